@@ -1,0 +1,231 @@
+"""Gymnasium environment for the RoboView pick-and-place task (id ``RoboView/PickPlace-v0``)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from roboview_data.cameras import ALL_CAMERAS, scene_camera_poses
+from roboview_data.colors import get_color
+from roboview_data.factors import BASELINES, OBJECT_POSITIONS
+from roboview_data.instances import TaskInstance
+from roboview_data.scene import (
+    BOX_CENTER, BOX_INNER_HALF, BOX_WALL_HEIGHT, GRIPPER_DRIVER_CLOSED, HOME_QPOS, SHAPES,
+    RenderQuality, Scene,
+)
+
+log = logging.getLogger(__name__)
+
+ENV_ID = "RoboView/PickPlace-v0"
+STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
+ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
+IMAGE_KEY = "observation.images.{}"
+DEPTH_KEY = "observation.depth.{}"
+STATE_KEY = "observation.state"
+
+# Per-episode jitter drawn from the episode seed (kept small so the named position stays meaningful).
+POSITION_JITTER_M = 0.01
+YAW_JITTER_RAD = 0.35
+# Success: the object is this still (m/s) and the gripper this open (0 open … 1 closed).
+REST_SPEED = 0.05
+RELEASED_GRIPPER = 0.25
+
+
+def baseline_instance() -> TaskInstance:
+    """Every factor at its baseline: the scene the expert demos are rendered in."""
+    return TaskInstance(split="baseline", varied=("color",), factors=dict(BASELINES),
+                        context_subspace="base")
+
+
+class PickPlaceEnv(gym.Env):
+    """Franka Panda + Robotiq 2F-85 puts one small object into an open yellow box.
+
+    **Observations** (keys are the LeRobot dataset's feature keys): ``observation.images.<camera>``
+    uint8 H×W×3 for each requested camera (``front``, ``left_top``, ``right_top``, ``wrist``),
+    optionally ``observation.depth.<camera>`` float32 H×W metres, and ``observation.state`` float32
+    (8,) = 7 arm joint positions (rad) + gripper closure (0 open … 1 closed).
+
+    **Actions** float32 (8,): absolute target positions (rad) of the 7 arm joints, tracked by joint
+    position servos, and the gripper command (0 open … 1 closed), held for one control period
+    (1/fps s).
+
+    **Randomizations** — the instance fixes every factor (object color, shape and named initial
+    position, instruction, camera pose / Euler perturbation / distance). The episode seed adds
+    only a small jitter: object xy ± 1 cm and heading ± 0.35 rad, drawn from a
+    `numpy.random.Generator` seeded by `reset(seed=...)` (default: the instance's seed).
+
+    **Success conditions** — the object's center lies inside the box's inner walls and below the
+    rim, it moves slower than 5 cm/s, it touches no part of the robot, and the gripper is open
+    (released). The episode terminates on success and truncates after `max_steps`.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, cameras: Sequence[str] = ALL_CAMERAS, image_size: int = 224, fps: int = 10,
+                 max_steps: int = 120, depth: bool = False, quality: RenderQuality = "fast") -> None:
+        unknown = [c for c in cameras if c not in ALL_CAMERAS]
+        if unknown or not cameras:
+            raise ValueError(f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}")
+        if not 16 <= image_size <= 640:
+            raise ValueError(f"image_size={image_size} out of range; allowed 16..640")
+        if fps <= 0 or 500 % fps:
+            raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
+        if max_steps <= 0:
+            raise ValueError(f"max_steps={max_steps} must be positive")
+        self.cameras = tuple(cameras)
+        self.image_size = image_size
+        self.fps = fps
+        self.max_steps = max_steps
+        self.depth = depth
+        self.scene = Scene(quality)
+        self.model, self.data = self.scene.model, self.scene.data
+        self.n_substeps = round(1.0 / (fps * self.model.opt.timestep))
+        self._renderer: mujoco.Renderer | None = None
+        self._depth_renderer: mujoco.Renderer | None = None
+        self.instance = baseline_instance()
+        self.instruction = self.instance.get("instruction")
+        self.steps = 0
+
+        arm_range = self.model.jnt_range[[self.model.joint(f"panda/joint{i}").id for i in range(1, 8)]]
+        low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
+        high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
+        self.action_space = gym.spaces.Box(low, high, dtype=np.float32)
+        spaces = {IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
+                  for c in self.cameras}
+        if depth:
+            spaces |= {DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
+                       for c in self.cameras}
+        spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
+        self.observation_space = gym.spaces.Dict(spaces)
+
+    # -- rendering ---------------------------------------------------------------------------
+    @property
+    def renderer(self) -> mujoco.Renderer:
+        # Created lazily and reused: a Renderer costs ~0.7 s and must live in the process using it.
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
+        return self._renderer
+
+    def render_camera(self, camera: str, depth: bool = False) -> np.ndarray:
+        if depth:
+            if self._depth_renderer is None:
+                self._depth_renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
+                self._depth_renderer.enable_depth_rendering()
+            renderer = self._depth_renderer
+        else:
+            renderer = self.renderer
+        renderer.update_scene(self.data, camera=self.scene.ids.cameras[camera])
+        return renderer.render()
+
+    def render(self) -> np.ndarray:
+        return self.render_camera(self.cameras[0])
+
+    # -- gym API -----------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        options = options or {}
+        instance = options.get("instance", self.instance)
+        if not isinstance(instance, TaskInstance):
+            raise TypeError(f"options['instance'] must be a TaskInstance, got {type(instance).__name__}")
+        episode_seed = instance.seed if seed is None else seed
+        super().reset(seed=episode_seed)
+        rng = np.random.default_rng(episode_seed)
+        self.instance = instance
+        self.instruction = instance.get("instruction")
+        self.steps = 0
+
+        mujoco.mj_resetData(self.model, self.data)
+        values = instance.factor_values
+        for pose in scene_camera_poses(values["camera_pose"], values["camera_euler"],
+                                       values["dist_scale"]).values():
+            self.scene.set_camera(pose)
+        color = get_color(values["color"])
+        xy = np.asarray(OBJECT_POSITIONS[values["initial_position"]])
+        xy = xy + rng.uniform(-POSITION_JITTER_M, POSITION_JITTER_M, size=2)
+        yaw = rng.uniform(-YAW_JITTER_RAD, YAW_JITTER_RAD)
+        self.scene.place_object(values["shape"], xy, yaw, np.array([*color.rgb, 1.0]))
+        self.scene.reset_robot(HOME_QPOS)
+        mujoco.mj_forward(self.model, self.data)
+        return self._observation(), self._info()
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != self.action_space.shape or not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be {self.action_space.shape} finite values, got {action!r}")
+        action = np.clip(action, self.action_space.low, self.action_space.high)
+        self.data.ctrl[self.scene.ids.arm_actuators] = action[:7]
+        self.data.ctrl[self.scene.ids.gripper_actuator] = 255.0 * action[7]
+        mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
+        self.steps += 1
+        success = self.is_success()
+        truncated = self.steps >= self.max_steps and not success
+        return self._observation(), float(success), success, truncated, self._info(success)
+
+    # -- state -------------------------------------------------------------------------------
+    @property
+    def shape(self) -> str:
+        return self.instance.get("shape")
+
+    def gripper_closure(self) -> float:
+        return float(np.clip(self.data.qpos[self.scene.ids.gripper_qpos] / GRIPPER_DRIVER_CLOSED, 0.0, 1.0))
+
+    def state(self) -> np.ndarray:
+        q = self.data.qpos[self.scene.ids.arm_qpos]
+        return np.append(q, self.gripper_closure()).astype(np.float32)
+
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Privileged: world position and quaternion [w,x,y,z] of the active object."""
+        body = self.scene.ids.shape_body[self.shape]
+        return self.data.xpos[body].copy(), self.data.xquat[body].copy()
+
+    def ee_position(self) -> np.ndarray:
+        return self.data.site_xpos[self.scene.ids.pinch_site].copy()
+
+    def object_touches_robot(self) -> bool:
+        geom = self.scene.ids.shape_geom[self.shape]
+        robot = self.scene.ids.robot_geoms
+        for c in self.data.contact[: self.data.ncon]:
+            if (c.geom1 == geom and c.geom2 in robot) or (c.geom2 == geom and c.geom1 in robot):
+                return True
+        return False
+
+    def is_success(self) -> bool:
+        pos, _ = self.object_pose()
+        rel = pos[:2] - BOX_CENTER
+        inside = bool(np.all(np.abs(rel) < BOX_INNER_HALF) and pos[2] < BOX_WALL_HEIGHT + 0.01)
+        if not inside:
+            return False
+        dof = self.scene.ids.shape_dof[self.shape]
+        speed = float(np.linalg.norm(self.data.qvel[dof:dof + 3]))
+        released = self.gripper_closure() < RELEASED_GRIPPER
+        return speed < REST_SPEED and released and not self.object_touches_robot()
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        obs = {IMAGE_KEY.format(c): self.render_camera(c) for c in self.cameras}
+        if self.depth:
+            obs |= {DEPTH_KEY.format(c): self.render_camera(c, depth=True).astype(np.float32)
+                    for c in self.cameras}
+        obs[STATE_KEY] = self.state()
+        return obs
+
+    def _info(self, success: bool = False) -> dict:
+        return {"is_success": success, "instance_id": self.instance.instance_id,
+                "task": self.instruction, "steps": self.steps}
+
+    def close(self) -> None:
+        for r in (self._renderer, self._depth_renderer):
+            if r is not None:
+                r.close()
+        self._renderer = self._depth_renderer = None
+
+
+def register() -> None:
+    """Register ENV_ID with gymnasium (idempotent)."""
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="roboview_data.env:PickPlaceEnv")
+
+
+register()

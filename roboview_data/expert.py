@@ -1,0 +1,134 @@
+"""Scripted expert with privileged state: reach, grasp, lift, carry, release over the box.
+
+It reads the object's true pose from the simulator at reset and plans a Cartesian path of the
+gripper's pinch point through fixed waypoints, interpolated with a minimum-jerk profile. Each
+control step solves damped-least-squares inverse kinematics (position + "pointing down at yaw ψ")
+on a scratch `MjData`, so the action it emits is exactly the env's action: 7 joint targets +
+gripper command.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from roboview_data.env import PickPlaceEnv
+from roboview_data.scene import BOX_CENTER, BOX_WALL_HEIGHT, HOME_QPOS, SHAPES
+
+# Heights (m) of the pinch point: hover above the object, carry over the box, release.
+HOVER_Z = 0.12
+CARRY_Z = 0.20
+RELEASE_Z = BOX_WALL_HEIGHT + 0.08
+# The pinch site sits between the fingertips; grasp a little above the object's center.
+GRASP_OFFSET_Z = 0.004
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Move the pinch point to `target` (yaw `yaw`) over `steps` control steps with the gripper at `grip`."""
+
+    target: np.ndarray
+    yaw: float
+    steps: int
+    grip: float
+
+
+def _yaw_of(quat: np.ndarray) -> float:
+    w, x, y, z = quat
+    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+def _min_jerk(s: float) -> float:
+    return s ** 3 * (10 - 15 * s + 6 * s * s)
+
+
+class ScriptedExpert:
+    """Solves every context at baseline visuals; acts through the env's own action space."""
+
+    name = "expert"
+
+    def __init__(self, env: PickPlaceEnv) -> None:
+        self.env = env
+        self.model = env.model
+        self._scratch = mujoco.MjData(env.model)
+        ids = env.scene.ids
+        self._qadr, self._dof, self._site = ids.arm_qpos, ids.arm_dof, ids.pinch_site
+        self._jac_p = np.zeros((3, self.model.nv))
+        self._jac_r = np.zeros((3, self.model.nv))
+        lo_hi = self.model.jnt_range[[self.model.joint(f"panda/joint{i}").id for i in range(1, 8)]]
+        self._q_lo, self._q_hi = lo_hi[:, 0] + 1e-3, lo_hi[:, 1] - 1e-3
+        # Orientation of the pinch site at the home pose (pointing straight down, yaw 0).
+        self._scratch.qpos[self._qadr] = HOME_QPOS
+        mujoco.mj_kinematics(self.model, self._scratch)
+        self._r_home = self._scratch.site_xmat[self._site].reshape(3, 3).copy()
+        self._home_finger_yaw = float(np.arctan2(self._r_home[1, 1], self._r_home[0, 1]))
+        self._plan: list[tuple[np.ndarray, float, float]] = []
+        self._t = 0
+        self._q = HOME_QPOS.copy()
+
+    def reset(self) -> None:
+        """Plan from the current (just reset) simulator state."""
+        obj_pos, obj_quat = self.env.object_pose()
+        shape = SHAPES[self.env.shape]
+        start = self.env.ee_position()
+        # Fingers close along the site's y axis: align it with the object's x axis, picking the
+        # symmetric equivalent nearest the current wrist yaw so the wrist turns as little as possible.
+        obj_yaw = _yaw_of(obj_quat)
+        half_turn = min(shape.symmetry, np.pi)
+        delta = obj_yaw - self._home_finger_yaw
+        grasp_yaw = (delta + half_turn / 2) % half_turn - half_turn / 2
+        grasp_z = obj_pos[2] + GRASP_OFFSET_Z
+        above = np.array([obj_pos[0], obj_pos[1], HOVER_Z])
+        box_above = np.array([BOX_CENTER[0], BOX_CENTER[1], CARRY_Z])
+        box_release = np.array([BOX_CENTER[0], BOX_CENTER[1], RELEASE_Z])
+        segments = [
+            Segment(above, grasp_yaw, 12, 0.0),
+            Segment(np.array([obj_pos[0], obj_pos[1], grasp_z]), grasp_yaw, 8, 0.0),
+            Segment(np.array([obj_pos[0], obj_pos[1], grasp_z]), grasp_yaw, 5, 1.0),
+            Segment(np.array([obj_pos[0], obj_pos[1], CARRY_Z]), grasp_yaw, 8, 1.0),
+            Segment(box_above, 0.0, 12, 1.0),
+            Segment(box_release, 0.0, 5, 1.0),
+            Segment(box_release, 0.0, 4, 0.0),
+            Segment(box_above, 0.0, 30, 0.0),
+        ]
+        self._plan = []
+        pos, yaw = start, 0.0
+        for seg in segments:
+            for i in range(1, seg.steps + 1):
+                s = _min_jerk(i / seg.steps)
+                self._plan.append((pos + s * (seg.target - pos), yaw + s * (seg.yaw - yaw), seg.grip))
+            pos, yaw = seg.target, seg.yaw
+        self._t = 0
+        self._q = self.env.data.qpos[self._qadr].copy()
+
+    def select_action(self, observation: dict | None = None) -> np.ndarray:
+        target, yaw, grip = self._plan[min(self._t, len(self._plan) - 1)]
+        self._t += 1
+        self._q = self._solve_ik(target, yaw, self._q)
+        return np.append(self._q, grip).astype(np.float32)
+
+    def _solve_ik(self, target: np.ndarray, yaw: float, q0: np.ndarray, iters: int = 30) -> np.ndarray:
+        c, s = np.cos(yaw), np.sin(yaw)
+        r_target = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ self._r_home
+        data, q = self._scratch, q0.copy()
+        damping = 1e-4
+        for _ in range(iters):
+            data.qpos[self._qadr] = q
+            mujoco.mj_kinematics(self.model, data)
+            mujoco.mj_comPos(self.model, data)
+            r_now = data.site_xmat[self._site].reshape(3, 3)
+            err_p = target - data.site_xpos[self._site]
+            err_r = 0.5 * sum(np.cross(r_now[:, i], r_target[:, i]) for i in range(3))
+            err = np.concatenate([err_p, err_r])
+            if np.linalg.norm(err_p) < 1e-4 and np.linalg.norm(err_r) < 1e-3:
+                break
+            mujoco.mj_jacSite(self.model, data, self._jac_p, self._jac_r, self._site)
+            jac = np.vstack([self._jac_p[:, self._dof], self._jac_r[:, self._dof]])
+            dq = jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(6), err)
+            # Pull gently toward the home posture in the null space to avoid drifting elbows.
+            null = np.eye(7) - np.linalg.pinv(jac) @ jac
+            dq += null @ (0.05 * (HOME_QPOS - q))
+            q = np.clip(q + dq, self._q_lo, self._q_hi)
+        return q

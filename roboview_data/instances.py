@@ -1,0 +1,317 @@
+"""Task instances (v, c) of the benchmark, their stable identities, and the suites of them.
+
+A task instance fixes the value of every factor. Its id is a hash of its canonical parameters,
+so the same instance gets the same id, seed and episode seeds on any machine and any backend
+(DESIGN.md, "Identity, seeds, actions"). A `SuiteConfig` (or a named preset) says which SVGF
+variant trees (`roboview_data.svgf`) make up a benchmark; `generate_suite` walks them.
+
+    >>> len(generate_suite(load_preset("paper")))
+    2127
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from functools import cached_property
+from typing import Any
+
+from roboview_data.colors import get_color
+from roboview_data.factors import (
+    BASELINES,
+    CONTEXT_FACTORS,
+    FACTOR_NAMES,
+    VISUAL_FACTORS,
+    load_factor,
+)
+from roboview_data.svgf import (
+    SUBSPACE_KEY,
+    UNION_MODES,
+    FactorSampler,
+    RecursiveVariantTaskManager,
+    VariantNode,
+    cartesian_split_name,
+    cartesian_subspace,
+    context_space,
+    factorial_subspace,
+    task_subspace,
+)
+
+# Which variation subspace of C_Gen a context came from: a context factor's C_k^gen, "base" (the
+# baseline context G, in dedupe mode or as the factorial split's c*), or "cartesian".
+CONTEXT_SUBSPACES = ("base", "cartesian", *CONTEXT_FACTORS)
+SEED_MODULUS = 2**31
+FACTORIAL_SPLIT = "color_x_camera_pose"
+SPLITS = (*VISUAL_FACTORS, FACTORIAL_SPLIT)
+# Saturated (red, green, blue), achromatic (black, white, gray) and low-saturation (rosybrown).
+DEFAULT_FACTORIAL_COLORS = ("red", "green", "blue", "black", "white", "gray", "rosybrown")
+
+
+def _round_floats(obj: Any) -> Any:
+    """Round floats to 9 decimals so ids do not depend on the last bits of a float."""
+    if isinstance(obj, float):
+        return round(obj, 9)
+    if isinstance(obj, Mapping):
+        return {str(k): _round_floats(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_round_floats(v) for v in obj]
+    return obj
+
+
+def canonical_json(params: Mapping[str, Any]) -> str:
+    """Canonical JSON of parameters: sorted keys, compact separators, floats rounded to 9 places."""
+    return json.dumps(_round_floats(params), sort_keys=True, separators=(",", ":"))
+
+
+def stable_id(params: Mapping[str, Any]) -> str:
+    """First 16 hex digits of SHA-256 over the canonical JSON of `params`."""
+    return hashlib.sha256(canonical_json(params).encode("utf-8")).hexdigest()[:16]
+
+
+def _seed_from(text: str) -> int:
+    digest = hashlib.sha256(text.encode("utf-8")).digest()
+    return int.from_bytes(digest[:8], "big") % SEED_MODULUS
+
+
+def episode_seed(instance_id: str, repeat: int) -> int:
+    """Seed of repeat `repeat` of an instance: SHA-256("id:repeat"), 8 bytes big-endian, mod 2**31.
+
+    Derived from the id alone so local pools, Ray workers and other machines agree on it.
+    """
+    return _seed_from(f"{instance_id}:{repeat}")
+
+
+@dataclass(frozen=True)
+class TaskInstance:
+    """One benchmark task instance: every factor's value plus where it sits in the suite.
+
+    `factors` may be given as a mapping or as (name, value) pairs; it is stored as pairs in the
+    canonical factor order (visual, then context) so instances are hashable and compare equal
+    whatever order they were built in.
+    """
+
+    # Split the instance belongs to (color, camera_pose, ..., color_x_camera_pose, cartesian_*).
+    split: str
+    # The factor(s) this split varies, in the order of the `value` column.
+    varied: tuple[str, ...]
+    # The value of all 7 factors, as (name, value) pairs in FACTOR_NAMES order.
+    factors: tuple[tuple[str, str], ...]
+    # Variation subspace of C_Gen the context came from (one of CONTEXT_SUBSPACES).
+    context_subspace: str
+
+    def __post_init__(self) -> None:
+        pairs = dict(self.factors.items() if isinstance(self.factors, Mapping) else self.factors)
+        if set(pairs) != set(FACTOR_NAMES):
+            missing = sorted(set(FACTOR_NAMES) - set(pairs))
+            extra = sorted(set(pairs) - set(FACTOR_NAMES))
+            raise ValueError(
+                f"instance of split {self.split!r} must set every factor exactly once; "
+                f"missing {missing}, unknown {extra}"
+            )
+        for name, value in pairs.items():
+            load_factor(name).validate(value)
+        object.__setattr__(self, "factors", tuple((name, pairs[name]) for name in FACTOR_NAMES))
+        object.__setattr__(self, "varied", tuple(self.varied))
+        if not self.varied or len(set(self.varied)) != len(self.varied):
+            raise ValueError(f"varied must name distinct factors, got {self.varied!r}")
+        for name in self.varied:
+            load_factor(name)
+        if self.context_subspace not in CONTEXT_SUBSPACES:
+            raise ValueError(
+                f"unknown context_subspace {self.context_subspace!r}; "
+                f"allowed: {', '.join(CONTEXT_SUBSPACES)}"
+            )
+
+    @property
+    def factor_values(self) -> dict[str, str]:
+        """All factor values as a dict in canonical factor order."""
+        return dict(self.factors)
+
+    def get(self, name: str) -> str:
+        """The value of factor `name` (unknown names raise listing the valid factors)."""
+        return self.factor_values[load_factor(name).name]
+
+    @property
+    def context(self) -> dict[str, str]:
+        """The task context c: the context factor values of this instance."""
+        values = self.factor_values
+        return {name: values[name] for name in CONTEXT_FACTORS}
+
+    @cached_property
+    def instance_id(self) -> str:
+        """Stable id over split, varied, all factor values and the context subspace."""
+        return stable_id(
+            {
+                "split": self.split,
+                "varied": list(self.varied),
+                "factors": self.factor_values,
+                "context_subspace": self.context_subspace,
+            }
+        )
+
+    @cached_property
+    def context_id(self) -> str:
+        """Stable id of the context c; shared by every instance that runs in the same context."""
+        return stable_id({"context": self.context, "context_subspace": self.context_subspace})
+
+    @property
+    def factor(self) -> str:
+        """The varied factor names, "|"-joined (the record's `factor` column)."""
+        return "|".join(self.varied)
+
+    @property
+    def value(self) -> str:
+        """The varied values, "|"-joined in the order of `factor`."""
+        values = self.factor_values
+        return "|".join(values[name] for name in self.varied)
+
+    @property
+    def seed(self) -> int:
+        """Seed the env's reset uses for this instance, derived from the id alone."""
+        return _seed_from(self.instance_id)
+
+    def to_record(self) -> dict[str, Any]:
+        """The instance-record columns that need no simulator (DESIGN.md, "Instance record")."""
+        color = get_color(self.get("color"))
+        return {
+            "instance_id": self.instance_id,
+            "split": self.split,
+            "factor": self.factor,
+            "value": self.value,
+            "context_id": self.context_id,
+            **self.factor_values,
+            "color_hex": color.hex,
+            "color_rgb": list(color.rgb),
+            "color_lab": list(color.lab),
+            "seed": self.seed,
+        }
+
+
+# --- suite configuration, presets and generation ------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SuiteConfig:
+    """Which task instances a benchmark suite holds. Presets are `dataclasses.replace` of it."""
+
+    # Name of the preset this configuration came from (recorded with the benchmark).
+    preset: str = "paper"
+    # How C_Gen unites the variation subspaces: per_subspace (paper, 11 contexts) or dedupe (9).
+    union_mode: str = "per_subspace"
+    # Splits to generate, in this order: any of color, camera_pose, camera_euler, dist_scale,
+    # color_x_camera_pose.
+    splits: tuple[str, ...] = SPLITS
+    # Colors crossed with the orbital camera poses in the color_x_camera_pose split.
+    factorial_colors: tuple[str, ...] = DEFAULT_FACTORIAL_COLORS
+    # Extra full-Cartesian-product splits, each a tuple of factor names (others at baseline).
+    cartesian: tuple[tuple[str, ...], ...] = ()
+    # Restrictions of factors to some of their values, as (factor, values) pairs; a small suite
+    # for demos and tests without changing the registry.
+    value_subsets: tuple[tuple[str, tuple[str, ...]], ...] = ()
+
+    def __post_init__(self) -> None:
+        # Config parsers may hand in lists; tuples keep the config frozen and hashable.
+        object.__setattr__(self, "splits", tuple(self.splits))
+        object.__setattr__(self, "factorial_colors", tuple(self.factorial_colors))
+        object.__setattr__(self, "cartesian", tuple(tuple(f) for f in self.cartesian))
+        subsets = tuple((name, tuple(values)) for name, values in self.value_subsets)
+        object.__setattr__(self, "value_subsets", subsets)
+        if self.union_mode not in UNION_MODES:
+            raise ValueError(f"unknown union_mode {self.union_mode!r}; allowed: {UNION_MODES}")
+        for split in self.splits:
+            if split not in SPLITS:
+                raise ValueError(f"unknown split {split!r}; allowed: {', '.join(SPLITS)}")
+        if len(set(self.splits)) != len(self.splits):
+            raise ValueError(f"splits listed twice in {self.splits!r}")
+        if not self.factorial_colors and FACTORIAL_SPLIT in self.splits:
+            raise ValueError(f"{FACTORIAL_SPLIT} needs at least one factorial color")
+        for name in self.factorial_colors:
+            get_color(name)
+        if len(set(self.factorial_colors)) != len(self.factorial_colors):
+            raise ValueError(f"factorial_colors listed twice in {self.factorial_colors!r}")
+        for factors in self.cartesian:
+            for name in factors:
+                load_factor(name)
+            if not factors or len(set(factors)) != len(factors):
+                raise ValueError(f"a cartesian split needs distinct factors, got {factors!r}")
+        if len(set(self.cartesian)) != len(self.cartesian):
+            raise ValueError(f"cartesian splits listed twice in {self.cartesian!r}")
+        for name, values in self.value_subsets:
+            # Subsets may only hold swept values: camera_pose 'original' is a baseline, not a pose.
+            FactorSampler(name, values)
+            bad = [v for v in values if v not in load_factor(name).values]
+            if bad:
+                raise ValueError(f"value_subsets[{name!r}]: {bad} are not swept values of {name}")
+        if len({name for name, _ in self.value_subsets}) != len(self.value_subsets):
+            raise ValueError("value_subsets names a factor twice")
+
+    @property
+    def subsets(self) -> dict[str, tuple[str, ...]]:
+        """value_subsets as a dict."""
+        return dict(self.value_subsets)
+
+
+PAPER = SuiteConfig()
+PRESETS: dict[str, SuiteConfig] = {
+    # The paper's suite: 11 x (141 + 21 + 9 + 9) + 7 x 21 = 2,127 instances.
+    "paper": PAPER,
+    # Same splits over the set-union C_Gen: 9 x 180 + 147 = 1,767 instances.
+    "paper_dedupe": replace(PAPER, preset="paper_dedupe", union_mode="dedupe"),
+    # Demo/test suite: 3 contexts (G, object left, cylinder) x a few values per visual factor
+    # (4 colors, 3 poses, 3 eulers, 3 distances) + 2 colors x 3 poses = 45 instances.
+    "tiny": replace(
+        PAPER,
+        preset="tiny",
+        union_mode="dedupe",
+        factorial_colors=("red", "white"),
+        value_subsets=(
+            ("color", ("red", "green", "blue", "white")),
+            ("camera_pose", ("orbit_r0_0", "orbit_r1_3", "orbit_r2_6")),
+            ("camera_euler", ("-6,-6", "0,0", "6,6")),
+            ("dist_scale", ("0", "4", "8")),
+            ("initial_position", ("center", "left")),
+            ("shape", ("cube", "cylinder")),
+            ("instruction", (BASELINES["instruction"],)),
+        ),
+    ),
+}
+
+
+def load_preset(name: str) -> SuiteConfig:
+    """Return the registered suite preset `name`; unknown names raise listing the valid ones."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}") from None
+
+
+def split_trees(cfg: SuiteConfig) -> dict[str, tuple[tuple[str, ...], VariantNode]]:
+    """Each split's name → (varied factors, variant tree), in generation order."""
+    subsets = cfg.subsets
+    c_gen = context_space(cfg.union_mode, subsets)
+    trees: dict[str, tuple[tuple[str, ...], VariantNode]] = {}
+    for split in cfg.splits:
+        if split == FACTORIAL_SPLIT:
+            tree = factorial_subspace(cfg.factorial_colors, subsets)
+            trees[split] = (("color", "camera_pose"), tree)
+        else:
+            trees[split] = ((split,), task_subspace(split, c_gen, subsets))
+    for factors in cfg.cartesian:
+        tree = cartesian_subspace(factors, subsets)
+        trees[cartesian_split_name(factors)] = (tuple(factors), tree)
+    return trees
+
+
+def generate_suite(cfg: SuiteConfig) -> list[TaskInstance]:
+    """All task instances of a suite, split by split in a fixed, deterministic order."""
+    instances = []
+    for split, (varied, tree) in split_trees(cfg).items():
+        for assignment in RecursiveVariantTaskManager(tree).generate():
+            subspace = assignment.pop(SUBSPACE_KEY)
+            instances.append(TaskInstance(split, varied, tuple(assignment.items()), subspace))
+    ids = [instance.instance_id for instance in instances]
+    if len(set(ids)) != len(ids):
+        raise RuntimeError(f"suite {cfg.preset!r} produced duplicate instance ids")
+    return instances

@@ -1,0 +1,109 @@
+"""The factor registry: exact values, baselines, parsers and error messages."""
+
+import pytest
+
+from roboview_data.colors import COLORS
+from roboview_data.factors import (
+    BASELINES,
+    CONTEXT_FACTORS,
+    FACTOR_NAMES,
+    FACTORS,
+    OBJECT_POSITIONS,
+    VISUAL_FACTORS,
+    load_factor,
+    parse_camera_pose,
+    parse_dist_scale,
+    parse_euler,
+)
+
+
+def test_factor_names_and_kinds():
+    assert VISUAL_FACTORS == ("color", "camera_pose", "camera_euler", "dist_scale")
+    assert CONTEXT_FACTORS == ("initial_position", "shape", "instruction")
+    assert tuple(FACTORS) == FACTOR_NAMES == VISUAL_FACTORS + CONTEXT_FACTORS
+    assert [load_factor(n).kind for n in FACTOR_NAMES] == ["visual"] * 4 + ["context"] * 3
+
+
+def test_baselines():
+    assert BASELINES == {
+        "color": "red",
+        "camera_pose": "original",
+        "camera_euler": "0,0",
+        "dist_scale": "0",
+        "initial_position": "center",
+        "shape": "cube",
+        "instruction": "put the small object into the yellow box",
+    }
+
+
+def test_color_values():
+    color = load_factor("color")
+    assert color.values == tuple(sorted(COLORS))
+    assert len(color.values) == 141
+
+
+def test_camera_pose_values_and_baseline_outside_sweep():
+    pose = load_factor("camera_pose")
+    assert len(pose.values) == 21
+    assert pose.values[:2] == ("orbit_r0_0", "orbit_r0_1")
+    assert pose.values[7] == "orbit_r1_0"
+    assert pose.values[-1] == "orbit_r2_6"
+    assert "original" not in pose.values
+    assert pose.is_valid("original")
+    assert pose.validate("original") == "original"
+    assert parse_camera_pose("orbit_r2_3") == (2, 3)
+    assert parse_camera_pose("original") is None
+    with pytest.raises(ValueError, match="'orbit_r3_0'"):
+        parse_camera_pose("orbit_r3_0")
+
+
+def test_camera_euler_values_and_parser():
+    euler = load_factor("camera_euler")
+    assert euler.values == (
+        "-6,-6", "-6,0", "-6,6", "0,-6", "0,0", "0,6", "6,-6", "6,0", "6,6",
+    )
+    assert parse_euler("-6,6") == (-6, 6)
+    assert parse_euler("0,0") == (0, 0)
+    with pytest.raises(ValueError, match=r"unknown camera_euler '3,0'; allowed: -6,-6"):
+        parse_euler("3,0")
+
+
+def test_dist_scale_values_and_parser():
+    assert load_factor("dist_scale").values == tuple(str(k) for k in range(9))
+    assert parse_dist_scale("8") == 8
+    assert parse_dist_scale("0") == 0
+    with pytest.raises(ValueError, match="unknown dist_scale '9'"):
+        parse_dist_scale("9")
+
+
+def test_context_factor_values():
+    assert load_factor("initial_position").values == ("center", "left", "right", "near")
+    assert tuple(OBJECT_POSITIONS) == load_factor("initial_position").values
+    assert OBJECT_POSITIONS["center"] == (0.50, 0.12)
+    assert load_factor("shape").values == ("cube", "cylinder", "hex_prism", "cuboid")
+    instructions = load_factor("instruction").values
+    assert len(instructions) == 3
+    assert instructions[0] == BASELINES["instruction"]
+
+
+def test_instructions_name_neither_color_nor_shape():
+    words = set(COLORS) | {"cube", "cylinder", "prism", "cuboid", "hex"}
+    for text in load_factor("instruction").values:
+        # "yellow" names the target box, not the manipulated object.
+        assert not (set(text.split()) - {"yellow"}) & words, text
+
+
+def test_validate_names_bad_value_and_allowed_values():
+    with pytest.raises(
+        ValueError, match=r"^unknown shape 'sphere'; allowed: cube, cylinder, hex_prism, cuboid$"
+    ):
+        load_factor("shape").validate("sphere")
+    with pytest.raises(ValueError, match=r"camera_pose 'orbit'; allowed: original, orbit_r0_0"):
+        load_factor("camera_pose").validate("orbit")
+    with pytest.raises(ValueError, match=r"unknown color 'grey'; allowed: aliceblue.*'gray'"):
+        load_factor("color").validate("grey")
+
+
+def test_load_factor_unknown_lists_valid_names():
+    with pytest.raises(ValueError, match=r"unknown factor 'colour'; valid factors: color, camera_"):
+        load_factor("colour")
