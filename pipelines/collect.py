@@ -1,0 +1,225 @@
+"""Collect scripted-expert demos into a LeRobotDataset v3 (context-only randomization).
+
+    python -m pipelines.collect --dataset.repo_id=roboview/pick_place --dataset.root=outputs/demos \
+        --dataset.num_episodes=350 --num_workers=2
+
+Each attempt draws a task context (object position, shape, instruction) at random with every
+visual factor at its baseline, as the paper did for its π0 training demos; only successful
+episodes are kept and failures are counted. Rerunning with the same root resumes where a killed
+run stopped. Load the result with `LeRobotDataset(repo_id, root=root)`.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import shutil
+import time
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import draccus
+from tqdm import tqdm
+
+from roboview_data.cameras import ALL_CAMERAS
+from roboview_data.demo_dataset import (
+    ROBOT_TYPE, CollectionSignature, Progress, add_episode, check_root, demo_features, load_provenance,
+    roll_back, write_checkpoint,
+)
+from roboview_data.rollout import DemoCollector, DemoEpisode, init_worker, run_in_worker
+
+log = logging.getLogger(__name__)
+
+VCODECS = ("libsvtav1", "h264", "hevc")
+
+
+@dataclass
+class DatasetConfig:
+    # Dataset id (ORG/NAME), written into the dataset's metadata and used by push_to_hub.
+    repo_id: str = "roboview/pick_place_demos"
+    # Local folder of the dataset. A new or empty folder starts a collection; a folder from an
+    # earlier run with the same settings resumes it.
+    root: str = "outputs/demos"
+    # Number of successful episodes the dataset should hold when the run ends.
+    num_episodes: int = 50
+    # Control and recording rate (Hz); must divide the 500 Hz physics rate.
+    fps: int = 10
+    # Side of the square camera images (pixels).
+    image_size: int = 224
+    # Cameras recorded as videos (any of front, left_top, right_top, wrist).
+    cameras: list[str] = field(default_factory=lambda: list(ALL_CAMERAS))
+    # Video codec for lerobot's encoder: libsvtav1 (LeRobot's default), h264 or hevc.
+    vcodec: str = "libsvtav1"
+
+    def __post_init__(self) -> None:
+        if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):
+            raise ValueError(f"--dataset.repo_id={self.repo_id!r} must look like ORG/NAME")
+        if self.num_episodes <= 0:
+            raise ValueError(f"--dataset.num_episodes={self.num_episodes} must be a positive count")
+        if self.fps <= 0 or 500 % self.fps:
+            raise ValueError(f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)")
+        if not 32 <= self.image_size <= 640:
+            raise ValueError(f"--dataset.image_size={self.image_size} out of range; allowed 32..640")
+        unknown = [c for c in self.cameras if c not in ALL_CAMERAS]
+        if unknown or not self.cameras or len(set(self.cameras)) != len(self.cameras):
+            raise ValueError(f"--dataset.cameras={self.cameras}: unknown or repeated camera(s) {unknown}; "
+                             f"allowed: {', '.join(ALL_CAMERAS)}")
+        if self.vcodec not in VCODECS:
+            raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
+
+
+@dataclass
+class CollectConfig:
+    dataset: DatasetConfig = field(default_factory=DatasetConfig)
+    # Collection seed: attempt i runs with episode seed SHA-256("collect:{seed}:{i}").
+    seed: int = 0
+    # Simulation worker processes (spawned; one renderer each). 1 runs in this process.
+    num_workers: int = 2
+    # Steps after which an attempt counts as a failure.
+    max_steps: int = 120
+    # Finalize the dataset every this many saved episodes; a killed run resumes from there.
+    checkpoint_every: int = 25
+    # Give up (with an error) when this many attempts have failed in total.
+    max_failures: int = 50
+
+    def __post_init__(self) -> None:
+        for name in ("num_workers", "max_steps", "checkpoint_every", "max_failures"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
+        if self.seed < 0:
+            raise ValueError(f"--seed={self.seed} must be ≥ 0")
+
+    @property
+    def signature(self) -> CollectionSignature:
+        d = self.dataset
+        return CollectionSignature(d.repo_id, d.fps, d.image_size, tuple(d.cameras), self.seed, self.max_steps)
+
+
+@dataclass(frozen=True)
+class CollectResult:
+    root: Path
+    episodes: int
+    new_episodes: int
+    attempts: int
+    failures: int
+    elapsed_s: float
+
+    @property
+    def success_rate(self) -> float:
+        return (self.attempts - self.failures) / self.attempts if self.attempts else float("nan")
+
+    @property
+    def demos_per_hour(self) -> float:
+        return 3600 * self.new_episodes / self.elapsed_s if self.elapsed_s else float("nan")
+
+
+def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
+    """Attempts first_attempt, first_attempt+1, … in order, computed by the worker pool."""
+    d = cfg.dataset
+    args = (cfg.seed, tuple(d.cameras), d.image_size, d.fps, cfg.max_steps)
+    attempt = first_attempt
+    if cfg.num_workers == 1:
+        collector = DemoCollector(*args)
+        try:
+            while True:
+                yield collector.run(attempt)
+                attempt += 1
+        finally:
+            collector.env.close()
+    with mp.get_context("spawn").Pool(cfg.num_workers, initializer=init_worker, initargs=args) as pool:
+        pending: deque = deque()
+        while True:
+            while len(pending) < 2 * cfg.num_workers:  # bounded look-ahead keeps memory flat
+                pending.append(pool.apply_async(run_in_worker, (attempt,)))
+                attempt += 1
+            yield pending.popleft().get()
+
+
+def _open_dataset(cfg: CollectConfig, create: bool):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    d = cfg.dataset
+    kwargs = dict(vcodec=d.vcodec, streaming_encoding=True, encoder_threads=1)
+    if create:
+        return LeRobotDataset.create(d.repo_id, d.fps, demo_features(tuple(d.cameras), d.image_size),
+                                     root=d.root, robot_type=ROBOT_TYPE, use_videos=True, **kwargs)
+    return LeRobotDataset(d.repo_id, root=d.root, **kwargs)
+
+
+def run(cfg: CollectConfig) -> CollectResult:
+    root = Path(cfg.dataset.root)
+    progress = check_root(root, cfg.signature)  # every input error surfaces here, before work
+    if progress is not None:
+        roll_back(root, progress)
+        if progress.episodes_saved == 0:  # nothing complete yet: start over cleanly
+            shutil.rmtree(root)
+            progress = None
+    if progress is not None and progress.episodes_saved >= cfg.dataset.num_episodes:
+        log.info("%s already holds %d episodes (asked for %d); nothing to do",
+                 root, progress.episodes_saved, cfg.dataset.num_episodes)
+        return CollectResult(root, progress.episodes_saved, 0, 0, 0, 0.0)
+    if progress is None:
+        if root.exists():
+            root.rmdir()  # empty (check_root verified); lerobot creates the folder itself
+        dataset = _open_dataset(cfg, create=True)
+        progress = Progress(cfg.signature)
+        write_checkpoint(root, progress, [])
+    else:
+        dataset = _open_dataset(cfg, create=False)
+    provenance = load_provenance(root)
+    start_saved, start_attempt, start_failures = progress.episodes_saved, progress.next_attempt, progress.failures
+    target = cfg.dataset.num_episodes
+    t0 = time.perf_counter()
+
+    bar = tqdm(total=target, initial=start_saved, desc="collect", unit="demo", dynamic_ncols=True)
+    episodes = _episodes(cfg, progress.next_attempt)
+    try:
+        for ep in episodes:
+            progress.next_attempt = ep.attempt + 1
+            if ep.success:
+                add_episode(dataset, ep)
+                provenance.append({"episode_index": progress.episodes_saved, **ep.provenance()})
+                progress.episodes_saved += 1
+                bar.update(1)
+            else:
+                progress.failures += 1
+                log.info("attempt %d failed after %d steps (context %s)", ep.attempt, ep.steps, ep.instance.context)
+            tried = progress.next_attempt - start_attempt
+            bar.set_postfix(success=f"{(tried - progress.failures + start_failures) / tried:.1%}",
+                            failed=progress.failures)
+            done = progress.episodes_saved >= target
+            if ep.success and (done or progress.episodes_saved % cfg.checkpoint_every == 0):
+                dataset.finalize()
+                write_checkpoint(root, progress, provenance)
+                if done:
+                    break
+                dataset = _open_dataset(cfg, create=False)
+            if progress.failures >= cfg.max_failures:
+                raise RuntimeError(
+                    f"{progress.failures} attempts failed (limit --max_failures={cfg.max_failures}); "
+                    f"the {progress.episodes_saved} episodes checkpointed so far are kept. "
+                    "Check the scene or raise --max_steps / --max_failures.")
+    finally:
+        episodes.close()
+        bar.close()
+    return CollectResult(root, progress.episodes_saved, progress.episodes_saved - start_saved,
+                         progress.next_attempt - start_attempt, progress.failures - start_failures,
+                         time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> CollectResult:
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    cfg = draccus.parse(CollectConfig, args=args)
+    result = run(cfg)
+    print(f"[collect] {result.episodes} episodes in {result.root} "
+          f"({result.new_episodes} new; {result.attempts} attempts, {result.failures} failed, "
+          f"expert success {result.success_rate:.1%}; {result.demos_per_hour:.0f} demos/h)")
+    return result
+
+
+if __name__ == "__main__":
+    main()

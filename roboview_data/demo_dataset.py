@@ -1,0 +1,172 @@
+"""Writing expert demos into a LeRobotDataset v3 with lerobot's own writer, crash-safely.
+
+lerobot keeps its parquet writers open until `finalize()`, so a killed process leaves files
+without footers. We therefore write in *checkpoints*: every `checkpoint_every` episodes the
+dataset is finalized and reopened (lerobot's own resume path, which starts new data/video/meta
+files), and `meta/roboview/progress.json` records what is complete, together with a copy of the
+three metadata files lerobot rewrites in place (info.json, stats.json, tasks.parquet). On the next
+run anything written after the last checkpoint is removed and those files restored, so a resumed
+dataset holds exactly the checkpointed episodes — nothing lost, nothing duplicated.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from roboview_data.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.rollout import DemoEpisode
+
+log = logging.getLogger(__name__)
+
+ROBOT_TYPE = "franka_panda_robotiq_2f85"
+PROGRESS_DIR = Path("meta/roboview")
+PROGRESS_FILE = PROGRESS_DIR / "progress.json"
+PROVENANCE_FILE = PROGRESS_DIR / "episodes.parquet"
+SNAPSHOT_DIR = PROGRESS_DIR / "checkpoint"
+# Files lerobot rewrites in place on every episode (restored on rollback).
+REWRITTEN_FILES = (Path("meta/info.json"), Path("meta/stats.json"), Path("meta/tasks.parquet"))
+# Folders whose files are only ever added, never rewritten, after a reopen.
+APPEND_ONLY_DIRS = ("data", "videos", "meta/episodes")
+TEMP_DIRS = ("images",)
+PROGRESS_FORMAT = 1
+
+
+class DatasetRootError(ValueError):
+    """The dataset root holds something this collection cannot safely write into."""
+
+
+@dataclass(frozen=True)
+class CollectionSignature:
+    """What must match for a root to be resumed: a different value means a different dataset."""
+
+    repo_id: str
+    fps: int
+    image_size: int
+    cameras: tuple[str, ...]
+    seed: int
+    max_steps: int
+
+
+def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
+    """LeRobot features: one video per camera, 8-d state and 8-d action (see README, "Action")."""
+    features = {
+        IMAGE_KEY.format(cam): {"dtype": "video", "shape": (image_size, image_size, 3),
+                                "names": ["height", "width", "channels"]}
+        for cam in cameras
+    }
+    features[STATE_KEY] = {"dtype": "float32", "shape": (len(STATE_NAMES),), "names": list(STATE_NAMES)}
+    features["action"] = {"dtype": "float32", "shape": (len(ACTION_NAMES),), "names": list(ACTION_NAMES)}
+    return features
+
+
+@dataclass
+class Progress:
+    """Checkpointed state of a collection (meta/roboview/progress.json)."""
+
+    signature: CollectionSignature
+    episodes_saved: int = 0
+    next_attempt: int = 0
+    failures: int = 0
+    format: int = PROGRESS_FORMAT
+
+    @classmethod
+    def load(cls, root: Path) -> Progress:
+        raw = json.loads((root / PROGRESS_FILE).read_text())
+        if raw.get("format") != PROGRESS_FORMAT:
+            raise DatasetRootError(f"{root / PROGRESS_FILE} has format {raw.get('format')!r}; "
+                                   f"this version reads format {PROGRESS_FORMAT}")
+        sig = raw.pop("signature")
+        sig["cameras"] = tuple(sig["cameras"])
+        return cls(signature=CollectionSignature(**sig), **raw)
+
+    def save(self, root: Path) -> None:
+        path = root / PROGRESS_FILE
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(asdict(self), indent=2))
+        tmp.replace(path)  # atomic: a crash leaves either the old or the new checkpoint
+
+
+def check_root(root: Path, signature: CollectionSignature) -> Progress | None:
+    """Validate `root` before any work: None = start fresh, else the checkpoint to resume from."""
+    if root.exists() and not root.is_dir():
+        raise DatasetRootError(f"--dataset.root={root} is a file; give a folder (new or from an earlier run)")
+    if not root.exists() or not any(root.iterdir()):
+        return None
+    if not (root / PROGRESS_FILE).is_file():
+        raise DatasetRootError(
+            f"--dataset.root={root} is not empty and holds no RoboView collection "
+            f"({PROGRESS_FILE} missing); choose a new folder or delete this one")
+    progress = Progress.load(root)
+    if progress.signature != signature:
+        diffs = {k: (v, getattr(signature, k)) for k, v in asdict(progress.signature).items()
+                 if (tuple(v) if isinstance(v, list) else v) != getattr(signature, k)}
+        detail = ", ".join(f"{k}: existing {old!r} vs requested {new!r}" for k, (old, new) in diffs.items())
+        raise DatasetRootError(
+            f"--dataset.root={root} holds a collection made with different settings ({detail}); "
+            "rerun with the same settings to resume, or choose a new root")
+    return progress
+
+
+def _append_only_files(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for d in APPEND_ONLY_DIRS if (root / d).exists()
+                  for p in (root / d).rglob("*") if p.is_file())
+
+
+def write_checkpoint(root: Path, progress: Progress, provenance: list[dict]) -> None:
+    """Record a consistent state. Call only right after `dataset.finalize()`."""
+    snap = root / SNAPSHOT_DIR
+    snap.mkdir(parents=True, exist_ok=True)
+    for rel in REWRITTEN_FILES:
+        if (root / rel).exists():
+            shutil.copy2(root / rel, snap / rel.name)
+    (snap / "files.json").write_text(json.dumps(_append_only_files(root)))
+    if provenance:
+        frame = pd.DataFrame(provenance)
+        tmp = root / PROVENANCE_FILE.with_suffix(".tmp")
+        frame.to_parquet(tmp, index=False)
+        tmp.replace(root / PROVENANCE_FILE)
+    progress.save(root)
+
+
+def load_provenance(root: Path) -> list[dict]:
+    path = root / PROVENANCE_FILE
+    return pd.read_parquet(path).to_dict("records") if path.exists() else []
+
+
+def roll_back(root: Path, progress: Progress) -> int:
+    """Remove everything written after the last checkpoint; returns how many files were removed."""
+    for tmp in TEMP_DIRS:
+        shutil.rmtree(root / tmp, ignore_errors=True)
+    snap = root / SNAPSHOT_DIR
+    kept = set(json.loads((snap / "files.json").read_text()))
+    removed = 0
+    for rel in _append_only_files(root):
+        if rel not in kept:
+            (root / rel).unlink()
+            removed += 1
+    for rel in REWRITTEN_FILES:
+        if (snap / rel.name).exists():
+            shutil.copy2(snap / rel.name, root / rel)
+    if removed:
+        log.warning("rolled back %d file(s) written after the last checkpoint (%d episodes kept)",
+                    removed, progress.episodes_saved)
+    return removed
+
+
+def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRobotDataset
+    """Append one successful expert episode through lerobot's add_frame / save_episode."""
+    task = episode.instance.get("instruction")
+    for t in range(episode.steps):
+        frame = {IMAGE_KEY.format(cam): frames[t] for cam, frames in episode.images.items()}
+        frame[STATE_KEY] = episode.states[t]
+        frame["action"] = episode.actions[t]
+        frame["task"] = task
+        dataset.add_frame(frame)
+    dataset.save_episode()

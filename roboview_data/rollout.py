@@ -1,0 +1,103 @@
+"""Expert demonstrations: one seeded attempt = one episode, run in whichever process calls it.
+
+`demo_attempt(i)` is a pure function of (collection seed, attempt index): the same pair gives the
+same context, the same frames and the same actions on any machine and in any worker, which is
+what makes parallel collection deterministic and resumable.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from roboview_data.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv
+from roboview_data.expert import ScriptedExpert
+from roboview_data.factors import CONTEXT_FACTORS
+from roboview_data.instances import TaskInstance
+from roboview_data.svgf import ContextSampler
+
+SEED_MODULUS = 2**31
+
+
+def attempt_seed(seed: int, attempt: int) -> int:
+    """Episode seed of collection attempt `attempt`: SHA-256 of "collect:{seed}:{attempt}" (as episode_seed)."""
+    digest = hashlib.sha256(f"collect:{seed}:{attempt}".encode()).digest()
+    return int.from_bytes(digest[:8], "big") % SEED_MODULUS
+
+
+def training_instance(rng: np.random.Generator) -> TaskInstance:
+    """Context-only randomization: context factors drawn at random, visual factors at baseline."""
+    values = ContextSampler().sample_context(rng)
+    return TaskInstance(split="train", varied=CONTEXT_FACTORS, factors=values, context_subspace="cartesian")
+
+
+@dataclass
+class DemoEpisode:
+    """What one attempt produced. Frames are (observation_t, action_t) pairs, t = 0 … steps−1."""
+
+    attempt: int
+    episode_seed: int
+    instance: TaskInstance
+    success: bool
+    steps: int
+    duration_s: float
+    images: dict[str, np.ndarray] = field(default_factory=dict)  # camera -> (T, H, W, 3) uint8
+    states: np.ndarray | None = None  # (T, 8) float32
+    actions: np.ndarray | None = None  # (T, 8) float32
+
+    def provenance(self) -> dict:
+        return {"attempt": self.attempt, "episode_seed": self.episode_seed,
+                "instance_id": self.instance.instance_id, **self.instance.context, "steps": self.steps}
+
+
+class DemoCollector:
+    """Owns one env + expert (one renderer) per process; reused for every attempt it runs."""
+
+    def __init__(self, seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int) -> None:
+        self.seed = seed
+        self.env = PickPlaceEnv(cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps)
+        self.expert = ScriptedExpert(self.env)
+
+    def run(self, attempt: int) -> DemoEpisode:
+        start = time.perf_counter()
+        ep_seed = attempt_seed(self.seed, attempt)
+        instance = training_instance(np.random.default_rng(ep_seed))
+        obs, _ = self.env.reset(seed=ep_seed, options={"instance": instance})
+        self.expert.reset()
+        frames: dict[str, list[np.ndarray]] = {c: [] for c in self.env.cameras}
+        states, actions = [], []
+        success = False
+        for _ in range(self.env.max_steps):
+            action = self.expert.select_action(obs)
+            for cam in self.env.cameras:
+                frames[cam].append(obs[IMAGE_KEY.format(cam)])
+            states.append(obs[STATE_KEY])
+            actions.append(action)
+            obs, _, success, truncated, _ = self.env.step(action)
+            if success or truncated:
+                break
+        episode = DemoEpisode(attempt, ep_seed, instance, success, len(actions), time.perf_counter() - start)
+        if success:  # failures are only counted, so their frames never cross the process boundary
+            episode.images = {c: np.stack(v) for c, v in frames.items()}
+            episode.states = np.stack(states).astype(np.float32)
+            episode.actions = np.stack(actions).astype(np.float32)
+        return episode
+
+
+# -- process-pool plumbing (spawn start method: EGL contexts do not survive fork) ---------------
+_WORKER: DemoCollector | None = None
+
+
+def init_worker(seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int) -> None:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    global _WORKER
+    _WORKER = DemoCollector(seed, cameras, image_size, fps, max_steps)
+
+
+def run_in_worker(attempt: int) -> DemoEpisode:
+    assert _WORKER is not None, "init_worker was not called in this process"
+    return _WORKER.run(attempt)
