@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
-import os
 import shutil
 import time
 from collections import deque
@@ -21,12 +20,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import draccus
 from tqdm import tqdm
 
+from pipelines._cli import fail, parse, setup_environment
 from roboview_data.cameras import ALL_CAMERAS
 from roboview_data.demo_dataset import (
-    ROBOT_TYPE, CollectionSignature, Progress, add_episode, check_root, demo_features, load_provenance,
+    ROBOT_TYPE, CollectionSignature, DatasetRootError, Progress, add_episode, check_root, demo_features, load_provenance,
     roll_back, write_checkpoint,
 )
 from roboview_data.rollout import DemoCollector, DemoEpisode, init_worker, run_in_worker
@@ -211,10 +210,12 @@ def run(cfg: CollectConfig) -> CollectResult:
 
 
 def main(args: list[str] | None = None) -> CollectResult:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    cfg = draccus.parse(CollectConfig, args=args)
-    result = run(cfg)
+    setup_environment()
+    cfg = parse(CollectConfig, args)
+    try:
+        result = run(cfg)
+    except DatasetRootError as exc:
+        fail(str(exc))
     print(f"[collect] {result.episodes} episodes in {result.root} "
           f"({result.new_episodes} new; {result.attempts} attempts, {result.failures} failed, "
           f"expert success {result.success_rate:.1%}; {result.demos_per_hour:.0f} demos/h)")

@@ -1,0 +1,18 @@
+import os
+
+# Headless rendering for every test process (and the workers they spawn).
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("SVT_LOG", "1")
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def env():
+    from roboview_data.env import PickPlaceEnv
+
+    env = PickPlaceEnv(image_size=96, depth=False)
+    yield env
+    env.close()
