@@ -105,7 +105,7 @@ def look_at(name: str, eye: np.ndarray, target: np.ndarray = WORKSPACE_CENTER,
 
 # The unperturbed ("original") scene cameras.
 BASE_CAMERAS: dict[str, CameraPose] = {
-    "front": look_at("front", np.array([1.08, 0.02, 0.58])),
+    "front": look_at("front", np.array([1.18, -0.02, 0.62]), np.array([0.48, -0.02, 0.03]), fovy=50.0),
     "left_top": look_at("left_top", np.array([0.60, 0.64, 0.64])),
     "right_top": look_at("right_top", np.array([0.60, -0.64, 0.64])),
 }

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import logging
 from collections.abc import Sequence
 
@@ -86,6 +87,7 @@ class PickPlaceEnv(gym.Env):
         self.n_substeps = round(1.0 / (fps * self.model.opt.timestep))
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
+        self._open_renderers: list[mujoco.Renderer] = []
         self.instance = baseline_instance()
         self.instruction = self.instance.get("instruction")
         self.steps = 0
@@ -103,17 +105,29 @@ class PickPlaceEnv(gym.Env):
         self.observation_space = gym.spaces.Dict(spaces)
 
     # -- rendering ---------------------------------------------------------------------------
+    def new_renderer(self) -> mujoco.Renderer:
+        """A renderer at the env's image size, closed with the env (or at exit, while EGL is up)."""
+        return self._track(mujoco.Renderer(self.model, self.image_size, self.image_size))
+
+    def _track(self, renderer: mujoco.Renderer) -> mujoco.Renderer:
+        # GL contexts must be freed before interpreter teardown, not by __del__ during it; the
+        # hook is registered after mujoco.egl's own (made with the first context), so it runs first.
+        if not self._open_renderers:
+            atexit.register(PickPlaceEnv._close_renderers, self._open_renderers)
+        self._open_renderers.append(renderer)
+        return renderer
+
     @property
     def renderer(self) -> mujoco.Renderer:
         # Created lazily and reused: a Renderer costs ~0.7 s and must live in the process using it.
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
+            self._renderer = self.new_renderer()
         return self._renderer
 
     def render_camera(self, camera: str, depth: bool = False) -> np.ndarray:
         if depth:
             if self._depth_renderer is None:
-                self._depth_renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
+                self._depth_renderer = self.new_renderer()
                 self._depth_renderer.enable_depth_rendering()
             renderer = self._depth_renderer
         else:
@@ -215,10 +229,13 @@ class PickPlaceEnv(gym.Env):
         return {"is_success": success, "instance_id": self.instance.instance_id,
                 "task": self.instruction, "steps": self.steps}
 
+    @staticmethod
+    def _close_renderers(renderers: list[mujoco.Renderer]) -> None:
+        while renderers:
+            renderers.pop().close()
+
     def close(self) -> None:
-        for r in (self._renderer, self._depth_renderer):
-            if r is not None:
-                r.close()
+        self._close_renderers(self._open_renderers)
         self._renderer = self._depth_renderer = None
 
 

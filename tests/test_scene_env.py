@@ -27,7 +27,7 @@ _SEGMENTERS: dict[int, mujoco.Renderer] = {}
 def object_pixels(env: PickPlaceEnv, camera: str) -> int:
     """Pixels of the active object in `camera`'s segmentation render."""
     if id(env) not in _SEGMENTERS:
-        _SEGMENTERS[id(env)] = mujoco.Renderer(env.model, 96, 96)
+        _SEGMENTERS[id(env)] = env.new_renderer()
         _SEGMENTERS[id(env)].enable_segmentation_rendering()
     renderer = _SEGMENTERS[id(env)]
     renderer.update_scene(env.data, camera=env.scene.ids.cameras[camera])

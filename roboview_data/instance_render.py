@@ -1,0 +1,66 @@
+"""Turn a task instance into its benchmark record: camera extrinsics, fairness numbers, preview.
+
+One `InstanceRenderer` per process (one compiled scene, one set of renderers); each instance is
+applied in place by the env's reset — no recompiles.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+from PIL import Image
+
+from roboview_data.cameras import ALL_CAMERAS
+from roboview_data.env import IMAGE_KEY, PickPlaceEnv
+from roboview_data.fairness import OBSERVED_CAMERAS, FairnessProbe, FairnessThresholds
+from roboview_data.instances import TaskInstance
+
+PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
+
+
+def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
+    """Observed cameras side by side, PNG-encoded deterministically (no timestamps, fixed settings)."""
+    tiles = [Image.fromarray(f).resize((size, size), Image.Resampling.BILINEAR) for f in frames]
+    sheet = Image.new("RGB", (size * len(tiles), size))
+    for i, tile in enumerate(tiles):
+        sheet.paste(tile, (i * size, 0))
+    buf = io.BytesIO()
+    sheet.save(buf, format="PNG", optimize=False, compress_level=6)
+    return buf.getvalue()
+
+
+class InstanceRenderer:
+    def __init__(self, image_size: int, thresholds: FairnessThresholds) -> None:
+        self.env = PickPlaceEnv(cameras=OBSERVED_CAMERAS, image_size=image_size)
+        self.probe = FairnessProbe(self.env)
+        self.thresholds = thresholds
+
+    def record(self, instance: TaskInstance) -> dict:
+        obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
+        rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in OBSERVED_CAMERAS}
+        fairness = self.probe.measure(rgb, self.thresholds)
+        return {
+            **instance.to_record(),
+            "cameras": [self.env.scene.camera_pose(cam).to_record() for cam in ALL_CAMERAS],
+            "fairness": fairness.to_record(),
+            "preview": {"bytes": preview_png([rgb[c] for c in OBSERVED_CAMERAS]), "path": None},
+        }
+
+    def close(self) -> None:
+        self.env.close()
+
+
+_WORKER: InstanceRenderer | None = None
+
+
+def init_worker(image_size: int, thresholds: FairnessThresholds) -> None:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    global _WORKER
+    _WORKER = InstanceRenderer(image_size, thresholds)
+
+
+def record_in_worker(instance: TaskInstance) -> dict:
+    assert _WORKER is not None, "init_worker was not called in this process"
+    return _WORKER.record(instance)
