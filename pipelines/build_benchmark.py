@@ -1,0 +1,208 @@
+"""Build the frozen benchmark split: SVGF instances → perceptual-fairness gate → HF dataset folder.
+
+    python -m pipelines.build_benchmark --output_dir=outputs/benchmark [--preset=paper] [--num_workers=2]
+
+Writes `data/<split>.parquet` (one split per benchmark split), `rejected/rejected.parquet`, a
+dataset card `README.md`, `benchmark.json` (machine-readable manifest with the suite hash) and
+`contact_sheet/index.html` for human review. Load with `datasets.load_dataset(output_dir, split=...)`.
+The build fails, after writing the contact sheet and `fairness_report.csv`, when fewer than
+`--min_pass_rate` of the candidates pass the gate.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import multiprocessing as mp
+import shutil
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from tqdm import tqdm
+
+from pipelines._cli import fail, parse, setup_environment
+from roboview_data import benchmark_io as bio
+from roboview_data.contact_sheet import write_contact_sheet
+from roboview_data.fairness import FairnessThresholds
+from roboview_data.instance_render import init_worker, record_in_worker
+from roboview_data.instances import PRESETS, SuiteConfig, generate_suite, load_preset
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class BuildConfig:
+    # Folder to write the Hugging Face dataset into (new, empty, or an earlier build's output).
+    output_dir: str = "outputs/benchmark"
+    # Suite preset: paper (2,127 instances), paper_dedupe (1,767) or tiny (45, for demos and tests).
+    preset: str = "paper"
+    # Override the preset's Structured Union mode: per_subspace or dedupe.
+    union_mode: str | None = None
+    # Override the colors crossed with the 21 orbital poses in color_x_camera_pose.
+    factorial_colors: list[str] | None = None
+    # Add one full Cartesian-product split over these factors (e.g. [color,shape]).
+    cartesian: list[str] | None = None
+    # Worker processes (spawned; one scene and renderer each).
+    num_workers: int = 2
+    # Side of the rendered camera images the gate measures and previews come from (pixels).
+    image_size: int = 224
+    # Stage-2 decisions CSV (instance_id, verdict, reviewer, note) from reviewing the contact sheet.
+    decisions: str | None = None
+    # The build fails when fewer than this share of candidates pass the stage-1 gate (paper: 95%).
+    min_pass_rate: float = 0.95
+    # Stage-1 thresholds.
+    fairness: FairnessThresholds = field(default_factory=FairnessThresholds)
+
+    def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise ValueError(f"unknown --preset={self.preset!r}; allowed: {', '.join(PRESETS)}")
+        if self.num_workers <= 0:
+            raise ValueError(f"--num_workers={self.num_workers} must be a positive count")
+        if not 64 <= self.image_size <= 640:
+            raise ValueError(f"--image_size={self.image_size} out of range; allowed 64..640")
+        if not 0.0 < self.min_pass_rate <= 1.0:
+            raise ValueError(f"--min_pass_rate={self.min_pass_rate} must lie in (0, 1]")
+        self.suite  # validates union mode, colors and factor names now, before any work
+
+    @property
+    def suite(self) -> SuiteConfig:
+        suite = load_preset(self.preset)
+        if self.union_mode is not None:
+            suite = replace(suite, union_mode=self.union_mode)
+        if self.factorial_colors is not None:
+            suite = replace(suite, factorial_colors=tuple(self.factorial_colors))
+        if self.cartesian:
+            suite = replace(suite, cartesian=(*suite.cartesian, tuple(self.cartesian)))
+        return suite
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    output_dir: Path
+    candidates: int
+    accepted: int
+    gate_pass_rate: float
+    suite_hash: str
+    elapsed_s: float
+    contact_sheet: Path
+
+
+def _check_output_dir(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--output_dir={out} is a file; give a folder")
+    if out.is_dir() and any(out.iterdir()) and not (out / bio.MANIFEST).is_file():
+        raise ValueError(f"--output_dir={out} is not empty and holds no RoboView benchmark "
+                         f"({bio.MANIFEST} missing); choose a new folder or delete this one")
+
+
+def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:
+    args = (cfg.image_size, cfg.fairness)
+    bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
+    records, passed = [], 0
+    with mp.get_context("spawn").Pool(cfg.num_workers, initializer=init_worker, initargs=args) as pool:
+        for record in pool.imap(record_in_worker, instances, chunksize=8):
+            records.append(record)
+            passed += record["fairness"]["passed"]
+            bar.update(1)
+            bar.set_postfix(passed=f"{passed / len(records):.1%}")
+    bar.close()
+    return records
+
+
+def run(cfg: BuildConfig) -> BuildResult:
+    out = Path(cfg.output_dir)
+    _check_output_dir(out)
+    suite = cfg.suite
+    instances = generate_suite(suite)
+    decisions = bio.read_decisions(Path(cfg.decisions), {i.instance_id for i in instances}) if cfg.decisions else {}
+    t0 = time.perf_counter()
+    records = _render_all(cfg, instances)
+    verdicts = [bio.adjudicate(r, decisions.get(r["instance_id"])) for r in records]
+    accepted = [ok for ok, _ in verdicts]
+    rejected_by = [who for _, who in verdicts]
+    gate_rate = sum(r["fairness"]["passed"] for r in records) / len(records)
+
+    # Write into a sibling temp folder and swap it in: never a half-written benchmark.
+    tmp = out.with_name(out.name + ".building")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    sheet = write_contact_sheet(tmp, records, accepted, rejected_by)
+    by_split: dict[str, list[dict]] = {}
+    rejected_rows = []
+    for r, ok, who in zip(records, accepted, rejected_by):
+        if ok:
+            by_split.setdefault(r["split"], []).append(r)
+        else:
+            rejected_rows.append({**r, "rejected_by": who})
+    if gate_rate < cfg.min_pass_rate:
+        _write_offenders(tmp, records)
+    else:
+        for split, rows in by_split.items():
+            bio.write_split(rows, tmp / "data" / f"{split}.parquet")
+        if rejected_rows:
+            bio.write_split(rejected_rows, tmp / "rejected" / "rejected.parquet", rejected=True)
+    digest = bio.suite_hash(by_split)
+    manifest = {
+        "format": bio.FORMAT_VERSION, "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
+        "suite": {"preset": suite.preset, "union_mode": suite.union_mode, "splits": list(suite.splits),
+                  "factorial_colors": list(suite.factorial_colors),
+                  "cartesian": [list(c) for c in suite.cartesian],
+                  "value_subsets": {k: list(v) for k, v in suite.value_subsets}},
+        "image_size": cfg.image_size, "thresholds": bio.thresholds_dict(cfg.fairness),
+        "candidates": len(records), "gate_pass_rate": gate_rate, "min_pass_rate": cfg.min_pass_rate,
+        "splits": bio.split_counts(records, accepted, rejected_by), "rejected": len(rejected_rows),
+        "decisions": len(decisions), "reviewers": sorted({d.reviewer for d in decisions.values()}),
+        "suite_hash": digest, "benchmark_version": f"{suite.preset}-{digest[:12]}",
+        "fairness_stats": bio.fairness_stats(records),
+    }
+    bio.write_manifest(tmp, manifest)
+    if manifest["status"] == "ok":
+        bio.write_card(tmp, manifest)
+    shutil.rmtree(out, ignore_errors=True)
+    tmp.rename(out)
+    sheet = out / sheet.relative_to(tmp)
+    if manifest["status"] != "ok":
+        raise GateFailure(f"only {gate_rate:.1%} of {len(records)} candidates pass the fairness gate "
+                          f"(need {cfg.min_pass_rate:.0%}); offenders in {out / 'fairness_report.csv'}, "
+                          f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold.")
+    _print_summary(manifest)
+    return BuildResult(out, len(records), sum(accepted), gate_rate, digest, time.perf_counter() - t0, sheet)
+
+
+class GateFailure(RuntimeError):
+    """Fewer candidates than required pass the perceptual-fairness gate."""
+
+
+def _write_offenders(out: Path, records: list[dict]) -> None:
+    with (out / "fairness_report.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["instance_id", "split", "value", "initial_position", "shape", "reject_reason"])
+        for r in records:
+            if not r["fairness"]["passed"]:
+                writer.writerow([r["instance_id"], r["split"], r["value"], r["initial_position"], r["shape"],
+                                 r["fairness"]["reject_reason"]])
+
+
+def _print_summary(manifest: dict) -> None:
+    print(f"{'split':<22}{'candidates':>11}{'accepted':>10}{'rejected':>10}{'pass':>8}")
+    for split, c in manifest["splits"].items():
+        rejected = c["rejected_gate"] + c["rejected_review"]
+        print(f"{split:<22}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{c['accepted'] / c['candidates']:>8.1%}")
+    print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
+
+
+def main(args: list[str] | None = None) -> BuildResult:
+    setup_environment()
+    cfg = parse(BuildConfig, args)
+    try:
+        result = run(cfg)
+    except (ValueError, GateFailure) as exc:
+        fail(str(exc))
+    print(f"[build_benchmark] {result.accepted}/{result.candidates} instances in {result.output_dir} "
+          f"({result.elapsed_s:.0f} s); contact sheet: {result.contact_sheet}")
+    return result
+
+
+if __name__ == "__main__":
+    main()
