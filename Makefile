@@ -31,7 +31,10 @@ $(STAMP): pyproject.toml requirements.lock
 demo: install
 	$(PY) -m pipelines.collect --dataset.repo_id=roboview/demo_pick_place \
 	  --dataset.root=$(DEMO_DIR)/dataset --dataset.num_episodes=6 --num_workers=2
-	@echo "Demo dataset: $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
+	$(PY) -m pipelines.build_benchmark --output_dir=$(DEMO_DIR)/benchmark --preset=tiny --num_workers=2
+	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
+	@echo "Demo benchmark: $(DEMO_DIR)/benchmark (datasets.load_dataset('$(DEMO_DIR)/benchmark', split='color'))"
+	@echo "Contact sheet:  $(DEMO_DIR)/benchmark/contact_sheet/index.html"
 
 test: install
 	$(PY) -m pytest -q
@@ -39,6 +42,7 @@ test: install
 bench: install
 	$(PY) -m benchmarks.render_rate
 	$(PY) -m benchmarks.collect_rate
+	$(PY) -m pipelines.build_benchmark --output_dir=outputs/benchmark_paper --preset=paper
 
 clean-demo:
 	rm -rf $(DEMO_DIR)

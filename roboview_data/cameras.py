@@ -35,6 +35,8 @@ ORBIT_AZIMUTHS_DEG = tuple(np.linspace(-72.0, 72.0, 7))
 
 DIST_STEP_M = 0.05
 DEFAULT_FOVY_DEG = 45.0
+# Orbital cameras see the whole workspace (objects and box) from closer in: a wider lens.
+ORBIT_FOVY_DEG = 50.0
 
 
 @dataclass(frozen=True)
@@ -117,7 +119,7 @@ def orbital_pose(name: str, value: str) -> CameraPose:
     radius, height = ORBIT_RINGS[ring]
     azimuth = np.deg2rad(ORBIT_AZIMUTHS_DEG[k])
     eye = WORKSPACE_CENTER + np.array([radius * np.cos(azimuth), radius * np.sin(azimuth), height])
-    return look_at(name, eye)
+    return look_at(name, eye, fovy=ORBIT_FOVY_DEG)
 
 
 def apply_euler(pose: CameraPose, yaw_deg: float, pitch_deg: float) -> CameraPose:

@@ -1,0 +1,155 @@
+"""Publish a built benchmark (and optionally a collected LeRobot dataset) to the Hugging Face hub.
+
+    python -m pipelines.publish --path=outputs/benchmark --repo_id=ORG/NAME [--dry_run=true]
+
+Creates the dataset repo if missing, uploads the folder, and tags the upload with the benchmark
+version from `benchmark.json`. `--dry_run=true` lists exactly what would be uploaded and touches
+nothing. Without a token, in offline mode or without network it fails before changing anything.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from fnmatch import fnmatch
+from pathlib import Path
+
+from pipelines._cli import fail, parse, setup_environment
+from roboview_data.benchmark_io import MANIFEST
+
+log = logging.getLogger(__name__)
+
+CONTACT_SHEET = "contact_sheet/*"
+
+
+class PublishError(RuntimeError):
+    """The hub cannot be reached or refuses; nothing was changed."""
+
+
+@dataclass
+class PublishConfig:
+    # Benchmark folder written by pipelines.build_benchmark.
+    path: str = "outputs/benchmark"
+    # Hub dataset repo to push the benchmark to (ORG/NAME).
+    repo_id: str = ""
+    # List what would be uploaded, and where, without contacting the hub.
+    dry_run: bool = False
+    # Also upload the contact sheet (HTML + previews; the previews are already in the parquet).
+    include_contact_sheet: bool = False
+    # Create the repo as private.
+    private: bool = False
+    # Optionally also push a LeRobot dataset collected by pipelines.collect (its root folder) ...
+    lerobot_root: str | None = None
+    # ... to this hub repo (ORG/NAME), through lerobot's own push_to_hub.
+    lerobot_repo_id: str | None = None
+
+    def __post_init__(self) -> None:
+        for flag, value in (("repo_id", self.repo_id), ("lerobot_repo_id", self.lerobot_repo_id)):
+            if value is not None and (value.count("/") != 1 or not all(value.split("/"))):
+                raise ValueError(f"--{flag}={value!r} must look like ORG/NAME")
+        manifest = Path(self.path) / MANIFEST
+        if not manifest.is_file():
+            raise ValueError(f"--path={self.path} holds no built benchmark ({MANIFEST} missing); "
+                             "run pipelines.build_benchmark first")
+        if json.loads(manifest.read_text()).get("status") != "ok":
+            raise ValueError(f"--path={self.path} is a failed build (fairness gate); fix and rebuild first")
+        if (self.lerobot_root is None) != (self.lerobot_repo_id is None):
+            raise ValueError("--lerobot_root and --lerobot_repo_id go together")
+        if self.lerobot_root is not None and not (Path(self.lerobot_root) / "meta/info.json").is_file():
+            raise ValueError(f"--lerobot_root={self.lerobot_root} is not a LeRobot dataset (meta/info.json missing)")
+
+
+@dataclass(frozen=True)
+class Plan:
+    repo_id: str
+    version: str
+    files: list[tuple[str, int]]  # (path in repo, bytes)
+    lerobot_files: list[tuple[str, int]]
+
+    @property
+    def total_bytes(self) -> int:
+        return sum(size for _, size in self.files + self.lerobot_files)
+
+
+def _files(root: Path, ignore: list[str]) -> list[tuple[str, int]]:
+    out = []
+    for p in sorted(root.rglob("*")):
+        rel = p.relative_to(root).as_posix()
+        if p.is_file() and not any(fnmatch(rel, pattern) for pattern in ignore):
+            out.append((rel, p.stat().st_size))
+    return out
+
+
+def plan(cfg: PublishConfig) -> Plan:
+    root = Path(cfg.path)
+    version = json.loads((root / MANIFEST).read_text())["benchmark_version"]
+    ignore = [] if cfg.include_contact_sheet else [CONTACT_SHEET]
+    lerobot = _files(Path(cfg.lerobot_root), ["images/*"]) if cfg.lerobot_root else []
+    return Plan(cfg.repo_id, version, _files(root, ignore), lerobot)
+
+
+def _hub_api():
+    """An authenticated HfApi, or PublishError saying what is missing (checked before any change)."""
+    from huggingface_hub import HfApi, constants, get_token
+
+    if constants.HF_HUB_OFFLINE:
+        raise PublishError("offline mode is on (HF_HUB_OFFLINE=1); unset it to publish, "
+                           "or use --dry_run=true to see what would be uploaded")
+    token = get_token()
+    if not token:
+        raise PublishError("no Hugging Face token: run `huggingface-cli login` or set HF_TOKEN "
+                           "(use --dry_run=true to see what would be uploaded)")
+    api = HfApi(token=token)
+    try:
+        user = api.whoami()
+    except Exception as exc:  # network down, endpoint unreachable, token refused
+        raise PublishError(f"cannot reach the hub at {constants.ENDPOINT} or the token was refused: "
+                           f"{type(exc).__name__}: {exc}") from exc
+    log.info("publishing as %s", user.get("name"))
+    return api
+
+
+def publish(cfg: PublishConfig, the_plan: Plan) -> str:
+    api = _hub_api()
+    api.create_repo(cfg.repo_id, repo_type="dataset", private=cfg.private, exist_ok=True)
+    ignore = None if cfg.include_contact_sheet else [CONTACT_SHEET]
+    commit = api.upload_folder(folder_path=cfg.path, repo_id=cfg.repo_id, repo_type="dataset",
+                               ignore_patterns=ignore, commit_message=f"RoboView benchmark {the_plan.version}")
+    api.create_tag(cfg.repo_id, tag=the_plan.version, repo_type="dataset", exist_ok=True)
+    if cfg.lerobot_root:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+        LeRobotDataset(cfg.lerobot_repo_id, root=cfg.lerobot_root).push_to_hub(
+            tags=["roboview", "franka-panda", "mujoco"], private=cfg.private)
+    return str(commit)
+
+
+def run(cfg: PublishConfig) -> Plan:
+    the_plan = plan(cfg)
+    if cfg.dry_run:
+        for rel, size in the_plan.files:
+            print(f"{size:>12,}  {cfg.repo_id}/{rel}")
+        for rel, size in the_plan.lerobot_files:
+            print(f"{size:>12,}  {cfg.lerobot_repo_id}/{rel}")
+        print(f"[dry run] {len(the_plan.files) + len(the_plan.lerobot_files)} files, "
+              f"{the_plan.total_bytes:,} bytes; tag {the_plan.version}; nothing uploaded")
+        return the_plan
+    publish(cfg, the_plan)
+    print(f"[publish] {cfg.repo_id} tagged {the_plan.version}")
+    return the_plan
+
+
+def main(args: list[str] | None = None) -> Plan:
+    setup_environment()
+    cfg = parse(PublishConfig, args)
+    if not cfg.repo_id:
+        fail("--repo_id=ORG/NAME is required")
+    try:
+        return run(cfg)
+    except PublishError as exc:
+        fail(str(exc))
+
+
+if __name__ == "__main__":
+    main()
