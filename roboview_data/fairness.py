@@ -30,7 +30,7 @@ class FairnessThresholds:
     min_object_visible: float = 0.6
     # Minimum share of the box's unoccluded pixels visible in the scene cameras (front, left_top).
     min_box_visible: float = 0.5
-    # Minimum object area in pixels (at the measured resolution, 224² by default).
+    # Minimum object area in pixels of a 224² frame (scaled by area for other image sizes).
     min_object_pixels: int = 25
     # Object must lie wholly inside the frame (no object pixel on the border when unoccluded).
     require_in_frame: bool = True
@@ -123,7 +123,8 @@ class FairnessProbe:
                 delta_e_table=_delta_e(obj_lab, table_lab),
             )
             results.append(result)
-            reasons += _violations(result, thresholds, scene_camera=cam != "wrist")
+            min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
+            reasons += _violations(result, thresholds, min_pixels, scene_camera=cam != "wrist")
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
 
@@ -148,12 +149,12 @@ def _delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
     return float(delta_e_2000(a, b)) if a is not None and b is not None else float("nan")
 
 
-def _violations(r: CameraFairness, t: FairnessThresholds, scene_camera: bool) -> list[str]:
+def _violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, scene_camera: bool) -> list[str]:
     out = []
     if r.object_visible < t.min_object_visible:
         out.append(f"{r.camera}: object visible {r.object_visible:.2f} < {t.min_object_visible}")
-    if r.object_pixels < t.min_object_pixels:
-        out.append(f"{r.camera}: object area {r.object_pixels} px < {t.min_object_pixels}")
+    if r.object_pixels < min_pixels:
+        out.append(f"{r.camera}: object area {r.object_pixels} px < {min_pixels:.0f}")
     if t.require_in_frame and not r.object_in_frame:
         out.append(f"{r.camera}: object not wholly in frame")
     if scene_camera:
