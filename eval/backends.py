@@ -1,0 +1,102 @@
+"""Execution backends: a local process pool (spawn) or Ray actors. Same rows for the same seeds.
+
+Both keep a bounded number of episodes in flight and yield results as they finish. A worker that
+dies loses only its episode in flight: it is logged, the worker replaced, and the episode retried
+(at most `max_retries` times, then the run stops with an error naming it).
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+from collections.abc import Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem, init_worker, run_in_worker
+
+log = logging.getLogger(__name__)
+
+BACKENDS = ("local", "ray")
+
+
+class EpisodeLost(RuntimeError):
+    """An episode's worker died more often than allowed."""
+
+
+def _retry(work: WorkItem, tries: dict, max_retries: int, why: str) -> None:
+    tries[work.key] = tries.get(work.key, 0) + 1
+    log.warning("worker died running %s repeat %d (%s); retry %d/%d", *work.key, why, tries[work.key], max_retries)
+    if tries[work.key] > max_retries:
+        raise EpisodeLost(f"episode {work.key[0]} repeat {work.key[1]} lost its worker {tries[work.key]} times")
+
+
+def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
+              max_retries: int = 2) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+    queue = list(items)[::-1]
+    tries: dict = {}
+    ctx = mp.get_context("spawn")  # EGL contexts do not survive fork
+    while queue:
+        pool = ProcessPoolExecutor(num_workers, mp_context=ctx, initializer=init_worker, initargs=(spec,))
+        in_flight: dict = {}
+        broken = False
+        try:
+            while (queue or in_flight) and not broken:
+                while queue and len(in_flight) < 2 * num_workers:
+                    work = queue.pop()
+                    in_flight[pool.submit(run_in_worker, work)] = work
+                done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+                for future in done:
+                    work = in_flight.pop(future)
+                    try:
+                        result = future.result()
+                    except BrokenProcessPool as exc:
+                        # A worker died: the pool is gone, so every episode in flight is requeued.
+                        broken = True
+                        _retry(work, tries, max_retries, str(exc) or "worker process died")
+                        queue.append(work)
+                        continue
+                    yield work, result
+            for work in in_flight.values():
+                queue.append(work)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, address: str | None = None,
+            max_retries: int = 2) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+    import ray
+    from ray.exceptions import RayActorError
+
+    if not ray.is_initialized():
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(num_cpus=num_workers, include_dashboard=False, log_to_driver=False,
+                     runtime_env={"env_vars": {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}})
+    actor_cls = ray.remote(num_cpus=1)(EvalWorker)
+    actors = [actor_cls.remote(spec) for _ in range(num_workers)]
+    queue = list(items)[::-1]
+    tries: dict = {}
+    in_flight: dict = {}
+    idle = list(range(num_workers))
+    try:
+        while queue or in_flight:
+            while queue and idle:
+                slot = idle.pop()
+                work = queue.pop()
+                in_flight[actors[slot].run.remote(work)] = (slot, work)
+            ready, _ = ray.wait(list(in_flight), num_returns=1)
+            slot, work = in_flight.pop(ready[0])
+            try:
+                result = ray.get(ready[0])
+            except RayActorError as exc:
+                _retry(work, tries, max_retries, type(exc).__name__)
+                actors[slot] = actor_cls.remote(spec)
+                queue.append(work)
+            else:
+                yield work, result
+            idle.append(slot)
+    finally:
+        for actor in actors:
+            ray.kill(actor)

@@ -1,0 +1,99 @@
+"""Crash-safe episode results: a line-per-episode journal plus an atomically refreshed parquet.
+
+Each finished episode is appended to `episodes.jsonl` and flushed to disk before anything else
+happens, so a killed run loses at most the episodes still in flight. `episodes.parquet` is
+rewritten from the journal (write to a temp file, then rename) every few seconds and at the end,
+so readers always see a complete file. On resume the journal is read back (a torn last line is
+dropped), deduplicated by (instance_id, repeat), and finished pairs are skipped.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+JOURNAL = "episodes.jsonl"
+PARQUET = "episodes.parquet"
+RUN_FILE = "run.json"
+VERSION_KEY = b"roboview_benchmark_version"
+
+
+class ResultsError(ValueError):
+    """The output folder holds results that cannot be continued by this run."""
+
+
+class EpisodeStore:
+    def __init__(self, out: Path, run_info: dict, flush_every_s: float = 5.0) -> None:
+        self.out = out
+        self.run_info = run_info
+        self.flush_every_s = flush_every_s
+        self.rows: dict[tuple[str, int], dict] = {}
+        self._last_flush = 0.0
+        self._check_and_load()
+        self._journal = (out / JOURNAL).open("a")
+
+    def _check_and_load(self) -> None:
+        out = self.out
+        if out.exists() and not out.is_dir():
+            raise ResultsError(f"--output_dir={out} is a file; give a folder")
+        run_file = out / RUN_FILE
+        if out.is_dir() and any(out.iterdir()) and not run_file.is_file():
+            raise ResultsError(f"--output_dir={out} is not empty and holds no RoboView evaluation "
+                               f"({RUN_FILE} missing); choose a new folder")
+        if run_file.is_file():
+            previous = json.loads(run_file.read_text())
+            diffs = [f"{k}: existing {previous.get(k)!r} vs requested {v!r}"
+                     for k, v in self.run_info.items() if previous.get(k) != v]
+            if diffs:
+                raise ResultsError(f"--output_dir={out} holds results of a different run ({'; '.join(diffs)}); "
+                                   "rerun the same command to resume, or choose a new folder")
+        out.mkdir(parents=True, exist_ok=True)
+        run_file.write_text(json.dumps(self.run_info, indent=2, sort_keys=True))
+        journal = out / JOURNAL
+        if journal.is_file():
+            for line in journal.read_text().splitlines():
+                try:
+                    row = json.loads(line)
+                except json.JSONDecodeError:
+                    continue  # a line torn by a kill mid-write; that episode reruns
+                self.rows[(row["instance_id"], row["repeat"])] = row
+            # Rewrite the journal without torn lines so appends start on a clean line.
+            tmp = journal.with_suffix(".tmp")
+            tmp.write_text("".join(json.dumps(r) + "\n" for r in self.rows.values()))
+            tmp.replace(journal)
+
+    def done(self, key: tuple[str, int]) -> bool:
+        return key in self.rows
+
+    def add(self, row: dict) -> None:
+        key = (row["instance_id"], row["repeat"])
+        if key in self.rows:
+            return  # a retried episode that had in fact finished: same seed, same row
+        self.rows[key] = row
+        self._journal.write(json.dumps(row) + "\n")
+        self._journal.flush()
+        os.fsync(self._journal.fileno())
+        if time.monotonic() - self._last_flush > self.flush_every_s:
+            self.write_parquet()
+
+    def write_parquet(self) -> Path:
+        rows = sorted(self.rows.values(), key=lambda r: (r["split"], r["instance_id"], r["repeat"]))
+        table = pa.Table.from_pylist(rows) if rows else pa.table({})
+        meta = {VERSION_KEY: self.run_info["benchmark_version"].encode(),
+                b"roboview_policy": self.run_info["policy"].encode()}
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
+        path = self.out / PARQUET
+        tmp = path.with_suffix(".parquet.tmp")
+        pq.write_table(table, tmp)
+        tmp.replace(path)
+        self._last_flush = time.monotonic()
+        return path
+
+    def close(self) -> None:
+        self.write_parquet()
+        self._journal.close()

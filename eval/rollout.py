@@ -1,0 +1,107 @@
+"""One evaluation episode, and the per-process worker that runs them (local pool or Ray actor).
+
+A worker owns one env (one renderer) and one policy for its whole life. An episode is a pure
+function of (policy, instance, repeat): its seed is `episode_seed(instance_id, repeat)`, so every
+backend and machine produces the same row.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from eval.benchmark import BenchmarkItem
+from policies.base import PolicySpec, make_policy, policy_entry
+from roboview_data.env import IMAGE_KEY, PickPlaceEnv
+from roboview_data.instances import episode_seed
+
+
+@dataclass(frozen=True)
+class WorkerSpec:
+    policy: PolicySpec
+    image_size: int = 224
+    max_steps: int = 120
+    # Keep compressed frames and trajectories for the Rerun recording.
+    record_media: bool = False
+
+
+@dataclass(frozen=True)
+class WorkItem:
+    item: BenchmarkItem
+    repeat: int
+
+    @property
+    def key(self) -> tuple[str, int]:
+        return self.item.record["instance_id"], self.repeat
+
+
+@dataclass
+class EpisodeResult:
+    row: dict
+    # Only with record_media: camera -> list of JPEG bytes; (T, 3) end-effector / object positions.
+    frames: dict[str, list[bytes]] | None = None
+    ee_path: np.ndarray | None = None
+    object_path: np.ndarray | None = None
+
+
+def _jpeg(image: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="JPEG", quality=85)
+    return buf.getvalue()
+
+
+class EvalWorker:
+    def __init__(self, spec: WorkerSpec) -> None:
+        os.environ.setdefault("MUJOCO_GL", "egl")
+        entry = policy_entry(spec.policy.type)
+        self.spec = spec
+        self.env = PickPlaceEnv(cameras=entry.cameras(spec.policy), image_size=spec.image_size,
+                                max_steps=spec.max_steps, depth=entry.depth)
+        self.policy = make_policy(spec.policy, self.env)
+
+    def run(self, work: WorkItem) -> EpisodeResult:
+        instance, record = work.item.instance, work.item.record
+        seed = episode_seed(record["instance_id"], work.repeat)
+        start = time.perf_counter()
+        obs, _ = self.env.reset(seed=seed, options={"instance": instance})
+        self.policy.reset(instance)
+        media = self.spec.record_media
+        frames: dict[str, list[bytes]] = {c: [] for c in self.env.cameras} if media else {}
+        ee, obj = [], []
+        success = False
+        for _ in range(self.env.max_steps):
+            if media:
+                for cam in self.env.cameras:
+                    frames[cam].append(_jpeg(obs[IMAGE_KEY.format(cam)]))
+                ee.append(self.env.ee_position())
+                obj.append(self.env.object_pose()[0])
+            obs, _, success, truncated, _ = self.env.step(self.policy.select_action(obs))
+            if success or truncated:
+                break
+        reason = "" if success else (getattr(self.policy, "last_failure", "") or
+                                     f"object not released inside the box within {self.env.max_steps} steps")
+        row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
+               "steps": self.env.steps, "duration_s": time.perf_counter() - start,
+               "policy": self.policy.name, "failure_reason": reason}
+        if not media:
+            return EpisodeResult(row)
+        return EpisodeResult(row, frames, np.array(ee), np.array(obj))
+
+
+_WORKER: EvalWorker | None = None
+
+
+def init_worker(spec: WorkerSpec) -> None:
+    global _WORKER
+    _WORKER = EvalWorker(spec)
+
+
+def run_in_worker(work: WorkItem) -> EpisodeResult:
+    assert _WORKER is not None, "init_worker was not called in this process"
+    return _WORKER.run(work)

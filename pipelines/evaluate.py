@@ -1,0 +1,188 @@
+"""Roll out a policy over the frozen benchmark instances and append one row per episode.
+
+    python -m pipelines.evaluate --benchmark.path=outputs/benchmark --policy.type=vision \
+        --eval.n_repeats=5 --eval.num_workers=2 --output_dir=outputs/eval/vision
+
+Each (instance, repeat) runs once with seed SHA-256(f"{instance_id}:{repeat}"); episodes stop
+early on success. Rows go to OUT/episodes.parquet (journalled in OUT/episodes.jsonl as they
+finish). Rerunning the same command resumes: finished pairs are skipped, none is duplicated.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tqdm import tqdm
+
+from eval.backends import BACKENDS, EpisodeLost, run_local, run_ray
+from eval.benchmark import load_benchmark
+from eval.results import EpisodeStore, ResultsError
+from eval.rollout import WorkerSpec, WorkItem
+from pipelines._cli import fail, parse, setup_environment
+from policies.base import PolicySpec, policy_entry, registered_policies
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class BenchmarkConfig:
+    # Benchmark folder written by pipelines.build_benchmark.
+    path: str = "outputs/benchmark"
+    # Comma-separated splits to evaluate (default: every split of the benchmark).
+    splits: str = ""
+
+    @property
+    def split_list(self) -> list[str] | None:
+        return [s.strip() for s in self.splits.split(",") if s.strip()] or None
+
+
+@dataclass
+class PolicyConfig:
+    # Registered policy: expert, vision, random or lerobot.
+    type: str = "expert"
+    # Checkpoint folder for --policy.type=lerobot (a lerobot-train `pretrained_model` folder).
+    path: str | None = None
+    # Scene camera the vision policy looks through (front or left_top).
+    camera: str = "front"
+
+    def __post_init__(self) -> None:
+        policy_entry(self.type)  # unknown names fail here, listing the registered ones
+        if self.type == "lerobot":
+            from policies.lerobot_policy import load_config
+
+            load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
+
+    @property
+    def spec(self) -> PolicySpec:
+        options = (("camera", self.camera),) if self.type == "vision" else ()
+        return PolicySpec(self.type, self.path, options)
+
+
+@dataclass
+class EvalConfig:
+    # Episodes per instance (paper: 5 for single-factor splits, 10 for the factorial split).
+    n_repeats: int = 5
+    # Evaluate only the first N instances of each chosen split (fixed order); 0 = all.
+    limit: int = 0
+    # Worker processes (local) or actors (ray); one env and renderer each.
+    num_workers: int = 2
+    # local (process pool, spawn) or ray.
+    backend: str = "local"
+    # Address of an existing Ray cluster; empty starts a local one.
+    ray_address: str = ""
+    # Write a Rerun recording of every episode to this .rrd file.
+    rerun: str = ""
+    # Control steps before an episode counts as a failure.
+    max_steps: int = 120
+    # Camera image side (pixels).
+    image_size: int = 224
+
+    def __post_init__(self) -> None:
+        for name in ("n_repeats", "num_workers", "max_steps"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
+        if self.limit < 0:
+            raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"unknown --eval.backend={self.backend!r}; allowed: {', '.join(BACKENDS)}")
+        if self.rerun and not self.rerun.endswith(".rrd"):
+            raise ValueError(f"--eval.rerun={self.rerun!r} must name a .rrd file")
+
+
+@dataclass
+class EvaluateConfig:
+    benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    # Folder for episodes.parquet (and its journal); rerun the same command to resume.
+    output_dir: str = "outputs/eval"
+
+
+@dataclass(frozen=True)
+class EvaluateResult:
+    output_dir: Path
+    episodes: int
+    new_episodes: int
+    success_rate: float
+    elapsed_s: float
+
+    @property
+    def episodes_per_hour(self) -> float:
+        return 3600 * self.new_episodes / self.elapsed_s if self.elapsed_s else float("nan")
+
+
+def run(cfg: EvaluateConfig) -> EvaluateResult:
+    bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
+    spec = cfg.policy.spec
+    run_info = {"benchmark_version": bench.version, "policy": spec.type, "policy_path": spec.path,
+                "policy_options": dict(spec.options), "n_repeats": cfg.eval.n_repeats,
+                "max_steps": cfg.eval.max_steps, "image_size": cfg.eval.image_size}
+    store = EpisodeStore(Path(cfg.output_dir), run_info)
+    work = []
+    for split, items in bench.splits.items():
+        chosen = items[: cfg.eval.limit] if cfg.eval.limit else items
+        work += [WorkItem(item, r) for item in chosen for r in range(cfg.eval.n_repeats)]
+    todo = [w for w in work if not store.done(w.key)]
+    log.info("%d episodes planned, %d already done, %d to run", len(work), len(work) - len(todo), len(todo))
+
+    rerun = None
+    if cfg.eval.rerun:
+        from eval.rerun_log import RerunLogger
+
+        rerun = RerunLogger(Path(cfg.eval.rerun))
+    worker = WorkerSpec(spec, cfg.eval.image_size, cfg.eval.max_steps, record_media=rerun is not None)
+    if cfg.eval.backend == "ray":
+        stream = run_ray(worker, todo, cfg.eval.num_workers, cfg.eval.ray_address or None)
+    else:
+        stream = run_local(worker, todo, cfg.eval.num_workers)
+
+    per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+    for row in store.rows.values():
+        per_split[row["split"]][0] += row["success"]
+        per_split[row["split"]][1] += 1
+    bar = tqdm(total=len(work), initial=len(work) - len(todo), desc=f"eval {spec.type}", unit="ep",
+               dynamic_ncols=True)
+    t0 = time.perf_counter()
+    new = 0
+    try:
+        for _, result in stream:
+            store.add(result.row)
+            if rerun is not None:
+                rerun.log_episode(result)
+            stats = per_split[result.row["split"]]
+            stats[0] += result.row["success"]
+            stats[1] += 1
+            new += 1
+            bar.update(1)
+            bar.set_postfix({s: f"{k / n:.0%}" for s, (k, n) in per_split.items()})
+    finally:
+        stream.close()
+        bar.close()
+        store.close()
+        if rerun is not None:
+            rerun.close()
+    total = len(store.rows)
+    successes = sum(r["success"] for r in store.rows.values())
+    return EvaluateResult(Path(cfg.output_dir), total, new, successes / total if total else float("nan"),
+                          time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> EvaluateResult:
+    setup_environment()
+    cfg = parse(EvaluateConfig, args)
+    try:
+        result = run(cfg)
+    except (ValueError, ResultsError, EpisodeLost) as exc:
+        fail(str(exc))
+    print(f"[evaluate] {result.episodes} episodes in {result.output_dir / 'episodes.parquet'} "
+          f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h); "
+          f"policies available: {', '.join(registered_policies())}")
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+"""Built-in policies: the privileged expert (upper bound) and uniform random actions (floor).
+
+The vision heuristic and the LeRobot checkpoint adapter live in their own modules and register here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from policies.base import PolicyEntry, PolicySpec, register_policy
+from roboview_data.env import PickPlaceEnv
+from roboview_data.expert import ScriptedExpert
+from roboview_data.instances import TaskInstance
+
+# The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
+DEFAULT_CAMERAS = ("front",)
+
+
+class ExpertPolicy:
+    """The scripted expert with privileged state; its Bias Coefficient should be ≈ 0."""
+
+    name = "expert"
+
+    def __init__(self, env: PickPlaceEnv) -> None:
+        self._expert = ScriptedExpert(env)
+
+    def reset(self, instance: TaskInstance) -> None:
+        self._expert.reset()
+
+    def select_action(self, observation: dict) -> np.ndarray:
+        return self._expert.select_action(observation)
+
+
+class RandomPolicy:
+    """Uniform random joint targets near the current pose and a random gripper: the floor."""
+
+    name = "random"
+
+    def __init__(self, env: PickPlaceEnv, step_rad: float = 0.15) -> None:
+        self.env = env
+        self.step_rad = step_rad
+        self._rng = np.random.default_rng(0)
+
+    def reset(self, instance: TaskInstance) -> None:
+        # Seeded from the episode's own generator so repeats differ and reruns agree.
+        self._rng = np.random.default_rng(self.env.np_random.integers(2**63))
+
+    def select_action(self, observation: dict) -> np.ndarray:
+        q = observation["observation.state"][:7]
+        target = q + self._rng.uniform(-self.step_rad, self.step_rad, size=7)
+        low, high = self.env.action_space.low, self.env.action_space.high
+        action = np.append(target, self._rng.uniform(0.0, 1.0)).astype(np.float32)
+        return np.clip(action, low, high)
+
+
+register_policy("expert", PolicyEntry(lambda spec, env: ExpertPolicy(env), lambda spec: DEFAULT_CAMERAS,
+                                      doc="privileged scripted expert (upper bound)"))
+register_policy("random", PolicyEntry(lambda spec, env: RandomPolicy(env), lambda spec: DEFAULT_CAMERAS,
+                                      doc="random joint targets around the current pose (floor)"))

@@ -1,0 +1,116 @@
+"""Any LeRobot policy checkpoint (ACT, Diffusion, π0, SmolVLA, …) as a RoboView policy.
+
+Loaded the way `lerobot-eval` loads it: the config and weights through the policy class's
+`from_pretrained`, and the checkpoint's own saved pre/post-processors (normalization, device,
+tokenization). Our observation keys are the dataset's feature keys, so a policy trained on
+`pipelines.collect` demos needs no renaming; a checkpoint that wants a camera or a state/action
+shape this env cannot provide fails before any rollout with the mismatch spelled out.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from policies.base import PolicyEntry, PolicySpec, register_policy
+from roboview_data.cameras import ALL_CAMERAS
+from roboview_data.env import ACTION_NAMES, STATE_KEY, STATE_NAMES, PickPlaceEnv
+from roboview_data.instances import TaskInstance
+
+log = logging.getLogger(__name__)
+
+
+class CheckpointError(ValueError):
+    """The checkpoint is missing, unreadable, or does not fit the env's features."""
+
+
+def _checkpoint_dir(path: str | None) -> Path:
+    if not path:
+        raise CheckpointError("--policy.type=lerobot needs --policy.path=DIR (a `pretrained_model` folder "
+                              "written by lerobot-train, e.g. outputs/train/checkpoints/last/pretrained_model)")
+    root = Path(path)
+    if (root / "pretrained_model" / "config.json").is_file():
+        root = root / "pretrained_model"
+    if not (root / "config.json").is_file():
+        raise CheckpointError(f"--policy.path={path} holds no LeRobot checkpoint (config.json missing)")
+    return root
+
+
+def load_config(path: str | None):
+    from lerobot.configs.policies import PreTrainedConfig
+
+    root = _checkpoint_dir(path)
+    try:
+        config = PreTrainedConfig.from_pretrained(root)
+    except Exception as exc:  # draccus/json errors: say which file
+        raise CheckpointError(f"cannot read {root / 'config.json'}: {exc}") from exc
+    check_features(config)
+    return root, config
+
+
+def check_features(config) -> None:
+    """Every input the checkpoint wants must be one we render; its action must be our action."""
+    problems = []
+    for key, feature in config.input_features.items():
+        if key.startswith("observation.images."):
+            cam = key.removeprefix("observation.images.")
+            if cam not in ALL_CAMERAS:
+                problems.append(f"camera {cam!r} (env cameras: {', '.join(ALL_CAMERAS)})")
+        elif key == STATE_KEY:
+            if tuple(feature.shape) != (len(STATE_NAMES),):
+                problems.append(f"{key} shape {tuple(feature.shape)} (env gives ({len(STATE_NAMES)},))")
+        else:
+            problems.append(f"input {key!r} (env provides observation.images.<camera> and {STATE_KEY})")
+    action = config.output_features.get("action")
+    if action is None or tuple(action.shape) != (len(ACTION_NAMES),):
+        shape = None if action is None else tuple(action.shape)
+        problems.append(f"action shape {shape} (env expects ({len(ACTION_NAMES)},): 7 joint targets + gripper)")
+    if problems:
+        raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
+
+
+def checkpoint_cameras(spec: PolicySpec) -> tuple[str, ...]:
+    _, config = load_config(spec.path)
+    cams = tuple(k.removeprefix("observation.images.") for k in config.input_features
+                 if k.startswith("observation.images."))
+    return cams or ("front",)
+
+
+class LeRobotPolicy:
+    def __init__(self, spec: PolicySpec, env: PickPlaceEnv) -> None:
+        import torch
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        root, config = load_config(spec.path)
+        config.device = "cpu"
+        self.name = f"lerobot:{config.type}"
+        self._torch = torch
+        self.policy = get_policy_class(config.type).from_pretrained(root, config=config)
+        self.policy.eval()
+        self.preprocessor, self.postprocessor = make_pre_post_processors(
+            policy_cfg=config, pretrained_path=str(root),
+            preprocessor_overrides={"device_processor": {"device": "cpu"}})
+        self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
+        self.task = ""
+
+    def reset(self, instance: TaskInstance) -> None:
+        self.policy.reset()  # clears action-chunk queues
+        self.task = instance.get("instruction")
+
+    def select_action(self, observation: dict) -> np.ndarray:
+        torch = self._torch
+        batch = {STATE_KEY: torch.from_numpy(observation[STATE_KEY]).float().unsqueeze(0), "task": [self.task]}
+        for key in self.image_keys:
+            img = torch.from_numpy(observation[key]).permute(2, 0, 1).float().div_(255.0)
+            batch[key] = img.unsqueeze(0)
+        batch = self.preprocessor(batch)
+        with torch.inference_mode():
+            action = self.policy.select_action(batch)
+        action = self.postprocessor(action)
+        return action.squeeze(0).cpu().numpy().astype(np.float32)
+
+
+register_policy("lerobot", PolicyEntry(LeRobotPolicy, checkpoint_cameras,
+                                       doc="any LeRobot checkpoint (--policy.path=DIR)"))
