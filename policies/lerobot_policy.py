@@ -39,6 +39,7 @@ def _checkpoint_dir(path: str | None) -> Path:
 
 
 def load_config(path: str | None):
+    import lerobot.policies  # noqa: F401  (registers every policy config type: act, diffusion, pi0, …)
     from lerobot.configs.policies import PreTrainedConfig
 
     root = _checkpoint_dir(path)

@@ -69,20 +69,36 @@ class ScriptedExpert:
         self._q = HOME_QPOS.copy()
 
     def reset(self) -> None:
-        """Plan from the current (just reset) simulator state."""
+        """Plan from the current (just reset) simulator state, reading the object's true pose."""
         obj_pos, obj_quat = self.env.object_pose()
-        shape = SHAPES[self.env.shape]
-        start = self.env.ee_position()
+        self.plan(obj_pos, _yaw_of(obj_quat), SHAPES[self.env.shape].symmetry)
+
+    def plan(self, obj_pos: np.ndarray, obj_yaw: float, symmetry: float,
+             box_xy: np.ndarray = BOX_CENTER, arm_qpos: np.ndarray | None = None) -> None:
+        """Plan the pick-and-place for an object at `obj_pos` (its center) with heading `obj_yaw`.
+
+        Split from `reset` so a non-privileged agent (the vision policy) can drive the same motion
+        from perceived values: it passes its perceived box center and its own joint reading
+        `arm_qpos`; without one the plan starts from the simulator's current arm state.
+        `symmetry` is the object's rotational symmetry about z (rad), which bounds the wrist turn.
+        """
+        if arm_qpos is None:
+            start = self.env.ee_position()
+            q_start = self.env.data.qpos[self._qadr].copy()
+        else:
+            q_start = np.asarray(arm_qpos, dtype=float).copy()
+            self._scratch.qpos[self._qadr] = q_start
+            mujoco.mj_kinematics(self.model, self._scratch)
+            start = self._scratch.site_xpos[self._site].copy()
         # Fingers close along the site's y axis: align it with the object's x axis, picking the
         # symmetric equivalent nearest the current wrist yaw so the wrist turns as little as possible.
-        obj_yaw = _yaw_of(obj_quat)
-        half_turn = min(shape.symmetry, np.pi)
+        half_turn = min(symmetry, np.pi)
         delta = obj_yaw - self._home_finger_yaw
         grasp_yaw = (delta + half_turn / 2) % half_turn - half_turn / 2
         grasp_z = obj_pos[2] + GRASP_OFFSET_Z
         above = np.array([obj_pos[0], obj_pos[1], HOVER_Z])
-        box_above = np.array([BOX_CENTER[0], BOX_CENTER[1], CARRY_Z])
-        box_release = np.array([BOX_CENTER[0], BOX_CENTER[1], RELEASE_Z])
+        box_above = np.array([box_xy[0], box_xy[1], CARRY_Z])
+        box_release = np.array([box_xy[0], box_xy[1], RELEASE_Z])
         segments = [
             Segment(above, grasp_yaw, 12, 0.0),
             Segment(np.array([obj_pos[0], obj_pos[1], grasp_z]), grasp_yaw, 8, 0.0),
@@ -101,7 +117,7 @@ class ScriptedExpert:
                 self._plan.append((pos + s * (seg.target - pos), yaw + s * (seg.yaw - yaw), seg.grip))
             pos, yaw = seg.target, seg.yaw
         self._t = 0
-        self._q = self.env.data.qpos[self._qadr].copy()
+        self._q = q_start
 
     def select_action(self, observation: dict | None = None) -> np.ndarray:
         target, yaw, grip = self._plan[min(self._t, len(self._plan) - 1)]

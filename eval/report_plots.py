@@ -1,0 +1,207 @@
+"""PNG figures of a report, drawn from the metrics dict only (never from raw episodes).
+
+Why from the dict: a figure and the table next to it then show the same numbers. Each figure
+needs one split; when no policy has it the figure is skipped and the reason goes into report.md.
+Success counts behind the Wilson intervals are recovered as round(sr × n_episodes), exact because
+sr was computed as count / n.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: reports are written on machines without a display
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+from eval.metrics import wilson_interval  # noqa: E402
+from roboview_data.colors import CATEGORIES, COLORS  # noqa: E402
+from roboview_data.factors import (  # noqa: E402
+    DIST_SCALE_STEP_M, EULER_STEPS_DEG, N_ORBIT_POSES_PER_RING, N_ORBIT_RINGS, parse_camera_pose, parse_euler,
+    parse_dist_scale,
+)
+
+Layouts = dict[str, dict[str, Any]]
+_MARKERS = "osD^vP*X"
+_DPI = 100
+
+
+def _per_value(layouts: Layouts, split: str, key: str = "splits") -> dict[str, dict[str, dict]]:
+    """policy → per_value of `split`, for the policies that have it."""
+    return {p: lay[key][split]["per_value"] for p, lay in layouts.items() if split in lay[key]}
+
+
+def _wilson_err(stats: list[dict]) -> np.ndarray:
+    """Asymmetric error bars (2, n) around each SR from its Wilson interval."""
+    err = []
+    for s in stats:
+        lo, hi = wilson_interval(round(s["sr"] * s["n_episodes"]), s["n_episodes"])
+        err.append((s["sr"] - lo, hi - s["sr"]))
+    return np.clip(np.array(err).T, 0, None)  # k/n recomputed from sr may differ by float noise
+
+
+def _save(fig: plt.Figure, path: Path) -> None:
+    fig.savefig(path, dpi=_DPI)
+    plt.close(fig)
+
+
+def _grid_axes(n: int, width: float, height: float) -> tuple[plt.Figure, list[plt.Axes]]:
+    fig, axes = plt.subplots(1, n, figsize=(width * n, height), squeeze=False, layout="constrained")
+    return fig, list(axes[0])
+
+
+def _heatmap(ax: plt.Axes, grid: np.ndarray, rows: list[str], cols: list[str], title: str) -> Any:
+    image = ax.imshow(grid, vmin=0, vmax=1, cmap="viridis", aspect="auto")
+    ax.set_xticks(range(len(cols)), cols, rotation=45 if max(map(len, cols)) > 3 else 0, ha="right")
+    ax.set_yticks(range(len(rows)), rows)
+    for (i, j), v in np.ndenumerate(grid):
+        if not math.isnan(v):
+            ax.text(j, i, f"{100 * v:.0f}", ha="center", va="center", fontsize=7,
+                    color="white" if v < 0.5 else "black")
+    ax.set_title(title)
+    return image
+
+
+def category_color(category: str) -> str:
+    """Bar color of a basic category: the CSS color of the same name."""
+    return COLORS[category].hex if category in COLORS else "#808080"
+
+
+def plot_color_categories(layouts: Layouts, path: Path) -> None:
+    """SR per basic color category (pooled over its colors' episodes), Wilson 95 % error bars."""
+    per = _per_value(layouts, "color")
+    fig, ax = plt.subplots(figsize=(10, 4), layout="constrained")
+    width = 0.8 / len(per)
+    for i, (policy, values) in enumerate(per.items()):
+        stats = []
+        for category in CATEGORIES:
+            members = [s for v, s in values.items() if v in COLORS and COLORS[v].category == category]
+            n = sum(s["n_episodes"] for s in members)
+            k = sum(round(s["sr"] * s["n_episodes"]) for s in members)
+            stats.append({"sr": k / n if n else math.nan, "n_episodes": n})
+        shown = [j for j, s in enumerate(stats) if s["n_episodes"]]
+        ax.bar(np.array(shown) + (i - (len(per) - 1) / 2) * width, [stats[j]["sr"] for j in shown], width,
+               yerr=_wilson_err([stats[j] for j in shown]), capsize=2, label=policy,
+               color=[category_color(CATEGORIES[j]) for j in shown], edgecolor="black", hatch="/" * i)
+    ax.set_xticks(range(len(CATEGORIES)), CATEGORIES)
+    ax.set(ylabel="success rate", ylim=(0, 1.05), title="Success rate by basic color category")
+    if len(per) > 1:  # bars wear their category's color, so the legend shows each policy's hatch
+        ax.legend(handles=[Patch(facecolor="white", edgecolor="black", hatch="/" * i, label=p)
+                           for i, p in enumerate(per)])
+    _save(fig, path)
+
+
+def plot_color_lab(layouts: Layouts, path: Path) -> None:
+    """SR per color against CIELAB chroma C*ab and lightness L*, each dot in its own color."""
+    fig, axes = _grid_axes(2, 5, 4)
+    for i, (policy, values) in enumerate(_per_value(layouts, "color").items()):
+        known = [(COLORS[v], s["sr"]) for v, s in values.items() if v in COLORS]
+        lab = np.array([c.lab for c, _ in known])
+        sr = [s for _, s in known]
+        faces = [c.hex for c, _ in known]
+        for ax, x in zip(axes, (np.hypot(lab[:, 1], lab[:, 2]), lab[:, 0])):
+            ax.scatter(x, sr, c=faces, edgecolors="black", linewidths=0.4, marker=_MARKERS[i % len(_MARKERS)],
+                       label=policy)
+    axes[0].set(xlabel="CIELAB chroma C*ab", ylabel="success rate", ylim=(-0.05, 1.05))
+    axes[1].set(xlabel="CIELAB lightness L*", ylim=(-0.05, 1.05))
+    axes[0].set_title("Success rate vs chroma")
+    axes[1].set_title("Success rate vs lightness")
+    if len(layouts) > 1:
+        axes[1].legend()
+    _save(fig, path)
+
+
+def plot_camera_pose(layouts: Layouts, path: Path) -> None:
+    """SR over the 21 orbital poses as a ring × azimuth-index grid, one panel per policy."""
+    per = _per_value(layouts, "camera_pose")
+    fig, axes = _grid_axes(len(per), 5, 2.6)
+    for ax, (policy, values) in zip(axes, per.items()):
+        grid = np.full((N_ORBIT_RINGS, N_ORBIT_POSES_PER_RING), math.nan)
+        for value, s in values.items():
+            where = parse_camera_pose(value)
+            if where is not None:
+                grid[where] = s["sr"]
+        image = _heatmap(ax, grid, [f"ring {r}" for r in range(N_ORBIT_RINGS)],
+                         [str(k) for k in range(N_ORBIT_POSES_PER_RING)], policy)
+        ax.set_xlabel("pose index on ring")
+    fig.colorbar(image, ax=axes, label="success rate")
+    fig.suptitle("Success rate by orbital camera pose")
+    _save(fig, path)
+
+
+def plot_camera_euler(layouts: Layouts, path: Path) -> None:
+    """SR over (yaw, pitch) as a 3 × 3 heatmap, yaw rows and pitch columns."""
+    per = _per_value(layouts, "camera_euler")
+    fig, axes = _grid_axes(len(per), 3.6, 3.2)
+    steps = list(EULER_STEPS_DEG)
+    for ax, (policy, values) in zip(axes, per.items()):
+        grid = np.full((len(steps), len(steps)), math.nan)
+        for value, s in values.items():
+            yaw, pitch = parse_euler(value)
+            grid[steps.index(yaw), steps.index(pitch)] = s["sr"]
+        _heatmap(ax, grid, [f"yaw {y}°" for y in steps], [f"{p}°" for p in steps], policy)
+        ax.set_xlabel("pitch")
+    fig.suptitle("Success rate by camera Euler offset")
+    _save(fig, path)
+
+
+def plot_dist_scale(layouts: Layouts, path: Path) -> None:
+    """SR against how far the cameras moved back (0.05·k m), Wilson 95 % band."""
+    fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
+    for i, (policy, values) in enumerate(_per_value(layouts, "dist_scale").items()):
+        items = sorted(values.items(), key=lambda kv: parse_dist_scale(kv[0]))
+        x = [DIST_SCALE_STEP_M * parse_dist_scale(v) for v, _ in items]
+        sr = np.array([s["sr"] for _, s in items])
+        err = _wilson_err([s for _, s in items])
+        ax.plot(x, sr, marker=_MARKERS[i % len(_MARKERS)], label=policy)
+        ax.fill_between(x, sr - err[0], sr + err[1], alpha=0.2)
+    ax.set(xlabel="camera moved back along its optical axis (m)", ylabel="success rate", ylim=(0, 1.05),
+           title="Success rate vs camera distance")
+    ax.legend()
+    _save(fig, path)
+
+
+def plot_color_x_camera_pose(layouts: Layouts, path: Path) -> None:
+    """SR of every (color, pose) pair: pose rows, color columns, as the paper's heatmaps."""
+    per = _per_value(layouts, "color_x_camera_pose", key="interactions")
+    fig, axes = _grid_axes(len(per), 4.5, 6)
+    for ax, (policy, values) in zip(axes, per.items()):
+        pairs = [key.split("|") for key in values]
+        colors = list(dict.fromkeys(c for c, _ in pairs))
+        poses = list(dict.fromkeys(p for _, p in pairs))
+        grid = np.full((len(poses), len(colors)), math.nan)
+        for (color, pose), s in zip(pairs, values.values()):
+            grid[poses.index(pose), colors.index(color)] = s["sr"]
+        image = _heatmap(ax, grid, poses, colors, policy)
+    fig.colorbar(image, ax=axes, label="success rate")
+    fig.suptitle("Success rate by object color and camera pose")
+    _save(fig, path)
+
+
+# file name → (split it needs, section of the layout holding it, drawing function)
+PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
+    "sr_by_color_category.png": ("color", "splits", plot_color_categories),
+    "sr_vs_color_lab.png": ("color", "splits", plot_color_lab),
+    "sr_camera_pose.png": ("camera_pose", "splits", plot_camera_pose),
+    "sr_camera_euler.png": ("camera_euler", "splits", plot_camera_euler),
+    "sr_dist_scale.png": ("dist_scale", "splits", plot_dist_scale),
+    "sr_color_x_camera_pose.png": ("color_x_camera_pose", "interactions", plot_color_x_camera_pose),
+}
+
+
+def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
+    """Draw every figure whose split is present; file name → None if written, else the reason."""
+    outcome: dict[str, str | None] = {}
+    for name, (split, key, draw) in PLOTS.items():
+        if not any(split in layout[key] for layout in layouts.values()):
+            outcome[name] = f"no policy has the {split} split"
+            continue
+        draw(layouts, output_dir / name)
+        outcome[name] = None
+    return outcome

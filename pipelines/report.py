@@ -1,0 +1,75 @@
+"""Turn evaluation episodes into metrics.json, report.md and plots.
+
+    python -m pipelines.report --results=outputs/eval/episodes.parquet --output_dir=outputs/report
+
+`--results` takes one parquet file or several, comma-separated (say one per policy); a file may
+also hold several policies. Metrics follow DESIGN.md "Metrics" (eval.metrics); for several
+policies metrics.json holds {"epsilon", "resampling", "sources", "policies": {name: metrics}}.
+Inputs are checked before any work: missing files or columns, repeated episodes and mixed
+benchmark versions stop the run with a message naming the offender.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from eval.metrics import EPSILON, EpisodesError, MetricsConfig
+from eval.report import REPORT_FILE, ReportResult, load_results, write_report
+from pipelines._cli import fail, parse, setup_environment
+
+
+@dataclass
+class ReportConfig:
+    # Episode table(s) written by pipelines.evaluate: one path or several, comma-separated.
+    results: str = ""
+    # Folder that receives metrics.json, report.md and the PNG plots (created when missing).
+    output_dir: str = "outputs/report"
+    # ε added to the mean in the CV and IEC denominators.
+    epsilon: float = EPSILON
+    # Bootstrap replicates behind the CV / IEC confidence intervals.
+    n_boot: int = 1000
+    # Permutations behind the p-values.
+    n_perm: int = 1000
+    # Seed of the bootstrap and permutation generators.
+    seed: int = 0
+    # Draw the PNG plots (false: metrics.json and report.md only).
+    plots: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.result_paths:
+            raise ValueError("--results is required: the episodes.parquet file(s) of pipelines.evaluate")
+        self.metrics_config  # validates epsilon, n_boot, n_perm and seed with their own messages
+
+    @property
+    def result_paths(self) -> list[Path]:
+        return [Path(p.strip()) for p in self.results.split(",") if p.strip()]
+
+    @property
+    def metrics_config(self) -> MetricsConfig:
+        try:
+            return MetricsConfig(self.epsilon, self.n_boot, self.n_perm, self.seed)
+        except ValueError as exc:
+            raise ValueError(f"--{exc}") from None
+
+
+def run(cfg: ReportConfig) -> ReportResult:
+    episodes, sources = load_results(cfg.result_paths)
+    return write_report(episodes, cfg.output_dir, cfg.metrics_config, sources=sources, plots=cfg.plots)
+
+
+def main(args: list[str] | None = None) -> ReportResult:
+    setup_environment()
+    cfg = parse(ReportConfig, args)
+    try:
+        result = run(cfg)
+    except (FileNotFoundError, EpisodesError) as exc:
+        fail(str(exc))
+    skipped = [name for name, reason in result.plots.items() if reason is not None]
+    print(f"[report] {result.output_dir / REPORT_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
+          + (f", skipped {', '.join(skipped)}" if skipped else ""))
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,153 @@
+"""evaluate on the tiny benchmark: expert per split, resume, local vs Ray, Rerun, LeRobot adapter, bad input."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pipelines.build_benchmark import BuildConfig
+from pipelines.build_benchmark import run as build
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, PolicyConfig, run
+
+ROOT = Path(__file__).parents[1]
+RERUN = Path(sys.executable).parent / "rerun"
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bench") / "tiny"
+    build(BuildConfig(output_dir=str(out), preset="tiny", image_size=96))
+    return out
+
+
+def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
+             backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120):
+    cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), PolicyConfig(policy, path),
+                         EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers, backend=backend,
+                                    rerun=rerun, image_size=64, max_steps=max_steps), str(out))
+    return run(cfg)
+
+
+def rows(out: Path) -> pd.DataFrame:
+    return pd.read_parquet(out / "episodes.parquet").drop(columns=["duration_s"]).sort_values(
+        ["instance_id", "repeat"]).reset_index(drop=True)
+
+
+def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
+    result = evaluate(bench, tmp_path / "ev", limit=2, repeats=1)
+    df = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
+    assert set(df["split"]) == {"color", "camera_pose", "camera_euler", "dist_scale", "color_x_camera_pose"}
+    assert len(df) == 10 and result.new_episodes == 10
+    for split, sr in df.groupby("split")["success"].mean().items():
+        assert sr >= 0.95, f"expert SR {sr:.0%} on {split}"
+    assert (df["policy"] == "expert").all() and (df["failure_reason"] == "").all()
+    # Episode seeds follow DESIGN.md's derivation.
+    from roboview_data.instances import episode_seed
+    assert all(episode_seed(i, r) == s for i, r, s in zip(df["instance_id"], df["repeat"], df["episode_seed"]))
+
+
+def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
+    ref = tmp_path / "ref"
+    evaluate(bench, ref, splits="color,dist_scale", limit=2, repeats=2)
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}", "--policy.type=expert",
+           "--benchmark.splits=color,dist_scale", "--eval.limit=2", "--eval.n_repeats=2",
+           "--eval.image_size=64", f"--output_dir={out}"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env=os.environ | {"PYTHONPATH": str(ROOT)})
+    journal = out / "episodes.jsonl"
+    deadline = time.time() + 300
+    while time.time() < deadline and not (journal.exists() and len(journal.read_text().splitlines()) >= 3):
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done_before = len(journal.read_text().splitlines())
+    assert 3 <= done_before < 8
+    with journal.open("a") as f:
+        f.write('{"instance_id": "torn')  # a line cut by the kill
+    result = evaluate(bench, out, splits="color,dist_scale", limit=2, repeats=2)
+    assert result.new_episodes == 8 - done_before
+    got, want = rows(out), rows(ref)
+    assert not got.duplicated(["instance_id", "repeat"]).any() and len(got) == 8
+    pd.testing.assert_frame_equal(got, want)
+    assert evaluate(bench, out, splits="color,dist_scale", limit=2, repeats=2).new_episodes == 0
+
+
+def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path):
+    evaluate(bench, tmp_path / "local", splits="color,camera_pose", limit=1, repeats=2)
+    evaluate(bench, tmp_path / "ray", splits="color,camera_pose", limit=1, repeats=2, backend="ray")
+    import ray
+    ray.shutdown()
+    local, remote = rows(tmp_path / "local"), rows(tmp_path / "ray")
+    assert len(local) == 4
+    pd.testing.assert_frame_equal(local, remote)
+
+
+def test_rerun_recording_verifies(bench, tmp_path):
+    rrd = tmp_path / "eval.rrd"
+    evaluate(bench, tmp_path / "ev", splits="color", limit=2, repeats=1, rerun=str(rrd))
+    proc = subprocess.run([str(RERUN), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "verified without error" in proc.stdout + proc.stderr
+    assert rrd.stat().st_size > 20_000  # frames of two episodes, not an empty shell
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tmp_path_factory) -> Path:
+    from pipelines.collect import CollectConfig, DatasetConfig
+    from pipelines.collect import run as collect
+
+    root = tmp_path_factory.mktemp("ckpt")
+    collect(CollectConfig(DatasetConfig(repo_id="t/demos", root=str(root / "ds"), num_episodes=2, image_size=64,
+                                        cameras=["left_top", "wrist"]), num_workers=1))
+    cmd = [sys.executable, "-m", "lerobot.scripts.lerobot_train", "--dataset.repo_id=t/demos",
+           f"--dataset.root={root / 'ds'}", "--policy.type=act", "--policy.pretrained_backbone_weights=null",
+           "--policy.device=cpu", "--policy.push_to_hub=false", "--steps=2", "--batch_size=2", "--num_workers=0",
+           "--save_freq=2", "--wandb.enable=false", f"--output_dir={root / 'train'}"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return root / "train" / "checkpoints" / "last" / "pretrained_model"
+
+
+def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_path):
+    result = evaluate(bench, tmp_path / "ev", policy="lerobot", path=str(tiny_checkpoint), splits="color",
+                      limit=1, repeats=1, workers=1, max_steps=8)
+    df = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
+    assert result.episodes == 1 and df["policy"].tolist() == ["lerobot:act"]
+    assert df["steps"].tolist() == [8] and not df["success"].any()
+    assert "within 8 steps" in df["failure_reason"][0]
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pipelines.evaluate", *args], capture_output=True, text=True,
+                          timeout=300, env=os.environ | {"PYTHONPATH": str(ROOT)})
+
+
+def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
+    out = tmp_path / "out"
+    proc = _cli(f"--benchmark.path={bench}", "--policy.type=oracle", f"--output_dir={out}")
+    assert proc.returncode == 2 and "unknown policy type 'oracle'; allowed: expert, lerobot, random" in proc.stderr
+    proc = _cli(f"--benchmark.path={bench}", "--benchmark.splits=colour", f"--output_dir={out}")
+    assert proc.returncode == 2 and "unknown split(s) ['colour']" in proc.stderr
+    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tmp_path}", f"--output_dir={out}")
+    assert proc.returncode == 2 and "holds no LeRobot checkpoint" in proc.stderr
+    bad = tmp_path / "bad_ckpt"
+    bad.mkdir()
+    config = json.loads((tiny_checkpoint / "config.json").read_text())
+    config["input_features"]["observation.images.top_down"] = config["input_features"].pop("observation.images.wrist")
+    (bad / "config.json").write_text(json.dumps(config))
+    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}", f"--output_dir={out}")
+    assert proc.returncode == 2 and "camera 'top_down'" in proc.stderr
+    assert not out.exists()
+    # Results from another benchmark version in the output folder: refuse to mix them.
+    out.mkdir()
+    (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert"}))
+    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1")
+    assert proc.returncode == 2 and "existing 'paper-000000000000' vs requested 'tiny-" in proc.stderr
+    assert not (out / "episodes.jsonl").exists()

@@ -1,0 +1,178 @@
+"""Metrics against small tables computed by hand (DESIGN.md "Metrics"), plus the add-ons' contracts."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.metrics import (
+    EpisodesError, MetricsConfig, compute_all_metrics, compute_metrics, conditional_cv, interaction_metrics,
+    policy_layouts, split_metrics, wilson_interval,
+)
+
+EPS = 1e-6
+FAST = MetricsConfig(n_boot=200, n_perm=200)
+
+
+def episodes(cells: dict[tuple[str, str], list[int]], split: str = "color", factor: str = "color",
+             policy: str = "p") -> pd.DataFrame:
+    """One instance per (value, context) with the listed outcomes, one row per repeat."""
+    rows = [{"policy": policy, "split": split, "factor": factor, "value": value, "context_id": ctx,
+             "instance_id": f"{split}/{value}/{ctx}", "repeat": r, "success": bool(s)}
+            for (value, ctx), outcomes in cells.items() for r, s in enumerate(outcomes)]
+    return pd.DataFrame(rows)
+
+
+# 2 contexts × 3 values × 2 repeats. c1: SR a = 1, b = 0.5, c = 0 (μ 0.5, σ = √(1/6)); c2: all fail.
+HAND = episodes({("a", "c1"): [1, 1], ("b", "c1"): [1, 0], ("c", "c1"): [0, 0],
+                 ("a", "c2"): [0, 0], ("b", "c2"): [0, 0], ("c", "c2"): [0, 0]})
+
+
+def test_single_split_by_hand():
+    m = split_metrics(HAND, FAST)
+    assert (m["n_instances"], m["n_episodes"]) == (6, 12)
+    assert m["sr"] == pytest.approx(3 / 12)
+    # CV(c1) = √(1/6) / (0.5 + ε); CV(c2) = 0 / (0 + ε) = 0; cv = their mean.
+    assert m["cv"] == pytest.approx((math.sqrt(1 / 6) / (0.5 + EPS) + 0.0) / 2, rel=1e-12)
+    assert m["cv"] == pytest.approx(0.408248, abs=1e-6)
+    assert m["per_value"] == {
+        "a": {"sr": 0.5, "n_episodes": 4, "signed_dev": pytest.approx(0.25)},  # mean(1 − 0.5, 0 − 0)
+        "b": {"sr": 0.25, "n_episodes": 4, "signed_dev": pytest.approx(0.0)},
+        "c": {"sr": 0.0, "n_episodes": 4, "signed_dev": pytest.approx(-0.25)},
+    }
+
+
+def test_context_where_everything_fails_has_zero_ccv():
+    sr = np.array([1.0, 0.5, 0.0, 0.0, 0.0, 0.0])
+    ccv = conditional_cv(sr, np.array([0, 0, 0, 1, 1, 1]), EPS)
+    assert ccv == pytest.approx([math.sqrt(1 / 6) / (0.5 + EPS), 0.0])
+
+
+def test_split_where_everything_fails_has_null_cv():
+    m = split_metrics(episodes({(v, c): [0, 0] for v in "abc" for c in ("c1", "c2")}), FAST)
+    assert m["sr"] == 0.0
+    assert (m["cv"], m["cv_ci95"], m["cv_bias"], m["p_value"]) == (None, None, None, None)
+    # Wilson stays defined at 0/12: an upper bound on SR, 1.96²/(12 + 1.96²).
+    assert m["sr_ci95"] == pytest.approx([0.0, 3.8415 / 15.8415], abs=1e-4)
+
+
+# Factorial 2 × 2 in one context, 2 repeats: SR(a1,b1)=1, SR(a2,b1)=.5, SR(a1,b2)=0, SR(a2,b2)=.5.
+FACTORIAL = episodes({("a1|b1", "c*"): [1, 1], ("a2|b1", "c*"): [1, 0],
+                      ("a1|b2", "c*"): [0, 0], ("a2|b2", "c*"): [0, 1]}, split="A_x_B", factor="A|B")
+
+
+def test_factorial_cv_and_iec_by_hand():
+    m = interaction_metrics(FACTORIAL, FAST)
+    # CV(A|b1) = σ(1, .5)/μ = .25/.75 = 1/3;  CV(A|b2) = σ(0, .5)/μ = .25/.25 = 1.
+    cv_a = [0.25 / (0.75 + EPS), 0.25 / (0.25 + EPS)]
+    # CV(B|a1) = σ(1, 0)/μ = .5/.5 = 1;        CV(B|a2) = σ(.5, .5) = 0.
+    cv_b = [0.5 / (0.5 + EPS), 0.0]
+    assert m["cv"]["A"] == pytest.approx(np.mean(cv_a), rel=1e-12)  # ≈ 2/3
+    assert m["cv"]["B"] == pytest.approx(np.mean(cv_b), rel=1e-12)  # ≈ 1/2
+    # IEC(A;B) = σ(1/3, 1) / μ = (1/3)/(2/3) = 0.5;  IEC(B;A) = σ(1, 0)/μ = 0.5/0.5 = 1.
+    assert m["iec"]["A|B"] == pytest.approx(np.std(cv_a) / (np.mean(cv_a) + EPS), rel=1e-12)
+    assert m["iec"]["A|B"] == pytest.approx(0.5, abs=1e-5)
+    assert m["iec"]["B|A"] == pytest.approx(1.0, abs=1e-5)
+    assert (m["sr"], m["n_episodes"], m["factors"]) == (0.5, 8, ["A", "B"])
+    assert m["per_value"]["a2|b1"] == {"sr": 0.5, "n_episodes": 2}
+
+
+def test_factorial_all_failed_is_null():
+    m = interaction_metrics(FACTORIAL.assign(success=False), FAST)
+    assert m["cv"] == {"A": None, "B": None}
+    assert m["iec"] == {"A|B": None, "B|A": None}
+    assert m["iec_ci95"] == {"A|B": None, "B|A": None}
+
+
+def test_wilson_interval_known_values():
+    assert wilson_interval(8, 10) == pytest.approx((0.490, 0.943), abs=1e-3)
+    assert wilson_interval(0, 0) is None
+    assert wilson_interval(10, 10)[1] == 1.0
+
+
+def _noisy(seed: int = 0, contexts: int = 3, values: int = 6, repeats: int = 5) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    return episodes({(f"v{v}", f"c{c}"): list(rng.random(repeats) < (v + 1) / (values + 1))
+                     for v in range(values) for c in range(contexts)})
+
+
+def test_bootstrap_interval_contains_estimate_and_is_seeded():
+    table = _noisy()
+    m = split_metrics(table, FAST)
+    lo, hi = m["cv_ci95"]
+    assert lo < m["cv"] < hi
+    assert split_metrics(table, FAST)["cv_ci95"] == [lo, hi]
+    assert split_metrics(table, MetricsConfig(n_boot=200, n_perm=200, seed=1))["cv_ci95"] != [lo, hi]
+
+
+def test_bootstrap_reports_the_upward_bias_of_repeat_noise():
+    # Every value succeeds 3 times in 5: no spread to find, yet resampled repeats always show some.
+    m = split_metrics(episodes({(v, "c1"): [1, 1, 1, 0, 0] for v in "abcdef"}), FAST)
+    assert m["cv"] == pytest.approx(0.0)
+    assert m["cv_bias"] > 0.1
+    assert m["cv_ci95"][0] == 0.0 and m["cv_ci95"][1] > 0.1
+
+
+def test_permutation_p_value_small_for_dependence_large_for_none():
+    strong = episodes({(v, c): [int(v in "ab")] * 10 for v in "abcd" for c in ("c1", "c2")})
+    assert split_metrics(strong, FAST)["p_value"] <= 2 / 201
+    flat = episodes({(v, c): [1, 0] * 5 for v in "abcd" for c in ("c1", "c2")})
+    assert split_metrics(flat, FAST)["p_value"] == 1.0
+
+
+def test_permutation_p_value_of_factorial_factors():
+    # Success depends on A only: a1 always succeeds, a2 never, at every b.
+    cells = {(f"a{a}|b{b}", "c*"): [int(a == 1)] * 8 for a in (1, 2) for b in (1, 2, 3)}
+    m = interaction_metrics(episodes(cells, split="A_x_B", factor="A|B"), FAST)
+    assert m["p_value"]["A"] <= 2 / 201
+    assert m["p_value"]["B"] == 1.0
+
+
+def test_split_numbers_do_not_depend_on_other_splits():
+    alone = compute_metrics(_noisy(), FAST)["splits"]["color"]
+    with_other = pd.concat([_noisy(), FACTORIAL])
+    assert compute_metrics(with_other, FAST)["splits"]["color"] == alone
+
+
+def test_layout_and_several_policies():
+    both = pd.concat([HAND, _noisy().assign(policy="q")])
+    m = compute_all_metrics(both, FAST)
+    assert set(m) == {"epsilon", "resampling", "policies"} and set(m["policies"]) == {"p", "q"}
+    assert m["policies"]["p"]["splits"]["color"] == compute_metrics(HAND, FAST)["splits"]["color"]
+    assert set(policy_layouts(m)) == {"p", "q"}
+    single = compute_all_metrics(pd.concat([HAND, FACTORIAL]), FAST)
+    assert single["epsilon"] == EPS and single["policy"] == "p"
+    assert set(single["splits"]["color"]) >= {"factor", "n_instances", "n_episodes", "sr", "sr_ci95", "cv",
+                                              "cv_ci95", "p_value", "per_value"}
+    assert set(single["interactions"]["A_x_B"]["iec"]) == {"A|B", "B|A"}
+    assert single["average"] == {"sr": 0.25, "cv": single["splits"]["color"]["cv"]}
+    assert policy_layouts(single) == {"p": single}
+    with pytest.raises(ValueError, match="one policy"):
+        compute_metrics(both, FAST)
+
+
+def test_bad_tables_name_the_problem():
+    with pytest.raises(EpisodesError, match="context_id, success"):
+        compute_metrics(HAND.drop(columns=["context_id", "success"]))
+    with pytest.raises(EpisodesError, match="success must be boolean"):
+        compute_metrics(HAND.assign(success=2))
+    with pytest.raises(EpisodesError, match="'color'.*mixes factors"):
+        compute_metrics(HAND.assign(factor=["color"] * 11 + ["shape"]))
+    with pytest.raises(EpisodesError, match="instance 'color/a/c1'"):
+        compute_metrics(HAND.assign(context_id=["x"] + list(HAND["context_id"][1:])))
+    with pytest.raises(ValueError, match="epsilon"):
+        MetricsConfig(epsilon=0)
+
+
+def test_paper_sized_split_runs_in_seconds():
+    rng = np.random.default_rng(0)
+    p = rng.random(1551)
+    table = episodes({(f"v{i % 141}", f"c{i // 141}"): list(rng.random(5) < p[i]) for i in range(1551)})
+    start = time.perf_counter()
+    m = split_metrics(table, MetricsConfig())  # 1,000 bootstrap replicates and 1,000 permutations
+    assert time.perf_counter() - start < 20
+    assert m["n_instances"] == 1551 and m["p_value"] < 0.01

@@ -1,0 +1,183 @@
+"""pipelines.report end to end on synthetic episode files of the tiny suite (no simulator needed)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from PIL import Image
+
+from eval.metrics import EpisodesError, policy_layouts
+from eval.report import VERSION_KEY, load_results
+from eval.report_plots import PLOTS
+from pipelines.report import ReportConfig, main, run
+from roboview_data.instances import episode_seed, generate_suite, load_preset
+
+FAST = {"n_boot": 50, "n_perm": 50}
+
+
+def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None, repeats: int = 3) -> pd.DataFrame:
+    """Every DESIGN episode column for the tiny suite's instances; outcomes seeded per policy."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for instance in generate_suite(load_preset("tiny")):
+        if splits is not None and instance.split not in splits:
+            continue
+        record = instance.to_record()
+        p = rng.random()
+        for r in range(repeats):
+            success = bool(rng.random() < p)
+            rows.append({**record, "repeat": r, "episode_seed": episode_seed(record["instance_id"], r),
+                         "cameras": [{"name": "front", "pos": [0.0, 0.0, 1.0], "quat": [1.0, 0.0, 0.0, 0.0],
+                                      "fovy": 45.0}],
+                         "success": success, "steps": 10, "duration_s": 0.1, "policy": policy,
+                         "failure_reason": "" if success else "timeout"})
+    return pd.DataFrame(rows)
+
+
+def write(frame: pd.DataFrame, path: Path, version: str | None = "tiny-abc") -> Path:
+    table = pa.Table.from_pandas(frame)
+    if version is not None:
+        table = table.replace_schema_metadata({**table.schema.metadata, VERSION_KEY.encode(): version.encode()})
+    pq.write_table(table, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("report")
+    a = write(make_episodes("expert", 0), tmp / "expert.parquet")
+    b = write(make_episodes("random", 1).assign(success=False), tmp / "random.parquet")
+    return run(ReportConfig(results=f"{a},{b}", output_dir=str(tmp / "rep"), **FAST))
+
+
+def test_files_and_plots_are_written(report):
+    out = report.output_dir
+    assert {p.name for p in out.iterdir()} == {"metrics.json", "report.md", *PLOTS}
+    for name in PLOTS:
+        with Image.open(out / name) as image:
+            image.verify()
+            assert image.format == "PNG" and image.size[0] > 200
+
+
+def test_metrics_json_holds_both_policies(report):
+    metrics = json.loads((report.output_dir / "metrics.json").read_text())
+    assert metrics == report.metrics
+    layouts = policy_layouts(metrics)
+    assert set(layouts) == {"expert", "random"}
+    assert [s[VERSION_KEY] for s in metrics["sources"]] == ["tiny-abc", "tiny-abc"]
+    assert set(layouts["expert"]["splits"]) == {"color", "camera_pose", "camera_euler", "dist_scale"}
+    # The always-failing policy: SR 0, CV null, and N/A in the table.
+    assert layouts["random"]["splits"]["color"]["cv"] is None
+    assert layouts["random"]["interactions"]["color_x_camera_pose"]["iec"]["color|camera_pose"] is None
+
+
+def _table_rows(markdown: str, heading: str) -> dict[str, list[str]]:
+    """First column → cells of the table under the heading that starts with `heading`."""
+    section = markdown.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
+    rows = [line.strip("|").split(" | ") for line in section.splitlines() if line.startswith("| ")]
+    return {cells[0].strip(): [c.strip().strip("*") for c in cells[1:]] for cells in rows[1:]}
+
+
+def _pct(x: float | None) -> str:
+    return "N/A" if x is None else f"{100 * x:.2f}"
+
+
+def _with_ci(x: float | None, ci: list[float] | None) -> str:
+    return _pct(x) + ("" if ci is None else f" [{_pct(ci[0])}, {_pct(ci[1])}]")
+
+
+def test_report_tables_equal_metrics(report):
+    markdown = (report.output_dir / "report.md").read_text()
+    layouts = policy_layouts(report.metrics)
+    table1 = _table_rows(markdown, "Table 1")
+    table2 = _table_rows(markdown, "Table 2")
+    p_values = _table_rows(markdown, "Does success")
+    for policy, layout in layouts.items():
+        expected = []
+        for split in ("color", "camera_pose", "camera_euler", "dist_scale"):
+            m = layout["splits"][split]
+            expected += [_with_ci(m["sr"], m["sr_ci95"]), _with_ci(m["cv"], m["cv_ci95"])]
+        expected += [_pct(layout["average"]["sr"]), _pct(layout["average"]["cv"])]
+        assert table1[policy] == expected
+        f = layout["interactions"]["color_x_camera_pose"]
+        assert table2[policy] == [
+            _with_ci(f["sr"], f["sr_ci95"]),
+            _with_ci(f["cv"]["color"], f["cv_ci95"]["color"]),
+            _with_ci(f["iec"]["color|camera_pose"], f["iec_ci95"]["color|camera_pose"]),
+            _with_ci(f["cv"]["camera_pose"], f["cv_ci95"]["camera_pose"]),
+            _with_ci(f["iec"]["camera_pose|color"], f["iec_ci95"]["camera_pose|color"])]
+        p = layout["splits"]["color"]["p_value"]
+        assert p_values[policy][0] == ("N/A" if p is None else f"{p:.4f}")
+    assert table1["random"][1] == "N/A"
+
+
+def _numbers(obj) -> set[str]:
+    """Every way report.md may print a number of the metrics dict."""
+    if isinstance(obj, dict):
+        return set().union(*map(_numbers, obj.values())) if obj else set()
+    if isinstance(obj, list):
+        return set().union(*map(_numbers, obj)) if obj else set()
+    if isinstance(obj, bool) or obj is None or isinstance(obj, str):
+        return set()
+    if isinstance(obj, int):
+        return {str(obj)}
+    return {f"{100 * obj:.2f}", f"{obj:.4f}"}
+
+
+def test_every_number_in_report_tables_comes_from_metrics(report):
+    allowed = _numbers(report.metrics)
+    markdown = (report.output_dir / "report.md").read_text()
+    lines = markdown.splitlines()
+    body = [line for i, line in enumerate(lines)  # table rows below a header's "| --- |" line
+            if line.startswith("| ") and not line.startswith("| ---") and i > 0 and lines[i - 1].startswith("| ")
+            and not (i + 1 < len(lines) and lines[i + 1].startswith("| ---"))]
+    cells = [cell for line in body for cell in line.split(" | ")[1:]]
+    found = [n for cell in cells for n in re.findall(r"-?\d+\.\d+|-?\d+", cell)]
+    assert found and set(found) <= allowed
+
+
+def test_missing_split_skips_its_plots(tmp_path):
+    path = write(make_episodes("expert", 0, splits=("color",)), tmp_path / "color.parquet")
+    result = run(ReportConfig(results=str(path), output_dir=str(tmp_path / "rep"), **FAST))
+    assert result.metrics["policy"] == "expert" and set(result.metrics["splits"]) == {"color"}
+    assert result.plots["sr_by_color_category.png"] is None
+    assert result.plots["sr_camera_pose.png"] == "no policy has the camera_pose split"
+    assert not (tmp_path / "rep" / "sr_camera_pose.png").exists()
+    assert "sr_camera_pose.png skipped: no policy has the camera_pose split" in (tmp_path / "rep/report.md").read_text()
+
+
+def test_bad_inputs_name_the_offender(tmp_path, capsys):
+    good = write(make_episodes("expert", 0, splits=("color",)), tmp_path / "good.parquet")
+    with pytest.raises(FileNotFoundError, match="nowhere.parquet"):
+        load_results([good, tmp_path / "nowhere.parquet"])
+    lacking = write(make_episodes("x", 0, splits=("color",)).drop(columns=["context_id", "repeat"]),
+                    tmp_path / "lacking.parquet")
+    with pytest.raises(EpisodesError, match=r"lacking.parquet lacks column\(s\) context_id, repeat"):
+        load_results([lacking])
+    other = write(make_episodes("random", 1, splits=("color",)), tmp_path / "other.parquet", version="paper-999")
+    with pytest.raises(EpisodesError, match="tiny-abc.*paper-999"):
+        load_results([good, other])
+    with pytest.raises(EpisodesError, match="occur twice"):
+        load_results([good, good])
+    with pytest.raises(SystemExit):
+        main([f"--results={tmp_path / 'nowhere.parquet'}", f"--output_dir={tmp_path / 'rep'}"])
+    assert "nowhere.parquet" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([f"--results={good}", "--n_boot=0"])
+    assert "n_boot=0" in capsys.readouterr().err
+
+
+def test_cli_without_plots(tmp_path, capsys):
+    path = write(make_episodes("expert", 0, splits=("dist_scale",)), tmp_path / "e.parquet", version=None)
+    result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--n_boot=20",
+                   "--n_perm=20"])
+    assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.md"]
+    assert result.metrics["sources"][0][VERSION_KEY] is None
+    assert "[report]" in capsys.readouterr().out

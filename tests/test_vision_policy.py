@@ -1,0 +1,98 @@
+"""The `vision` policy perceives from pixels alone: accurate at baseline, biased by colour.
+
+Privileged state (object pose, box center) is read here only to grade what the policy perceived.
+"""
+
+import numpy as np
+import pytest
+
+from policies.base import PolicySpec, make_policy, policy_entry, registered_policies
+from policies.perception import PerceptionError, perceive
+from roboview_data.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
+from roboview_data.factors import BASELINES
+from roboview_data.instances import TaskInstance, episode_seed
+from roboview_data.scene import BOX_CENTER
+
+CAMERA = "front"
+
+
+def _instance(**factors: str) -> TaskInstance:
+    varied = tuple(factors) or ("color",)
+    return TaskInstance("color", varied, dict(BASELINES, **factors), "base")
+
+
+@pytest.fixture(scope="module")
+def rgbd_env():
+    env = PickPlaceEnv(cameras=(CAMERA,), depth=True, image_size=224)
+    yield env
+    env.close()
+
+
+def _perceive(env: PickPlaceEnv, instance: TaskInstance, seed: int):
+    obs, _ = env.reset(seed=seed, options={"instance": instance})
+    return perceive(obs[IMAGE_KEY.format(CAMERA)], obs[DEPTH_KEY.format(CAMERA)], env.scene.camera_pose(CAMERA))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_baseline_perception_within_2cm(rgbd_env, seed):
+    seen = _perceive(rgbd_env, _instance(), seed)
+    true_pos, _ = rgbd_env.object_pose()
+    assert np.linalg.norm(seen.object_pos - true_pos) < 0.02
+    assert np.linalg.norm(seen.box_xy - BOX_CENTER) < 0.02
+    assert seen.symmetry == pytest.approx(np.pi / 2)  # a cube's footprint is square
+
+
+def test_perception_changes_with_colour(rgbd_env):
+    red = _perceive(rgbd_env, _instance(), 0)
+    true_pos, _ = rgbd_env.object_pose()
+    # Gold falls in the box's yellow range, so the object disappears into the box mask.
+    with pytest.raises(PerceptionError, match="object not found"):
+        _perceive(rgbd_env, _instance(color="gold"), 0)
+    # Dark grey is close to the table's own colour: nothing salient is left to find.
+    with pytest.raises(PerceptionError, match="object not found"):
+        _perceive(rgbd_env, _instance(color="darkgray"), 0)
+    # Mid grey is only partly separated from the table: found, but off-center and less salient.
+    gray = _perceive(rgbd_env, _instance(color="gray"), 0)
+    assert np.linalg.norm(gray.object_pos - true_pos) > 2 * np.linalg.norm(red.object_pos - true_pos)
+    assert gray.object_pixels < red.object_pixels / 2
+    assert gray.saliency < red.saliency / 2
+
+
+def test_registered_with_camera_option():
+    assert "vision" in registered_policies()
+    entry = policy_entry("vision")
+    assert entry.depth
+    assert entry.cameras(PolicySpec("vision")) == ("front",)
+    assert entry.cameras(PolicySpec("vision", options=(("camera", "left_top"),))) == ("left_top",)
+    with pytest.raises(ValueError, match="allowed"):
+        entry.cameras(PolicySpec("vision", options=(("camera", "ceiling"),)))
+    with pytest.raises(ValueError, match="unknown option"):
+        entry.cameras(PolicySpec("vision", options=(("zoom", "2"),)))
+
+
+def _rollout(env: PickPlaceEnv, policy, instance: TaskInstance, repeat: int) -> tuple[bool, list[np.ndarray]]:
+    obs, _ = env.reset(seed=episode_seed(instance.instance_id, repeat), options={"instance": instance})
+    policy.reset(instance)
+    actions = []
+    for _ in range(env.max_steps):
+        actions.append(policy.select_action(obs))
+        obs, _, terminated, truncated, _ = env.step(actions[-1])
+        if terminated or truncated:
+            return terminated, actions
+    return False, actions
+
+
+def test_succeeds_at_baseline_and_holds_still_when_blind(rgbd_env):
+    policy = make_policy(PolicySpec("vision"), rgbd_env)
+    baseline = _instance()
+    for repeat in range(2):
+        success, _ = _rollout(rgbd_env, policy, baseline, repeat)
+        assert success and policy.last_failure == ""
+    # A yellow object is never found: the policy reports why and holds its pose with the gripper open.
+    rgbd_env.max_steps = 5
+    try:
+        success, actions = _rollout(rgbd_env, policy, _instance(color="yellow"), 0)
+    finally:
+        rgbd_env.max_steps = 120
+    assert not success and policy.last_failure == "object not found"
+    assert all(np.array_equal(a, actions[0]) for a in actions) and actions[0][7] == 0.0
