@@ -100,7 +100,7 @@ def dominant_color(lab: np.ndarray) -> np.ndarray:
     """Median Lab of the most populated coarse histogram bin: the table, which fills most views."""
     flat = lab.reshape(-1, 3)
     bins = np.floor(flat / HIST_BIN).astype(np.int64)
-    keys, inverse, counts = np.unique(bins, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(bins, axis=0, return_inverse=True, return_counts=True)
     return np.median(flat[inverse.ravel() == np.argmax(counts)], axis=0)
 
 
@@ -116,7 +116,8 @@ def yellow_mask(rgb: np.ndarray) -> np.ndarray:
 
 def robot_mask(points: np.ndarray) -> np.ndarray:
     """Where the robot can be: above the table's object layer or around its own base."""
-    return (points[..., 2] > ROBOT_CLEARANCE_Z) | (np.linalg.norm(points[..., :2], axis=-1) < ROBOT_BASE_RADIUS)
+    near_base = np.linalg.norm(points[..., :2], axis=-1) < ROBOT_BASE_RADIUS
+    return (points[..., 2] > ROBOT_CLEARANCE_Z) | near_base
 
 
 def _components(mask: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:

@@ -30,7 +30,8 @@ def rgbd_env():
 
 def _perceive(env: PickPlaceEnv, instance: TaskInstance, seed: int):
     obs, _ = env.reset(seed=seed, options={"instance": instance})
-    return perceive(obs[IMAGE_KEY.format(CAMERA)], obs[DEPTH_KEY.format(CAMERA)], env.scene.camera_pose(CAMERA))
+    return perceive(obs[IMAGE_KEY.format(CAMERA)], obs[DEPTH_KEY.format(CAMERA)],
+                    env.scene.camera_pose(CAMERA))
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
