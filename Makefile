@@ -32,9 +32,15 @@ demo: install
 	$(PY) -m pipelines.collect --dataset.repo_id=roboview/demo_pick_place \
 	  --dataset.root=$(DEMO_DIR)/dataset --dataset.num_episodes=6 --num_workers=2
 	$(PY) -m pipelines.build_benchmark --output_dir=$(DEMO_DIR)/benchmark --preset=tiny --num_workers=2
+	$(PY) -m pipelines.evaluate --benchmark.path=$(DEMO_DIR)/benchmark --policy.type=vision \
+	  --eval.n_repeats=2 --eval.limit=4 --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
+	  --output_dir=$(DEMO_DIR)/eval/vision
+	$(PY) -m pipelines.report --results=$(DEMO_DIR)/eval/vision/episodes.parquet --output_dir=$(DEMO_DIR)/report
 	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
 	@echo "Demo benchmark: $(DEMO_DIR)/benchmark (datasets.load_dataset('$(DEMO_DIR)/benchmark', split='color'))"
 	@echo "Contact sheet:  $(DEMO_DIR)/benchmark/contact_sheet/index.html"
+	@echo "Evaluation:     $(DEMO_DIR)/eval/vision/episodes.parquet (Rerun: .venv/bin/rerun $(DEMO_DIR)/eval/vision.rrd)"
+	@echo "Report:         $(DEMO_DIR)/report/report.md (+ metrics.json and PNG plots)"
 
 test: install
 	$(PY) -m pytest -q
@@ -42,6 +48,7 @@ test: install
 bench: install
 	$(PY) -m benchmarks.render_rate
 	$(PY) -m benchmarks.collect_rate
+	$(PY) -m benchmarks.eval_rate
 	$(PY) -m pipelines.build_benchmark --output_dir=outputs/benchmark_paper --preset=paper
 
 clean-demo:
