@@ -23,7 +23,7 @@ from eval.benchmark import load_benchmark
 from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import fail, parse, setup_environment
-from policies.base import PolicySpec, policy_entry, registered_policies
+from policies.base import PolicySpec, policy_entry
 
 log = logging.getLogger(__name__)
 
@@ -179,8 +179,7 @@ def main(args: list[str] | None = None) -> EvaluateResult:
     except (ValueError, ResultsError, EpisodeLost) as exc:
         fail(str(exc))
     print(f"[evaluate] {result.episodes} episodes in {result.output_dir / 'episodes.parquet'} "
-          f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h); "
-          f"policies available: {', '.join(registered_policies())}")
+          f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h)")
     return result
 
 
