@@ -92,7 +92,7 @@ class PickPlaceEnv(gym.Env):
         self.instruction = self.instance.get("instruction")
         self.steps = 0
 
-        arm_range = self.model.jnt_range[[self.model.joint(f"panda/joint{i}").id for i in range(1, 8)]]
+        arm_range = self.scene.ids.arm_range
         low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
         high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
         self.action_space = gym.spaces.Box(low, high, dtype=np.float32)

@@ -57,7 +57,7 @@ class ScriptedExpert:
         self._qadr, self._dof, self._site = ids.arm_qpos, ids.arm_dof, ids.pinch_site
         self._jac_p = np.zeros((3, self.model.nv))
         self._jac_r = np.zeros((3, self.model.nv))
-        lo_hi = self.model.jnt_range[[self.model.joint(f"panda/joint{i}").id for i in range(1, 8)]]
+        lo_hi = ids.arm_range
         self._q_lo, self._q_hi = lo_hi[:, 0] + 1e-3, lo_hi[:, 1] - 1e-3
         # Orientation of the pinch site at the home pose (pointing straight down, yaw 0).
         self._scratch.qpos[self._qadr] = HOME_QPOS

@@ -70,7 +70,7 @@ def stable_id(params: Mapping[str, Any]) -> str:
     return hashlib.sha256(canonical_json(params).encode("utf-8")).hexdigest()[:16]
 
 
-def _seed_from(text: str) -> int:
+def seed_from_text(text: str) -> int:
     digest = hashlib.sha256(text.encode("utf-8")).digest()
     return int.from_bytes(digest[:8], "big") % SEED_MODULUS
 
@@ -80,7 +80,7 @@ def episode_seed(instance_id: str, repeat: int) -> int:
 
     Derived from the id alone so local pools, Ray workers and other machines agree on it.
     """
-    return _seed_from(f"{instance_id}:{repeat}")
+    return seed_from_text(f"{instance_id}:{repeat}")
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ class TaskInstance:
     @property
     def seed(self) -> int:
         """Seed the env's reset uses for this instance, derived from the id alone."""
-        return _seed_from(self.instance_id)
+        return seed_from_text(self.instance_id)
 
     def to_record(self) -> dict[str, Any]:
         """The instance-record columns that need no simulator (DESIGN.md, "Instance record")."""

@@ -7,7 +7,6 @@ what makes parallel collection deterministic and resumable.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import time
 from dataclasses import dataclass, field
@@ -17,16 +16,13 @@ import numpy as np
 from roboview_data.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv
 from roboview_data.expert import ScriptedExpert
 from roboview_data.factors import CONTEXT_FACTORS
-from roboview_data.instances import TaskInstance
+from roboview_data.instances import TaskInstance, seed_from_text
 from roboview_data.svgf import ContextSampler
-
-SEED_MODULUS = 2**31
 
 
 def attempt_seed(seed: int, attempt: int) -> int:
     """Episode seed of collection attempt `attempt`: SHA-256 of "collect:{seed}:{attempt}" (as episode_seed)."""
-    digest = hashlib.sha256(f"collect:{seed}:{attempt}".encode()).digest()
-    return int.from_bytes(digest[:8], "big") % SEED_MODULUS
+    return seed_from_text(f"collect:{seed}:{attempt}")
 
 
 def training_instance(rng: np.random.Generator) -> TaskInstance:

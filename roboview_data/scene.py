@@ -189,6 +189,7 @@ class SceneIds:
 
     arm_qpos: np.ndarray
     arm_dof: np.ndarray
+    arm_range: np.ndarray  # (7, 2) joint limits, rad
     arm_actuators: np.ndarray
     gripper_actuator: int
     gripper_qpos: int
@@ -210,6 +211,7 @@ class SceneIds:
         return cls(
             arm_qpos=np.array([model.joint(j).qposadr[0] for j in ARM_JOINTS]),
             arm_dof=np.array([model.joint(j).dofadr[0] for j in ARM_JOINTS]),
+            arm_range=model.jnt_range[[model.joint(j).id for j in ARM_JOINTS]].copy(),
             arm_actuators=np.array([model.actuator(a).id for a in ARM_ACTUATORS]),
             gripper_actuator=model.actuator(GRIPPER_ACTUATOR).id,
             gripper_qpos=int(model.joint(GRIPPER_JOINT).qposadr[0]),
