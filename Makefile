@@ -33,7 +33,7 @@ demo: install
 	  --dataset.root=$(DEMO_DIR)/dataset --dataset.num_episodes=6 --num_workers=2
 	$(PY) -m pipelines.build_benchmark --output_dir=$(DEMO_DIR)/benchmark --preset=tiny --num_workers=2
 	$(PY) -m pipelines.evaluate --benchmark.path=$(DEMO_DIR)/benchmark --policy.type=vision \
-	  --eval.n_repeats=2 --eval.limit=4 --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
+	  --eval.n_repeats=3 --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
 	  --output_dir=$(DEMO_DIR)/eval/vision
 	$(PY) -m pipelines.report --results=$(DEMO_DIR)/eval/vision/episodes.parquet --output_dir=$(DEMO_DIR)/report
 	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from roboview_data.benchmark_io import MANIFEST
+from roboview_data.benchmark_io import FORMAT_VERSION, MANIFEST
 from roboview_data.factors import FACTOR_NAMES
 from roboview_data.instances import CONTEXT_SUBSPACES, TaskInstance
 
@@ -49,6 +49,10 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
         raise ValueError(f"--benchmark.path={root} holds no RoboView benchmark ({MANIFEST} missing); "
                          "build one with `python -m pipelines.build_benchmark`")
     manifest = json.loads(manifest_path.read_text())
+    if manifest.get("format") != FORMAT_VERSION:
+        raise ValueError(f"--benchmark.path={root} has benchmark format {manifest.get('format')!r}; this version "
+                         f"reads format {FORMAT_VERSION} (episode seeds shared per context and repeat); rebuild it "
+                         "with `python -m pipelines.build_benchmark`")
     if manifest.get("status") != "ok":
         raise ValueError(f"--benchmark.path={root} is a failed build; rebuild it")
     available = [s for s in manifest["splits"] if (root / "data" / f"{s}.parquet").is_file()]

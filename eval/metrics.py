@@ -1,46 +1,47 @@
-"""Bias metrics of paper §5.4 made exact (DESIGN.md, "Metrics"), with uncertainty on top.
+"""Bias metrics of paper §5.4 made exact (DESIGN.md, "Metrics"), and the statistics that say
+whether they are more than noise (DESIGN.md, "Statistics beyond the paper").
 
 Everything here is a pure function of an episodes table (one row per episode, DESIGN.md "Episode
 record"). Notation: a *cell* is a value v (or a value pair (a, b) in a factorial split) in a
 context c; SR(v, c) is the mean success over every episode of the instances in that cell.
 
-- Average Success Rate `sr`: mean success over the split's episodes.
+The paper's numbers, verbatim:
+
+- Average Success Rate `sr`: mean success over the split's episodes (weighted by episodes, not
+  averaged over instances as the paper's tables are).
 - Conditional CV (CCV): CV(V | c) = σ_v SR(v, c) / (μ_v SR(v, c) + ε), σ population (ddof = 0).
-  A context where everything failed has CV = 0 / (0 + ε) = 0.
-- Bias Coefficient `cv`: mean over contexts c of CV(V | c); null when every episode failed
-  (0/ε would report "no bias" for a policy that never succeeds).
+  A context where everything failed has CV = 0 / (0 + ε) = 0 (counted in `n_contexts_all_failed`).
+- Bias Coefficient `cv`: mean over contexts c of CV(V | c); null when every episode failed.
 - Factorial split over (A, B): CV(A | b, c) over a; `cv[A]` = mean over (b, c);
   IEC(A; B) = mean over c of σ_b CV(A|b,c) / (μ_b CV(A|b,c) + ε), keyed "A|B"; same for B.
 
-Beyond the paper (why: a CV from 5 repeats is noisy, and readers must see how noisy):
+Why more is needed: with n repeats a policy with *no* bias and success p shows CV ≈ √((1−p)/(n p))
+from binomial noise alone. So:
 
-- `sr_ci95`: Wilson score interval over episodes (treats episodes as independent Bernoulli
-  trials; it stays defined, as an upper bound, when every episode failed).
-- `cv_ci95` / `iec_ci95`: bootstrap that resamples each instance's episodes with replacement.
-  Resampling n binary outcomes with k successes is exactly a Binomial(n, k/n) draw, so replicates
-  draw success counts directly (1,551 instances × 1,000 replicates: well under a second). The
-  interval is the bootstrap's 2.5–97.5 % spread placed around the reported value,
-  [CV + q2.5 − q50, CV + q97.5 − q50] clipped at 0: how far the reported CV moves when the
-  repeats are rerun. Why not the plain percentile interval: repeat noise adds p(1−p)/n to every
-  SR's variance, so CV is biased upward and resampling adds that bias a second time — with 5
-  repeats the percentile interval of a realistic table lies wholly above the reported CV.
-  `cv_bias` / `iec_bias` (mean replicate − reported value) state that bias instead of hiding it.
-  An instance whose repeats all agree contributes no spread: the interval covers repeat noise
-  only, not the choice of instances or contexts.
-- `p_value`: permutation test of "success depends on the factor". Under the null the value labels
-  of episodes are exchangeable within a context (within (b, c) for A in a factorial split), so a
-  permutation redistributes the context's successes over its cells: a multivariate
-  hypergeometric draw. Statistic: the Bias Coefficient itself. p = (1 + #{CV_perm ≥ CV}) / (1 + n).
-  Labels are permuted per episode, not per instance: with one instance per cell, shuffling whole
-  instances only reorders the values and leaves CV unchanged.
+- `cv_null`: mean CV over permutations of value labels within blocks (context, repeat) — the noise
+  floor of this very table. Episodes of one (c, r) share their seed (common random numbers), so
+  under "the value does not matter" their labels are exchangeable: the permutation is exact for
+  independent episodes and for CRN-coupled ones alike.
+- `cv_excess` = √max(0, cv² − cv_null²): bias beyond noise (variances of independent noise add).
+- `cv_excess_ci95`: null. No interval for it has yet passed the coverage simulation the contract
+  requires (README, "Statistics"); the earlier bootstrap interval around `cv` covered the noise-free
+  CV 0 % of the time, so it is gone rather than renamed.
+- `p_value`: likelihood-ratio test of a binomial GLM `value + context` against `context`
+  (statsmodels), χ² reference, or the same permutations as reference when the table is sparse
+  (`eval.stats`). `p_value_cv`: the permutation test with `cv` itself as statistic.
+- `per_value[v]`: `odds_ratio` of v against the other values with its 95 % interval and p-value,
+  Cochran–Mantel–Haenszel stratified by block (context, repeat); `q_value`: Benjamini–Hochberg
+  over the split's values.
+- Factorial splits: `p_value[f]` (GLM LRT of f within the other factor × context), `cv_null`,
+  `cv_excess`, `p_value_cv` per factor; `p_interaction` (LRT of A×B against A + B); `iec_null`
+  (IEC of tables drawn from the fitted additive GLM: a parametric bootstrap), `iec_excess`
+  (√max(0, iec² − iec_null²)) and `p_iec` (share of additive draws with an IEC at least as large).
 
 Output layout (`compute_metrics`): DESIGN's metrics.json for one policy, plus `policy`,
-`resampling` (n_boot, n_perm, seed), `average` (mean SR and CV over the single-factor splits
-present, the paper's "Average" column; CV null if any split's is), `cv_bias` in each split, and in each
-interaction `n_instances`, `sr_ci95`, `cv_ci95`, `cv_bias`, `iec_ci95`, `iec_bias`, `p_value`
-(per factor) and `per_value` ("a|b" → sr, n_episodes). `compute_all_metrics`
-returns that dict for a single policy and {"epsilon", "resampling", "policies": {name: dict}} for
-several; `policy_layouts` reads either shape back.
+`resampling` (n_perm, n_glm, seed) and `average` (mean SR, CV and cv_excess over the single-factor
+splits present). `compute_all_metrics` returns that dict for a single policy and {"epsilon",
+"resampling", "policies": {name: dict}} (+ "comparisons", `eval.compare`) for several;
+`policy_layouts` reads either shape back.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from eval import stats
 from roboview_data.factors import FACTORS
 
 log = logging.getLogger(__name__)
@@ -62,8 +64,7 @@ log = logging.getLogger(__name__)
 EPSILON = 1e-6
 Z95 = 1.959963984540054  # standard normal 97.5 % quantile
 # Columns the metrics read; the rest of the episode record is carried along untouched.
-METRIC_COLUMNS = ("policy", "split", "factor", "value", "context_id", "instance_id", "success")
-_PERM_TOLERANCE = 1e-12  # float noise when a permutation reproduces the observed cells exactly
+METRIC_COLUMNS = ("policy", "split", "factor", "value", "context_id", "instance_id", "repeat", "success")
 
 
 @dataclass(frozen=True)
@@ -72,18 +73,19 @@ class MetricsConfig:
 
     # ε in the CV and IEC denominators (DESIGN default 1e-6).
     epsilon: float = EPSILON
-    # Bootstrap replicates for cv_ci95 / iec_ci95.
-    n_boot: int = 1000
-    # Permutations for p_value.
+    # Within-block permutations behind cv_null and p_value_cv.
     n_perm: int = 1000
-    # Seed of the bootstrap and permutation generators (one stream per split and purpose).
+    # Draws behind GLM calibration: permutations for a sparse p_value, additive-model tables for
+    # iec_null and a sparse p_interaction (each draw refits a GLM, so fewer than n_perm).
+    n_glm: int = 200
+    # Seed of the permutation and bootstrap generators (one stream per split and purpose).
     seed: int = 0
 
     def __post_init__(self) -> None:
         if not self.epsilon > 0:
             raise ValueError(f"epsilon={self.epsilon} must be > 0 (it keeps CV finite at SR = 0)")
-        if self.n_boot < 1 or self.n_perm < 1:
-            raise ValueError(f"n_boot={self.n_boot} and n_perm={self.n_perm} must be ≥ 1")
+        if self.n_perm < 1 or self.n_glm < 1:
+            raise ValueError(f"n_perm={self.n_perm} and n_glm={self.n_glm} must be ≥ 1")
         if self.seed < 0:
             raise ValueError(f"seed={self.seed} must be ≥ 0")
 
@@ -125,73 +127,68 @@ def _codes(frame: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
     return frame.groupby(list(columns), sort=True).ngroup().to_numpy()
 
 
+def excess(observed: float, null: float) -> float:
+    """√max(0, observed² − null²): the part of a dispersion not explained by the null's noise."""
+    return math.sqrt(max(0.0, observed * observed - null * null))
+
+
 @dataclass(frozen=True)
-class _Cells:
-    """One split's episodes reduced to instance and cell success counts (all statistics need)."""
+class _Table:
+    """One split's episodes as cells (value(s) × context) plus each episode's cell and repeat."""
 
     factors: tuple[str, ...]
     cells: pd.DataFrame  # one row per cell: factor columns, context_id, n, k
-    inst_cell: np.ndarray  # cell code of each instance
-    inst_n: np.ndarray
-    inst_k: np.ndarray
+    episodes: pd.DataFrame  # one row per episode: factor columns, context_id, repeat, success, cell
+
+    @property
+    def n(self) -> np.ndarray:
+        return self.cells["n"].to_numpy()
+
+    @property
+    def k(self) -> np.ndarray:
+        return self.cells["k"].to_numpy()
 
     @property
     def sr(self) -> np.ndarray:
-        return (self.cells["k"] / self.cells["n"]).to_numpy()
+        return self.k / self.n
 
     def codes(self, columns: Sequence[str]) -> np.ndarray:
         return _codes(self.cells, columns)
 
+    def permuted_k(self, within: Sequence[str], n_perm: int, rng: np.random.Generator) -> np.ndarray:
+        """(n_perm, n_cells) success counts with episodes' cell labels shuffled within blocks.
 
-def _aggregate(episodes: pd.DataFrame, factors: tuple[str, ...]) -> _Cells:
-    """Instances and cells of one split (`check_episodes` has vouched for its consistency)."""
-    inst = episodes.groupby("instance_id", sort=True).agg(
-        n=("success", "size"), k=("success", "sum"), value=("value", "first"), context_id=("context_id", "first"))
-    parts = inst["value"].astype(str).str.split("|", regex=False)
+        A block is a combination of `within` columns plus the repeat: under the null every
+        episode of a block is exchangeable (the same seed, the same context, any value).
+        """
+        eps = self.episodes
+        blocks = _codes(eps, [*within, "repeat"])
+        success = eps["success"].to_numpy().astype(np.int8)
+        shuffled = np.empty((n_perm, len(eps)), dtype=np.int8)
+        order = np.argsort(blocks, kind="stable")
+        bounds = np.searchsorted(blocks[order], np.arange(blocks.max() + 2))
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            idx = order[lo:hi]
+            shuffled[:, idx] = rng.permuted(np.tile(success[idx], (n_perm, 1)), axis=1)
+        return _group_sum(shuffled.astype(np.int64), eps["cell"].to_numpy())
+
+
+def _table(episodes: pd.DataFrame, factors: tuple[str, ...]) -> _Table:
+    """Cells of one split (`check_episodes` has vouched for its consistency)."""
+    eps = episodes[["value", "context_id", "repeat", "success", "instance_id"]].copy()
+    parts = eps["value"].astype(str).str.split("|", regex=False)
     for i, name in enumerate(factors):
-        inst[name] = parts.str[i]
+        eps[name] = parts.str[i]
     keys = [*factors, "context_id"]
-    inst["cell"] = _codes(inst, keys)
-    cells = inst.groupby("cell", sort=True).agg(
-        n=("n", "sum"), k=("k", "sum"), **{key: (key, "first") for key in keys})
-    return _Cells(factors, cells.reset_index(drop=True), inst["cell"].to_numpy(),
-                  inst["n"].to_numpy(), inst["k"].to_numpy().astype(np.int64))
+    eps["cell"] = _codes(eps, keys)
+    cells = eps.groupby("cell", sort=True).agg(
+        n=("success", "size"), k=("success", "sum"), **{key: (key, "first") for key in keys})
+    return _Table(factors, cells.reset_index(drop=True), eps.reset_index(drop=True))
 
 
 def _rng(cfg: MetricsConfig, split: str, purpose: str) -> np.random.Generator:
-    """A stream per (seed, split, purpose): a split's CI never depends on which others exist."""
+    """A stream per (seed, split, purpose): a split's numbers never depend on which others exist."""
     return np.random.default_rng([cfg.seed, zlib.crc32(f"{split}:{purpose}".encode())])
-
-
-def _bootstrap_sr(cells: _Cells, n_boot: int, rng: np.random.Generator) -> np.ndarray:
-    """(n_boot, n_cells) cell SRs with every instance's episodes resampled with replacement."""
-    k = rng.binomial(cells.inst_n, cells.inst_k / cells.inst_n, size=(n_boot, len(cells.inst_n)))
-    return _group_sum(k, cells.inst_cell) / cells.cells["n"].to_numpy()
-
-
-def _permuted_sr(cells: _Cells, groups: np.ndarray, n_perm: int, rng: np.random.Generator) -> np.ndarray:
-    """(n_perm, n_cells) cell SRs with episode labels shuffled among the cells of each group."""
-    n, k = cells.cells["n"].to_numpy(), cells.cells["k"].to_numpy()
-    out = np.empty((n_perm, len(n)))
-    for g in range(groups.max() + 1):
-        idx = np.flatnonzero(groups == g)
-        draws = rng.multivariate_hypergeometric(n[idx], int(k[idx].sum()), size=n_perm)
-        out[:, idx] = draws / n[idx]
-    return out
-
-
-def _ci(samples: np.ndarray, point: float) -> list[float]:
-    """The replicates' 95 % spread around `point` (see module docstring for why not percentile)."""
-    lo, mid, hi = np.percentile(samples, [2.5, 50, 97.5])
-    return [max(0.0, float(point + lo - mid)), float(point + hi - mid)]
-
-
-def _bias(samples: np.ndarray, point: float) -> float:
-    return float(np.mean(samples) - point)
-
-
-def _p_value(observed: float, permuted: np.ndarray) -> float:
-    return float((1 + np.sum(permuted >= observed - _PERM_TOLERANCE)) / (1 + len(permuted)))
 
 
 def _value_order(factor: str, values: Sequence[str]) -> list[str]:
@@ -206,32 +203,55 @@ def _interval(successes: int, n: int) -> list[float] | None:
     return None if ci is None else [ci[0], ci[1]]
 
 
+def _lrt_fields(test: stats.LRT | None) -> dict[str, Any]:
+    if test is None:
+        return {"p_value": None, "p_value_method": None, "lrt": None}
+    return {"p_value": test.p_value, "p_value_method": test.method,
+            "lrt": {"statistic": test.statistic, "df": test.df}}
+
+
+def _per_value_tests(table: _Table, factor: str) -> dict[str, stats.ValueTest]:
+    """CMH odds ratio of each value against the rest, stratified by block (context, repeat)."""
+    eps = table.episodes
+    grid = eps.groupby(["context_id", "repeat", factor], sort=True)["success"].agg(["sum", "size"])
+    k = grid["sum"].unstack(factor, fill_value=0)
+    n = grid["size"].unstack(factor, fill_value=0)
+    k_all, n_all = k.sum(axis=1).to_numpy(), n.sum(axis=1).to_numpy()
+    return {str(v): stats.value_vs_rest(k[v].to_numpy(), n[v].to_numpy(), k_all, n_all) for v in k.columns}
+
+
 def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
-    """SR, CV (with CI and bias), p-value and per-value numbers of one single-factor split.
+    """SR, CV and its statistics, and per-value numbers of one single-factor split.
 
     `episodes` holds one split of one policy, validated by `check_episodes`. per_value[v]:
     `sr` = successes / episodes of v over all contexts; `signed_dev` = mean over the contexts c
     that hold v of SR(v, c) − μ_v' SR(v', c) (μ over the values present in c) — how much easier
-    (> 0) or harder (< 0) v is than the other values of its contexts, whatever those contexts'
-    overall difficulty.
+    (> 0) or harder (< 0) v is than the other values of its contexts; then the CMH numbers.
     """
     split = str(episodes["split"].iloc[0])
     factor = str(episodes["factor"].iloc[0])
-    cells = _aggregate(episodes, (factor,))
+    table = _table(episodes, (factor,))
     n, k = len(episodes), int(episodes["success"].sum())
-    ctx = cells.codes(["context_id"])
-    sr_cell = cells.sr
-    per_value: dict[str, dict[str, Any]] = {}
+    ctx = table.codes(["context_id"])
+    sr_cell = table.sr
+    ctx_k = np.bincount(ctx, weights=table.k)
     dev = sr_cell - (_group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
-    table = cells.cells.assign(dev=dev).groupby(factor)
-    for value in _value_order(factor, list(table.groups)):
-        rows = table.get_group(value)
-        per_value[value] = {"sr": float(rows["k"].sum() / rows["n"].sum()),
-                            "n_episodes": int(rows["n"].sum()),
-                            "signed_dev": float(rows["dev"].mean())}
-    out: dict[str, Any] = {"factor": factor, "n_instances": int(len(cells.inst_n)), "n_episodes": n,
-                           "sr": k / n, "sr_ci95": _interval(k, n),
-                           "cv": None, "cv_ci95": None, "cv_bias": None, "p_value": None,
+    tests = _per_value_tests(table, factor) if k else {}
+    grouped = table.cells.assign(dev=dev).groupby(factor)
+    per_value: dict[str, dict[str, Any]] = {}
+    for value in _value_order(factor, list(grouped.groups)):
+        rows = grouped.get_group(value)
+        test = tests.get(value, stats.ValueTest(None, None, None))
+        per_value[value] = {"sr": float(rows["k"].sum() / rows["n"].sum()), "n_episodes": int(rows["n"].sum()),
+                            "signed_dev": float(rows["dev"].mean()), "odds_ratio": test.odds_ratio,
+                            "odds_ratio_ci95": test.odds_ratio_ci95, "p_value": test.p_value}
+    for value, q in zip(per_value, stats.benjamini_hochberg([m["p_value"] for m in per_value.values()])):
+        per_value[value]["q_value"] = q
+    out: dict[str, Any] = {"factor": factor, "n_instances": int(episodes["instance_id"].nunique()),
+                           "n_episodes": n, "n_contexts": int(ctx.max() + 1),
+                           "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
+                           "sr": k / n, "sr_ci95": _interval(k, n), "cv": None, "cv_null": None,
+                           "cv_excess": None, "cv_excess_ci95": None, **_lrt_fields(None), "p_value_cv": None,
                            "per_value": per_value}
     if k == 0:
         return out
@@ -239,21 +259,25 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     def statistic(sr: np.ndarray) -> np.ndarray:
         return conditional_cv(sr, ctx, cfg.epsilon).mean(axis=-1)
 
+    permuted = table.permuted_k(["context_id"], cfg.n_perm, _rng(cfg, split, "perm"))
+    null = statistic(permuted / table.n)
     out["cv"] = float(statistic(sr_cell))
-    boot = statistic(_bootstrap_sr(cells, cfg.n_boot, _rng(cfg, split, "boot")))
-    out["cv_ci95"], out["cv_bias"] = _ci(boot, out["cv"]), _bias(boot, out["cv"])
-    out["p_value"] = _p_value(out["cv"], statistic(_permuted_sr(cells, ctx, cfg.n_perm, _rng(cfg, split, "perm"))))
+    out["cv_null"] = float(null.mean())
+    out["cv_excess"] = excess(out["cv"], out["cv_null"])
+    out["p_value_cv"] = stats.permutation_p(out["cv"], null)
+    value_codes = table.codes([factor])
+    out |= _lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
     return out
 
 
-def _factorial_statistics(cells: _Cells, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
+def _factorial_statistics(table: _Table, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
     """(cell SRs (..., n_cells) → {A, B, "A|B", "B|A"} arrays; each factor's cell groups (b, c) / (a, c))."""
-    a, b = cells.factors
-    by = {a: cells.codes([b, "context_id"]), b: cells.codes([a, "context_id"])}
+    a, b = table.factors
+    by = {a: table.codes([b, "context_id"]), b: table.codes([a, "context_id"])}
     # Context of each (b, c) / (a, c) group, to average CV(A|b,c) over b within c for IEC.
-    group_ctx = {f: _codes(cells.cells.assign(g=by[f]).groupby("g").first(), ["context_id"]) for f in (a, b)}
+    group_ctx = {f: _codes(table.cells.assign(g=by[f]).groupby("g").first(), ["context_id"]) for f in (a, b)}
 
-    def stats(sr: np.ndarray) -> dict[str, np.ndarray]:
+    def statistics(sr: np.ndarray) -> dict[str, np.ndarray]:
         res: dict[str, np.ndarray] = {}
         for f, other in ((a, b), (b, a)):
             ccv = conditional_cv(sr, by[f], epsilon)
@@ -261,39 +285,52 @@ def _factorial_statistics(cells: _Cells, epsilon: float) -> tuple[Callable, dict
             res[f"{f}|{other}"] = conditional_cv(ccv, group_ctx[f], epsilon).mean(axis=-1)
         return res
 
-    return stats, by
+    return statistics, by
 
 
 def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
-    """SR, cv per factor, IEC both ways (with bootstrap CIs) and p-values of a two-factor split."""
+    """SR, CV per factor, IEC both ways, each against its null, and the tests of a two-factor split."""
     split = str(episodes["split"].iloc[0])
     a, b = str(episodes["factor"].iloc[0]).split("|")
-    cells = _aggregate(episodes, (a, b))
+    table = _table(episodes, (a, b))
     n, k = len(episodes), int(episodes["success"].sum())
-    pooled = cells.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
-    order = {f: {v: i for i, v in enumerate(_value_order(f, cells.cells[f].unique()))} for f in (a, b)}
+    pooled = table.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
+    order = {f: {v: i for i, v in enumerate(_value_order(f, table.cells[f].unique()))} for f in (a, b)}
     keys = sorted(pooled.index, key=lambda ab: (order[a][ab[0]], order[b][ab[1]]))
     per_value = {f"{va}|{vb}": {"sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
                                 "n_episodes": int(pooled.loc[(va, vb), "n"])} for va, vb in keys}
-    names = (a, b, f"{a}|{b}", f"{b}|{a}")
-    out: dict[str, Any] = {"factors": [a, b], "n_instances": int(len(cells.inst_n)), "sr": k / n,
+    iec_names = (f"{a}|{b}", f"{b}|{a}")
+    out: dict[str, Any] = {"factors": [a, b], "n_instances": int(episodes["instance_id"].nunique()), "sr": k / n,
                            "sr_ci95": _interval(k, n), "n_episodes": n,
-                           **{key: dict.fromkeys((a, b)) for key in ("cv", "cv_ci95", "cv_bias")},
-                           **{key: dict.fromkeys(names[2:]) for key in ("iec", "iec_ci95", "iec_bias")},
-                           "p_value": {a: None, b: None}, "per_value": per_value}
+                           **{key: dict.fromkeys((a, b)) for key in
+                              ("cv", "cv_null", "cv_excess", "p_value", "p_value_method", "p_value_cv")},
+                           **{key: dict.fromkeys(iec_names) for key in ("iec", "iec_null", "iec_excess", "p_iec")},
+                           "p_interaction": None, "p_interaction_method": None, "per_value": per_value}
     if k == 0:
         return out
-    stats, by = _factorial_statistics(cells, cfg.epsilon)
-    point = stats(cells.sr)
-    boot = stats(_bootstrap_sr(cells, cfg.n_boot, _rng(cfg, split, "boot")))
-    for name in names:
-        kind = "cv" if name in (a, b) else "iec"
-        out[kind][name] = float(point[name])
-        out[f"{kind}_ci95"][name] = _ci(boot[name], out[kind][name])
-        out[f"{kind}_bias"][name] = _bias(boot[name], out[kind][name])
-    for f in (a, b):
-        permuted = stats(_permuted_sr(cells, by[f], cfg.n_perm, _rng(cfg, split, f"perm:{f}")))
-        out["p_value"][f] = _p_value(out["cv"][f], permuted[f])
+    statistics, by = _factorial_statistics(table, cfg.epsilon)
+    point = statistics(table.sr)
+    for f, other in ((a, b), (b, a)):
+        permuted = table.permuted_k([other, "context_id"], cfg.n_perm, _rng(cfg, split, f"perm:{f}"))
+        null = statistics(permuted / table.n)[f]
+        out["cv"][f] = float(point[f])
+        out["cv_null"][f] = float(null.mean())
+        out["cv_excess"][f] = excess(out["cv"][f], out["cv_null"][f])
+        out["p_value_cv"][f] = stats.permutation_p(out["cv"][f], null)
+        test = stats.factor_lrt(table.k, table.n, table.codes([f]), by[f], permuted[: cfg.n_glm])
+        out["p_value"][f] = None if test is None else test.p_value
+        out["p_value_method"][f] = None if test is None else test.method
+    test, draws = stats.interaction_lrt(table.k, table.n, table.codes([a]), table.codes([b]),
+                                        table.codes(["context_id"]), cfg.n_glm, _rng(cfg, split, "additive"))
+    if test is not None:
+        out["p_interaction"], out["p_interaction_method"] = test.p_value, test.method
+    null_iec = statistics(draws / table.n) if draws is not None else None
+    for name in iec_names:
+        out["iec"][name] = float(point[name])
+        if null_iec is not None:
+            out["iec_null"][name] = float(null_iec[name].mean())
+            out["iec_excess"][name] = excess(out["iec"][name], out["iec_null"][name])
+            out["p_iec"][name] = stats.permutation_p(out["iec"][name], null_iec[name])
     return out
 
 
@@ -351,12 +388,14 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
             interactions[str(split)] = interaction_metrics(rows, cfg)
         else:
             log.warning("split %s crosses %d factors; IEC is pairwise, so it is left out", split, n_factors)
-    srs = [s["sr"] for s in splits.values()]
-    cvs = [s["cv"] for s in splits.values()]
-    average = {"sr": float(np.mean(srs)) if srs else None,
-               "cv": float(np.mean(cvs)) if cvs and None not in cvs else None}
-    return {"epsilon": cfg.epsilon, "policy": str(policies[0]),
-            "resampling": {"n_boot": cfg.n_boot, "n_perm": cfg.n_perm, "seed": cfg.seed},
+    average: dict[str, float | None] = {"sr": None, "cv": None, "cv_excess": None}
+    for key in average:
+        values = [s[key] for s in splits.values()]
+        average[key] = float(np.mean(values)) if values and None not in values else None
+    from eval.compare import baseline_retest  # compare builds on this module
+
+    return {"epsilon": cfg.epsilon, "policy": str(policies[0]), "resampling": _resampling(cfg),
+            "control": baseline_retest(episodes),
             "splits": splits, "interactions": interactions, "average": average}
 
 
@@ -366,9 +405,15 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     names = sorted(map(str, episodes["policy"].unique()))
     if len(names) == 1:
         return compute_metrics(episodes, cfg)
-    return {"epsilon": cfg.epsilon,
-            "resampling": {"n_boot": cfg.n_boot, "n_perm": cfg.n_perm, "seed": cfg.seed},
-            "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names}}
+    from eval.compare import compare_policies  # compare builds on this module
+
+    return {"epsilon": cfg.epsilon, "resampling": _resampling(cfg),
+            "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
+            "comparisons": compare_policies(episodes, cfg)}
+
+
+def _resampling(cfg: MetricsConfig) -> dict[str, int]:
+    return {"n_perm": cfg.n_perm, "n_glm": cfg.n_glm, "seed": cfg.seed}
 
 
 def policy_layouts(metrics: dict[str, Any]) -> dict[str, dict[str, Any]]:

@@ -3,13 +3,15 @@
 Input is one or several `episodes.parquet` files (DESIGN.md, "Episode record"): one per policy, or
 one holding several policies. They are validated before any work — missing files, missing or null
 columns, repeated episodes, and files evaluated on different benchmark versions (parquet
-key-value metadata `roboview_benchmark_version`; a file without the key is not compared) — so a
+key-value metadata `roboview_benchmark_version`; a file without the key is not compared), and files
+of another results format (`roboview_results_format`: seeds of the old per-instance rule) — so a
 report never silently mixes incomparable runs.
 
 metrics.json is `eval.metrics.compute_all_metrics` plus `sources` (path and benchmark version of
 each file): for one policy DESIGN's layout, for several {"epsilon", "resampling", "sources",
-"policies": {name: layout}}. report.md prints only numbers read from that dict — SR, CV and IEC
-×100 as in the paper's Tables 1 and 2, p-values as they are — so the two files cannot disagree.
+"policies": {name: layout}, "comparisons": [...]}. report.md prints only numbers read from that dict —
+SR, CV, cv_excess and IEC ×100 as in the paper's Tables 1 and 2, p-values as they are — so the two
+files cannot disagree.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import pyarrow.parquet as pq
 from eval.metrics import (
     METRIC_COLUMNS, EpisodesError, MetricsConfig, check_episodes, compute_all_metrics, policy_layouts,
 )
+from eval.results import FORMAT_KEY, RESULTS_FORMAT
 from roboview_data.factors import VISUAL_FACTORS
 
 log = logging.getLogger(__name__)
@@ -38,6 +41,7 @@ REPORT_FILE = "report.md"
 _TITLES = {"color": "Color", "camera_pose": "Camera Pose", "camera_euler": "Camera Euler",
            "dist_scale": "Dist Scale"}
 _N_EXTREMES = 3  # values listed at each end of the per-value deviation ranking
+ALPHA = 0.05  # level at which the report calls a difference significant
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,14 @@ def load_results(paths: Sequence[str | Path]) -> tuple[pd.DataFrame, list[dict[s
     if missing:
         raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
     sources = [{"path": str(p), VERSION_KEY: read_version(p)} for p in paths]
+    for path in paths:
+        fmt = (pq.read_schema(path).metadata or {}).get(FORMAT_KEY)
+        if fmt != str(RESULTS_FORMAT).encode():
+            found = "none (format 1)" if fmt is None else fmt.decode()
+            raise EpisodesError(
+                f"{path} was written with results format {found}, whose episode seeds hashed instance_id; "
+                f"this version reports format {RESULTS_FORMAT} only (seeds shared per context and repeat, the "
+                "pairing its statistics rely on). Re-run pipelines.evaluate into a new --output_dir")
     versioned = [s for s in sources if s[VERSION_KEY] is not None]
     for s in versioned[1:]:
         if s[VERSION_KEY] != versioned[0][VERSION_KEY]:
@@ -115,37 +127,65 @@ def _split_order(layouts: dict[str, dict], key: str) -> list[str]:
     return [s for s in VISUAL_FACTORS if s in present] + sorted(present - set(VISUAL_FACTORS))
 
 
-def _bold_min(rows: list[list[str]], values: list[list[float | None]]) -> None:
-    """Bold the lowest CV/IEC of each column, as the paper marks the least biased agent."""
-    if len(rows) < 2:
+def _significant_pairs(metrics: dict[str, Any], split: str) -> dict[frozenset[str], float | None]:
+    return {frozenset(c["policies"]): c["p_cv_excess"] for c in metrics.get("comparisons", []) if c["split"] == split}
+
+
+def _bold_lowest(rows: list[list[str]], column: int, values: list[float | None],
+                 pairs: dict[frozenset[str], float | None]) -> None:
+    """Bold the lowest value of a column only where it is significantly lower than the runner-up
+    (paired p_cv_excess < 0.05): a lower CV that is within noise is not a less biased policy."""
+    ranked = sorted((v, i) for i, v in enumerate(values) if v is not None)
+    if len(ranked) < 2:
         return
-    for j in range(len(values[0])):
-        column = [(v[j], i) for i, v in enumerate(values) if v[j] is not None]
-        if column:
-            i = min(column)[1]
-            rows[i][j + 1] = f"**{rows[i][j + 1]}**"
+    (_, best), (_, second) = ranked[:2]
+    p = pairs.get(frozenset((rows[best][0], rows[second][0])))
+    if p is not None and p < ALPHA:
+        rows[best][column] = f"**{rows[best][column]}**"
 
 
-def _table1(layouts: dict[str, dict]) -> list[str]:
-    splits = _split_order(layouts, "splits")
-    header = ["Policy", *(f"{_TITLES.get(s, s)} {m}" for s in splits for m in ("SR", "CV")), "Average SR", "Average CV"]
-    rows, cvs = [], []
+def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
+    parts, floor_only = [], []
     for name, layout in layouts.items():
-        row, cv_row = [name], []
+        for split, m in layout["splits"].items():
+            if m["cv_null"] is None:
+                continue
+            parts.append(f"{name}/{split} {pct(m['cv_null'])}")
+            if m["p_value"] is None or m["p_value"] >= ALPHA:
+                floor_only.append(f"{name}/{split}")
+    lines = [f"Noise floor (cv_null ×100, the CV this table shows when the value does not matter): {'; '.join(parts)}."]
+    lines.append("CVs indistinguishable from their noise floor (p ≥ 0.05): "
+                 + (", ".join(floor_only) if floor_only else "none") + ".")
+    return [*lines, ""]
+
+
+def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
+    splits = _split_order(layouts, "splits")
+    header = ["Policy", *(f"{_TITLES.get(s, s)} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
+              "Average SR", "Average CV", "Average cv_excess"]
+    rows = []
+    for name, layout in layouts.items():
+        row = [name]
         for s in splits:
             m = layout["splits"].get(s)
-            row += ["—", "—"] if m is None else [pct(m["sr"]) + pct_ci(m["sr_ci95"]),
-                                                 pct(m["cv"]) + pct_ci(m["cv_ci95"])]
-            cv_row += [None, None if m is None else m["cv"]]
-        row += [pct(layout["average"]["sr"]), pct(layout["average"]["cv"])]
+            row += ["—"] * 4 if m is None else [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]),
+                                                pct(m["cv_excess"]), p_fmt(m["p_value"])]
+        row += [pct(layout["average"]["sr"]), pct(layout["average"]["cv"]), pct(layout["average"]["cv_excess"])]
         rows.append(row)
-        cvs.append(cv_row + [None, layout["average"]["cv"]])
-    _bold_min(rows, cvs)
-    return ["## Table 1 — success rate and Bias Coefficient (×100, 95 % CI)", "",
-            *_table(header, rows),
-            "SR: mean success over a split's episodes, Wilson interval. CV: mean over contexts of "
-            "σ_v SR(v,c) / (μ_v SR(v,c) + ε), bootstrap interval over repeats. N/A: every episode "
-            "failed. Bold: lowest CV.", ""]
+    for j, s in enumerate(splits):
+        column = 1 + 4 * j + 2
+        _bold_lowest(rows, column, [lay["splits"].get(s, {}).get("cv_excess") for lay in layouts.values()],
+                     _significant_pairs(metrics, s))
+    return ["## Table 1 — success rate and Bias Coefficient (×100)", "", *_table(header, rows),
+            "SR: successes / episodes of the split (weighted by episodes, not averaged over instances as in "
+            "the paper), Wilson 95 % interval. CV: the paper's Bias Coefficient, mean over contexts of "
+            "σ_v SR(v,c) / (μ_v SR(v,c) + ε); a context where everything failed enters as 0. cv_excess: "
+            "√max(0, CV² − cv_null²), the bias beyond binomial noise — rank policies on it, not on CV. "
+            "p: likelihood-ratio test of a binomial GLM value + context against context (permutation-"
+            "calibrated when cells are sparse). N/A: every episode failed. Bold: lowest cv_excess, only "
+            "where it is significantly lower than the next policy's (paired test, p < 0.05). No interval is "
+            "given for CV or cv_excess: none has passed the coverage simulation.", "",
+            *_noise_floor_line(layouts)]
 
 
 def _table2(layouts: dict[str, dict]) -> list[str]:
@@ -153,50 +193,79 @@ def _table2(layouts: dict[str, dict]) -> list[str]:
     for split in _split_order(layouts, "interactions"):
         have = {n: lay["interactions"][split] for n, lay in layouts.items() if split in lay["interactions"]}
         a, b = next(iter(have.values()))["factors"]
-        header = ["Policy", "SR", f"CV_SR({a})", f"IEC({a}; {b})", f"CV_SR({b})", f"IEC({b}; {a})"]
-        rows, values = [], []
+        header = ["Policy", "SR", f"CV({a})", f"p({a})", f"CV({b})", f"p({b})", f"IEC({a}; {b})",
+                  f"IEC({a}; {b}) null", f"IEC({b}; {a})", f"IEC({b}; {a}) null", "p_interaction"]
+        rows, notes = [], []
         for name, m in have.items():
-            keys = [("cv", a), ("iec", f"{a}|{b}"), ("cv", b), ("iec", f"{b}|{a}")]
-            rows.append([name, pct(m["sr"]) + pct_ci(m["sr_ci95"])]
-                        + [pct(m[k][x]) + pct_ci(m[f"{k}_ci95"][x]) for k, x in keys])
-            values.append([None] + [m[k][x] for k, x in keys])
-        _bold_min(rows, values)
-        lines += [f"## Table 2 — {split}: Bias Coefficient and Interaction Effect Coefficient (×100, 95 % CI)", "",
+            ab, ba = f"{a}|{b}", f"{b}|{a}"
+            rows.append([name, pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"][a]), p_fmt(m["p_value"][a]),
+                         pct(m["cv"][b]), p_fmt(m["p_value"][b]), pct(m["iec"][ab]), pct(m["iec_null"][ab]),
+                         pct(m["iec"][ba]), pct(m["iec_null"][ba]), p_fmt(m["p_interaction"])])
+            notes.append(f"- {name}: {_interaction_verdict(m, a, b)}")
+        lines += [f"## Table 2 — {split}: Bias Coefficient and Interaction Effect Coefficient (×100)", "",
                   *_table(header, rows),
-                  f"IEC({a}; {b}): how much the bias from {a} changes with {b} (mean over contexts of "
-                  f"σ_b CV({a}|b,c) / (μ_b CV({a}|b,c) + ε)). Bold: lowest.", ""]
+                  f"IEC({a}; {b}): how much the bias from {a} changes with {b}. Its null is the IEC of tables "
+                  "drawn from the fitted additive (no-interaction) binomial GLM: main effects and noise alone "
+                  "produce it. p_interaction: likelihood-ratio test of A×B against A + B.", "", *notes, ""]
     return lines
 
 
-def _tests_table(layouts: dict[str, dict]) -> list[str]:
-    splits, inter = _split_order(layouts, "splits"), _split_order(layouts, "interactions")
-    factors = {s: next(lay["interactions"][s]["factors"] for lay in layouts.values() if s in lay["interactions"])
-               for s in inter}
-    header = ["Policy", *splits, *(f"{s}: {f}" for s in inter for f in factors[s])]
-    rows = []
+def _interaction_verdict(m: dict[str, Any], a: str, b: str) -> str:
+    """Say 'interaction' / 'asymmetric coupling' only when it survives calibration."""
+    p = m["p_interaction"]
+    if p is None:
+        return "no informative cells: interaction not testable."
+    if p >= ALPHA:
+        return (f"no evidence of interaction (p_interaction = {p_fmt(p)}); the IECs are what additive effects "
+                "and noise produce, so no asymmetry is claimed.")
+    beyond = [f"IEC({x}; {y})" for x, y in ((a, b), (b, a)) if (m["p_iec"][f"{x}|{y}"] or 1.0) < ALPHA]
+    if len(beyond) == 1:
+        return f"interaction (p_interaction = {p_fmt(p)}); asymmetric: only {beyond[0]} exceeds its additive null."
+    return (f"interaction (p_interaction = {p_fmt(p)}); "
+            + ("both IECs exceed their additive nulls." if beyond else "neither IEC alone exceeds its additive null."))
+
+
+def _directions(layouts: dict[str, dict]) -> list[str]:
+    lines = ["## Which values differ (CMH odds ratio vs the other values, stratified by context and repeat; "
+             "BH q < 0.05)", ""]
     for name, layout in layouts.items():
-        row = [name] + [p_fmt(layout["splits"][s]["p_value"]) if s in layout["splits"] else "—" for s in splits]
-        for s in inter:
-            m = layout["interactions"].get(s)
-            row += [p_fmt(m["p_value"][f]) if m else "—" for f in factors[s]]
-        rows.append(row)
-    return ["## Does success depend on the factor? (permutation p-values)", "", *_table(header, rows),
-            "Value labels are shuffled among the episodes of each context (of each (other value, "
-            "context) in a factorial split); statistic: the Bias Coefficient.", ""]
+        for split, m in layout["splits"].items():
+            sig = [(v, s) for v, s in m["per_value"].items() if s["q_value"] is not None and s["q_value"] < ALPHA]
+            low = sorted((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] is not None and s["odds_ratio"] < 1)
+            high = sorted(((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] is not None and s["odds_ratio"] > 1),
+                          reverse=True)
+            text = (lambda items: ", ".join(f"{v} (OR {o:.2g}, SR {pct(m['per_value'][v]['sr'])})"
+                                            for o, v in items) or "none")
+            lines.append(f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}")
+    return [*lines, ""]
+
+
+def _comparisons(metrics: dict[str, Any]) -> list[str]:
+    comps = metrics.get("comparisons", [])
+    if not comps:
+        return []
+    rows = [[c["split"], f"{c['policies'][1]} − {c['policies'][0]}", str(c["n_pairs"]), pct(c["delta_sr"]),
+             p_fmt(c["p_sr"]), pct(c["delta_cv_excess"]), p_fmt(c["p_cv_excess"])] for c in comps]
+    return ["## Policy comparisons (paired within instance and repeat: same seeds)", "",
+            *_table(["Split", "Difference", "Pairs", "ΔSR ×100", "p (McNemar)", "Δcv_excess ×100",
+                     "p (paired permutation)"], rows), ""]
 
 
 def _diagnostics(layouts: dict[str, dict]) -> list[str]:
     rows = []
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():
-            rows.append([name, split, str(m["n_instances"]), str(m["n_episodes"]), pct(m["cv_bias"])])
-        for split, m in layout["interactions"].items():
-            for f in m["factors"]:
-                rows.append([name, f"{split}: {f}", str(m["n_instances"]), str(m["n_episodes"]), pct(m["cv_bias"][f])])
-    return ["## Sample sizes and repeat-noise bias of CV", "",
-            *_table(["Policy", "Split", "Instances", "Episodes", "CV bias ×100"], rows),
-            "CV bias: mean bootstrap CV minus reported CV. Repeat noise inflates CV; a large bias "
-            "means more repeats are needed before CVs are compared.", ""]
+            rows.append([name, split, str(m["n_instances"]), str(m["n_episodes"]), str(m["n_contexts"]),
+                         str(m["n_contexts_all_failed"]), m["p_value_method"] or "—", p_fmt(m["p_value_cv"])])
+    control = [f"- {name}: baseline instance agrees across splits in {pct(c['agreement'])} % of {c['n_pairs']} "
+               f"(context, repeat) pairs; baseline SR by split: "
+               + ", ".join(f"{s} {pct(v)}" for s, v in c["sr_by_split"].items())
+               for name, layout in layouts.items() if (c := layout.get("control"))]
+    return ["## Sample sizes, calibration and the control arm", "",
+            *_table(["Policy", "Split", "Instances", "Episodes", "Contexts", "Contexts all failed",
+                     "p calibration", "p (CV permutation)"], rows),
+            "Control arm (test–retest): the all-baseline instance of each context runs, with the same seeds, in "
+            "the color, camera_euler and dist_scale splits.", *control, ""]
 
 
 def _extremes(layouts: dict[str, dict]) -> list[str]:
@@ -216,12 +285,13 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
     layouts = policy_layouts(metrics)
     settings = metrics["resampling"]
     lines = ["# RoboView-Bias report", "",
-             f"Policies: {', '.join(layouts)}. ε = {metrics['epsilon']:g}; {settings['n_boot']} bootstrap "
-             f"replicates, {settings['n_perm']} permutations, seed {settings['seed']}.", ""]
+             f"Policies: {', '.join(layouts)}. ε = {metrics['epsilon']:g}; {settings['n_perm']} permutations "
+             f"for CV floors, {settings['n_glm']} GLM calibration draws, seed {settings['seed']}.", ""]
     for source in metrics.get("sources", []):
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
-    lines += _table1(layouts) + _table2(layouts) + _tests_table(layouts) + _diagnostics(layouts) + _extremes(layouts)
+    lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
+              + _diagnostics(layouts) + _extremes(layouts))
     lines += ["## Plots", ""]
     for name, reason in plots.items():
         lines.append(f"![{name}]({name})" if reason is None else f"- {name} skipped: {reason}")
@@ -236,7 +306,7 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     metrics = compute_all_metrics(episodes, cfg)
     if sources is not None:
         metrics["sources"] = sources
-    (out / METRICS_FILE).write_text(json.dumps(metrics, indent=2) + "\n")
+    (out / METRICS_FILE).write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     outcome: dict[str, str | None] = {}
     if plots:
         from eval.report_plots import make_plots  # matplotlib only when plots are asked for

@@ -184,6 +184,41 @@ def plot_color_x_camera_pose(layouts: Layouts, path: Path) -> None:
     _save(fig, path)
 
 
+def plot_forest(split: str) -> Callable[[Layouts, Path], None]:
+    """Forest plot of a single-factor split: each value's CMH odds ratio against the other values,
+    95 % interval, colored where its Benjamini–Hochberg q < 0.05 (red: harder, blue: easier)."""
+
+    def draw(layouts: Layouts, path: Path) -> None:
+        per_policy = _per_value(layouts, split)
+        n_rows = max(len(pv) for pv in per_policy.values())
+        fig, axes = _grid_axes(len(per_policy), 5.0, max(3.0, 0.16 * n_rows + 1.2))
+        for ax, (policy, per_value) in zip(axes, per_policy.items()):
+            names = list(per_value)
+            for y, name in enumerate(names):
+                s = per_value[name]
+                if s["odds_ratio"] is None or s["odds_ratio"] <= 0:
+                    continue  # undefined (no informative stratum) or zero: nothing to place on a log axis
+                significant = s["q_value"] is not None and s["q_value"] < 0.05
+                color = ("tab:red" if s["odds_ratio"] < 1 else "tab:blue") if significant else "0.6"
+                if s["odds_ratio_ci95"] is not None:
+                    lo, hi = s["odds_ratio_ci95"]
+                    ax.plot([max(lo, 1e-3), min(hi, 1e3)], [y, y], color=color, lw=1.2)
+                ax.plot(s["odds_ratio"], y, "o", color=color, ms=3.5)
+            ax.axvline(1.0, color="k", lw=0.8, ls="--")
+            ax.set_xscale("log")
+            ax.set_yticks(range(len(names)), names, fontsize=6 if len(names) > 40 else 8)
+            ax.invert_yaxis()
+            ax.set_xlabel("odds ratio vs the other values (CMH, 95 % CI)")
+            ax.set_title(policy)
+        handles = [Patch(color="tab:red", label="harder, q < 0.05"), Patch(color="tab:blue", label="easier, q < 0.05"),
+                   Patch(color="0.6", label="not significant")]
+        fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8)
+        fig.suptitle(f"{split}: which values differ from the rest")
+        _save(fig, path)
+
+    return draw
+
+
 # file name → (split it needs, section of the layout holding it, drawing function)
 PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_by_color_category.png": ("color", "splits", plot_color_categories),
@@ -192,6 +227,8 @@ PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_camera_euler.png": ("camera_euler", "splits", plot_camera_euler),
     "sr_dist_scale.png": ("dist_scale", "splits", plot_dist_scale),
     "sr_color_x_camera_pose.png": ("color_x_camera_pose", "interactions", plot_color_x_camera_pose),
+    **{f"forest_{split}.png": (split, "splits", plot_forest(split))
+       for split in ("color", "camera_pose", "camera_euler", "dist_scale")},
 }
 
 

@@ -21,6 +21,10 @@ JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
 RUN_FILE = "run.json"
 VERSION_KEY = b"roboview_benchmark_version"
+FORMAT_KEY = b"roboview_results_format"
+# 2: episode seeds from (context_id, repeat), shared by every value of a context (common random
+# numbers); 1 (or no key): seeds hashed from instance_id. The two must never be mixed.
+RESULTS_FORMAT = 2
 
 
 class ResultsError(ValueError):
@@ -30,7 +34,7 @@ class ResultsError(ValueError):
 class EpisodeStore:
     def __init__(self, out: Path, run_info: dict, flush_every_s: float = 5.0) -> None:
         self.out = out
-        self.run_info = run_info
+        self.run_info = {**run_info, "results_format": RESULTS_FORMAT}
         self.flush_every_s = flush_every_s
         self.rows: dict[tuple[str, int], dict] = {}
         self._last_flush = 0.0
@@ -47,6 +51,11 @@ class EpisodeStore:
                                f"({RUN_FILE} missing); choose a new folder")
         if run_file.is_file():
             previous = json.loads(run_file.read_text())
+            if previous.get("results_format", 1) != RESULTS_FORMAT:
+                raise ResultsError(
+                    f"--output_dir={out} holds results of format {previous.get('results_format', 1)} (episode seeds "
+                    f"hashed from instance_id); this version writes format {RESULTS_FORMAT} (seeds shared per "
+                    "context and repeat) and never mixes the two: choose a new folder")
             diffs = [f"{k}: existing {previous.get(k)!r} vs requested {v!r}"
                      for k, v in self.run_info.items() if previous.get(k) != v]
             if diffs:
@@ -85,7 +94,7 @@ class EpisodeStore:
         rows = sorted(self.rows.values(), key=lambda r: (r["split"], r["instance_id"], r["repeat"]))
         table = pa.Table.from_pylist(rows) if rows else pa.table({})
         meta = {VERSION_KEY: self.run_info["benchmark_version"].encode(),
-                b"roboview_policy": self.run_info["policy"].encode()}
+                b"roboview_policy": self.run_info["policy"].encode(), FORMAT_KEY: str(RESULTS_FORMAT).encode()}
         table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
         path = self.out / PARQUET
         tmp = path.with_suffix(".parquet.tmp")

@@ -1,8 +1,8 @@
 """One evaluation episode, and the per-process worker that runs them (local pool or Ray actor).
 
 A worker owns one env (one renderer) and one policy for its whole life. An episode is a pure
-function of (policy, instance, repeat): its seed is `episode_seed(instance_id, repeat)`, so every
-backend and machine produces the same row.
+function of (policy, instance, repeat): its seed is `episode_seed(context_id, repeat)` (common random
+numbers: every value of a context shares it), so every backend and machine produces the same row.
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ class EvalWorker:
 
     def run(self, work: WorkItem) -> EpisodeResult:
         instance, record = work.item.instance, work.item.record
-        seed = episode_seed(record["instance_id"], work.repeat)
+        seed = episode_seed(record["context_id"], work.repeat)
         start = time.perf_counter()
         obs, _ = self.env.reset(seed=seed, options={"instance": instance})
         self.policy.reset(instance)

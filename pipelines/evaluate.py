@@ -3,8 +3,9 @@
     python -m pipelines.evaluate --benchmark.path=outputs/benchmark --policy.type=vision \
         --eval.n_repeats=5 --eval.num_workers=2 --output_dir=outputs/eval/vision
 
-Each (instance, repeat) runs once with seed SHA-256(f"{instance_id}:{repeat}"); episodes stop
-early on success. Rows go to OUT/episodes.parquet (journalled in OUT/episodes.jsonl as they
+Each (instance, repeat) runs once with seed SHA-256(f"{context_id}:{repeat}") — common random
+numbers: every value of a context runs repeat r with the same seed; episodes stop early on
+success. `--eval.protocol=paper` runs the paper's 5 repeats (10 on the factorial split). Rows go to OUT/episodes.parquet (journalled in OUT/episodes.jsonl as they
 finish). Rerunning the same command resumes: finished pairs are skipped, none is duplicated.
 """
 
@@ -62,10 +63,20 @@ class PolicyConfig:
         return PolicySpec(self.type, self.path, options)
 
 
+# protocol → (repeats for splits not listed (0: n_repeats), per-split repeats)
+PROTOCOLS: dict[str, tuple[int, dict[str, int]]] = {"": (0, {}), "paper": (5, {"color_x_camera_pose": 10})}
+
+
 @dataclass
 class EvalConfig:
-    # Episodes per instance (paper: 5 for single-factor splits, 10 for the factorial split).
+    # Episodes per instance, every split without its own entry in split_repeats.
     n_repeats: int = 5
+    # Per-split repeats overriding n_repeats, comma-separated split=N (e.g. color_x_camera_pose=10).
+    # `python -m pipelines.plan` says how many a split needs to detect a given bias.
+    split_repeats: str = ""
+    # paper: the paper's protocol, 5 repeats per single-factor instance and 10 per factorial
+    # instance (sets n_repeats and split_repeats; explicit split_repeats entries still win).
+    protocol: str = ""
     # Evaluate only the first N instances of each chosen split (fixed order); 0 = all.
     limit: int = 0
     # Worker processes (local) or actors (ray); one env and renderer each.
@@ -91,6 +102,20 @@ class EvalConfig:
             raise ValueError(f"unknown --eval.backend={self.backend!r}; allowed: {', '.join(BACKENDS)}")
         if self.rerun and not self.rerun.endswith(".rrd"):
             raise ValueError(f"--eval.rerun={self.rerun!r} must name a .rrd file")
+        if self.protocol not in PROTOCOLS:
+            raise ValueError(f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}")
+        self.repeats_for("")  # parses split_repeats now, so a typo fails before any work
+
+    def repeats_for(self, split: str) -> int:
+        """Repeats for `split`: split_repeats entry, else the protocol's, else n_repeats."""
+        default, table = PROTOCOLS[self.protocol]
+        table = dict(table)
+        for item in filter(None, (x.strip() for x in self.split_repeats.split(","))):
+            name, sep, count = item.partition("=")
+            if not sep or not count.strip().isdigit() or int(count) <= 0:
+                raise ValueError(f"--eval.split_repeats entry {item!r} must be split=N with N ≥ 1")
+            table[name.strip()] = int(count)
+        return table.get(split, default or self.n_repeats)
 
 
 @dataclass
@@ -118,14 +143,20 @@ class EvaluateResult:
 def run(cfg: EvaluateConfig) -> EvaluateResult:
     bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
     spec = cfg.policy.spec
+    unknown = [s.partition("=")[0].strip() for s in cfg.eval.split_repeats.split(",")
+               if s.strip() and s.partition("=")[0].strip() not in bench.splits]
+    if unknown:
+        raise ValueError(f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
+                         f"evaluated: {', '.join(bench.splits)}")
+    repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
     run_info = {"benchmark_version": bench.version, "policy": spec.type, "policy_path": spec.path,
-                "policy_options": dict(spec.options), "n_repeats": cfg.eval.n_repeats,
+                "policy_options": dict(spec.options), "n_repeats": repeats,
                 "max_steps": cfg.eval.max_steps, "image_size": cfg.eval.image_size}
     store = EpisodeStore(Path(cfg.output_dir), run_info)
     work = []
     for split, items in bench.splits.items():
         chosen = items[: cfg.eval.limit] if cfg.eval.limit else items
-        work += [WorkItem(item, r) for item in chosen for r in range(cfg.eval.n_repeats)]
+        work += [WorkItem(item, r) for item in chosen for r in range(repeats[split])]
     todo = [w for w in work if not store.done(w.key)]
     log.info("%d episodes planned, %d already done, %d to run", len(work), len(work) - len(todo), len(todo))
 

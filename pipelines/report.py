@@ -27,10 +27,10 @@ class ReportConfig:
     output_dir: str = "outputs/report"
     # ε added to the mean in the CV and IEC denominators.
     epsilon: float = EPSILON
-    # Bootstrap replicates behind the CV / IEC confidence intervals.
-    n_boot: int = 1000
-    # Permutations behind the p-values.
+    # Within-(context, repeat) permutations behind cv_null and p_value_cv.
     n_perm: int = 1000
+    # GLM calibration draws: permutations for sparse p_value, additive-model tables for iec_null.
+    n_glm: int = 200
     # Seed of the bootstrap and permutation generators.
     seed: int = 0
     # Draw the PNG plots (false: metrics.json and report.md only).
@@ -39,7 +39,7 @@ class ReportConfig:
     def __post_init__(self) -> None:
         if not self.result_paths:
             raise ValueError("--results is required: the episodes.parquet file(s) of pipelines.evaluate")
-        self.metrics_config  # validates epsilon, n_boot, n_perm and seed with their own messages
+        self.metrics_config  # validates epsilon, n_perm, n_glm and seed with their own messages
 
     @property
     def result_paths(self) -> list[Path]:
@@ -48,7 +48,7 @@ class ReportConfig:
     @property
     def metrics_config(self) -> MetricsConfig:
         try:
-            return MetricsConfig(self.epsilon, self.n_boot, self.n_perm, self.seed)
+            return MetricsConfig(self.epsilon, self.n_perm, self.n_glm, self.seed)
         except ValueError as exc:
             raise ValueError(f"--{exc}") from None
 

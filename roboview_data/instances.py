@@ -1,8 +1,8 @@
 """Task instances (v, c) of the benchmark, their stable identities, and the suites of them.
 
 A task instance fixes the value of every factor. Its id is a hash of its canonical parameters,
-so the same instance gets the same id, seed and episode seeds on any machine and any backend
-(DESIGN.md, "Identity, seeds, actions"). A `SuiteConfig` (or a named preset) says which SVGF
+so the same instance gets the same id on any machine and any backend; episode seeds come from
+(context, repeat), shared by every value of a context (DESIGN.md, "Identity, seeds, actions"). A `SuiteConfig` (or a named preset) says which SVGF
 variant trees (`roboview_data.svgf`) make up a benchmark; `generate_suite` walks them.
 
     >>> len(generate_suite(load_preset("paper")))
@@ -75,12 +75,14 @@ def seed_from_text(text: str) -> int:
     return int.from_bytes(digest[:8], "big") % SEED_MODULUS
 
 
-def episode_seed(instance_id: str, repeat: int) -> int:
-    """Seed of repeat `repeat` of an instance: SHA-256("id:repeat"), 8 bytes big-endian, mod 2**31.
+def episode_seed(context_id: str, repeat: int) -> int:
+    """Seed of repeat `repeat` in context `context_id`: SHA-256("context_id:repeat"), 8 bytes, mod 2**31.
 
-    Derived from the id alone so local pools, Ray workers and other machines agree on it.
+    Common random numbers: every instance of one context (any value, any split) runs repeat r with
+    the same seed, so two episodes of one (c, r) differ only in the visual factor under study.
+    Derived from ids alone so local pools, Ray workers and other machines agree on it.
     """
-    return seed_from_text(f"{instance_id}:{repeat}")
+    return seed_from_text(f"{context_id}:{repeat}")
 
 
 @dataclass(frozen=True)
@@ -169,8 +171,8 @@ class TaskInstance:
 
     @property
     def seed(self) -> int:
-        """Seed the env's reset uses for this instance, derived from the id alone."""
-        return seed_from_text(self.instance_id)
+        """The repeat-0 episode seed (the env's reset default for this instance)."""
+        return episode_seed(self.context_id, 0)
 
     def to_record(self) -> dict[str, Any]:
         """The instance-record columns that need no simulator (DESIGN.md, "Instance record")."""
@@ -260,14 +262,16 @@ PRESETS: dict[str, SuiteConfig] = {
     # Same splits over the set-union C_Gen: 9 x 180 + 147 = 1,767 instances.
     "paper_dedupe": replace(PAPER, preset="paper_dedupe", union_mode="dedupe"),
     # Demo/test suite: 3 contexts (G, object left, cylinder) x a few values per visual factor
-    # (4 colors, 3 poses, 3 eulers, 3 distances) + 2 colors x 3 poses = 45 instances.
+    # (8 colors, 3 poses, 3 eulers, 3 distances) + 2 colors x 3 poses = 57 instances. The colors
+    # include the vision agent's known weaknesses (yellows merge with the box, grays with the table)
+    # so the demo's report has a real bias to find.
     "tiny": replace(
         PAPER,
         preset="tiny",
         union_mode="dedupe",
         factorial_colors=("red", "white"),
         value_subsets=(
-            ("color", ("red", "green", "blue", "white")),
+            ("color", ("red", "green", "blue", "white", "gold", "yellow", "gray", "dimgray")),
             ("camera_pose", ("orbit_r0_0", "orbit_r1_3", "orbit_r2_6")),
             ("camera_euler", ("-6,-6", "0,0", "6,6")),
             ("dist_scale", ("0", "4", "8")),

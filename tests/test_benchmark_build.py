@@ -35,7 +35,7 @@ def tree_digest(path: Path) -> str:
 def built(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bench") / "tiny"
     result = run(BuildConfig(output_dir=str(out), preset="tiny", image_size=128))
-    assert result.candidates == 45 and result.gate_pass_rate >= 0.95
+    assert result.candidates == 57 and result.gate_pass_rate >= 0.95
     return out
 
 
@@ -44,7 +44,7 @@ def test_splits_load_back_with_datasets_and_counts_match(built):
     expected = {"color": 12, "camera_pose": 9, "camera_euler": 9, "dist_scale": 9, "color_x_camera_pose": 6}
     assert {k: len(v) for k, v in ds.items()} == expected
     ids = [i for split in ds.values() for i in split["instance_id"]]
-    assert len(ids) == len(set(ids)) == 45
+    assert len(ids) == len(set(ids)) == 57
     assert ids == [i.instance_id for i in generate_suite(load_preset("tiny"))]  # stable, suite order
     row = ds["color_x_camera_pose"][0]
     assert row["factor"] == "color|camera_pose" and row["value"] == f"{row['color']}|{row['camera_pose']}"

@@ -49,7 +49,7 @@ def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
     assert (df["policy"] == "expert").all() and (df["failure_reason"] == "").all()
     # Episode seeds follow DESIGN.md's derivation.
     from roboview_data.instances import episode_seed
-    assert all(episode_seed(i, r) == s for i, r, s in zip(df["instance_id"], df["repeat"], df["episode_seed"]))
+    assert all(episode_seed(c, r) == s for c, r, s in zip(df["context_id"], df["repeat"], df["episode_seed"]))
 
 
 def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
@@ -147,7 +147,15 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
     assert not out.exists()
     # Results from another benchmark version in the output folder: refuse to mix them.
     out.mkdir()
-    (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert"}))
+    (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert",
+                                              "results_format": 2}))
     proc = _cli(f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1")
     assert proc.returncode == 2 and "existing 'paper-000000000000' vs requested 'tiny-" in proc.stderr
     assert not (out / "episodes.jsonl").exists()
+    # Results written under the old seed rule (no results_format): refuse to resume into them.
+    (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert"}))
+    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1")
+    assert proc.returncode == 2 and "results of format 1" in proc.stderr and "choose a new folder" in proc.stderr
+    # Per-split repeats: a typo fails before any rollout, naming the entry.
+    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'z'}", "--eval.split_repeats=color=two")
+    assert proc.returncode == 2 and "'color=two' must be split=N" in proc.stderr

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pandas as pd
@@ -15,7 +14,7 @@ from eval.metrics import (
 )
 
 EPS = 1e-6
-FAST = MetricsConfig(n_boot=200, n_perm=200)
+FAST = MetricsConfig(n_perm=200, n_glm=50)
 
 
 def episodes(cells: dict[tuple[str, str], list[int]], split: str = "color", factor: str = "color",
@@ -39,11 +38,14 @@ def test_single_split_by_hand():
     # CV(c1) = √(1/6) / (0.5 + ε); CV(c2) = 0 / (0 + ε) = 0; cv = their mean.
     assert m["cv"] == pytest.approx((math.sqrt(1 / 6) / (0.5 + EPS) + 0.0) / 2, rel=1e-12)
     assert m["cv"] == pytest.approx(0.408248, abs=1e-6)
-    assert m["per_value"] == {
+    paper_keys = {v: {k: s[k] for k in ("sr", "n_episodes", "signed_dev")} for v, s in m["per_value"].items()}
+    assert paper_keys == {
         "a": {"sr": 0.5, "n_episodes": 4, "signed_dev": pytest.approx(0.25)},  # mean(1 − 0.5, 0 − 0)
         "b": {"sr": 0.25, "n_episodes": 4, "signed_dev": pytest.approx(0.0)},
         "c": {"sr": 0.0, "n_episodes": 4, "signed_dev": pytest.approx(-0.25)},
     }
+    # a never fails where others do (odds ratio ∞: undefined, None); c never succeeds (0).
+    assert (m["per_value"]["a"]["odds_ratio"], m["per_value"]["c"]["odds_ratio"]) == (None, 0.0)
 
 
 def test_context_where_everything_fails_has_zero_ccv():
@@ -55,7 +57,8 @@ def test_context_where_everything_fails_has_zero_ccv():
 def test_split_where_everything_fails_has_null_cv():
     m = split_metrics(episodes({(v, c): [0, 0] for v in "abc" for c in ("c1", "c2")}), FAST)
     assert m["sr"] == 0.0
-    assert (m["cv"], m["cv_ci95"], m["cv_bias"], m["p_value"]) == (None, None, None, None)
+    assert (m["cv"], m["cv_null"], m["cv_excess"], m["p_value"], m["p_value_cv"]) == (None,) * 5
+    assert m["n_contexts_all_failed"] == 2
     # Wilson stays defined at 0/12: an upper bound on SR, 1.96²/(12 + 1.96²).
     assert m["sr_ci95"] == pytest.approx([0.0, 3.8415 / 15.8415], abs=1e-4)
 
@@ -85,7 +88,7 @@ def test_factorial_all_failed_is_null():
     m = interaction_metrics(FACTORIAL.assign(success=False), FAST)
     assert m["cv"] == {"A": None, "B": None}
     assert m["iec"] == {"A|B": None, "B|A": None}
-    assert m["iec_ci95"] == {"A|B": None, "B|A": None}
+    assert m["iec_null"] == {"A|B": None, "B|A": None} and m["p_interaction"] is None
 
 
 def test_wilson_interval_known_values():
@@ -100,36 +103,68 @@ def _noisy(seed: int = 0, contexts: int = 3, values: int = 6, repeats: int = 5) 
                      for v in range(values) for c in range(contexts)})
 
 
-def test_bootstrap_interval_contains_estimate_and_is_seeded():
+def test_noise_floor_is_seeded_and_explains_a_flat_table():
+    # Every value succeeds 3 times in 5, in different repeats: CV 0, and its noise floor is what
+    # reshuffling the values within each repeat shows.
+    flat = episodes({(v, "c1"): list(np.roll([1, 1, 1, 0, 0], i)) for i, v in enumerate("abcdef")})
+    m = split_metrics(flat, FAST)
+    assert m["cv"] == pytest.approx(0.0) and m["cv_excess"] == 0.0
+    assert m["cv_null"] > 0.1 and m["p_value_cv"] == 1.0
+    assert m["cv_excess_ci95"] is None  # no interval has passed the coverage simulation
     table = _noisy()
-    m = split_metrics(table, FAST)
-    lo, hi = m["cv_ci95"]
-    assert lo < m["cv"] < hi
-    assert split_metrics(table, FAST)["cv_ci95"] == [lo, hi]
-    assert split_metrics(table, MetricsConfig(n_boot=200, n_perm=200, seed=1))["cv_ci95"] != [lo, hi]
+    first = split_metrics(table, FAST)
+    assert split_metrics(table, FAST) == first
+    assert split_metrics(table, MetricsConfig(n_perm=200, n_glm=50, seed=1))["cv_null"] != first["cv_null"]
 
 
-def test_bootstrap_reports_the_upward_bias_of_repeat_noise():
-    # Every value succeeds 3 times in 5: no spread to find, yet resampled repeats always show some.
-    m = split_metrics(episodes({(v, "c1"): [1, 1, 1, 0, 0] for v in "abcdef"}), FAST)
-    assert m["cv"] == pytest.approx(0.0)
-    assert m["cv_bias"] > 0.1
-    assert m["cv_ci95"][0] == 0.0 and m["cv_ci95"][1] > 0.1
+def test_permutations_keep_every_context_and_repeat_block():
+    # Under common random numbers a (context, repeat) block's successes stay in that block: repeat 0
+    # succeeds for every value and repeat 1 for none, so any shuffle reproduces the table exactly.
+    crn = episodes({(v, c): [1, 0] for v in "abcd" for c in ("c1", "c2")})
+    m = split_metrics(crn, FAST)
+    assert m["cv"] == pytest.approx(0.0) and m["cv_null"] == pytest.approx(0.0)
 
 
-def test_permutation_p_value_small_for_dependence_large_for_none():
+def test_p_values_small_for_dependence_large_for_none():
     strong = episodes({(v, c): [int(v in "ab")] * 10 for v in "abcd" for c in ("c1", "c2")})
-    assert split_metrics(strong, FAST)["p_value"] <= 2 / 201
-    flat = episodes({(v, c): [1, 0] * 5 for v in "abcd" for c in ("c1", "c2")})
-    assert split_metrics(flat, FAST)["p_value"] == 1.0
+    m = split_metrics(strong, FAST)
+    assert m["p_value_cv"] <= 2 / 201 and m["p_value"] < 1e-3
+    assert {v: s["odds_ratio"] is None or s["q_value"] < 0.05 for v, s in m["per_value"].items()} == dict.fromkeys("abcd", True)
+    flat = episodes({(v, c): list(np.roll([1, 0] * 5, i)) for i, v in enumerate("abcd") for c in ("c1", "c2")})
+    m = split_metrics(flat, FAST)
+    assert m["p_value_cv"] == 1.0 and m["p_value"] > 0.99
+    assert all(s["odds_ratio"] == pytest.approx(1.0) and s["q_value"] > 0.99 for s in m["per_value"].values())
 
 
-def test_permutation_p_value_of_factorial_factors():
+def test_per_value_odds_ratio_by_hand():
+    # One context, 4 repeats (blocks). b against {a, c, d}: r0 all succeed (no information);
+    # r1, r2: b 1/1 vs rest 1/3 → ad/n = 2/4, bc/n = 0; r3: b 0/1 vs rest 2/3 → ad/n = 0, bc/n = 2/4.
+    # Mantel–Haenszel OR = (0.5 + 0.5) / 0.5 = 2.
+    table = episodes({("a", "c"): [1, 0, 0, 0], ("b", "c"): [1, 1, 1, 0], ("c", "c"): [1, 1, 0, 1],
+                      ("d", "c"): [1, 0, 1, 1]})
+    m = split_metrics(table, FAST)
+    assert m["per_value"]["b"]["odds_ratio"] == pytest.approx(2.0)
+    assert m["per_value"]["a"]["odds_ratio"] == 0.0 and m["per_value"]["a"]["odds_ratio_ci95"] is None
+    assert m["n_contexts"] == 1 and m["n_contexts_all_failed"] == 0
+    # A value that fails more often than the rest in every block of two contexts: OR < 1, q < 0.05.
+    weak = episodes({(v, c): list(np.roll([1, 0, 0, 0, 1, 0, 0, 0, 1, 0] if v == "a" else [1, 1, 1, 0, 0, 1, 1, 1, 0, 1], i))
+                     for i, v in enumerate("abcd") for c in ("c1", "c2")})
+    a = split_metrics(weak, FAST)["per_value"]["a"]
+    assert a["odds_ratio"] < 0.2 and a["odds_ratio_ci95"][0] < a["odds_ratio"] < a["odds_ratio_ci95"][1] < 1
+    assert a["q_value"] < 0.01
+
+
+def test_factorial_p_values_and_interaction():
     # Success depends on A only: a1 always succeeds, a2 never, at every b.
     cells = {(f"a{a}|b{b}", "c*"): [int(a == 1)] * 8 for a in (1, 2) for b in (1, 2, 3)}
     m = interaction_metrics(episodes(cells, split="A_x_B", factor="A|B"), FAST)
-    assert m["p_value"]["A"] <= 2 / 201
-    assert m["p_value"]["B"] == 1.0
+    assert m["p_value_cv"]["A"] <= 2 / 201 and m["p_value"]["A"] <= 1 / 51  # the smallest 50 draws allow
+    assert m["p_value_cv"]["B"] == 1.0
+    # A pure interaction: a1 succeeds only at b1, a2 only at b2 (no main effect in SR).
+    cross = {(f"a{a}|b{b}", "c*"): [int(a == b)] * 8 for a in (1, 2) for b in (1, 2)}
+    m = interaction_metrics(episodes(cross, split="A_x_B", factor="A|B"), FAST)
+    assert m["p_interaction"] <= 1 / 51  # sparse: parametric bootstrap, the smallest 50 draws allow
+    assert m["iec_null"]["A|B"] is not None and m["iec_excess"]["A|B"] >= 0
 
 
 def test_split_numbers_do_not_depend_on_other_splits():
@@ -141,15 +176,19 @@ def test_split_numbers_do_not_depend_on_other_splits():
 def test_layout_and_several_policies():
     both = pd.concat([HAND, _noisy().assign(policy="q")])
     m = compute_all_metrics(both, FAST)
-    assert set(m) == {"epsilon", "resampling", "policies"} and set(m["policies"]) == {"p", "q"}
+    assert set(m) == {"epsilon", "resampling", "policies", "comparisons"} and set(m["policies"]) == {"p", "q"}
     assert m["policies"]["p"]["splits"]["color"] == compute_metrics(HAND, FAST)["splits"]["color"]
     assert set(policy_layouts(m)) == {"p", "q"}
     single = compute_all_metrics(pd.concat([HAND, FACTORIAL]), FAST)
     assert single["epsilon"] == EPS and single["policy"] == "p"
-    assert set(single["splits"]["color"]) >= {"factor", "n_instances", "n_episodes", "sr", "sr_ci95", "cv",
-                                              "cv_ci95", "p_value", "per_value"}
+    assert set(single["splits"]["color"]) >= {
+        "factor", "n_instances", "n_episodes", "sr", "sr_ci95", "cv", "cv_null", "cv_excess", "cv_excess_ci95",
+        "p_value", "p_value_cv", "n_contexts_all_failed", "per_value"}
+    assert set(single["splits"]["color"]["per_value"]["a"]) >= {"odds_ratio", "odds_ratio_ci95", "q_value"}
+    assert set(single["interactions"]["A_x_B"]) >= {"iec", "iec_null", "iec_excess", "p_interaction"}
     assert set(single["interactions"]["A_x_B"]["iec"]) == {"A|B", "B|A"}
-    assert single["average"] == {"sr": 0.25, "cv": single["splits"]["color"]["cv"]}
+    color = single["splits"]["color"]
+    assert single["average"] == {"sr": 0.25, "cv": color["cv"], "cv_excess": color["cv_excess"]}
     assert policy_layouts(single) == {"p": single}
     with pytest.raises(ValueError, match="one policy"):
         compute_metrics(both, FAST)
@@ -162,17 +201,19 @@ def test_bad_tables_name_the_problem():
         compute_metrics(HAND.assign(success=2))
     with pytest.raises(EpisodesError, match="'color'.*mixes factors"):
         compute_metrics(HAND.assign(factor=["color"] * 11 + ["shape"]))
+    with pytest.raises(EpisodesError, match="repeat"):
+        compute_metrics(HAND.drop(columns=["repeat"]))
     with pytest.raises(EpisodesError, match="instance 'color/a/c1'"):
         compute_metrics(HAND.assign(context_id=["x"] + list(HAND["context_id"][1:])))
     with pytest.raises(ValueError, match="epsilon"):
         MetricsConfig(epsilon=0)
 
 
-def test_paper_sized_split_runs_in_seconds():
+def test_paper_sized_split():
     rng = np.random.default_rng(0)
     p = rng.random(1551)
     table = episodes({(f"v{i % 141}", f"c{i // 141}"): list(rng.random(5) < p[i]) for i in range(1551)})
-    start = time.perf_counter()
-    m = split_metrics(table, MetricsConfig())  # 1,000 bootstrap replicates and 1,000 permutations
-    assert time.perf_counter() - start < 20
-    assert m["n_instances"] == 1551 and m["p_value"] < 0.01
+    m = split_metrics(table, MetricsConfig(n_glm=20))  # 1,000 permutations, 20 GLM refits
+    # Success varies per cell (value × context), so both tests see it; the GLM's resolution is 1/21.
+    assert m["n_instances"] == 1551 and m["p_value_cv"] < 0.01
+    assert m["p_value"] == pytest.approx(1 / 21) and m["p_value_method"] == "permutation"

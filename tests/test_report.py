@@ -15,11 +15,12 @@ from PIL import Image
 
 from eval.metrics import EpisodesError, policy_layouts
 from eval.report import VERSION_KEY, load_results
+from eval.results import FORMAT_KEY
 from eval.report_plots import PLOTS
 from pipelines.report import ReportConfig, main, run
 from roboview_data.instances import episode_seed, generate_suite, load_preset
 
-FAST = {"n_boot": 50, "n_perm": 50}
+FAST = {"n_glm": 20, "n_perm": 50}
 
 
 def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None, repeats: int = 3) -> pd.DataFrame:
@@ -33,7 +34,7 @@ def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None,
         p = rng.random()
         for r in range(repeats):
             success = bool(rng.random() < p)
-            rows.append({**record, "repeat": r, "episode_seed": episode_seed(record["instance_id"], r),
+            rows.append({**record, "repeat": r, "episode_seed": episode_seed(record["context_id"], r),
                          "cameras": [{"name": "front", "pos": [0.0, 0.0, 1.0], "quat": [1.0, 0.0, 0.0, 0.0],
                                       "fovy": 45.0}],
                          "success": success, "steps": 10, "duration_s": 0.1, "policy": policy,
@@ -41,8 +42,9 @@ def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None,
     return pd.DataFrame(rows)
 
 
-def write(frame: pd.DataFrame, path: Path, version: str | None = "tiny-abc") -> Path:
+def write(frame: pd.DataFrame, path: Path, version: str | None = "tiny-abc", results_format: bytes = b"2") -> Path:
     table = pa.Table.from_pandas(frame)
+    table = table.replace_schema_metadata({**table.schema.metadata, FORMAT_KEY: results_format})
     if version is not None:
         table = table.replace_schema_metadata({**table.schema.metadata, VERSION_KEY.encode(): version.encode()})
     pq.write_table(table, path)
@@ -98,24 +100,21 @@ def test_report_tables_equal_metrics(report):
     layouts = policy_layouts(report.metrics)
     table1 = _table_rows(markdown, "Table 1")
     table2 = _table_rows(markdown, "Table 2")
-    p_values = _table_rows(markdown, "Does success")
     for policy, layout in layouts.items():
         expected = []
         for split in ("color", "camera_pose", "camera_euler", "dist_scale"):
             m = layout["splits"][split]
-            expected += [_with_ci(m["sr"], m["sr_ci95"]), _with_ci(m["cv"], m["cv_ci95"])]
-        expected += [_pct(layout["average"]["sr"]), _pct(layout["average"]["cv"])]
+            p = "N/A" if m["p_value"] is None else f"{m['p_value']:.4f}"
+            expected += [_with_ci(m["sr"], m["sr_ci95"]), _pct(m["cv"]), _pct(m["cv_excess"]), p]
+        expected += [_pct(layout["average"][k]) for k in ("sr", "cv", "cv_excess")]
         assert table1[policy] == expected
         f = layout["interactions"]["color_x_camera_pose"]
-        assert table2[policy] == [
-            _with_ci(f["sr"], f["sr_ci95"]),
-            _with_ci(f["cv"]["color"], f["cv_ci95"]["color"]),
-            _with_ci(f["iec"]["color|camera_pose"], f["iec_ci95"]["color|camera_pose"]),
-            _with_ci(f["cv"]["camera_pose"], f["cv_ci95"]["camera_pose"]),
-            _with_ci(f["iec"]["camera_pose|color"], f["iec_ci95"]["camera_pose|color"])]
-        p = layout["splits"]["color"]["p_value"]
-        assert p_values[policy][0] == ("N/A" if p is None else f"{p:.4f}")
+        assert table2[policy][:2] == [_with_ci(f["sr"], f["sr_ci95"]), _pct(f["cv"]["color"])]
+        assert table2[policy][5:7] == [_pct(f["iec"]["color|camera_pose"]), _pct(f["iec_null"]["color|camera_pose"])]
     assert table1["random"][1] == "N/A"
+    comparisons = _table_rows(markdown, "Policy comparisons")
+    color = next(c for c in report.metrics["comparisons"] if c["split"] == "color")
+    assert comparisons["color"][:3] == ["random − expert", str(color["n_pairs"]), _pct(color["delta_sr"])]
 
 
 def _numbers(obj) -> set[str]:
@@ -170,13 +169,16 @@ def test_bad_inputs_name_the_offender(tmp_path, capsys):
         main([f"--results={tmp_path / 'nowhere.parquet'}", f"--output_dir={tmp_path / 'rep'}"])
     assert "nowhere.parquet" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main([f"--results={good}", "--n_boot=0"])
-    assert "n_boot=0" in capsys.readouterr().err
+        main([f"--results={good}", "--n_glm=0"])
+    assert "n_glm=0" in capsys.readouterr().err
+    old = write(make_episodes("expert", 0, splits=("color",)), tmp_path / "old.parquet", results_format=b"1")
+    with pytest.raises(EpisodesError, match="results format 1.*seeds hashed instance_id"):
+        load_results([good, old])
 
 
 def test_cli_without_plots(tmp_path, capsys):
     path = write(make_episodes("expert", 0, splits=("dist_scale",)), tmp_path / "e.parquet", version=None)
-    result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--n_boot=20",
+    result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--n_glm=20",
                    "--n_perm=20"])
     assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.md"]
     assert result.metrics["sources"][0][VERSION_KEY] is None

@@ -72,7 +72,7 @@ def test_registered_with_camera_option():
 
 
 def _rollout(env: PickPlaceEnv, policy, instance: TaskInstance, repeat: int) -> tuple[bool, list[np.ndarray]]:
-    obs, _ = env.reset(seed=episode_seed(instance.instance_id, repeat), options={"instance": instance})
+    obs, _ = env.reset(seed=episode_seed(instance.context_id, repeat), options={"instance": instance})
     policy.reset(instance)
     actions = []
     for _ in range(env.max_steps):

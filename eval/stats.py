@@ -1,0 +1,231 @@
+"""Statistical tests behind the bias metrics: does success depend on a factor, which values, and
+do two factors interact (DESIGN.md, "Statistics beyond the paper"). Libraries do the statistics:
+binomial GLMs from statsmodels, Cochran–Mantel–Haenszel from statsmodels, Benjamini–Hochberg and
+the χ² / non-central χ² laws from scipy. This module only arranges tables for them.
+
+Tables are *cells*: success counts `k` out of `n` episodes, with integer codes (0..G-1) saying
+which value / context / other factor each cell belongs to.
+
+Why permutation calibration exists: the χ² law of a likelihood-ratio statistic is asymptotic.
+With a handful of repeats per cell and success rates near 0 or 1 (the usual benchmark table) the
+expected counts are tiny and the χ² reference is off, so such tables ("sparse": Cochran's rule,
+more than 20 % of informative cells expect fewer than 5 successes or failures) get the LRT's
+reference distribution from within-block permutations of value labels instead (an exact test).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import statsmodels.api as sm
+from scipy import stats
+from statsmodels.stats.contingency_tables import StratifiedTable, mcnemar
+from threadpoolctl import threadpool_limits
+
+SPARSE_EXPECTED = 5.0  # Cochran: expected counts below this make χ² approximations doubtful
+SPARSE_FRACTION = 0.2  # ... in more than this fraction of the cells
+_PERM_TOLERANCE = 1e-9  # float noise when a permuted table reproduces the observed statistic
+
+
+def design_matrix(codes: Sequence[np.ndarray]) -> np.ndarray:
+    """Intercept plus treatment-coded dummies (first level dropped) of each factor's codes."""
+    columns = [np.ones(len(codes[0]))]
+    for code in codes:
+        levels = np.unique(code)
+        columns += [(code == level).astype(float) for level in levels[1:]]
+    return np.column_stack(columns)
+
+
+def interaction_codes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Codes of the (a, b) combinations present: the A×B term of a GLM."""
+    return np.unique(np.stack([a, b], axis=1), axis=0, return_inverse=True)[1].ravel()
+
+
+def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray,
+                 start: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """Log-likelihood and fitted probabilities of a binomial GLM (logit link) of k successes in n.
+
+    Separated data (a cell or level with every episode failing) sends coefficients to ±∞; the
+    log-likelihood still converges to its supremum, which is what a likelihood-ratio test needs.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # perfect-separation and convergence chatter, see above
+        result = sm.GLM(np.column_stack([k, n - k]), exog, family=sm.families.Binomial()).fit(
+            maxiter=100, start_params=start)
+    return float(result.llf), np.asarray(result.fittedvalues)
+
+
+def lrt_statistic(k: np.ndarray, n: np.ndarray, full: np.ndarray, reduced: np.ndarray) -> float:
+    """2 (ℓ_full − ℓ_reduced), clipped at 0 (the nested fit can only be worse, up to solver noise)."""
+    return max(0.0, 2.0 * (binomial_llf(k, n, full)[0] - binomial_llf(k, n, reduced)[0]))
+
+
+def is_sparse(n: np.ndarray, p: np.ndarray) -> bool:
+    """Cochran's rule on the cells' expected successes and failures under the null fit."""
+    expected = np.minimum(n * p, n * (1 - p))
+    return bool(np.mean(expected < SPARSE_EXPECTED) > SPARSE_FRACTION)
+
+
+def informative(k: np.ndarray, n: np.ndarray, strata: np.ndarray) -> np.ndarray:
+    """Mask of cells whose stratum has both outcomes: an all-fail or all-succeed stratum carries no
+    information about the factor and would send its own coefficient to ±∞."""
+    ks = np.bincount(strata, weights=k)
+    ns = np.bincount(strata, weights=n)
+    return ((ks > 0) & (ks < ns))[strata]
+
+
+@dataclass(frozen=True)
+class LRT:
+    """A likelihood-ratio test: statistic, degrees of freedom, p-value and how it was calibrated."""
+
+    statistic: float
+    df: int
+    p_value: float
+    method: str  # "asymptotic" (χ²), "permutation" or "parametric_bootstrap"
+
+
+@threadpool_limits.wrap(limits=1, user_api="blas")  # hundreds of small refits: threads only contend
+def factor_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarray,
+               permuted_k: np.ndarray | None) -> LRT | None:
+    """Does success depend on `value`? Binomial GLM `value + strata` against `strata`.
+
+    `permuted_k` (n_perm, n_cells): success counts with value labels shuffled within blocks; used
+    as the reference distribution when the table is sparse. None when no stratum is informative.
+    """
+    keep = informative(k, n, strata)
+    if not keep.any():
+        return None
+    _, value_c = np.unique(value[keep], return_inverse=True)
+    _, strata_c = np.unique(strata[keep], return_inverse=True)
+    full, reduced = design_matrix([strata_c, value_c]), design_matrix([strata_c])
+    df = full.shape[1] - reduced.shape[1]
+    if df == 0:
+        return None
+    observed = lrt_statistic(k[keep], n[keep], full, reduced)
+    _, p_null = binomial_llf(k[keep], n[keep], reduced)
+    if permuted_k is None or not is_sparse(n[keep], p_null):
+        return LRT(observed, df, float(stats.chi2.sf(observed, df)), "asymptotic")
+    # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are
+    # the same for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit
+    # starts from them (value dummies at zero), which halves its iterations.
+    start = np.zeros(full.shape[1])
+    start[: reduced.shape[1]] = np.linalg.lstsq(reduced, np.log(p_null / (1 - p_null)), rcond=None)[0]
+    null = np.array([max(0.0, 2.0 * (binomial_llf(kp[keep], n[keep], full, start)[0]
+                                     - binomial_llf(kp[keep], n[keep], reduced, start[: reduced.shape[1]])[0]))
+                     for kp in permuted_k])
+    return LRT(observed, df, permutation_p(observed, null), "permutation")
+
+
+def permutation_p(observed: float, null: np.ndarray) -> float:
+    """(1 + #{null ≥ observed}) / (1 + B): never 0, exact for exchangeable draws."""
+    return float((1 + np.sum(null >= observed - _PERM_TOLERANCE * max(1.0, abs(observed)))) / (1 + len(null)))
+
+
+@threadpool_limits.wrap(limits=1, user_api="blas")
+def interaction_lrt(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray, strata: np.ndarray,
+                    n_boot: int, rng: np.random.Generator) -> tuple[LRT | None, np.ndarray | None]:
+    """A×B against A + B (both + strata), and parametric-bootstrap tables from the additive fit.
+
+    Returns the test and (n_boot, n_cells) success counts drawn from the fitted additive model: the
+    reference for the LRT when the table is sparse, and the null tables of IEC. The bootstrap
+    tables cover every cell; uninformative strata keep their observed (constant) outcome.
+    """
+    keep = informative(k, n, strata)
+    if not keep.any():
+        return None, None
+    codes = [np.unique(x[keep], return_inverse=True)[1] for x in (strata, a, b)]
+    additive = design_matrix(codes)
+    full = design_matrix([*codes, interaction_codes(codes[1], codes[2])])
+    df = np.linalg.matrix_rank(full) - np.linalg.matrix_rank(additive)
+    _, p_add = binomial_llf(k[keep], n[keep], additive)
+    draws = np.tile(k, (n_boot, 1))
+    draws[:, keep] = rng.binomial(n[keep], p_add, size=(n_boot, int(keep.sum())))
+    if df == 0:
+        return None, draws
+    # An A×B design can be rank-deficient (missing combinations); statsmodels' pinv copes with it.
+    observed = lrt_statistic(k[keep], n[keep], full, additive)
+    if not is_sparse(n[keep], p_add):
+        return LRT(observed, int(df), float(stats.chi2.sf(observed, df)), "asymptotic"), draws
+    null = np.array([lrt_statistic(d[keep], n[keep], full, additive) for d in draws])
+    return LRT(observed, int(df), permutation_p(observed, null), "parametric_bootstrap"), draws
+
+
+@dataclass(frozen=True)
+class ValueTest:
+    """One value against the others, Mantel–Haenszel over strata (None where undefined)."""
+
+    odds_ratio: float | None
+    odds_ratio_ci95: list[float] | None
+    p_value: float | None
+
+
+def value_vs_rest(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray) -> ValueTest:
+    """Cochran–Mantel–Haenszel: a value's episodes against the other values', per stratum.
+
+    Arrays run over strata: the value's successes / episodes and everyone's. Strata without both
+    groups or without both outcomes carry no information and are left out.
+    """
+    k_rest, n_rest = k_all - k_value, n_all - n_value
+    use = (n_value > 0) & (n_rest > 0) & (k_all > 0) & (k_all < n_all)
+    if not use.any():
+        return ValueTest(None, None, None)
+    tables = np.array([[k_value, n_value - k_value], [k_rest, n_rest - k_rest]], dtype=float)[:, :, use]
+    table = StratifiedTable(tables)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        odds = _finite(table.oddsratio_pooled)
+        ci = [_finite(x) for x in table.oddsratio_pooled_confint()]
+        p = _finite(table.test_null_odds(correction=False).pvalue)
+    return ValueTest(odds, None if None in ci else ci, p)
+
+
+def _finite(x: float) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def benjamini_hochberg(p_values: Sequence[float | None]) -> list[float | None]:
+    """BH q-values (scipy) over the defined p-values; None stays None."""
+    defined = [i for i, p in enumerate(p_values) if p is not None]
+    q: list[float | None] = [None] * len(p_values)
+    if defined:
+        adjusted = stats.false_discovery_control([p_values[i] for i in defined], method="bh")
+        for i, value in zip(defined, adjusted):
+            q[i] = float(value)
+    return q
+
+
+def paired_success_test(a: np.ndarray, b: np.ndarray) -> float:
+    """McNemar's test on episodes paired by (instance, repeat) — same seed, same scene, two policies.
+
+    Exact binomial when fewer than 25 pairs disagree, χ² with continuity correction otherwise.
+    """
+    table = [[np.sum(a & b), np.sum(a & ~b)], [np.sum(~a & b), np.sum(~a & ~b)]]
+    discordant = table[0][1] + table[1][0]
+    if discordant == 0:
+        return 1.0
+    return float(mcnemar(table, exact=discordant < 25, correction=True).pvalue)
+
+
+def lrt_power(n_values: int, n_contexts: int, repeats: int, tau: float, sr: float, alpha: float = 0.05) -> float:
+    """Power of the `value + context` LRT against a logit-scale value effect of SD τ.
+
+    Non-central χ² with df = |V| − 1 and non-centrality λ = n · |C| · (|V| − 1) τ² · p(1 − p):
+    the expected Wald form of the LRT (Fisher information p(1−p) per episode on the logit scale).
+    """
+    df = n_values - 1
+    if df < 1:
+        raise ValueError(f"a factor needs ≥ 2 values to be tested, got {n_values}")
+    lam = repeats * n_contexts * df * tau**2 * sr * (1 - sr)
+    return float(stats.ncx2.sf(stats.chi2.ppf(1 - alpha, df), df, lam))
+
+
+def repeats_needed(n_values: int, n_contexts: int, tau: float, sr: float, power: float = 0.8,
+                   alpha: float = 0.05, max_repeats: int = 1000) -> int | None:
+    """Fewest repeats per instance reaching `power`; None if even `max_repeats` does not."""
+    for repeats in range(1, max_repeats + 1):
+        if lrt_power(n_values, n_contexts, repeats, tau, sr, alpha) >= power:
+            return repeats
+    return None
