@@ -88,6 +88,7 @@ class LeRobotPolicy:
         config.device = "cpu"
         self.name = f"lerobot:{config.type}"
         self._torch = torch
+        self.env = env  # its np_random, seeded by the episode seed at reset, seeds the policy's draws
         self.policy = get_policy_class(config.type).from_pretrained(root, config=config)
         self.policy.eval()
         self.preprocessor, self.postprocessor = make_pre_post_processors(
@@ -99,6 +100,9 @@ class LeRobotPolicy:
     def reset(self, instance: TaskInstance) -> None:
         self.policy.reset()  # clears action-chunk queues
         self.task = instance.get("instruction")
+        # Policy randomness (diffusion noise, sampled latents) from the episode seed: common random
+        # numbers cover the policy too, so two values of one (context, repeat) see the same draws.
+        self._torch.manual_seed(int(self.env.np_random.integers(2**31)))
 
     def select_action(self, observation: dict) -> np.ndarray:
         torch = self._torch

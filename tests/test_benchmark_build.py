@@ -41,7 +41,7 @@ def built(tmp_path_factory) -> Path:
 
 def test_splits_load_back_with_datasets_and_counts_match(built):
     ds = datasets.load_dataset(str(built))
-    expected = {"color": 12, "camera_pose": 9, "camera_euler": 9, "dist_scale": 9, "color_x_camera_pose": 6}
+    expected = {"color": 24, "camera_pose": 9, "camera_euler": 9, "dist_scale": 9, "color_x_camera_pose": 6}
     assert {k: len(v) for k, v in ds.items()} == expected
     ids = [i for split in ds.values() for i in split["instance_id"]]
     assert len(ids) == len(set(ids)) == 57
@@ -51,7 +51,7 @@ def test_splits_load_back_with_datasets_and_counts_match(built):
     assert row["preview"].size == (3 * 128, 128)
     card = (built / "README.md").read_text()
     assert card.startswith("---\nlicense: apache-2.0") and "split: camera_euler" in card
-    assert "Suite hash" in card and "| color | 12 | 12 |" in card
+    assert "Suite hash" in card and "| color | 24 | 24 |" in card
 
 
 def test_building_twice_gives_the_same_bytes(built, tmp_path):

@@ -1,7 +1,6 @@
 """The statistics validated by simulation against known truth (synthetic tables; no simulator).
 
-A policy "with logit-SD τ bias" succeeds on value v in context c with p = logistic(α + β_v),
-β_v ~ N(0, τ²). τ = 0 is no bias at all. Tolerances are binomial: with N simulated tables a
+Tables come from `eval.simulate` (a policy with logit-SD τ bias; τ = 0 is none). Tolerances are binomial: with N simulated tables a
 rejection rate at level 0.05 has standard error √(0.05·0.95/N).
 """
 
@@ -14,31 +13,18 @@ import pandas as pd
 import pytest
 
 from eval.metrics import MetricsConfig, interaction_metrics, split_metrics
+from eval.simulate import simulate_additive_factorial, simulate_split
 from eval.stats import lrt_power, repeats_needed
 from roboview_data.instances import episode_seed, generate_suite, load_preset
 
 SIM = MetricsConfig(n_perm=100, n_glm=40)
 
 
-def simulate(rng: np.random.Generator, n_values: int, n_contexts: int, repeats: int, tau: float,
-             sr: float) -> tuple[pd.DataFrame, float]:
-    """An episodes table with independent outcomes, and the noise-free CV of its true p(v, c)."""
-    beta = rng.normal(0.0, tau, n_values)
-    p = 1 / (1 + np.exp(-(math.log(sr / (1 - sr)) + beta)))[:, None].repeat(n_contexts, axis=1)
-    success = rng.random((n_values, n_contexts, repeats)) < p[:, :, None]
-    v, c, r = np.meshgrid(np.arange(n_values), np.arange(n_contexts), np.arange(repeats), indexing="ij")
-    v, c = v.ravel(), c.ravel()
-    frame = pd.DataFrame({"policy": "p", "split": "color", "factor": "color", "value": [f"v{x}" for x in v],
-                          "context_id": [f"c{x}" for x in c], "instance_id": [f"{a}/{b}" for a, b in zip(v, c)],
-                          "repeat": r.ravel(), "success": success.ravel()})
-    return frame, float(np.mean(p.std(axis=0) / p.mean(axis=0)))
-
-
 def run_many(n_sims: int, seed: int, **design) -> pd.DataFrame:
     rng = np.random.default_rng(seed)
     rows = []
     for _ in range(n_sims):
-        table, true_cv = simulate(rng, **design)
+        table, true_cv = simulate_split(rng, **design)
         m = split_metrics(table, SIM)
         qs = [s["q_value"] for s in m["per_value"].values() if s["q_value"] is not None]
         rows.append({"p": m["p_value"], "p_cv": m["p_value_cv"], "cv": m["cv"], "cv_excess": m["cv_excess"],
@@ -99,13 +85,8 @@ def test_interaction_calibrated_under_an_additive_truth():
     rejections, iec, excess = [], [], []
     n_sims = 60
     for _ in range(n_sims):
-        logit = rng.normal(0, 0.3, 4)[:, None] + np.linspace(-1.5, 1.5, 6)[None, :] + 0.5  # A (4) + B (6)
-        p = 1 / (1 + np.exp(-logit))
-        success = rng.random((4, 6, 10)) < p[:, :, None]
-        rows = [{"policy": "p", "split": "A_x_B", "factor": "A|B", "value": f"a{a}|b{b}", "context_id": "c*",
-                 "instance_id": f"{a}/{b}", "repeat": r, "success": bool(success[a, b, r])}
-                for a in range(4) for b in range(6) for r in range(10)]
-        m = interaction_metrics(pd.DataFrame(rows), SIM)
+        table = simulate_additive_factorial(rng, n_a=4, n_b=6, repeats=10, tau_a=0.3, b_range=1.5, sr=0.62)
+        m = interaction_metrics(table, SIM)
         rejections.append(m["p_interaction"] < 0.05)
         iec.append(m["iec"]["A|B"])
         excess.append(m["iec_excess"]["A|B"])
@@ -118,9 +99,9 @@ def test_power_formula_matches_simulation():
     # 9 values × 4 contexts × 10 repeats at SR 0.5, τ = 0.6: the χ² regime, where the formula applies.
     predicted = lrt_power(9, 4, 10, 0.6, 0.5)
     sims = run_many(60, 6, n_values=9, n_contexts=4, repeats=10, tau=0.6, sr=0.5)
-    assert abs(float(np.mean(sims["p"] < 0.05)) - predicted) < 0.15, predicted
-    # The paper's layouts at τ = 0.3: more values need fewer repeats (141 colors: 2; 21 poses: 6).
-    assert [repeats_needed(v, 11, 0.3, 0.7) for v in (141, 21, 9)] == [2, 6, 10]
+    assert abs(float(np.mean(sims["p"] < 0.05)) - predicted) < 0.12, predicted
+    # The paper's layouts at τ = 0.3: more values need fewer repeats (141 colors: 2; 21 poses: 6; 9 Euler steps: 12).
+    assert [repeats_needed(v, 11, 0.3, 0.7) for v in (141, 21, 9)] == [2, 6, 12]
 
 
 def test_common_random_numbers_share_seeds_across_values_and_splits():
@@ -134,3 +115,17 @@ def test_common_random_numbers_share_seeds_across_values_and_splits():
     context = suite[0].context_id
     assert suite[0].seed == episode_seed(context, 0) != episode_seed(context, 1)
     assert len({i.context_id for i in suite}) >= 3 and len({i.seed for i in suite}) == len({i.context_id for i in suite})
+
+
+def test_plan_cli_prints_repeats_per_split(capsys):
+    from pipelines.plan import main
+
+    plans = {(p.split, p.factor): p for p in main(["--preset=paper", "--tau=0.3", "--sr=0.7"])}
+    assert plans[("color", "color")].n_values == 141 and plans[("color", "color")].n_strata == 11
+    assert plans[("color", "color")].repeats == 2 and plans[("camera_pose", "camera_pose")].repeats == 6
+    # The factorial split is planned per factor, its strata being (other value, context).
+    assert plans[("color_x_camera_pose", "color")].n_strata == 21
+    assert "--eval.split_repeats=color=2,camera_pose=6" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["--preset=huge"])
+    assert "unknown preset 'huge'" in capsys.readouterr().err
