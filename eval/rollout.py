@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import os
+import sys
 import time
 from dataclasses import dataclass
 
@@ -27,6 +28,8 @@ class WorkerSpec:
     max_steps: int = 120
     # Keep compressed frames and trajectories for the Rerun recording.
     record_media: bool = False
+    # Intra-op threads of a torch policy in this worker (cores / workers); 0 leaves torch's default.
+    torch_threads: int = 0
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,8 @@ class EvalWorker:
         self.env = PickPlaceEnv(cameras=entry.cameras(spec.policy), image_size=spec.image_size,
                                 max_steps=spec.max_steps, depth=entry.depth)
         self.policy = make_policy(spec.policy, self.env)
+        if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
+            sys.modules["torch"].set_num_threads(spec.torch_threads)
 
     def run(self, work: WorkItem) -> EpisodeResult:
         instance, record = work.item.instance, work.item.record

@@ -12,6 +12,7 @@ finish). Rerunning the same command resumes: finished pairs are skipped, none is
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -49,20 +50,24 @@ class PolicyConfig:
     path: str | None = None
     # Scene camera the vision policy looks through (front or left_top).
     camera: str = "front"
+    # Device of a LeRobot checkpoint: auto (CUDA when present), cpu or cuda.
+    device: str = "auto"
 
     def __post_init__(self) -> None:
         policy_entry(self.type)  # unknown names fail here, listing the registered ones
         if self.type == "lerobot":
-            from policies.lerobot_policy import load_config
+            from policies.lerobot_policy import load_config, resolve_device
 
             load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
+            resolve_device(self.device)
 
     @property
     def spec(self) -> PolicySpec:
-        options = (("camera", self.camera),) if self.type == "vision" else ()
-        return PolicySpec(self.type, self.path, options)
+        options = {"vision": (("camera", self.camera),), "lerobot": (("device", self.device),)}
+        return PolicySpec(self.type, self.path, options.get(self.type, ()))
 
 
+DEFAULT_IMAGE_SIZE = 224
 # protocol → (repeats for splits not listed (0: n_repeats), per-split repeats)
 PROTOCOLS: dict[str, tuple[int, dict[str, int]]] = {"": (0, {}), "paper": (5, {"color_x_camera_pose": 10})}
 
@@ -89,10 +94,13 @@ class EvalConfig:
     rerun: str = ""
     # Control steps before an episode counts as a failure.
     max_steps: int = 120
-    # Camera image side (pixels).
-    image_size: int = 224
+    # Camera image side (pixels); 0: the policy's own (a checkpoint's input size), else 224.
+    # A size that disagrees with the checkpoint's fails before any rollout.
+    image_size: int = 0
 
     def __post_init__(self) -> None:
+        if self.image_size < 0:
+            raise ValueError(f"--eval.image_size={self.image_size} must be ≥ 0 (0 = the policy's own size)")
         for name in ("n_repeats", "num_workers", "max_steps"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
@@ -140,6 +148,15 @@ class EvaluateResult:
         return 3600 * self.new_episodes / self.elapsed_s if self.elapsed_s else float("nan")
 
 
+def resolve_image_size(spec: PolicySpec, requested: int) -> int:
+    """The policy's own image side if it has one (a checkpoint's), else `requested`, else 224."""
+    own = policy_entry(spec.type).image_size(spec)
+    if own is not None and requested and requested != own:
+        raise ValueError(f"--eval.image_size={requested} but the checkpoint {spec.path} was trained on {own}×{own} "
+                         f"images; drop the flag (the checkpoint's size is used) or pass {own}")
+    return own or requested or DEFAULT_IMAGE_SIZE
+
+
 def run(cfg: EvaluateConfig) -> EvaluateResult:
     bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
     spec = cfg.policy.spec
@@ -149,9 +166,10 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         raise ValueError(f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
                          f"evaluated: {', '.join(bench.splits)}")
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
+    image_size = resolve_image_size(spec, cfg.eval.image_size)
     run_info = {"benchmark_version": bench.version, "policy": spec.type, "policy_path": spec.path,
                 "policy_options": dict(spec.options), "n_repeats": repeats,
-                "max_steps": cfg.eval.max_steps, "image_size": cfg.eval.image_size}
+                "max_steps": cfg.eval.max_steps, "image_size": image_size}
     store = EpisodeStore(Path(cfg.output_dir), run_info)
     work = []
     for split, items in bench.splits.items():
@@ -165,7 +183,9 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         from eval.rerun_log import RerunLogger
 
         rerun = RerunLogger(Path(cfg.eval.rerun))
-    worker = WorkerSpec(spec, cfg.eval.image_size, cfg.eval.max_steps, record_media=rerun is not None)
+    # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
+    threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
+    worker = WorkerSpec(spec, image_size, cfg.eval.max_steps, record_media=rerun is not None, torch_threads=threads)
     if cfg.eval.backend == "ray":
         stream = run_ray(worker, todo, cfg.eval.num_workers, cfg.eval.ray_address or None)
     else:

@@ -48,6 +48,8 @@ class PolicyEntry:
     depth: bool = False
     # One line for --help and error messages.
     doc: str = ""
+    # Image side the policy was trained on (the env renders exactly that); None: any size works.
+    image_size: Callable[[PolicySpec], int | None] = lambda spec: None
 
 
 _REGISTRY: dict[str, PolicyEntry] = {}

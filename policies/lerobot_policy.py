@@ -22,6 +22,9 @@ from roboview_data.instances import TaskInstance
 log = logging.getLogger(__name__)
 
 
+DEVICES = ("auto", "cpu", "cuda")
+
+
 class CheckpointError(ValueError):
     """The checkpoint is missing, unreadable, or does not fit the env's features."""
 
@@ -72,6 +75,28 @@ def check_features(config) -> None:
         raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
 
 
+def checkpoint_image_size(spec: PolicySpec) -> int | None:
+    """The side of the checkpoint's (square) input images; every camera must share it."""
+    _, config = load_config(spec.path)
+    shapes = {k: tuple(f.shape) for k, f in config.input_features.items() if k.startswith("observation.images.")}
+    sides = {shape[-1] for shape in shapes.values()}
+    if any(shape[-1] != shape[-2] for shape in shapes.values()) or len(sides) > 1:
+        raise CheckpointError(f"checkpoint image shapes {shapes}: the env renders every camera as one square "
+                              "size; retrain on a dataset collected with --dataset.image_size=N")
+    return sides.pop() if sides else None
+
+
+def resolve_device(device: str) -> str:
+    """auto → cuda when a CUDA device is visible, else cpu; cuda without one is an error."""
+    import torch
+
+    if device not in DEVICES:
+        raise CheckpointError(f"unknown --policy.device={device!r}; allowed: {', '.join(DEVICES)}")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise CheckpointError("--policy.device=cuda but no CUDA device is visible here; use auto or cpu")
+    return ("cuda" if torch.cuda.is_available() else "cpu") if device == "auto" else device
+
+
 def checkpoint_cameras(spec: PolicySpec) -> tuple[str, ...]:
     _, config = load_config(spec.path)
     cams = tuple(k.removeprefix("observation.images.") for k in config.input_features
@@ -85,7 +110,8 @@ class LeRobotPolicy:
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
         root, config = load_config(spec.path)
-        config.device = "cpu"
+        device = resolve_device(dict(spec.options).get("device", "auto"))
+        config.device = device
         self.name = f"lerobot:{config.type}"
         self._torch = torch
         self.env = env  # its np_random, seeded by the episode seed at reset, seeds the policy's draws
@@ -93,7 +119,7 @@ class LeRobotPolicy:
         self.policy.eval()
         self.preprocessor, self.postprocessor = make_pre_post_processors(
             policy_cfg=config, pretrained_path=str(root),
-            preprocessor_overrides={"device_processor": {"device": "cpu"}})
+            preprocessor_overrides={"device_processor": {"device": device}})
         self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
         self.task = ""
 
@@ -118,4 +144,5 @@ class LeRobotPolicy:
 
 
 register_policy("lerobot", PolicyEntry(LeRobotPolicy, checkpoint_cameras,
-                                       doc="any LeRobot checkpoint (--policy.path=DIR)"))
+                                       doc="any LeRobot checkpoint (--policy.path=DIR)",
+                                       image_size=checkpoint_image_size))

@@ -27,10 +27,11 @@ def bench(tmp_path_factory) -> Path:
 
 
 def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
-             backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120):
+             backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120,
+             image_size: int = 64):
     cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), PolicyConfig(policy, path),
                          EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers, backend=backend,
-                                    rerun=rerun, image_size=64, max_steps=max_steps), str(out))
+                                    rerun=rerun, image_size=image_size, max_steps=max_steps), str(out))
     return run(cfg)
 
 
@@ -116,8 +117,10 @@ def tiny_checkpoint(tmp_path_factory) -> Path:
 
 
 def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_path):
+    # No image size given: the env renders the checkpoint's own 64² (its cameras: left_top + wrist).
     result = evaluate(bench, tmp_path / "ev", policy="lerobot", path=str(tiny_checkpoint), splits="color",
-                      limit=1, repeats=1, workers=1, max_steps=8)
+                      limit=1, repeats=1, workers=1, max_steps=8, image_size=0)
+    assert json.loads((tmp_path / "ev" / "run.json").read_text())["image_size"] == 64
     df = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
     assert result.episodes == 1 and df["policy"].tolist() == ["lerobot:act"]
     assert df["steps"].tolist() == [8] and not df["success"].any()
@@ -145,6 +148,14 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}", f"--output_dir={out}")
     assert proc.returncode == 2 and "camera 'top_down'" in proc.stderr
     assert not out.exists()
+    # An explicit image size that disagrees with the checkpoint's: both sizes named, nothing run.
+    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tiny_checkpoint}",
+                "--eval.image_size=96", f"--output_dir={out}")
+    assert proc.returncode == 2 and "--eval.image_size=96" in proc.stderr and "64×64" in proc.stderr
+    assert not out.exists()
+    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tiny_checkpoint}",
+                "--policy.device=tpu", f"--output_dir={out}")
+    assert proc.returncode == 2 and "--policy.device='tpu'" in proc.stderr and "auto, cpu, cuda" in proc.stderr
     # Results from another benchmark version in the output folder: refuse to mix them.
     out.mkdir()
     (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert",
