@@ -86,14 +86,14 @@ def checkpoint_image_size(spec: PolicySpec) -> int | None:
     return sides.pop() if sides else None
 
 
-def resolve_device(device: str) -> str:
+def resolve_device(device: str, flag: str = "--policy.device") -> str:
     """auto → cuda when a CUDA device is visible, else cpu; cuda without one is an error."""
     import torch
 
     if device not in DEVICES:
-        raise CheckpointError(f"unknown --policy.device={device!r}; allowed: {', '.join(DEVICES)}")
+        raise CheckpointError(f"unknown {flag}={device!r}; allowed: {', '.join(DEVICES)}")
     if device == "cuda" and not torch.cuda.is_available():
-        raise CheckpointError("--policy.device=cuda but no CUDA device is visible here; use auto or cpu")
+        raise CheckpointError(f"{flag}=cuda but no CUDA device is visible here; use auto or cpu")
     return ("cuda" if torch.cuda.is_available() else "cpu") if device == "auto" else device
 
 

@@ -107,12 +107,13 @@ def tiny_checkpoint(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("ckpt")
     collect(CollectConfig(DatasetConfig(repo_id="t/demos", root=str(root / "ds"), num_episodes=2, image_size=64,
                                         cameras=["left_top", "wrist"]), num_workers=1))
-    cmd = [sys.executable, "-m", "lerobot.scripts.lerobot_train", "--dataset.repo_id=t/demos",
-           f"--dataset.root={root / 'ds'}", "--policy.type=act", "--policy.pretrained_backbone_weights=null",
-           "--policy.device=cpu", "--policy.push_to_hub=false", "--steps=2", "--batch_size=2", "--num_workers=0",
-           "--save_freq=2", "--wandb.enable=false", f"--output_dir={root / 'train'}"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
+    args = [sys.executable, "-m", "pipelines.train", "--dataset.repo_id=t/demos", f"--dataset.root={root / 'ds'}",
+            f"--output_dir={root / 'train'}", "--batch_size=2", "--save_freq=2", "--device=cpu"]
+    proc = subprocess.run([*args, "--steps=2"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
+    dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
+    assert "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
     return root / "train" / "checkpoints" / "last" / "pretrained_model"
 
 

@@ -1,0 +1,124 @@
+"""Train a reference policy on `pipelines.collect` demos: lerobot's own trainer, the recipe that works here.
+
+    python -m pipelines.train --dataset.repo_id=roboview/pick_place_96 --dataset.root=outputs/demos96 \
+        --output_dir=outputs/train_act96 [--steps=6000] [--device=auto]
+
+A thin layer over `lerobot-train`: it checks the dataset, then runs lerobot's trainer with
+ACT-small (dim_model 256, feed-forward 1024, 2 encoder layers, chunk 20 executing 10, lr 1e-4 for
+the backbone too, batch 16) and *no* pretrained backbone (the default downloads ImageNet weights,
+which fails offline). Images are used at the size they were collected (`--dataset.image_size` of
+collect): ACT has no resize step, and evaluation renders the checkpoint's own size. Checkpoints
+land in OUTPUT/checkpoints/<step>/pretrained_model every `--save_freq` steps; rerunning the same
+command resumes from the last one (lerobot's `--resume`). Measured step time: README, "Training".
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pipelines._cli import fail, parse, setup_environment
+from policies.lerobot_policy import DEVICES, resolve_device
+
+
+@dataclass
+class TrainDatasetConfig:
+    # repo_id the dataset was collected under (--dataset.repo_id of pipelines.collect).
+    repo_id: str = "roboview/pick_place"
+    # Local dataset folder written by pipelines.collect.
+    root: str = ""
+
+
+@dataclass
+class TrainConfig:
+    dataset: TrainDatasetConfig = field(default_factory=TrainDatasetConfig)
+    # Run folder: checkpoints, logs; rerun the same command to resume from its last checkpoint.
+    output_dir: str = "outputs/train_act"
+    # Optimizer steps in total (a resumed run continues towards the same total).
+    steps: int = 6000
+    # Save a checkpoint every this many steps.
+    save_freq: int = 1000
+    # Batch size.
+    batch_size: int = 16
+    # Learning rate of the transformer and of the ResNet-18 backbone.
+    lr: float = 1e-4
+    # auto (CUDA when present), cpu or cuda.
+    device: str = "auto"
+    # ACT action chunk length, and how many of its actions run before the next inference.
+    chunk_size: int = 20
+    n_action_steps: int = 10
+    # Print lerobot-train's command line instead of running it.
+    dry_run: bool = False
+
+    def __post_init__(self) -> None:
+        if self.device not in DEVICES:
+            raise ValueError(f"unknown --device={self.device!r}; allowed: {', '.join(DEVICES)}")
+        for name in ("steps", "save_freq", "batch_size", "chunk_size", "n_action_steps"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
+        if self.n_action_steps > self.chunk_size:
+            raise ValueError(f"--n_action_steps={self.n_action_steps} cannot exceed --chunk_size={self.chunk_size}")
+        info = Path(self.dataset.root) / "meta" / "info.json"
+        if not self.dataset.root or not info.is_file():
+            raise ValueError(f"--dataset.root={self.dataset.root!r} holds no LeRobot dataset (meta/info.json "
+                             "missing); collect one with `python -m pipelines.collect`")
+        cameras = [k for k in json.loads(info.read_text())["features"] if k.startswith("observation.images.")]
+        if not cameras:
+            raise ValueError(f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one")
+
+
+def last_checkpoint(output_dir: Path) -> Path | None:
+    config = output_dir / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    return config if config.is_file() else None
+
+
+def command(cfg: TrainConfig) -> list[str]:
+    """lerobot-train's argument list: a fresh run, or a resume from the run folder's last checkpoint."""
+    out = Path(cfg.output_dir)
+    trainer = [sys.executable, "-m", "lerobot.scripts.lerobot_train"]
+    resume = last_checkpoint(out)
+    if resume is not None:
+        return [*trainer, f"--config_path={resume}", "--resume=true", f"--steps={cfg.steps}"]
+    if out.exists() and any(out.iterdir()):
+        raise ValueError(f"--output_dir={out} is not empty and holds no checkpoint to resume; choose a new folder")
+    return [*trainer, f"--dataset.repo_id={cfg.dataset.repo_id}", f"--dataset.root={cfg.dataset.root}",
+            "--policy.type=act", "--policy.pretrained_backbone_weights=null", "--policy.push_to_hub=false",
+            f"--policy.device={resolve_device(cfg.device, '--device')}", "--policy.dim_model=256",
+            "--policy.dim_feedforward=1024", "--policy.n_encoder_layers=2", "--policy.n_vae_encoder_layers=2",
+            f"--policy.chunk_size={cfg.chunk_size}", f"--policy.n_action_steps={cfg.n_action_steps}",
+            f"--policy.optimizer_lr={cfg.lr}", f"--policy.optimizer_lr_backbone={cfg.lr}",
+            f"--batch_size={cfg.batch_size}", f"--steps={cfg.steps}", f"--save_freq={cfg.save_freq}",
+            f"--log_freq={min(100, cfg.save_freq)}", "--num_workers=0", "--wandb.enable=false",
+            f"--output_dir={out}", f"--job_name={out.name}"]
+
+
+def run(cfg: TrainConfig) -> Path:
+    """Train (or resume); returns the last checkpoint's pretrained_model folder."""
+    cmd = command(cfg)
+    if cfg.dry_run:
+        print(" ".join(cmd))
+        return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
+    proc = subprocess.run(cmd)
+    if proc.returncode != 0:
+        raise RuntimeError(f"lerobot-train exited with {proc.returncode}; its log is above")
+    return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
+
+
+def main(args: list[str] | None = None) -> Path:
+    setup_environment()
+    cfg = parse(TrainConfig, args)
+    try:
+        checkpoint = run(cfg)
+    except (ValueError, RuntimeError) as exc:
+        fail(str(exc))
+    if not cfg.dry_run:
+        print(f"[train] checkpoint: {checkpoint} (evaluate: python -m pipelines.evaluate --policy.type=lerobot "
+              f"--policy.path={checkpoint} ...)")
+    return checkpoint
+
+
+if __name__ == "__main__":
+    main()
