@@ -29,6 +29,7 @@ from roboview_data.factors import (  # noqa: E402
 
 Layouts = dict[str, dict[str, Any]]
 _MARKERS = "osD^vP*X"
+_OR_LIMIT = 100.0  # forest plots clip odds ratios (and their intervals) to [1/100, 100]
 _DPI = 100
 
 
@@ -196,18 +197,26 @@ def plot_forest(split: str) -> Callable[[Layouts, Path], None]:
             names = list(per_value)
             for y, name in enumerate(names):
                 s = per_value[name]
-                if s["odds_ratio"] is None or s["odds_ratio"] <= 0:
-                    continue  # undefined (no informative stratum) or zero: nothing to place on a log axis
+                if s["p_value"] is None:
+                    continue  # no informative stratum: nothing was compared
+                # An odds ratio of 0 (never succeeds where others do) or ∞ (stored as null with a
+                # defined p-value: never fails where others do) sits at the axis edge as a triangle.
+                odds, marker = s["odds_ratio"], "o"
+                if odds is None or odds > _OR_LIMIT:
+                    odds, marker = _OR_LIMIT, ">"
+                elif odds < 1 / _OR_LIMIT:
+                    odds, marker = 1 / _OR_LIMIT, "<"
                 significant = s["q_value"] is not None and s["q_value"] < 0.05
-                color = ("tab:red" if s["odds_ratio"] < 1 else "tab:blue") if significant else "0.6"
+                color = ("tab:red" if odds < 1 else "tab:blue") if significant else "0.6"
                 if s["odds_ratio_ci95"] is not None:
                     lo, hi = s["odds_ratio_ci95"]
-                    ax.plot([max(lo, 1e-3), min(hi, 1e3)], [y, y], color=color, lw=1.2)
-                ax.plot(s["odds_ratio"], y, "o", color=color, ms=3.5)
+                    ax.plot([max(lo, 1 / _OR_LIMIT), min(hi, _OR_LIMIT)], [y, y], color=color, lw=1.2)
+                ax.plot(odds, y, marker, color=color, ms=3.5)
             ax.axvline(1.0, color="k", lw=0.8, ls="--")
             ax.set_xscale("log")
+            ax.set_xlim(1 / _OR_LIMIT / 1.5, _OR_LIMIT * 1.5)
             ax.set_yticks(range(len(names)), names, fontsize=6 if len(names) > 40 else 8)
-            ax.invert_yaxis()
+            ax.set_ylim(len(names) - 0.5, -0.5)  # first value on top, no empty margin
             ax.set_xlabel("odds ratio vs the other values (CMH, 95 % CI)")
             ax.set_title(policy)
         handles = [Patch(color="tab:red", label="harder, q < 0.05"), Patch(color="tab:blue", label="easier, q < 0.05"),
