@@ -29,9 +29,9 @@ from binomial noise alone. So:
 - `p_value`: likelihood-ratio test of a binomial GLM `value + context` against `context`
   (statsmodels), χ² reference, or the same permutations as reference when the table is sparse
   (`eval.stats`). `p_value_cv`: the permutation test with `cv` itself as statistic.
-- `per_value[v]`: `odds_ratio` of v against the other values with its 95 % interval and p-value,
-  Cochran–Mantel–Haenszel stratified by block (context, repeat); `q_value`: Benjamini–Hochberg
-  over the split's values.
+- `per_value[v]`: `odds_ratio` of v against the other values with its 95 % interval (Mantel–
+  Haenszel, stratified by block (context, repeat)) and the exact conditional p-value of the same
+  hypothesis (`eval.stats.exact_stratified_p`); `q_value`: Benjamini–Hochberg over the split's values.
 - Factorial splits: `p_value[f]` (GLM LRT of f within the other factor × context), `cv_null`,
   `cv_excess`, `p_value_cv` per factor; `p_interaction` (LRT of A×B against A + B); `iec_null`
   (IEC of tables drawn from the fitted additive GLM: a parametric bootstrap), `iec_excess`

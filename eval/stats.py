@@ -166,7 +166,11 @@ def value_vs_rest(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n
     """Cochran–Mantel–Haenszel: a value's episodes against the other values', per stratum.
 
     Arrays run over strata: the value's successes / episodes and everyone's. Strata without both
-    groups or without both outcomes carry no information and are left out.
+    groups or without both outcomes carry no information and are left out. The odds ratio and its
+    interval are statsmodels' Mantel–Haenszel estimate; the p-value is the *exact* conditional test
+    of the same hypothesis (`exact_stratified_p`): the asymptotic CMH χ² is wildly anti-conservative
+    on benchmark tables (a value failing 2 of 2 where 5 of 141 fail per block: χ² says 1.6e-13, the
+    exact probability is 1.3e-3).
     """
     k_rest, n_rest = k_all - k_value, n_all - n_value
     use = (n_value > 0) & (n_rest > 0) & (k_all > 0) & (k_all < n_all)
@@ -177,8 +181,23 @@ def value_vs_rest(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n
     with np.errstate(divide="ignore", invalid="ignore"):
         odds = _finite(table.oddsratio_pooled)
         ci = [_finite(x) for x in table.oddsratio_pooled_confint()]
-        p = _finite(table.test_null_odds(correction=False).pvalue)
+    p = exact_stratified_p(k_value[use], n_value[use], k_all[use], n_all[use])
     return ValueTest(odds, None if None in ci else ci, p)
+
+
+def exact_stratified_p(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray) -> float:
+    """Exact conditional test of "common odds ratio 1" over strata of 2×2 tables.
+
+    Given every stratum's margins, the value's successes in a stratum are hypergeometric (scipy); their
+    total is the convolution over strata. Two-sided p: the probability of totals no more likely than
+    the observed one (the rule of R's `mantelhaen.test(exact = TRUE)` and Fisher's exact test).
+    """
+    dist = np.ones(1)
+    for k, n, kv in zip(k_all.astype(int), n_all.astype(int), n_value.astype(int)):
+        support = np.arange(kv + 1)
+        dist = np.convolve(dist, stats.hypergeom.pmf(support, n, k, kv))
+    observed = dist[int(k_value.sum())]
+    return float(min(1.0, dist[dist <= observed * (1 + 1e-7)].sum()))
 
 
 def _finite(x: float) -> float | None:
