@@ -182,7 +182,8 @@ def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
             "σ_v SR(v,c) / (μ_v SR(v,c) + ε); a context where everything failed enters as 0. cv_excess: "
             "√max(0, CV² − cv_null²), the bias beyond binomial noise — rank policies on it, not on CV. "
             "p: likelihood-ratio test of a binomial GLM value + context against context (permutation-"
-            "calibrated when cells are sparse). N/A: every episode failed. Bold: lowest cv_excess, only "
+            "calibrated when cells are sparse). N/A: every episode failed (CV), or no context holds both "
+            "outcomes (p: nothing to test). Bold: lowest cv_excess, only "
             "where it is significantly lower than the next policy's (paired test, p < 0.05). No interval is "
             "given for CV or cv_excess: none has passed the coverage simulation.", "",
             *_noise_floor_line(layouts)]

@@ -55,7 +55,7 @@ def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray,
         warnings.simplefilter("ignore")  # perfect-separation and convergence chatter, see above
         result = sm.GLM(np.column_stack([k, n - k]), exog, family=sm.families.Binomial()).fit(
             maxiter=100, start_params=start)
-    return float(result.llf), np.asarray(result.fittedvalues)
+        return float(result.llf), np.asarray(result.fittedvalues)  # both lazy: computed here, quietly
 
 
 def lrt_statistic(k: np.ndarray, n: np.ndarray, full: np.ndarray, reduced: np.ndarray) -> float:
