@@ -171,3 +171,13 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
     # Per-split repeats: a typo fails before any rollout, naming the entry.
     proc = _cli(f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'z'}", "--eval.split_repeats=color=two")
     assert proc.returncode == 2 and "'color=two' must be split=N" in proc.stderr
+
+
+def test_repeats_per_split_and_the_paper_protocol():
+    paper = EvalConfig(protocol="paper")
+    assert (paper.repeats_for("color"), paper.repeats_for("color_x_camera_pose")) == (5, 10)
+    mixed = EvalConfig(n_repeats=3, split_repeats="color=2, camera_pose=6")
+    assert [mixed.repeats_for(s) for s in ("color", "camera_pose", "dist_scale")] == [2, 6, 3]
+    assert EvalConfig(protocol="paper", split_repeats="color_x_camera_pose=4").repeats_for("color_x_camera_pose") == 4
+    with pytest.raises(ValueError, match="unknown --eval.protocol='pi0'"):
+        EvalConfig(protocol="pi0")
