@@ -36,10 +36,17 @@ class BenchmarkConfig:
     path: str = "outputs/benchmark"
     # Comma-separated splits to evaluate (default: every split of the benchmark).
     splits: str = ""
+    # Comma-separated values to keep (the `value` column, e.g. red for the baseline color);
+    # default: every value.
+    values: str = ""
 
     @property
     def split_list(self) -> list[str] | None:
         return [s.strip() for s in self.splits.split(",") if s.strip()] or None
+
+    @property
+    def value_list(self) -> list[str] | None:
+        return [v.strip() for v in self.values.split(",") if v.strip()] or None
 
 
 @dataclass
@@ -165,9 +172,18 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     if unknown:
         raise ValueError(f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
                          f"evaluated: {', '.join(bench.splits)}")
+    if cfg.benchmark.value_list:
+        present = {i.record["value"] for items in bench.splits.values() for i in items}
+        missing = sorted(set(cfg.benchmark.value_list) - present)
+        if missing:
+            raise ValueError(f"--benchmark.values names {missing}, absent from the chosen splits; present: "
+                             f"{', '.join(sorted(present)[:20])}{' …' if len(present) > 20 else ''}")
+        keep = set(cfg.benchmark.value_list)
+        bench.splits.update({s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()})
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
     image_size = resolve_image_size(spec, cfg.eval.image_size)
-    run_info = {"benchmark_version": bench.version, "policy": spec.type, "policy_path": spec.path,
+    run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
+                "policy": spec.type, "policy_path": spec.path,
                 "policy_options": dict(spec.options), "n_repeats": repeats,
                 "max_steps": cfg.eval.max_steps, "image_size": image_size}
     store = EpisodeStore(Path(cfg.output_dir), run_info)

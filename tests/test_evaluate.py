@@ -171,6 +171,9 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
     # Per-split repeats: a typo fails before any rollout, naming the entry.
     proc = _cli(f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'z'}", "--eval.split_repeats=color=two")
     assert proc.returncode == 2 and "'color=two' must be split=N" in proc.stderr
+    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'v'}", "--benchmark.splits=color",
+                "--benchmark.values=red,chartreuse")
+    assert proc.returncode == 2 and "['chartreuse']" in proc.stderr and "red" in proc.stderr
 
 
 def test_repeats_per_split_and_the_paper_protocol():
@@ -181,3 +184,11 @@ def test_repeats_per_split_and_the_paper_protocol():
     assert EvalConfig(protocol="paper", split_repeats="color_x_camera_pose=4").repeats_for("color_x_camera_pose") == 4
     with pytest.raises(ValueError, match="unknown --eval.protocol='pi0'"):
         EvalConfig(protocol="pi0")
+
+
+def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):
+    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "color", "red"), PolicyConfig("expert"),
+                         EvalConfig(n_repeats=1, num_workers=1, image_size=64), str(tmp_path / "ev"))
+    run(cfg)
+    df = rows(tmp_path / "ev")
+    assert set(df["value"]) == {"red"} and df["context_id"].nunique() == 3 and df["success"].all()
