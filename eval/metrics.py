@@ -24,8 +24,8 @@ from binomial noise alone. So:
   independent episodes and for CRN-coupled ones alike.
 - `cv_excess` = √max(0, cv² − cv_null²): bias beyond noise (variances of independent noise add).
 - `cv_excess_ci95`: null. No interval for it has yet passed the coverage simulation the contract
-  requires (README, "Statistics"); the earlier bootstrap interval around `cv` covered the noise-free
-  CV 0 % of the time, so it is gone rather than renamed.
+  requires (README, "Statistics"); the earlier bootstrap interval around `cv` was centred on the
+  noise-inflated estimate and never validated, so it is gone rather than renamed.
 - `p_value`: likelihood-ratio test of a binomial GLM `value + context` against `context`
   (statsmodels), χ² reference, or the same permutations as reference when the table is sparse
   (`eval.stats`). `p_value_cv`: the permutation test with `cv` itself as statistic.
