@@ -89,7 +89,7 @@ def compare_pair(rows: pd.DataFrame, name_a: str, name_b: str, cfg: MetricsConfi
     n = len(paired.cell)
     stacked = np.concatenate([paired.a, paired.b])  # row i: A's instance i; row n + i: B's
 
-    def delta(x: np.ndarray, y: np.ndarray, axis: int = -1) -> float:
+    def delta(x: np.ndarray, y: np.ndarray) -> float:
         ex, ey = paired.cv_excess(stacked[x.astype(int)], seed), paired.cv_excess(stacked[y.astype(int)], seed)
         return np.nan if ex is None or ey is None else ey - ex
 
