@@ -129,3 +129,22 @@ def test_plan_cli_prints_repeats_per_split(capsys):
     with pytest.raises(SystemExit):
         main(["--preset=huge"])
     assert "unknown preset 'huge'" in capsys.readouterr().err
+
+
+def test_paired_comparison_of_two_policies():
+    from eval.compare import compare_policies
+
+    table, _ = simulate_split(np.random.default_rng(7), n_values=6, n_contexts=8, repeats=5, tau=0.0, sr=0.99)
+    a = table.assign(policy="a", success=True)
+    same = compare_policies(pd.concat([a, a.assign(policy="b")]), SIM)[0]
+    assert (same["delta_sr"], same["p_sr"], same["delta_cv_excess"], same["p_cv_excess"]) == (0.0, 1.0, 0.0, 1.0)
+    # b fails value v0 in every context and repeat (40 of 240 pairs, all discordant one way).
+    b = a.assign(policy="b", success=a["value"] != "v0")
+    diff = compare_policies(pd.concat([a, b]), SIM)[0]
+    assert diff["n_pairs"] == 240 and diff["delta_sr"] == pytest.approx(-40 / 240)
+    # McNemar, χ² with continuity correction at 40 discordant pairs: (|40 − 0| − 1)² / 40.
+    from scipy.stats import chi2
+
+    assert diff["p_sr"] == pytest.approx(chi2.sf(39**2 / 40, 1))
+    # Swapping whole instances puts all 8 of v0's on one side with probability 2/256: p can reach it.
+    assert diff["delta_cv_excess"] > 0.3 and diff["p_cv_excess"] < 0.05
