@@ -45,7 +45,7 @@ def interaction_codes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray,
-                 start: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+                 start: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
     """Log-likelihood and fitted probabilities of a binomial GLM (logit link) of k successes in n.
 
     Separated data (a cell or level with every episode failing) sends coefficients to ±∞; the
@@ -55,7 +55,8 @@ def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray,
         warnings.simplefilter("ignore")  # perfect-separation and convergence chatter, see above
         result = sm.GLM(np.column_stack([k, n - k]), exog, family=sm.families.Binomial()).fit(
             maxiter=100, start_params=start)
-        return float(result.llf), np.asarray(result.fittedvalues)  # both lazy: computed here, quietly
+        # llf and fitted values are lazy: computed here, inside the quiet block.
+        return float(result.llf), np.asarray(result.fittedvalues), np.asarray(result.params)
 
 
 def lrt_statistic(k: np.ndarray, n: np.ndarray, full: np.ndarray, reduced: np.ndarray) -> float:
@@ -105,16 +106,15 @@ def factor_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarr
     if df == 0:
         return None
     observed = lrt_statistic(k[keep], n[keep], full, reduced)
-    _, p_null = binomial_llf(k[keep], n[keep], reduced)
+    _, p_null, null_params = binomial_llf(k[keep], n[keep], reduced)
     if permuted_k is None or not is_sparse(n[keep], p_null):
         return LRT(observed, df, float(stats.chi2.sf(observed, df)), "asymptotic")
     # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are
     # the same for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit
     # starts from them (value dummies at zero), which halves its iterations.
-    start = np.zeros(full.shape[1])
-    start[: reduced.shape[1]] = np.linalg.lstsq(reduced, np.log(p_null / (1 - p_null)), rcond=None)[0]
+    start = np.concatenate([null_params, np.zeros(df)])
     null = np.array([max(0.0, 2.0 * (binomial_llf(kp[keep], n[keep], full, start)[0]
-                                     - binomial_llf(kp[keep], n[keep], reduced, start[: reduced.shape[1]])[0]))
+                                     - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]))
                      for kp in permuted_k])
     return LRT(observed, df, permutation_p(observed, null), "permutation")
 
@@ -140,7 +140,7 @@ def interaction_lrt(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray, 
     additive = design_matrix(codes)
     full = design_matrix([*codes, interaction_codes(codes[1], codes[2])])
     df = np.linalg.matrix_rank(full) - np.linalg.matrix_rank(additive)
-    _, p_add = binomial_llf(k[keep], n[keep], additive)
+    _, p_add, _ = binomial_llf(k[keep], n[keep], additive)
     draws = np.tile(k, (n_boot, 1))
     draws[:, keep] = rng.binomial(n[keep], p_add, size=(n_boot, int(keep.sum())))
     if df == 0:

@@ -119,18 +119,23 @@ class EvalConfig:
             raise ValueError(f"--eval.rerun={self.rerun!r} must name a .rrd file")
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}")
-        self.repeats_for("")  # parses split_repeats now, so a typo fails before any work
+        self.split_repeat_table  # parses split_repeats now, so a typo fails before any work
 
-    def repeats_for(self, split: str) -> int:
-        """Repeats for `split`: split_repeats entry, else the protocol's, else n_repeats."""
-        default, table = PROTOCOLS[self.protocol]
-        table = dict(table)
+    @property
+    def split_repeat_table(self) -> dict[str, int]:
+        """split → repeats as given by --eval.split_repeats."""
+        table = {}
         for item in filter(None, (x.strip() for x in self.split_repeats.split(","))):
             name, sep, count = item.partition("=")
             if not sep or not count.strip().isdigit() or int(count) <= 0:
                 raise ValueError(f"--eval.split_repeats entry {item!r} must be split=N with N ≥ 1")
             table[name.strip()] = int(count)
-        return table.get(split, default or self.n_repeats)
+        return table
+
+    def repeats_for(self, split: str) -> int:
+        """Repeats for `split`: split_repeats entry, else the protocol's, else n_repeats."""
+        default, table = PROTOCOLS[self.protocol]
+        return {**table, **self.split_repeat_table}.get(split, default or self.n_repeats)
 
 
 @dataclass
@@ -167,8 +172,7 @@ def resolve_image_size(spec: PolicySpec, requested: int) -> int:
 def run(cfg: EvaluateConfig) -> EvaluateResult:
     bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
     spec = cfg.policy.spec
-    unknown = [s.partition("=")[0].strip() for s in cfg.eval.split_repeats.split(",")
-               if s.strip() and s.partition("=")[0].strip() not in bench.splits]
+    unknown = [s for s in cfg.eval.split_repeat_table if s not in bench.splits]
     if unknown:
         raise ValueError(f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
                          f"evaluated: {', '.join(bench.splits)}")
