@@ -93,7 +93,7 @@ class EvalWorker:
                                      f"object not released inside the box within {self.env.max_steps} steps")
         row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
                "steps": self.env.steps, "duration_s": time.perf_counter() - start,
-               "policy": self.policy.name, "failure_reason": reason}
+               "policy": self.spec.policy.name or self.policy.name, "failure_reason": reason}
         if not media:
             return EpisodeResult(row)
         return EpisodeResult(row, frames, np.array(ee), np.array(obj))

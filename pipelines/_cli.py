@@ -11,6 +11,11 @@ import draccus
 
 T = TypeVar("T")
 
+# MuJoCo picks its GL backend when first imported, which the pipelines do before main() runs:
+# the headless defaults must be in place as soon as this module is (it is imported first).
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
 
 def _root_cause(exc: BaseException) -> BaseException:
     while exc.__cause__ is not None:
@@ -34,8 +39,6 @@ def parse(config_class: type[T], args: list[str] | None = None) -> T:
 
 def setup_environment() -> None:
     """Headless rendering and quiet encoders/progress bars from libraries (ours show progress)."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1: errors only
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     for noisy in ("libav", "datasets", "httpx", "urllib3"):

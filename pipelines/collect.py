@@ -4,7 +4,8 @@
         --dataset.num_episodes=350 --num_workers=2
 
 Each attempt draws a task context (object position, shape, instruction) at random with every
-visual factor at its baseline, as the paper did for its π0 training demos; only successful
+visual factor at its baseline, as the paper did for its π0 training demos (add
+`--dataset.randomize='[color,camera_pose]'` for visual domain randomization); only successful
 episodes are kept and failures are counted. Rerunning with the same root resumes where a killed
 run stopped. Load the result with `LeRobotDataset(repo_id, root=root)`.
 """
@@ -28,6 +29,7 @@ from roboview_data.demo_dataset import (
     ROBOT_TYPE, CollectionSignature, DatasetRootError, Progress, add_episode, check_root, demo_features, load_provenance,
     roll_back, write_checkpoint,
 )
+from roboview_data.randomization import validate_randomize
 from roboview_data.rollout import DemoCollector, DemoEpisode, init_worker, run_in_worker
 
 log = logging.getLogger(__name__)
@@ -52,6 +54,11 @@ class DatasetConfig:
     cameras: list[str] = field(default_factory=lambda: list(ALL_CAMERAS))
     # Video codec for lerobot's encoder: libsvtav1 (LeRobot's default), h264 or hevc.
     vcodec: str = "libsvtav1"
+    # Visual domain randomization, drawn per episode from continuous ranges (never the benchmark's
+    # named test values): any of color (object sRGB uniform in the unit cube), camera_pose (front and
+    # left_top on the continuous orbital surface). What was drawn is recorded per episode in
+    # meta/roboview/episodes.parquet. Empty: context-only randomization, as in the paper.
+    randomize: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):
@@ -68,6 +75,7 @@ class DatasetConfig:
                              f"allowed: {', '.join(ALL_CAMERAS)}")
         if self.vcodec not in VCODECS:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
+        self.randomize = list(validate_randomize(self.randomize))
 
 
 @dataclass
@@ -94,7 +102,8 @@ class CollectConfig:
     @property
     def signature(self) -> CollectionSignature:
         d = self.dataset
-        return CollectionSignature(d.repo_id, d.fps, d.image_size, tuple(d.cameras), self.seed, self.max_steps)
+        return CollectionSignature(d.repo_id, d.fps, d.image_size, tuple(d.cameras), self.seed, self.max_steps,
+                                   tuple(d.randomize))
 
 
 @dataclass(frozen=True)
@@ -118,7 +127,7 @@ class CollectResult:
 def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
     """Attempts first_attempt, first_attempt+1, … in order, computed by the worker pool."""
     d = cfg.dataset
-    args = (cfg.seed, tuple(d.cameras), d.image_size, d.fps, cfg.max_steps)
+    args = (cfg.seed, tuple(d.cameras), d.image_size, d.fps, cfg.max_steps, tuple(d.randomize))
     attempt = first_attempt
     if cfg.num_workers == 1:
         collector = DemoCollector(*args)

@@ -59,6 +59,9 @@ class PolicyConfig:
     camera: str = "front"
     # Device of a LeRobot checkpoint: auto (CUDA when present), cpu or cuda.
     device: str = "auto"
+    # Name written in the results' `policy` column and used by the report (e.g. act_ref vs
+    # act_campose for two checkpoints); empty: the policy's own name (expert, vision, lerobot:act).
+    name: str = ""
 
     def __post_init__(self) -> None:
         policy_entry(self.type)  # unknown names fail here, listing the registered ones
@@ -71,7 +74,7 @@ class PolicyConfig:
     @property
     def spec(self) -> PolicySpec:
         options = {"vision": (("camera", self.camera),), "lerobot": (("device", self.device),)}
-        return PolicySpec(self.type, self.path, options.get(self.type, ()))
+        return PolicySpec(self.type, self.path, options.get(self.type, ()), self.name)
 
 
 DEFAULT_IMAGE_SIZE = 224
@@ -91,6 +94,9 @@ class EvalConfig:
     protocol: str = ""
     # Evaluate only the first N instances of each chosen split (fixed order); 0 = all.
     limit: int = 0
+    # Evaluate only the first N task contexts of each chosen split, every value of each (a sample
+    # that keeps every value, e.g. --eval.contexts=2 for a quick bias profile); 0 = all.
+    contexts: int = 0
     # Worker processes (local) or actors (ray); one env and renderer each.
     num_workers: int = 2
     # local (process pool, spawn) or ray.
@@ -113,6 +119,8 @@ class EvalConfig:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
         if self.limit < 0:
             raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")
+        if self.contexts < 0:
+            raise ValueError(f"--eval.contexts={self.contexts} must be ≥ 0 (0 = every context)")
         if self.backend not in BACKENDS:
             raise ValueError(f"unknown --eval.backend={self.backend!r}; allowed: {', '.join(BACKENDS)}")
         if self.rerun and not self.rerun.endswith(".rrd"):
@@ -187,12 +195,15 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
     image_size = resolve_image_size(spec, cfg.eval.image_size)
     run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
-                "policy": spec.type, "policy_path": spec.path,
+                "policy": spec.type, "policy_path": spec.path, **({"policy_name": spec.name} if spec.name else {}),
                 "policy_options": dict(spec.options), "n_repeats": repeats,
                 "max_steps": cfg.eval.max_steps, "image_size": image_size}
     store = EpisodeStore(Path(cfg.output_dir), run_info)
     work = []
     for split, items in bench.splits.items():
+        if cfg.eval.contexts:
+            first = list(dict.fromkeys(i.record["context_id"] for i in items))[: cfg.eval.contexts]
+            items = [i for i in items if i.record["context_id"] in set(first)]
         chosen = items[: cfg.eval.limit] if cfg.eval.limit else items
         work += [WorkItem(item, r) for item in chosen for r in range(repeats[split])]
     todo = [w for w in work if not store.done(w.key)]

@@ -36,6 +36,8 @@ class PolicySpec:
     type: str
     path: str | None = None
     options: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+    # Name in the results' `policy` column; empty: the policy's own (e.g. lerobot:act).
+    name: str = ""
 
 
 @dataclass(frozen=True)

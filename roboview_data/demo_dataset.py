@@ -51,6 +51,7 @@ class CollectionSignature:
     cameras: tuple[str, ...]
     seed: int
     max_steps: int
+    randomize: tuple[str, ...] = ()  # collections made before randomization existed had none
 
 
 def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
@@ -83,6 +84,7 @@ class Progress:
                                    f"this version reads format {PROGRESS_FORMAT}")
         sig = raw.pop("signature")
         sig["cameras"] = tuple(sig["cameras"])
+        sig["randomize"] = tuple(sig.get("randomize", ()))
         return cls(signature=CollectionSignature(**sig), **raw)
 
     def save(self, root: Path) -> None:

@@ -58,6 +58,8 @@ class PickPlaceEnv(gym.Env):
     position, instruction, camera pose / Euler perturbation / distance). The episode seed adds
     only a small jitter: object xy ± 1 cm and heading ± 0.35 rad, drawn from a
     `numpy.random.Generator` seeded by `reset(seed=...)` (default: the instance's seed).
+    Training-time domain randomization overrides the instance's visuals through reset options:
+    ``object_rgb`` (sRGB in [0, 1]) and ``cameras`` (scene camera name -> `CameraPose`).
 
     **Success conditions** — the object's center lies inside the box's inner walls and below the
     rim, it moves slower than 5 cm/s, it touches no part of the robot, and the gripper is open
@@ -153,14 +155,21 @@ class PickPlaceEnv(gym.Env):
 
         mujoco.mj_resetData(self.model, self.data)
         values = instance.factor_values
-        for pose in scene_camera_poses(values["camera_pose"], values["camera_euler"],
-                                       values["dist_scale"]).values():
+        poses = scene_camera_poses(values["camera_pose"], values["camera_euler"], values["dist_scale"])
+        for name, pose in options.get("cameras", {}).items():
+            if name not in poses or pose.name != name:
+                raise ValueError(f"options['cameras'][{name!r}]: only the scene cameras {sorted(poses)} can be "
+                                 f"posed (pose named {pose.name!r})")
+            poses[name] = pose
+        for pose in poses.values():
             self.scene.set_camera(pose)
-        color = get_color(values["color"])
+        rgb = np.asarray(options.get("object_rgb", get_color(values["color"]).rgb), dtype=float)
+        if rgb.shape != (3,) or not np.all((rgb >= 0) & (rgb <= 1)):
+            raise ValueError(f"options['object_rgb']={options['object_rgb']!r} must be 3 sRGB values in [0, 1]")
         xy = np.asarray(OBJECT_POSITIONS[values["initial_position"]])
         xy = xy + rng.uniform(-POSITION_JITTER_M, POSITION_JITTER_M, size=2)
         yaw = rng.uniform(-YAW_JITTER_RAD, YAW_JITTER_RAD)
-        self.scene.place_object(values["shape"], xy, yaw, np.array([*color.rgb, 1.0]))
+        self.scene.place_object(values["shape"], xy, yaw, np.array([*rgb, 1.0]))
         self.scene.reset_robot(HOME_QPOS)
         mujoco.mj_forward(self.model, self.data)
         return self._observation(), self._info()

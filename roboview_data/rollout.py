@@ -17,6 +17,7 @@ from roboview_data.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv
 from roboview_data.expert import ScriptedExpert
 from roboview_data.factors import CONTEXT_FACTORS
 from roboview_data.instances import TaskInstance, seed_from_text
+from roboview_data.randomization import Randomization, sample_randomization
 from roboview_data.svgf import ContextSampler
 
 
@@ -44,17 +45,23 @@ class DemoEpisode:
     images: dict[str, np.ndarray] = field(default_factory=dict)  # camera -> (T, H, W, 3) uint8
     states: np.ndarray | None = None  # (T, 8) float32
     actions: np.ndarray | None = None  # (T, 8) float32
+    visuals: Randomization | None = None  # the object color and camera poses the frames show
+    randomized: tuple[str, ...] = ()
 
     def provenance(self) -> dict:
-        return {"attempt": self.attempt, "episode_seed": self.episode_seed,
-                "instance_id": self.instance.instance_id, **self.instance.context, "steps": self.steps}
+        row = {"attempt": self.attempt, "episode_seed": self.episode_seed,
+               "instance_id": self.instance.instance_id, **self.instance.context, "steps": self.steps,
+               "randomized": list(self.randomized)}
+        return row | (self.visuals.record() if self.visuals is not None else {})
 
 
 class DemoCollector:
     """Owns one env + expert (one renderer) per process; reused for every attempt it runs."""
 
-    def __init__(self, seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int) -> None:
+    def __init__(self, seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int,
+                 randomize: tuple[str, ...] = ()) -> None:
         self.seed = seed
+        self.randomize = randomize
         self.env = PickPlaceEnv(cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps)
         self.expert = ScriptedExpert(self.env)
 
@@ -62,7 +69,11 @@ class DemoCollector:
         start = time.perf_counter()
         ep_seed = attempt_seed(self.seed, attempt)
         instance = training_instance(np.random.default_rng(ep_seed))
-        obs, _ = self.env.reset(seed=ep_seed, options={"instance": instance})
+        visuals = sample_randomization(ep_seed, self.randomize)
+        options = {"instance": instance}
+        if self.randomize:  # context-only collections reset exactly as before
+            options |= {"object_rgb": visuals.object_rgb, "cameras": visuals.cameras}
+        obs, _ = self.env.reset(seed=ep_seed, options=options)
         self.expert.reset()
         frames: dict[str, list[np.ndarray]] = {c: [] for c in self.env.cameras}
         states, actions = [], []
@@ -76,7 +87,8 @@ class DemoCollector:
             obs, _, success, truncated, _ = self.env.step(action)
             if success or truncated:
                 break
-        episode = DemoEpisode(attempt, ep_seed, instance, success, len(actions), time.perf_counter() - start)
+        episode = DemoEpisode(attempt, ep_seed, instance, success, len(actions), time.perf_counter() - start,
+                              visuals=visuals, randomized=self.randomize)
         if success:  # failures are only counted, so their frames never cross the process boundary
             episode.images = {c: np.stack(v) for c, v in frames.items()}
             episode.states = np.stack(states).astype(np.float32)
@@ -88,10 +100,11 @@ class DemoCollector:
 _WORKER: DemoCollector | None = None
 
 
-def init_worker(seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int) -> None:
+def init_worker(seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int,
+                randomize: tuple[str, ...] = ()) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
     global _WORKER
-    _WORKER = DemoCollector(seed, cameras, image_size, fps, max_steps)
+    _WORKER = DemoCollector(seed, cameras, image_size, fps, max_steps, randomize)
 
 
 def run_in_worker(attempt: int) -> DemoEpisode:

@@ -134,6 +134,7 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     (["--dataset.fps=7"], "--dataset.fps=7 must be a positive divisor of 500"),
     (["--dataset.vcodec=mjpeg"], "'mjpeg' unknown; allowed: libsvtav1, h264, hevc"),
     (["--dataset.repo_id=noslash"], "'noslash' must look like ORG/NAME"),
+    (["--dataset.randomize=[color,lighting]"], "factor(s) ['lighting']; allowed: color, camera_pose"),
 ])
 def test_cli_rejects_bad_values_before_work(tmp_path, args, message):
     root = tmp_path / "ds"
@@ -155,9 +156,69 @@ def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path):
     proc = _cli(f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}", "--dataset.num_episodes=6",
                 "--dataset.image_size=96", cwd=tmp_path)
     assert proc.returncode == 2 and "image_size: existing 64 vs requested 96" in proc.stderr
+    proc = _cli(f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}", "--dataset.image_size=64",
+                "--max_steps=100", "--dataset.randomize=[color]", cwd=tmp_path)
+    assert proc.returncode == 2 and "randomize: existing () vs requested ('color',)" in proc.stderr
     assert (reference / "meta/info.json").read_text() == before
 
     a_file = tmp_path / "file"
     a_file.write_text("x")
     proc = _cli(f"--dataset.root={a_file}", f"--dataset.repo_id={REPO_ID}", cwd=tmp_path)
     assert proc.returncode == 2 and "is a file" in proc.stderr
+
+
+def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_actions(reference, tmp_path):
+    from roboview_data.cameras import BASE_CAMERAS, ORBIT_RINGS, WORKSPACE_CENTER
+
+    root = tmp_path / "rand"
+    cfg = small_cfg(root, 2, workers=1)
+    cfg.dataset.randomize = ["camera_pose", "color"]
+    cfg.dataset.__post_init__()  # canonical order, as the CLI does
+    assert cfg.dataset.randomize == ["color", "camera_pose"]
+    run(cfg)
+    ref, rnd = (pd.read_parquet(r / "meta/roboview/episodes.parquet") for r in (reference, root))
+    # The context-only reference shows the baseline in every episode, and says so.
+    assert all(list(v) == [1.0, 0.0, 0.0] for v in ref["object_rgb"])
+    assert all(np.allclose(p, BASE_CAMERAS["left_top"].pos) for p in ref["camera_left_top_pos"])
+    assert all(len(r) == 0 for r in ref["randomized"])
+    # Randomized: fresh visuals per episode, inside the documented continuous ranges...
+    assert all(list(r) == ["color", "camera_pose"] for r in rnd["randomized"])
+    rgbs = np.stack(rnd["object_rgb"].to_list())
+    assert rgbs.shape == (2, 3) and not np.allclose(rgbs[0], rgbs[1]) and ((rgbs >= 0) & (rgbs <= 1)).all()
+    for front, left, fovy in zip(rnd["camera_front_pos"], rnd["camera_left_top_pos"], rnd["camera_left_top_fovy"]):
+        assert np.allclose(front, left) and 45.0 <= fovy <= 50.0  # the perturbed cameras move together
+        rel = np.asarray(left) - WORKSPACE_CENTER
+        radius, height = np.hypot(rel[0], rel[1]), rel[2]
+        assert ORBIT_RINGS[0][0] - 0.04 <= radius <= ORBIT_RINGS[-1][0] + 0.04
+        assert ORBIT_RINGS[-1][1] - 0.03 <= height <= ORBIT_RINGS[0][1] + 0.03
+    # ...while the task contexts, seeds and expert actions are those of the context-only collection.
+    for col in ("attempt", "episode_seed", "initial_position", "shape", "instruction", "steps"):
+        assert rnd[col].tolist() == ref[col].iloc[:2].tolist(), col
+    ref_frames, rnd_frames = frames_table(reference), frames_table(root)
+    n = len(rnd_frames)
+    assert np.array_equal(np.stack(rnd_frames["action"]), np.stack(ref_frames["action"].iloc[:n]))
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    a, b = LeRobotDataset(REPO_ID, root=reference)[0], LeRobotDataset(REPO_ID, root=root)[0]
+    assert float((a["observation.images.left_top"] - b["observation.images.left_top"]).abs().mean()) > 0.02
+
+
+def test_env_shows_the_recorded_visuals(env):
+    from roboview_data.env import baseline_instance
+    from roboview_data.randomization import sample_randomization
+
+    visuals = sample_randomization(123, ("color", "camera_pose"))
+    env.reset(seed=5, options={"instance": baseline_instance(), "object_rgb": visuals.object_rgb,
+                               "cameras": visuals.cameras})
+    for name in ("front", "left_top"):
+        pose = env.scene.camera_pose(name)
+        assert np.allclose(pose.pos, visuals.cameras[name].pos, atol=1e-9)
+        assert np.allclose(np.abs(np.dot(pose.quat, visuals.cameras[name].quat)), 1.0, atol=1e-9)
+    geom = env.scene.ids.shape_geom[env.shape]
+    assert np.allclose(env.model.geom_rgba[geom][:3], visuals.object_rgb)
+    # The next reset without overrides is back to the instance's own visuals.
+    env.reset(seed=5, options={"instance": baseline_instance()})
+    assert np.allclose(env.scene.camera_pose("left_top").pos, (0.60, 0.64, 0.64))
+    assert np.allclose(env.model.geom_rgba[geom][:3], (1.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="must be 3 sRGB values in"):
+        env.reset(options={"instance": baseline_instance(), "object_rgb": (1.5, 0, 0)})

@@ -192,3 +192,24 @@ def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):
     run(cfg)
     df = rows(tmp_path / "ev")
     assert set(df["value"]) == {"red"} and df["context_id"].nunique() == 3 and df["success"].all()
+
+
+def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench, tmp_path):
+    from eval.benchmark import load_benchmark
+
+    full = load_benchmark(bench, ["camera_pose", "dist_scale"]).splits
+    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "camera_pose,dist_scale"), PolicyConfig("random", name="coin"),
+                         EvalConfig(n_repeats=1, contexts=2, num_workers=1, image_size=64, max_steps=2),
+                         str(tmp_path / "ev"))
+    run(cfg)
+    df = rows(tmp_path / "ev")
+    assert set(df["policy"]) == {"coin"}
+    assert json.loads((tmp_path / "ev" / "run.json").read_text())["policy_name"] == "coin"
+    for split, items in full.items():
+        first_two = list(dict.fromkeys(i.record["context_id"] for i in items))[:2]
+        sub = df[df["split"] == split]
+        assert set(sub["context_id"]) == set(first_two)  # the first two contexts of the split...
+        assert set(sub["value"]) == {i.record["value"] for i in items}  # ...with every value of it
+        assert len(sub) == 2 * len({i.record["value"] for i in items})
+    with pytest.raises(ValueError, match="--eval.contexts=-1 must be ≥ 0"):
+        EvalConfig(contexts=-1)
