@@ -60,12 +60,16 @@ def read_version(path: Path) -> str | None:
     return None if raw is None else raw.decode()
 
 
-def load_results(paths: Sequence[str | Path]) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
+def load_results(paths: Sequence[str | Path],
+                 names: Sequence[str | None] | None = None) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
     """Read and validate episode tables; returns their concatenation and per-file provenance.
 
-    Raises FileNotFoundError naming missing files and EpisodesError for unusable contents.
+    `names[i]`, when given, renames the one policy of file i (two checkpoints evaluated under the
+    same default name, say lerobot:act, become two policies). Raises FileNotFoundError naming
+    missing files and EpisodesError for unusable contents.
     """
     paths = [Path(p) for p in paths]
+    names = list(names) if names is not None else [None] * len(paths)
     if not paths:
         raise EpisodesError("no results file given")
     missing = [str(p) for p in paths if not p.is_file()]
@@ -88,9 +92,14 @@ def load_results(paths: Sequence[str | Path]) -> tuple[pd.DataFrame, list[dict[s
                 f"{VERSION_KEY}={versioned[0][VERSION_KEY]!r}, {s['path']} has {s[VERSION_KEY]!r}; "
                 "report runs of one benchmark version together")
     frames = []
-    for path in paths:
+    for path, name in zip(paths, names):
         frame = pd.read_parquet(path)
         check_episodes(frame, REQUIRED_COLUMNS, source=str(path))
+        if name:
+            if frame["policy"].nunique() > 1:
+                raise EpisodesError(f"{path} holds several policies ({', '.join(sorted(frame['policy'].unique()))}); "
+                                    f"it cannot be renamed {name!r} as a whole")
+            frame["policy"] = name
         frames.append(frame)
     episodes = pd.concat(frames, ignore_index=True)
     dup = episodes.duplicated(["policy", "instance_id", "repeat"])

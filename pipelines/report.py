@@ -21,7 +21,8 @@ from pipelines._cli import fail, parse, setup_environment
 
 @dataclass
 class ReportConfig:
-    # Episode table(s) written by pipelines.evaluate: one path or several, comma-separated.
+    # Episode table(s) written by pipelines.evaluate: one path or several, comma-separated; NAME=PATH
+    # names the file's policy in the report (e.g. act_ref=A.parquet,act_campose=B.parquet).
     results: str = ""
     # Folder that receives metrics.json, report.md and the PNG plots (created when missing).
     output_dir: str = "outputs/report"
@@ -42,8 +43,17 @@ class ReportConfig:
         self.metrics_config  # validates epsilon, n_perm, n_glm and seed with their own messages
 
     @property
+    def result_entries(self) -> list[tuple[str | None, Path]]:
+        """(name or None, path) per entry; NAME=PATH renames the file's policy."""
+        entries = []
+        for item in filter(None, (x.strip() for x in self.results.split(","))):
+            name, sep, path = item.partition("=")
+            entries.append((name.strip(), Path(path.strip())) if sep and "/" not in name else (None, Path(item)))
+        return entries
+
+    @property
     def result_paths(self) -> list[Path]:
-        return [Path(p.strip()) for p in self.results.split(",") if p.strip()]
+        return [path for _, path in self.result_entries]
 
     @property
     def metrics_config(self) -> MetricsConfig:
@@ -54,7 +64,7 @@ class ReportConfig:
 
 
 def run(cfg: ReportConfig) -> ReportResult:
-    episodes, sources = load_results(cfg.result_paths)
+    episodes, sources = load_results(cfg.result_paths, [name for name, _ in cfg.result_entries])
     return write_report(episodes, cfg.output_dir, cfg.metrics_config, sources=sources, plots=cfg.plots)
 
 

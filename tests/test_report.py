@@ -183,3 +183,17 @@ def test_cli_without_plots(tmp_path, capsys):
     assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.md"]
     assert result.metrics["sources"][0][VERSION_KEY] is None
     assert "[report]" in capsys.readouterr().out
+
+
+def test_named_results_make_one_file_two_policies(tmp_path):
+    good = write(make_episodes("lerobot:act", 0, splits=("color",)), tmp_path / "good.parquet")
+    main([f"--results=ref={good},again={good}", f"--output_dir={tmp_path / 'rep'}", "--plots=false",
+          "--n_perm=50", "--n_glm=20"])
+    metrics = json.loads((tmp_path / "rep" / "metrics.json").read_text())
+    assert sorted(metrics["policies"]) == ["again", "ref"]
+    pair = metrics["comparisons"][0]
+    assert pair["split"] == "color" and pair["n_pairs"] == 72 and pair["delta_sr"] == 0.0 and pair["p_sr"] == 1.0
+    mixed = write(pd.concat([make_episodes("a", 0, splits=("color",)), make_episodes("b", 1, splits=("color",))]),
+                  tmp_path / "mixed.parquet")
+    with pytest.raises(EpisodesError, match="holds several policies"):
+        load_results([mixed], ["c"])
