@@ -48,8 +48,9 @@ class CoverageConfig:
     output_dir: str = "outputs/coverage"
     # A training color within this CIEDE2000 distance of a test color counts as nearby.
     color_radius: float = 5.0
-    # A training camera within this distance (m) and rotation (deg) of a test pose counts as nearby.
+    # A training camera within this distance (m) of a test pose (and within pose_angle_deg) counts as nearby.
     pose_radius_m: float = 0.05
+    # A training camera within this rotation (deg) of a test pose (and within pose_radius_m) counts as nearby.
     pose_angle_deg: float = 5.0
     # Draw coverage.png.
     plots: bool = True
