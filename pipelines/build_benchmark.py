@@ -49,7 +49,7 @@ class BuildConfig:
     image_size: int = 224
     # Stage-2 decisions CSV (instance_id, verdict, reviewer, note) from reviewing the contact sheet.
     decisions: str | None = None
-    # The build fails when fewer than this share of candidates pass the stage-1 gate (paper: 95%).
+    # The build fails when fewer than this share of candidates pass the stage-1 gate (paper: 0.95, i.e. 95 percent).
     min_pass_rate: float = 0.95
     # Stage-1 thresholds.
     fairness: FairnessThresholds = field(default_factory=FairnessThresholds)
