@@ -19,6 +19,7 @@ from eval.benchmark import BenchmarkItem
 from policies.base import PolicySpec, make_policy, policy_entry
 from roboview_data.env import IMAGE_KEY, PickPlaceEnv
 from roboview_data.instances import episode_seed
+from roboview_data.worker_life import exit_with_parent
 
 
 @dataclass(frozen=True)
@@ -103,6 +104,7 @@ _WORKER: EvalWorker | None = None
 
 
 def init_worker(spec: WorkerSpec) -> None:
+    exit_with_parent()
     global _WORKER
     _WORKER = EvalWorker(spec)
 

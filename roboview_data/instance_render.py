@@ -16,6 +16,7 @@ from roboview_data.cameras import ALL_CAMERAS
 from roboview_data.env import IMAGE_KEY, PickPlaceEnv
 from roboview_data.fairness import OBSERVED_CAMERAS, FairnessProbe, FairnessThresholds
 from roboview_data.instances import TaskInstance
+from roboview_data.worker_life import exit_with_parent
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
 
@@ -57,6 +58,7 @@ _WORKER: InstanceRenderer | None = None
 
 def init_worker(image_size: int, thresholds: FairnessThresholds) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
+    exit_with_parent()
     global _WORKER
     _WORKER = InstanceRenderer(image_size, thresholds)
 

@@ -19,6 +19,7 @@ from roboview_data.factors import CONTEXT_FACTORS
 from roboview_data.instances import TaskInstance, seed_from_text
 from roboview_data.randomization import Randomization, sample_randomization
 from roboview_data.svgf import ContextSampler
+from roboview_data.worker_life import exit_with_parent
 
 
 def attempt_seed(seed: int, attempt: int) -> int:
@@ -103,6 +104,7 @@ _WORKER: DemoCollector | None = None
 def init_worker(seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int,
                 randomize: tuple[str, ...] = ()) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
+    exit_with_parent()
     global _WORKER
     _WORKER = DemoCollector(seed, cameras, image_size, fps, max_steps, randomize)
 

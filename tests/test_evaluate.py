@@ -213,3 +213,39 @@ def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench
         assert len(sub) == 2 * len({i.record["value"] for i in items})
     with pytest.raises(ValueError, match="--eval.contexts=-1 must be ≥ 0"):
         EvalConfig(contexts=-1)
+
+
+def _children(pid: int) -> set[int]:
+    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    return {int(x) for x in out.split()}
+
+
+def _alive(pid: int) -> bool:
+    state = subprocess.run(["ps", "-o", "stat=", "-p", str(pid)], capture_output=True, text=True).stdout.strip()
+    return bool(state) and not state.startswith("Z")
+
+
+def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
+    # A SIGKILLed evaluation used to leave its spawned workers (≈ 640 MB each) idle for good.
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}",
+                             "--eval.image_size=64", "--eval.num_workers=2", f"--output_dir={tmp_path / 'ev'}"],
+                            env=os.environ | {"PYTHONPATH": str(ROOT)}, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.time() + 120
+        journal = tmp_path / "ev" / "episodes.jsonl"
+        while time.time() < deadline and not (journal.exists() and journal.stat().st_size):
+            time.sleep(0.5)  # an episode finished: the workers are up
+        workers = _children(proc.pid)
+        assert len(workers) >= 2, "the pool never started"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        deadline = time.time() + 30
+        while time.time() < deadline and any(_alive(w) for w in workers):
+            time.sleep(0.5)
+        assert not [w for w in workers if _alive(w)], "workers outlived their parent"
+    finally:
+        for w in _children(proc.pid) if proc.poll() is None else ():
+            os.kill(w, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.kill()
