@@ -80,17 +80,17 @@ class EvalWorker:
         media = self.spec.record_media
         frames: dict[str, list[bytes]] = {c: [] for c in self.env.cameras} if media else {}
         ee, obj = [], []
-        success = False
+        success, info = False, {}
         for _ in range(self.env.max_steps):
             if media:
                 for cam in self.env.cameras:
                     frames[cam].append(_jpeg(obs[IMAGE_KEY.format(cam)]))
                 ee.append(self.env.ee_position())
                 obj.append(self.env.object_pose()[0])
-            obs, _, success, truncated, _ = self.env.step(self.policy.select_action(obs))
+            obs, _, success, truncated, info = self.env.step(self.policy.select_action(obs))
             if success or truncated:
                 break
-        reason = "" if success else (getattr(self.policy, "last_failure", "") or
+        reason = "" if success else (info.get("failure_reason") or getattr(self.policy, "last_failure", "") or
                                      f"object not released inside the box within {self.env.max_steps} steps")
         row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
                "steps": self.env.steps, "duration_s": time.perf_counter() - start,

@@ -33,6 +33,8 @@ POSITION_JITTER_M = 0.01
 YAW_JITTER_RAD = 0.35
 # Success: the object is this still (m/s) and the gripper this open (0 open … 1 closed).
 REST_SPEED = 0.05
+DEFAULT_MAX_STEPS = 120
+UNSTABLE_REASON = "simulation unstable"
 RELEASED_GRIPPER = 0.25
 
 
@@ -52,7 +54,9 @@ class PickPlaceEnv(gym.Env):
 
     **Actions** float32 (8,): absolute target positions (rad) of the 7 arm joints, tracked by joint
     position servos, and the gripper command (0 open … 1 closed), held for one control period
-    (1/fps s).
+    (1/fps s). Should MuJoCo find the simulation unstable (NaN/Inf accelerations, after which it
+    resets the state on its own), the step truncates the episode with
+    ``info["failure_reason"] == "simulation unstable"``.
 
     **Randomizations** — the instance fixes every factor (object color, shape and named initial
     position, instruction, camera pose / Euler perturbation / distance). The episode seed adds
@@ -69,7 +73,12 @@ class PickPlaceEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, cameras: Sequence[str] = ALL_CAMERAS, image_size: int = 224, fps: int = 10,
-                 max_steps: int = 120, depth: bool = False, quality: RenderQuality = "fast") -> None:
+                 max_steps: int = DEFAULT_MAX_STEPS, depth: bool = False, quality: RenderQuality = "fast",
+                 render_mode: str | None = "rgb_array") -> None:
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode={render_mode!r} unsupported; allowed: None, "
+                             f"{', '.join(map(repr, self.metadata['render_modes']))}")
+        self.render_mode = render_mode
         unknown = [c for c in cameras if c not in ALL_CAMERAS]
         if unknown or not cameras:
             raise ValueError(f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}")
@@ -183,9 +192,19 @@ class PickPlaceEnv(gym.Env):
         self.data.ctrl[self.scene.ids.gripper_actuator] = 255.0 * action[7]
         mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
         self.steps += 1
+        if self.unstable:
+            # MuJoCo found NaN/Inf accelerations and silently reset the state to the model's defaults:
+            # what follows is no longer this episode, so it ends here as a failure.
+            info = self._info() | {"failure_reason": UNSTABLE_REASON}
+            return self._observation(), 0.0, False, True, info
         success = self.is_success()
         truncated = self.steps >= self.max_steps and not success
         return self._observation(), float(success), success, truncated, self._info(success)
+
+    @property
+    def unstable(self) -> bool:
+        """True once MuJoCo reported an unstable simulation (bad accelerations) this episode."""
+        return self.data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
 
     # -- state -------------------------------------------------------------------------------
     @property
@@ -251,7 +270,7 @@ class PickPlaceEnv(gym.Env):
 def register() -> None:
     """Register ENV_ID with gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="roboview_data.env:PickPlaceEnv")
+        gym.register(id=ENV_ID, entry_point="roboview_data.env:PickPlaceEnv", max_episode_steps=DEFAULT_MAX_STEPS)
 
 
 register()

@@ -135,3 +135,33 @@ def test_camera_extrinsics_follow_the_factor():
     poses = scene_camera_poses("orbit_r1_3", "0,0", "0")
     assert poses["front"].pos == poses["left_top"].pos  # both observed cameras move together
     assert poses["right_top"] == BASE_CAMERAS["right_top"]  # never perturbed
+
+
+def test_gym_make_passes_the_gymnasium_env_checker():
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("RoboView/PickPlace-v0", image_size=32, cameras=["left_top"])
+    assert env.spec.max_episode_steps == 120 and env.unwrapped.render_mode == "rgb_array"
+    check_env(env.unwrapped)  # gymnasium's recommendation: the raw env behind gym.make's wrappers
+    env.reset(seed=1)
+    assert env.render().shape == (32, 32, 3)
+    env.close()
+    with pytest.raises(ValueError, match="render_mode='human' unsupported"):
+        PickPlaceEnv(image_size=32, cameras=["front"], render_mode="human")
+
+
+def test_an_unstable_simulation_ends_the_episode_as_a_failure():
+    # Joint targets near the lower limits make MuJoCo find NaN accelerations at the third step and
+    # reset the state on its own; the env must not carry on as if the episode continued.
+    env = PickPlaceEnv(image_size=32, cameras=["front"])
+    rng = np.random.default_rng(0)
+    actions = [env.action_space.low + rng.random(8).astype(np.float32)
+               * (env.action_space.high - env.action_space.low) * 0.1 for _ in range(5)]
+    env.reset(seed=123, options={"instance": baseline_instance()})
+    results = [env.step(a) for a in actions[:3]]
+    assert [r[3] for r in results] == [False, False, True] and not any(r[2] for r in results)
+    assert results[2][4]["failure_reason"] == "simulation unstable" and env.unstable
+    env.reset(seed=123, options={"instance": baseline_instance()})
+    assert not env.unstable  # a new episode starts clean
+    env.close()
