@@ -149,6 +149,13 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}", f"--output_dir={out}")
     assert proc.returncode == 2 and "camera 'top_down'" in proc.stderr
     assert not out.exists()
+    # Images the env cannot render (non-square): refused before any rollout, naming the shapes.
+    config = json.loads((tiny_checkpoint / "config.json").read_text())
+    config["input_features"]["observation.images.wrist"]["shape"] = [3, 64, 48]
+    (bad / "config.json").write_text(json.dumps(config))
+    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}", f"--output_dir={out}")
+    assert proc.returncode == 2 and "(3, 64, 48)" in proc.stderr and "square" in proc.stderr
+    assert not out.exists()
     # An explicit image size that disagrees with the checkpoint's: both sizes named, nothing run.
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tiny_checkpoint}",
                 "--eval.image_size=96", f"--output_dir={out}")
