@@ -8,6 +8,7 @@ numbers: every value of a context shares it), so every backend and machine produ
 from __future__ import annotations
 
 import io
+import logging
 import os
 import sys
 import time
@@ -16,10 +17,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from eval.benchmark import BenchmarkItem
-from policies.base import PolicySpec, make_policy, policy_entry
+from policies.base import PolicySpec, TransientPolicyError, make_policy, policy_entry
 from roboview_data.env import IMAGE_KEY, PickPlaceEnv
 from roboview_data.instances import episode_seed
 from roboview_data.worker_life import exit_with_parent
+
+log = logging.getLogger(__name__)
+
+# Policy calls that fail with these are retried (HTTP timeouts, dropped connections, rate limits);
+# any other exception, or the last retry's, ends the episode as a failure with the error as reason.
+TRANSIENT_ERRORS = (TimeoutError, ConnectionError, TransientPolicyError)
+POLICY_RETRIES = 2
+RETRY_BACKOFF_S = 0.5
+
+
+class PolicyFailed(Exception):
+    """A policy call raised: the episode is over, recorded as a failure with this reason."""
 
 
 @dataclass(frozen=True)
@@ -71,27 +84,49 @@ class EvalWorker:
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 
+    def _call_policy(self, fn, *args):
+        """fn(*args), retrying transient errors; any failure becomes PolicyFailed naming the error."""
+        for attempt in range(POLICY_RETRIES + 1):
+            try:
+                return fn(*args)
+            except TRANSIENT_ERRORS as exc:
+                if attempt == POLICY_RETRIES:
+                    raise PolicyFailed(f"policy error after {POLICY_RETRIES} retries: "
+                                       f"{type(exc).__name__}: {exc}") from exc
+                log.warning("policy %s raised %s (%s); retry %d/%d", fn.__name__, type(exc).__name__, exc,
+                            attempt + 1, POLICY_RETRIES)
+                time.sleep(RETRY_BACKOFF_S * 2**attempt)
+            except Exception as exc:
+                raise PolicyFailed(f"policy error: {type(exc).__name__}: {exc}") from exc
+
     def run(self, work: WorkItem) -> EpisodeResult:
         instance, record = work.item.instance, work.item.record
         seed = episode_seed(record["context_id"], work.repeat)
         start = time.perf_counter()
         obs, _ = self.env.reset(seed=seed, options={"instance": instance})
-        self.policy.reset(instance)
         media = self.spec.record_media
         frames: dict[str, list[bytes]] = {c: [] for c in self.env.cameras} if media else {}
         ee, obj = [], []
-        success, info = False, {}
-        for _ in range(self.env.max_steps):
-            if media:
-                for cam in self.env.cameras:
-                    frames[cam].append(_jpeg(obs[IMAGE_KEY.format(cam)]))
-                ee.append(self.env.ee_position())
-                obj.append(self.env.object_pose()[0])
-            obs, _, success, truncated, info = self.env.step(self.policy.select_action(obs))
-            if success or truncated:
-                break
-        reason = "" if success else (info.get("failure_reason") or getattr(self.policy, "last_failure", "") or
-                                     f"object not released inside the box within {self.env.max_steps} steps")
+        success, info, error = False, {}, ""
+        try:
+            self._call_policy(self.policy.reset, instance)
+            for _ in range(self.env.max_steps):
+                if media:
+                    for cam in self.env.cameras:
+                        frames[cam].append(_jpeg(obs[IMAGE_KEY.format(cam)]))
+                    ee.append(self.env.ee_position())
+                    obj.append(self.env.object_pose()[0])
+                action = np.asarray(self._call_policy(self.policy.select_action, obs), dtype=np.float32)
+                if action.shape != self.env.action_space.shape or not np.all(np.isfinite(action)):
+                    raise PolicyFailed(f"policy error: action of shape {action.shape} with values {action.ravel()[:8]} "
+                                       f"(the env takes {self.env.action_space.shape[0]} finite values)")
+                obs, _, success, truncated, info = self.env.step(action)
+                if success or truncated:
+                    break
+        except PolicyFailed as exc:
+            error = str(exc)
+        reason = "" if success else (error or info.get("failure_reason") or getattr(self.policy, "last_failure", "")
+                                     or f"object not released inside the box within {self.env.max_steps} steps")
         row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
                "steps": self.env.steps, "duration_s": time.perf_counter() - start,
                "policy": self.spec.policy.name or self.policy.name, "failure_reason": reason}

@@ -18,6 +18,14 @@ from roboview_data.env import PickPlaceEnv
 from roboview_data.instances import TaskInstance
 
 
+class TransientPolicyError(RuntimeError):
+    """A failure worth retrying (an HTTP timeout, a rate limit): raise it from `select_action`/`reset`.
+
+    The evaluator retries such calls a few times (as it does `TimeoutError` and `ConnectionError`);
+    any other exception ends the episode as a failure recording the error as its reason.
+    """
+
+
 @runtime_checkable
 class Policy(Protocol):
     name: str

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -256,3 +257,46 @@ def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
             os.kill(w, signal.SIGKILL)
         if proc.poll() is None:
             proc.kill()
+
+
+class _Flaky:
+    """Raises `errors` (one per call, None = answer) from select_action, then holds the arm still."""
+
+    name = "flaky"
+
+    def __init__(self, errors):
+        self.errors, self.calls = list(errors), 0
+
+    def reset(self, instance) -> None:
+        pass
+
+    def select_action(self, observation):
+        self.calls += 1
+        error = self.errors.pop(0) if self.errors else None
+        if error == "nan":
+            return np.full(8, np.nan, dtype=np.float32)
+        if error is not None:
+            raise error
+        return np.append(observation["observation.state"][:7], 0.0).astype(np.float32)
+
+
+@pytest.mark.parametrize("errors, steps, calls, reason", [
+    ([None, RuntimeError("bad checkpoint output")], 1, 2, "policy error: RuntimeError: bad checkpoint output"),
+    ([TimeoutError("slow"), TimeoutError("slow"), None], 4, 6, "within 4 steps"),  # retried, then fine
+    ([ConnectionError("down")] * 3, 0, 3, "policy error after 2 retries: ConnectionError: down"),
+    ([None, None, "nan"], 2, 3, "policy error: action of shape (8,)"),
+])
+def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, errors, steps, calls, reason):
+    import eval.rollout as rollout
+    from eval.benchmark import load_benchmark
+    from policies.base import _REGISTRY, PolicyEntry, PolicySpec
+
+    monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
+    policy = _Flaky(errors)
+    monkeypatch.setitem(_REGISTRY, "flaky", PolicyEntry(lambda spec, env: policy, lambda spec: ("front",)))
+    worker = rollout.EvalWorker(rollout.WorkerSpec(PolicySpec("flaky"), image_size=32, max_steps=4))
+    item = load_benchmark(bench, ["color"]).splits["color"][0]
+    row = worker.run(rollout.WorkItem(item, 0)).row
+    worker.env.close()
+    assert not row["success"] and row["steps"] == steps and reason in row["failure_reason"]
+    assert policy.calls == calls  # every retry is a real call
