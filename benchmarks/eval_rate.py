@@ -24,7 +24,8 @@ from pathlib import Path
 from pipelines._cli import setup_environment
 from pipelines.build_benchmark import BuildConfig
 from pipelines.build_benchmark import run as build
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, PolicyConfig, resolve_image_size, run
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, resolve_image_size, run
+from policies.base import PolicyConfig, policy_config
 
 
 def _timed(totals: dict[str, float], key: str, fn):
@@ -44,8 +45,7 @@ def breakdown(bench: str, policy: PolicyConfig, splits: str, limit: int) -> dict
     from eval.benchmark import load_benchmark
     from eval.rollout import EvalWorker, WorkerSpec, WorkItem
 
-    spec = policy.spec
-    worker = EvalWorker(WorkerSpec(spec, resolve_image_size(spec, 0), torch_threads=os.cpu_count() or 1))
+    worker = EvalWorker(WorkerSpec(policy, resolve_image_size(policy, 0), torch_threads=os.cpu_count() or 1))
     totals: dict[str, float] = defaultdict(float)
     env = worker.env
     env.render_camera = _timed(totals, "render", env.render_camera)
@@ -78,7 +78,7 @@ def main() -> None:
     parser.add_argument("--split", default="", help="comma-separated splits (default: all)")
     args = parser.parse_args()
     setup_environment()
-    policy = PolicyConfig(args.policy, args.path)
+    policy = policy_config(args.policy, **({"path": args.path} if args.path else {}))
     scratch = Path(tempfile.mkdtemp(prefix="roboview_evalrate_"))
     try:
         bench = args.benchmark or str(scratch / "bench")

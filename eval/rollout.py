@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eval.benchmark import BenchmarkItem
-from policies.base import PolicySpec, TransientPolicyError, make_policy, policy_entry
+from policies.base import PolicyConfig, TransientPolicyError
 from roboview_data.env import IMAGE_KEY, PickPlaceEnv
 from roboview_data.instances import episode_seed
 from roboview_data.worker_life import exit_with_parent
@@ -37,7 +37,7 @@ class PolicyFailed(Exception):
 
 @dataclass(frozen=True)
 class WorkerSpec:
-    policy: PolicySpec
+    policy: PolicyConfig
     image_size: int = 224
     max_steps: int = 120
     # Keep compressed frames and trajectories for the Rerun recording.
@@ -76,11 +76,10 @@ def _jpeg(image: np.ndarray) -> bytes:
 class EvalWorker:
     def __init__(self, spec: WorkerSpec) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
-        entry = policy_entry(spec.policy.type)
         self.spec = spec
-        self.env = PickPlaceEnv(cameras=entry.cameras(spec.policy), image_size=spec.image_size,
-                                max_steps=spec.max_steps, depth=entry.depth)
-        self.policy = make_policy(spec.policy, self.env)
+        self.env = PickPlaceEnv(cameras=spec.policy.cameras(), image_size=spec.image_size,
+                                max_steps=spec.max_steps, depth=spec.policy.depth)
+        self.policy = spec.policy.build(self.env)
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import sys
+import typing
 from typing import TypeVar
 
 import draccus
@@ -29,11 +31,28 @@ def fail(message: str, code: int = 2) -> None:
     raise SystemExit(code)
 
 
+def _check_choices(config_class: type, args: list[str]) -> None:
+    """`--X.type=NAME` for a registry-typed field X must name a registered type (argparse's own
+    message for this omits which field and lists choices in a form our errors do not use)."""
+    hints = typing.get_type_hints(config_class)
+    for f in dataclasses.fields(config_class):
+        kind = hints.get(f.name)
+        if not (isinstance(kind, type) and issubclass(kind, draccus.ChoiceRegistry)):
+            continue
+        for arg in args:
+            if arg.startswith(f"--{f.name}.type="):
+                name = arg.split("=", 1)[1]
+                known = sorted(kind.get_known_choices())
+                if name not in known:
+                    fail(f"unknown {f.name} type {name!r}; allowed: {', '.join(known)}")
+
+
 def parse(config_class: type[T], args: list[str] | None = None) -> T:
     """Parse `args` into `config_class`; validation errors exit with the validator's own message."""
+    _check_choices(config_class, sys.argv[1:] if args is None else args)
     try:
         return draccus.parse(config_class, args=args)
-    except draccus.utils.ParsingError as exc:
+    except (draccus.utils.ParsingError, draccus.utils.DecodingError) as exc:
         fail(str(_root_cause(exc)))
 
 

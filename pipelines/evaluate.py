@@ -25,7 +25,7 @@ from eval.benchmark import load_benchmark
 from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import fail, parse, setup_environment
-from policies.base import PolicySpec, policy_entry
+from policies.base import PolicyConfig, default_policy_config, load_policy_types
 
 log = logging.getLogger(__name__)
 
@@ -47,34 +47,6 @@ class BenchmarkConfig:
     @property
     def value_list(self) -> list[str] | None:
         return [v.strip() for v in self.values.split(",") if v.strip()] or None
-
-
-@dataclass
-class PolicyConfig:
-    # Registered policy: expert, vision, random or lerobot.
-    type: str = "expert"
-    # Checkpoint folder for --policy.type=lerobot (a lerobot-train `pretrained_model` folder).
-    path: str | None = None
-    # Scene camera the vision policy looks through (front or left_top).
-    camera: str = "front"
-    # Device of a LeRobot checkpoint: auto (CUDA when present), cpu or cuda.
-    device: str = "auto"
-    # Name written in the results' `policy` column and used by the report (e.g. act_ref vs
-    # act_campose for two checkpoints); empty: the policy's own name (expert, vision, lerobot:act).
-    name: str = ""
-
-    def __post_init__(self) -> None:
-        policy_entry(self.type)  # unknown names fail here, listing the registered ones
-        if self.type == "lerobot":
-            from policies.lerobot_policy import load_config, resolve_device
-
-            load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
-            resolve_device(self.device)
-
-    @property
-    def spec(self) -> PolicySpec:
-        options = {"vision": (("camera", self.camera),), "lerobot": (("device", self.device),)}
-        return PolicySpec(self.type, self.path, options.get(self.type, ()), self.name)
 
 
 DEFAULT_IMAGE_SIZE = 224
@@ -149,7 +121,7 @@ class EvalConfig:
 @dataclass
 class EvaluateConfig:
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
-    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    policy: PolicyConfig = field(default_factory=default_policy_config)
     eval: EvalConfig = field(default_factory=EvalConfig)
     # Folder for episodes.parquet (and its journal); rerun the same command to resume.
     output_dir: str = "outputs/eval"
@@ -168,18 +140,18 @@ class EvaluateResult:
         return 3600 * self.new_episodes / self.elapsed_s if self.elapsed_s else float("nan")
 
 
-def resolve_image_size(spec: PolicySpec, requested: int) -> int:
+def resolve_image_size(policy: PolicyConfig, requested: int) -> int:
     """The policy's own image side if it has one (a checkpoint's), else `requested`, else 224."""
-    own = policy_entry(spec.type).image_size(spec)
+    own = policy.image_size()
     if own is not None and requested and requested != own:
-        raise ValueError(f"--eval.image_size={requested} but the checkpoint {spec.path} was trained on {own}×{own} "
+        raise ValueError(f"--eval.image_size={requested} but the checkpoint {policy.checkpoint} was trained on {own}×{own} "
                          f"images; drop the flag (the checkpoint's size is used) or pass {own}")
     return own or requested or DEFAULT_IMAGE_SIZE
 
 
 def run(cfg: EvaluateConfig) -> EvaluateResult:
     bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
-    spec = cfg.policy.spec
+    policy = cfg.policy
     unknown = [s for s in cfg.eval.split_repeat_table if s not in bench.splits]
     if unknown:
         raise ValueError(f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
@@ -193,10 +165,10 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         keep = set(cfg.benchmark.value_list)
         bench.splits.update({s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()})
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
-    image_size = resolve_image_size(spec, cfg.eval.image_size)
+    image_size = resolve_image_size(policy, cfg.eval.image_size)
     run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
-                "policy": spec.type, "policy_path": spec.path, **({"policy_name": spec.name} if spec.name else {}),
-                "policy_options": dict(spec.options), "n_repeats": repeats,
+                "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
+                "policy_options": policy.options(), "n_repeats": repeats,
                 "max_steps": cfg.eval.max_steps, "image_size": image_size}
     store = EpisodeStore(Path(cfg.output_dir), run_info)
     work = []
@@ -216,7 +188,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         rerun = RerunLogger(Path(cfg.eval.rerun))
     # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
     threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
-    worker = WorkerSpec(spec, image_size, cfg.eval.max_steps, record_media=rerun is not None, torch_threads=threads)
+    worker = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None, torch_threads=threads)
     if cfg.eval.backend == "ray":
         stream = run_ray(worker, todo, cfg.eval.num_workers, cfg.eval.ray_address or None)
     else:
@@ -226,7 +198,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     for row in store.rows.values():
         per_split[row["split"]][0] += row["success"]
         per_split[row["split"]][1] += 1
-    bar = tqdm(total=len(work), initial=len(work) - len(todo), desc=f"eval {spec.type}", unit="ep",
+    bar = tqdm(total=len(work), initial=len(work) - len(todo), desc=f"eval {policy.type}", unit="ep",
                dynamic_ncols=True)
     t0 = time.perf_counter()
     new = 0
@@ -255,6 +227,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
 
 def main(args: list[str] | None = None) -> EvaluateResult:
     setup_environment()
+    load_policy_types()  # builtin and plugin policy types, so --policy.type can name any of them
     cfg = parse(EvaluateConfig, args)
     try:
         result = run(cfg)

@@ -1,20 +1,19 @@
-"""Built-in policies: the privileged expert (upper bound) and uniform random actions (floor).
+"""Built-in policy types `expert` (privileged upper bound) and `random` (floor): configs and policies.
 
-The vision heuristic and the LeRobot checkpoint adapter live in their own modules and register here.
+The vision heuristic and the LeRobot checkpoint adapter live in their own modules, each registering
+its own config the same way.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from policies.base import PolicyEntry, PolicySpec, register_policy
+from policies.base import PolicyConfig
 from roboview_data.env import PickPlaceEnv
 from roboview_data.expert import ScriptedExpert
 from roboview_data.instances import TaskInstance
-
-# The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
-DEFAULT_CAMERAS = ("front",)
-
 
 class ExpertPolicy:
     """The scripted expert with privileged state; its Bias Coefficient should be ≈ 0."""
@@ -53,7 +52,23 @@ class RandomPolicy:
         return np.clip(action, low, high)
 
 
-register_policy("expert", PolicyEntry(lambda spec, env: ExpertPolicy(env), lambda spec: DEFAULT_CAMERAS,
-                                      doc="privileged scripted expert (upper bound)"))
-register_policy("random", PolicyEntry(lambda spec, env: RandomPolicy(env), lambda spec: DEFAULT_CAMERAS,
-                                      doc="random joint targets around the current pose (floor)"))
+@PolicyConfig.register_subclass("expert")
+@dataclass
+class ExpertConfig(PolicyConfig):
+    """The scripted expert, reading ground-truth object and box poses from the simulator."""
+
+    doc = "privileged scripted expert (upper bound)"
+
+    def build(self, env: PickPlaceEnv) -> ExpertPolicy:
+        return ExpertPolicy(env)
+
+
+@PolicyConfig.register_subclass("random")
+@dataclass
+class RandomConfig(PolicyConfig):
+    """Random joint targets around the current pose: the floor."""
+
+    doc = "random joint targets around the current pose (floor)"
+
+    def build(self, env: PickPlaceEnv) -> RandomPolicy:
+        return RandomPolicy(env)

@@ -1,17 +1,22 @@
-"""The policy protocol every evaluated agent implements, and the registry `eval/` loads them from.
+"""The policy protocol every evaluated agent implements, and the policy types (one config each).
 
-`eval/` never imports a concrete policy: it asks `make_policy(spec, env)` for one by name.
-A policy declares which cameras it consumes (and whether it wants depth) so the evaluator renders
-only those; the env is handed to the factory for sensor calibration (camera intrinsics and
-extrinsics) and, for the privileged expert only, ground-truth state.
+`eval/` and `pipelines/` never import a concrete policy: a `PolicyConfig` subclass per type, chosen
+with `--policy.type=NAME` (draccus.ChoiceRegistry, as lerobot's `PreTrainedConfig`), knows which
+cameras its policy consumes (and whether it wants depth) so the evaluator renders only those, and
+builds the policy once the env exists; the env is handed over for sensor calibration (camera
+intrinsics and extrinsics) and, for the privileged expert only, ground-truth state. To add a type,
+write one module like `policies/vision.py` (config + policy) and list it in BUILTIN_MODULES, or
+publish it from your own package under the `roboview.policies` entry-point group.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+import importlib
+import importlib.metadata
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
+import draccus
 import numpy as np
 
 from roboview_data.env import PickPlaceEnv
@@ -37,58 +42,88 @@ class Policy(Protocol):
         """Env action (8,) float32: 7 joint targets (rad) + gripper command (0 open … 1 closed)."""
 
 
-@dataclass(frozen=True)
-class PolicySpec:
-    """What the evaluator needs to build a policy and the env it observes."""
+# Builtin policy types: modules that define and register a PolicyConfig subclass. Imported on
+# demand (by name, never at import time of this module); third-party packages add types through the
+# ENTRY_POINT_GROUP entry points, each naming such a module.
+BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy")
+ENTRY_POINT_GROUP = "roboview.policies"
+DEFAULT_POLICY_TYPE = "expert"
+# The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
+DEFAULT_CAMERAS = ("front",)
 
-    type: str
-    path: str | None = None
-    options: tuple[tuple[str, str], ...] = field(default_factory=tuple)
-    # Name in the results' `policy` column; empty: the policy's own (e.g. lerobot:act).
+
+@dataclass
+class PolicyConfig(draccus.ChoiceRegistry):
+    """One policy type's settings, chosen on the command line with `--policy.type=NAME`.
+
+    A subclass registers itself with `@PolicyConfig.register_subclass("name")`, declares its own
+    fields (they become `--policy.<field>` flags, validated in `__post_init__` before any work) and
+    says what the evaluator must know: the cameras its policy watches, whether it wants depth, the
+    image size it needs, and how to build the policy once the env exists.
+    """
+
+    # Name written in the results' `policy` column (e.g. act_ref vs act_campose for two checkpoints);
+    # empty: the policy's own name (expert, vision, lerobot:act).
     name: str = ""
 
+    # Whether the policy wants depth images too.
+    depth: ClassVar[bool] = False
+    # One line for listings and error messages.
+    doc: ClassVar[str] = ""
 
-@dataclass(frozen=True)
-class PolicyEntry:
-    # Builds the policy once the env exists.
-    factory: Callable[[PolicySpec, PickPlaceEnv], Policy]
-    # Cameras the policy observes (the env renders only these).
-    cameras: Callable[[PolicySpec], tuple[str, ...]]
-    # Whether it wants depth images as well.
-    depth: bool = False
-    # One line for --help and error messages.
-    doc: str = ""
-    # Image side the policy was trained on (the env renders exactly that); None: any size works.
-    image_size: Callable[[PolicySpec], int | None] = lambda spec: None
+    @classmethod
+    def default_choice_name(cls) -> str:
+        return DEFAULT_POLICY_TYPE
+
+    @property
+    def type(self) -> str:
+        return self.get_choice_name(type(self))
+
+    @property
+    def checkpoint(self) -> str | None:
+        """Weights the policy loads (recorded in run.json as policy_path); None for weightless policies."""
+        return None
+
+    def cameras(self) -> tuple[str, ...]:
+        """Cameras the policy observes (the env renders only these)."""
+        return DEFAULT_CAMERAS
+
+    def image_size(self) -> int | None:
+        """Image side the policy was trained on (the env renders exactly that); None: any size works."""
+        return None
+
+    def options(self) -> dict[str, Any]:
+        """The type's own settings, recorded in run.json (a resume must match them)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("name", "path")}
+
+    def build(self, env: PickPlaceEnv) -> Policy:
+        raise NotImplementedError(f"policy type {self.type!r} does not say how to build its policy")
 
 
-_REGISTRY: dict[str, PolicyEntry] = {}
-
-
-def register_policy(name: str, entry: PolicyEntry) -> None:
-    if name in _REGISTRY:
-        raise ValueError(f"policy {name!r} registered twice")
-    _REGISTRY[name] = entry
-
-
-def policy_entry(name: str) -> PolicyEntry:
-    _load_builtin()
-    if name not in _REGISTRY:
-        raise ValueError(f"unknown policy type {name!r}; allowed: {', '.join(sorted(_REGISTRY))}")
-    return _REGISTRY[name]
+def load_policy_types() -> tuple[str, ...]:
+    """Import the builtin policy modules and every `roboview.policies` entry point; the type names."""
+    for module in BUILTIN_MODULES:
+        importlib.import_module(module)
+    for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        importlib.import_module(entry.value.split(":")[0])
+    return tuple(sorted(PolicyConfig.get_known_choices()))
 
 
 def registered_policies() -> tuple[str, ...]:
-    _load_builtin()
-    return tuple(sorted(_REGISTRY))
+    return load_policy_types()
 
 
-def make_policy(spec: PolicySpec, env: PickPlaceEnv) -> Policy:
-    return policy_entry(spec.type).factory(spec, env)
+def policy_config(type_name: str = DEFAULT_POLICY_TYPE, **settings: Any) -> PolicyConfig:
+    """The config of policy type `type_name` with `settings` (what `--policy.type=… --policy.x=…` gives)."""
+    known = load_policy_types()
+    if type_name not in known:
+        raise ValueError(f"unknown policy type {type_name!r}; allowed: {', '.join(known)}")
+    return PolicyConfig.get_choice_class(type_name)(**settings)
 
 
-def _load_builtin() -> None:
-    # Importing the adapters registers them; kept lazy so `policies.base` stays light.
-    import policies.adapters  # noqa: F401
-    import policies.vision  # noqa: F401
-    import policies.lerobot_policy  # noqa: F401
+def default_policy_config() -> PolicyConfig:
+    return policy_config(DEFAULT_POLICY_TYPE)
+
+
+def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
+    return config.build(env)

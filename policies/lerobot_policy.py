@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from policies.base import PolicyEntry, PolicySpec, register_policy
+from dataclasses import dataclass
+
+from policies.base import PolicyConfig
 from roboview_data.cameras import ALL_CAMERAS
 from roboview_data.env import ACTION_NAMES, STATE_KEY, STATE_NAMES, PickPlaceEnv
 from roboview_data.instances import TaskInstance
@@ -75,9 +77,9 @@ def check_features(config) -> None:
         raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
 
 
-def checkpoint_image_size(spec: PolicySpec) -> int | None:
+def checkpoint_image_size(path: str | None) -> int | None:
     """The side of the checkpoint's (square) input images; every camera must share it."""
-    _, config = load_config(spec.path)
+    _, config = load_config(path)
     shapes = {k: tuple(f.shape) for k, f in config.input_features.items() if k.startswith("observation.images.")}
     sides = {shape[-1] for shape in shapes.values()}
     if any(shape[-1] != shape[-2] for shape in shapes.values()) or len(sides) > 1:
@@ -97,20 +99,20 @@ def resolve_device(device: str, flag: str = "--policy.device") -> str:
     return ("cuda" if torch.cuda.is_available() else "cpu") if device == "auto" else device
 
 
-def checkpoint_cameras(spec: PolicySpec) -> tuple[str, ...]:
-    _, config = load_config(spec.path)
+def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
+    _, config = load_config(path)
     cams = tuple(k.removeprefix("observation.images.") for k in config.input_features
                  if k.startswith("observation.images."))
     return cams or ("front",)
 
 
 class LeRobotPolicy:
-    def __init__(self, spec: PolicySpec, env: PickPlaceEnv) -> None:
+    def __init__(self, path: str, device: str, env: PickPlaceEnv) -> None:
         import torch
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
-        root, config = load_config(spec.path)
-        device = resolve_device(dict(spec.options).get("device", "auto"))
+        root, config = load_config(path)
+        device = resolve_device(device)
         config.device = device
         self.name = f"lerobot:{config.type}"
         self._torch = torch
@@ -143,6 +145,31 @@ class LeRobotPolicy:
         return action.squeeze(0).cpu().numpy().astype(np.float32)
 
 
-register_policy("lerobot", PolicyEntry(LeRobotPolicy, checkpoint_cameras,
-                                       doc="any LeRobot checkpoint (--policy.path=DIR)",
-                                       image_size=checkpoint_image_size))
+@PolicyConfig.register_subclass("lerobot")
+@dataclass
+class LeRobotConfig(PolicyConfig):
+    """A LeRobot checkpoint: its cameras and image size are read from the checkpoint itself."""
+
+    # Checkpoint folder (a lerobot-train `pretrained_model` folder, or the checkpoint folder holding one).
+    path: str | None = None
+    # Device: auto (CUDA when present), cpu or cuda.
+    device: str = "auto"
+
+    doc = "any LeRobot checkpoint (--policy.path=DIR)"
+
+    def __post_init__(self) -> None:
+        load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
+        resolve_device(self.device)
+
+    @property
+    def checkpoint(self) -> str | None:
+        return self.path
+
+    def cameras(self) -> tuple[str, ...]:
+        return checkpoint_cameras(self.path)
+
+    def image_size(self) -> int | None:
+        return checkpoint_image_size(self.path)
+
+    def build(self, env: PickPlaceEnv) -> LeRobotPolicy:
+        return LeRobotPolicy(self.path, self.device, env)

@@ -1,8 +1,8 @@
 """The `vision` policy: a SimpleAgent analogue that acts from one RGB-D glance, no privileged state.
 
 At the first observation of an episode it runs classic colour-based perception
-(`policies.perception`) on one scene camera (default `front`; `options=(("camera", "left_top"),)`
-picks another), then drives the scripted expert's motion (`ScriptedExpert.plan`) with the
+(`policies.perception`) on one scene camera (default `front`; `--policy.camera=left_top` picks
+another), then drives the scripted expert's motion (`ScriptedExpert.plan`) with the
 *perceived* object position, heading and box center. It never looks again, so whatever the
 camera's view of that one frame gets wrong — a yellow object taken for the box, a grey one lost in
 the table, a far camera leaving a handful of pixels — is exactly what the benchmark measures.
@@ -18,7 +18,9 @@ import logging
 
 import numpy as np
 
-from policies.base import PolicyEntry, PolicySpec, register_policy
+from dataclasses import dataclass
+
+from policies.base import PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.cameras import ALL_CAMERAS
 from roboview_data.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY, PickPlaceEnv
@@ -28,19 +30,28 @@ from roboview_data.instances import TaskInstance
 log = logging.getLogger(__name__)
 
 DEFAULT_CAMERA = "front"
-OPTIONS = ("camera",)
 
 
-def camera_option(spec: PolicySpec) -> str:
-    """The camera named in `spec.options` (default `front`); unknown keys or cameras raise."""
-    options = dict(spec.options)
-    unknown = sorted(set(options) - set(OPTIONS))
-    if unknown:
-        raise ValueError(f"vision policy: unknown option(s) {unknown}; allowed: {', '.join(OPTIONS)}")
-    camera = options.get("camera", DEFAULT_CAMERA)
-    if camera not in ALL_CAMERAS:
-        raise ValueError(f"vision policy: unknown camera {camera!r}; allowed: {', '.join(ALL_CAMERAS)}")
-    return camera
+@PolicyConfig.register_subclass("vision")
+@dataclass
+class VisionConfig(PolicyConfig):
+    """Colour-based RGB-D perception of one scene camera, then the expert's motion."""
+
+    # Scene camera the policy looks through (front, left_top, right_top or wrist).
+    camera: str = DEFAULT_CAMERA
+
+    depth = True
+    doc = "classic colour-based RGB-D perception of one camera (--policy.camera=front) + scripted motion"
+
+    def __post_init__(self) -> None:
+        if self.camera not in ALL_CAMERAS:
+            raise ValueError(f"vision policy: unknown camera {self.camera!r}; allowed: {', '.join(ALL_CAMERAS)}")
+
+    def cameras(self) -> tuple[str, ...]:
+        return (self.camera,)
+
+    def build(self, env: PickPlaceEnv) -> VisionPolicy:
+        return VisionPolicy(env, self.camera)
 
 
 class VisionPolicy:
@@ -95,12 +106,3 @@ class VisionPolicy:
             return
         p = self.perception
         self._motion.plan(p.object_pos, p.object_yaw, p.symmetry, box_xy=p.box_xy, arm_qpos=arm_q)
-
-
-def _make(spec: PolicySpec, env: PickPlaceEnv) -> VisionPolicy:
-    return VisionPolicy(env, camera_option(spec))
-
-
-register_policy("vision", PolicyEntry(
-    _make, cameras=lambda spec: (camera_option(spec),), depth=True,
-    doc="classic colour-based RGB-D perception of one camera (option camera=front) + scripted motion"))

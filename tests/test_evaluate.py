@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,8 @@ import pytest
 
 from pipelines.build_benchmark import BuildConfig
 from pipelines.build_benchmark import run as build
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, PolicyConfig, run
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from policies.base import PolicyConfig, policy_config
 
 ROOT = Path(__file__).parents[1]
 RERUN = Path(sys.executable).parent / "rerun"
@@ -30,7 +32,7 @@ def bench(tmp_path_factory) -> Path:
 def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
              backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120,
              image_size: int = 64):
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), PolicyConfig(policy, path),
+    cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), policy_config(policy, **({"path": path} if path else {})),
                          EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers, backend=backend,
                                     rerun=rerun, image_size=image_size, max_steps=max_steps), str(out))
     return run(cfg)
@@ -195,7 +197,7 @@ def test_repeats_per_split_and_the_paper_protocol():
 
 
 def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "color", "red"), PolicyConfig("expert"),
+    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "color", "red"), policy_config("expert"),
                          EvalConfig(n_repeats=1, num_workers=1, image_size=64), str(tmp_path / "ev"))
     run(cfg)
     df = rows(tmp_path / "ev")
@@ -206,7 +208,7 @@ def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench
     from eval.benchmark import load_benchmark
 
     full = load_benchmark(bench, ["camera_pose", "dist_scale"]).splits
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "camera_pose,dist_scale"), PolicyConfig("random", name="coin"),
+    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "camera_pose,dist_scale"), policy_config("random", name="coin"),
                          EvalConfig(n_repeats=1, contexts=2, num_workers=1, image_size=64, max_steps=2),
                          str(tmp_path / "ev"))
     run(cfg)
@@ -289,12 +291,17 @@ class _Flaky:
 def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, errors, steps, calls, reason):
     import eval.rollout as rollout
     from eval.benchmark import load_benchmark
-    from policies.base import _REGISTRY, PolicyEntry, PolicySpec
-
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     policy = _Flaky(errors)
-    monkeypatch.setitem(_REGISTRY, "flaky", PolicyEntry(lambda spec, env: policy, lambda spec: ("front",)))
-    worker = rollout.EvalWorker(rollout.WorkerSpec(PolicySpec("flaky"), image_size=32, max_steps=4))
+
+    @dataclass
+    class FlakyConfig(PolicyConfig):  # a policy type added by a test: one config class, one registry line
+        def build(self, env):
+            return policy
+
+    monkeypatch.setitem(PolicyConfig.get_known_choices(), "flaky", FlakyConfig)
+    assert policy_config("flaky").type == "flaky"
+    worker = rollout.EvalWorker(rollout.WorkerSpec(FlakyConfig(), image_size=32, max_steps=4))
     item = load_benchmark(bench, ["color"]).splits["color"][0]
     row = worker.run(rollout.WorkItem(item, 0)).row
     worker.env.close()

@@ -6,7 +6,7 @@ Privileged state (object pose, box center) is read here only to grade what the p
 import numpy as np
 import pytest
 
-from policies.base import PolicySpec, make_policy, policy_entry, registered_policies
+from policies.base import make_policy, policy_config, registered_policies
 from policies.perception import PerceptionError, perceive
 from roboview_data.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
 from roboview_data.factors import BASELINES
@@ -61,14 +61,14 @@ def test_perception_changes_with_colour(rgbd_env):
 
 def test_registered_with_camera_option():
     assert "vision" in registered_policies()
-    entry = policy_entry("vision")
-    assert entry.depth
-    assert entry.cameras(PolicySpec("vision")) == ("front",)
-    assert entry.cameras(PolicySpec("vision", options=(("camera", "left_top"),))) == ("left_top",)
+    config = policy_config("vision")
+    assert config.depth
+    assert config.cameras() == ("front",)
+    assert policy_config("vision", camera="left_top").cameras() == ("left_top",)
     with pytest.raises(ValueError, match="allowed"):
-        entry.cameras(PolicySpec("vision", options=(("camera", "ceiling"),)))
-    with pytest.raises(ValueError, match="unknown option"):
-        entry.cameras(PolicySpec("vision", options=(("zoom", "2"),)))
+        policy_config("vision", camera="ceiling")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'zoom'"):  # unknown option
+        policy_config("vision", zoom="2")
 
 
 def _rollout(env: PickPlaceEnv, policy, instance: TaskInstance, repeat: int) -> tuple[bool, list[np.ndarray]]:
@@ -84,7 +84,7 @@ def _rollout(env: PickPlaceEnv, policy, instance: TaskInstance, repeat: int) -> 
 
 
 def test_succeeds_at_baseline_and_holds_still_when_blind(rgbd_env):
-    policy = make_policy(PolicySpec("vision"), rgbd_env)
+    policy = make_policy(policy_config("vision"), rgbd_env)
     baseline = _instance()
     for repeat in range(2):
         success, _ = _rollout(rgbd_env, policy, baseline, repeat)
