@@ -7,11 +7,13 @@ import logging
 import os
 import sys
 import typing
+from collections.abc import Callable
 from typing import TypeVar
 
 import draccus
 
 T = TypeVar("T")
+R = TypeVar("R")
 
 # MuJoCo picks its GL backend when first imported, which the pipelines do before main() runs:
 # the headless defaults must be in place as soon as this module is (it is imported first).
@@ -71,3 +73,21 @@ def setup_environment() -> None:
         av.logging.set_level(av.logging.ERROR)
     except ImportError:
         pass
+
+
+def cli_main(config_class: type[T], run: Callable[[T], R], summary: Callable[[T, R], None] | None = None,
+             errors: tuple[type[BaseException], ...] = (ValueError,), args: list[str] | None = None,
+             before_parse: Callable[[], object] | None = None) -> R:
+    """Every pipeline's `main`: environment, parse, run; `errors` (the ones a user can fix) exit
+    with their message and no traceback; then `summary(cfg, result)` prints the one-line outcome."""
+    setup_environment()
+    if before_parse is not None:
+        before_parse()
+    cfg = parse(config_class, args)
+    try:
+        result = run(cfg)
+    except errors as exc:
+        fail(str(exc))
+    if summary is not None:
+        summary(cfg, result)
+    return result

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 from roboview_data import benchmark_io as bio
 from roboview_data.contact_sheet import write_contact_sheet
 from roboview_data.fairness import FairnessThresholds
@@ -192,16 +192,13 @@ def _print_summary(manifest: dict) -> None:
     print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
 
 
-def main(args: list[str] | None = None) -> BuildResult:
-    setup_environment()
-    cfg = parse(BuildConfig, args)
-    try:
-        result = run(cfg)
-    except (ValueError, GateFailure) as exc:
-        fail(str(exc))
+def _summary(cfg: BuildConfig, result: BuildResult) -> None:
     print(f"[build_benchmark] {result.accepted}/{result.candidates} instances in {result.output_dir} "
           f"({result.elapsed_s:.0f} s); contact sheet: {result.contact_sheet}")
-    return result
+
+
+def main(args: list[str] | None = None) -> BuildResult:
+    return cli_main(BuildConfig, run, _summary, (ValueError, GateFailure), args)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 from roboview_data.cameras import ALL_CAMERAS
 from roboview_data.demo_dataset import (
     ROBOT_TYPE, CollectionSignature, DatasetRootError, Progress, add_episode, check_root, demo_features, load_provenance,
@@ -223,17 +223,14 @@ def run(cfg: CollectConfig) -> CollectResult:
                          time.perf_counter() - t0)
 
 
-def main(args: list[str] | None = None) -> CollectResult:
-    setup_environment()
-    cfg = parse(CollectConfig, args)
-    try:
-        result = run(cfg)
-    except DatasetRootError as exc:
-        fail(str(exc))
+def _summary(cfg: CollectConfig, result: CollectResult) -> None:
     print(f"[collect] {result.episodes} episodes in {result.root} "
           f"({result.new_episodes} new; {result.attempts} attempts, {result.failures} failed, "
           f"expert success {result.success_rate:.1%}; {result.demos_per_hour:.0f} demos/h)")
-    return result
+
+
+def main(args: list[str] | None = None) -> CollectResult:
+    return cli_main(CollectConfig, run, _summary, (DatasetRootError,), args)
 
 
 if __name__ == "__main__":

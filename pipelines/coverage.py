@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from eval.benchmark import load_benchmark
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 from roboview_data.coverage import STATUSES, Radii, TrainingVisuals, audit, load_training_visuals, summary
 
 log = logging.getLogger(__name__)
@@ -144,19 +144,16 @@ def run(cfg: CoverageConfig) -> pd.DataFrame:
     return table
 
 
-def main(args: list[str] | None = None) -> pd.DataFrame:
-    setup_environment()
-    cfg = parse(CoverageConfig, args)
-    try:
-        table = run(cfg)
-    except ValueError as exc:
-        fail(str(exc))
+def _summary(cfg: CoverageConfig, table: pd.DataFrame) -> None:
     counts = summary(table)
     for split, row in counts.iterrows():
         print(f"[coverage] {split}: " + ", ".join(f"{row[s]} {s}" for s in STATUSES)
               + (f", {row['unobserved']} unobserved" if row["unobserved"] else ""))
     print(f"[coverage] wrote coverage.json, coverage.md{', coverage.png' if cfg.plots else ''} to {cfg.output_dir}")
-    return table
+
+
+def main(args: list[str] | None = None) -> pd.DataFrame:
+    return cli_main(CoverageConfig, run, _summary, (ValueError,), args)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from eval.backends import BACKENDS, EpisodeLost, run_local, run_ray
 from eval.benchmark import load_benchmark
 from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
 
 log = logging.getLogger(__name__)
@@ -225,17 +225,15 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
                           time.perf_counter() - t0)
 
 
-def main(args: list[str] | None = None) -> EvaluateResult:
-    setup_environment()
-    load_policy_types()  # builtin and plugin policy types, so --policy.type can name any of them
-    cfg = parse(EvaluateConfig, args)
-    try:
-        result = run(cfg)
-    except (ValueError, ResultsError, EpisodeLost) as exc:
-        fail(str(exc))
+def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     print(f"[evaluate] {result.episodes} episodes in {result.output_dir / 'episodes.parquet'} "
           f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h)")
-    return result
+
+
+def main(args: list[str] | None = None) -> EvaluateResult:
+    # Builtin and plugin policy types load first, so --policy.type can name any of them.
+    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, EpisodeLost), args,
+                    before_parse=load_policy_types)
 
 
 if __name__ == "__main__":

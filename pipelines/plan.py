@@ -18,7 +18,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 
 from eval.stats import lrt_power, repeats_needed
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 
 
 @dataclass
@@ -84,13 +84,7 @@ def run(cfg: PlanConfig) -> list[SplitPlan]:
             for split, factor, n_values, n_strata in _layouts(cfg) if n_values >= 2]
 
 
-def main(args: list[str] | None = None) -> list[SplitPlan]:
-    setup_environment()
-    cfg = parse(PlanConfig, args)
-    try:
-        plans = run(cfg)
-    except ValueError as exc:
-        fail(str(exc))
+def _summary(cfg: PlanConfig, plans: list[SplitPlan]) -> None:
     print(f"Repeats per instance for {cfg.power:.0%} power to detect a logit-SD {cfg.tau:g} bias at "
           f"α = {cfg.alpha:g}, success rate ≈ {cfg.sr:.0%} (GLM likelihood-ratio test):")
     print(f"{'split':<22}{'factor':<14}{'|V|':>5}{'strata':>8}{'repeats':>9}{'power at 5':>12}")
@@ -99,7 +93,10 @@ def main(args: list[str] | None = None) -> list[SplitPlan]:
         print(f"{p.split:<22}{p.factor:<14}{p.n_values:>5}{p.n_strata:>8}{need:>9}{p.power_at_5:>12.2f}")
     single = ",".join(f"{p.split}={p.repeats}" for p in plans if p.repeats is not None and "_x_" not in p.split)
     print(f"\nFor pipelines.evaluate: --eval.split_repeats={single}" if single else "")
-    return plans
+
+
+def main(args: list[str] | None = None) -> list[SplitPlan]:
+    return cli_main(PlanConfig, run, _summary, (ValueError,), args)
 
 
 if __name__ == "__main__":

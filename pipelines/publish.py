@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from fnmatch import fnmatch
 from pathlib import Path
 
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 from roboview_data.benchmark_io import MANIFEST
 
 log = logging.getLogger(__name__)
@@ -126,6 +126,8 @@ def publish(cfg: PublishConfig, the_plan: Plan) -> str:
 
 
 def run(cfg: PublishConfig) -> Plan:
+    if not cfg.repo_id:
+        raise PublishError("--repo_id=ORG/NAME is required")
     the_plan = plan(cfg)
     if cfg.dry_run:
         for rel, size in the_plan.files:
@@ -141,14 +143,7 @@ def run(cfg: PublishConfig) -> Plan:
 
 
 def main(args: list[str] | None = None) -> Plan:
-    setup_environment()
-    cfg = parse(PublishConfig, args)
-    if not cfg.repo_id:
-        fail("--repo_id=ORG/NAME is required")
-    try:
-        return run(cfg)
-    except PublishError as exc:
-        fail(str(exc))
+    return cli_main(PublishConfig, run, None, (PublishError,), args)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from eval.metrics import EPSILON, EpisodesError, MetricsConfig
 from eval.report import REPORT_FILE, ReportResult, load_results, write_report
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 
 
 @dataclass
@@ -68,17 +68,14 @@ def run(cfg: ReportConfig) -> ReportResult:
     return write_report(episodes, cfg.output_dir, cfg.metrics_config, sources=sources, plots=cfg.plots)
 
 
-def main(args: list[str] | None = None) -> ReportResult:
-    setup_environment()
-    cfg = parse(ReportConfig, args)
-    try:
-        result = run(cfg)
-    except (FileNotFoundError, EpisodesError) as exc:
-        fail(str(exc))
+def _summary(cfg: ReportConfig, result: ReportResult) -> None:
     skipped = [name for name, reason in result.plots.items() if reason is not None]
     print(f"[report] {result.output_dir / REPORT_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
           + (f", skipped {', '.join(skipped)}" if skipped else ""))
-    return result
+
+
+def main(args: list[str] | None = None) -> ReportResult:
+    return cli_main(ReportConfig, run, _summary, (FileNotFoundError, EpisodesError), args)
 
 
 if __name__ == "__main__":

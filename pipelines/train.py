@@ -20,7 +20,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipelines._cli import fail, parse, setup_environment
+from pipelines._cli import cli_main
 from policies.lerobot_policy import DEVICES, resolve_device
 
 
@@ -107,17 +107,14 @@ def run(cfg: TrainConfig) -> Path:
     return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
 
 
-def main(args: list[str] | None = None) -> Path:
-    setup_environment()
-    cfg = parse(TrainConfig, args)
-    try:
-        checkpoint = run(cfg)
-    except (ValueError, RuntimeError) as exc:
-        fail(str(exc))
+def _summary(cfg: TrainConfig, checkpoint: Path) -> None:
     if not cfg.dry_run:
         print(f"[train] checkpoint: {checkpoint} (evaluate: python -m pipelines.evaluate --policy.type=lerobot "
               f"--policy.path={checkpoint} ...)")
-    return checkpoint
+
+
+def main(args: list[str] | None = None) -> Path:
+    return cli_main(TrainConfig, run, _summary, (ValueError, RuntimeError), args)
 
 
 if __name__ == "__main__":
