@@ -9,6 +9,8 @@ shape this env cannot provide fails before any rollout with the mismatch spelled
 
 from __future__ import annotations
 
+import copy
+import functools
 import logging
 from pathlib import Path
 
@@ -43,17 +45,23 @@ def _checkpoint_dir(path: str | None) -> Path:
     return root
 
 
-def load_config(path: str | None):
+@functools.lru_cache(maxsize=8)
+def _read_config(root: Path):
     import lerobot.policies  # noqa: F401  (registers every policy config type: act, diffusion, pi0, …)
     from lerobot.configs.policies import PreTrainedConfig
 
-    root = _checkpoint_dir(path)
     try:
         config = PreTrainedConfig.from_pretrained(root)
     except Exception as exc:  # draccus/json errors: say which file
         raise CheckpointError(f"cannot read {root / 'config.json'}: {exc}") from exc
     check_features(config)
-    return root, config
+    return config
+
+
+def load_config(path: str | None):
+    """(checkpoint folder, a fresh copy of its config); config.json is parsed and checked once per process."""
+    root = _checkpoint_dir(path)
+    return root, copy.deepcopy(_read_config(root))
 
 
 def check_features(config) -> None:
