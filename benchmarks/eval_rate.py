@@ -24,7 +24,13 @@ from pathlib import Path
 from pipelines._cli import setup_environment
 from pipelines.build_benchmark import BuildConfig
 from pipelines.build_benchmark import run as build
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, resolve_image_size, run
+from pipelines.evaluate import (
+    BenchmarkConfig,
+    EvalConfig,
+    EvaluateConfig,
+    resolve_image_size,
+    run,
+)
 from policies.base import PolicyConfig, policy_config
 
 

@@ -18,8 +18,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from roboview_data.cameras import ALL_CAMERAS  # noqa: E402
-from roboview_data.env import PickPlaceEnv  # noqa: E402
+from roboview_data.sim.cameras import ALL_CAMERAS  # noqa: E402
+from roboview_data.sim.env import PickPlaceEnv  # noqa: E402
 
 
 def bare_fps(env: PickPlaceEnv, frames: int) -> float:

@@ -8,12 +8,12 @@ dies loses only its episode in flight: it is logged, the worker replaced, and th
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
 from collections.abc import Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 
-from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem, init_worker, run_in_worker
+from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem
+from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
 
@@ -35,16 +35,15 @@ def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
               max_retries: int = 2) -> Iterator[tuple[WorkItem, EpisodeResult]]:
     queue = list(items)[::-1]
     tries: dict = {}
-    ctx = mp.get_context("spawn")  # EGL contexts do not survive fork
     while queue:
-        pool = ProcessPoolExecutor(num_workers, mp_context=ctx, initializer=init_worker, initargs=(spec,))
+        pool = WorkerPool(num_workers, EvalWorker, (spec,))
         in_flight: dict = {}
         broken = False
         try:
             while (queue or in_flight) and not broken:
                 while queue and len(in_flight) < 2 * num_workers:
                     work = queue.pop()
-                    in_flight[pool.submit(run_in_worker, work)] = work
+                    in_flight[pool.submit(work)] = work
                 done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
                 for future in done:
                     work = in_flight.pop(future)
@@ -60,7 +59,7 @@ def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
             for work in in_flight.values():
                 queue.append(work)
         finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+            pool.close()
 
 
 def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, address: str | None = None,

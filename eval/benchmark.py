@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from roboview_data.benchmark_io import FORMAT_VERSION, MANIFEST
-from roboview_data.factors import FACTOR_NAMES
-from roboview_data.instances import CONTEXT_SUBSPACES, TaskInstance
+from roboview_data.benchmark.format import FORMAT_VERSION, MANIFEST
+from roboview_data.variation.factors import FACTOR_NAMES
+from roboview_data.variation.instances import CONTEXT_SUBSPACES, TaskInstance
 
 # Instance columns that travel into every episode row (DESIGN.md: all but fairness and preview).
 EPISODE_INSTANCE_COLUMNS = ("instance_id", "split", "factor", "value", "context_id", *FACTOR_NAMES,

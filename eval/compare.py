@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from eval.metrics import MetricsConfig, conditional_cv, excess, _codes, _group_sum
+from eval.metrics import MetricsConfig, _codes, _group_sum, conditional_cv, excess
 from eval.stats import paired_success_test
 
 N_INNER = 100  # permutations behind each swap's noise floor
@@ -127,7 +127,7 @@ def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
     splits; `agreement` is the share of (context, repeat) pairs seen in ≥ 2 splits whose outcomes all
     agree (1.0 for a deterministic policy), `sr_by_split` the baseline SR in each split.
     None when the table lacks the factor columns or no pair repeats."""
-    from roboview_data.factors import BASELINES, VISUAL_FACTORS
+    from roboview_data.variation.factors import BASELINES, VISUAL_FACTORS
 
     if any(f not in episodes.columns for f in VISUAL_FACTORS):
         return None

@@ -57,7 +57,7 @@ import numpy as np
 import pandas as pd
 
 from eval import stats
-from roboview_data.factors import FACTORS
+from roboview_data.variation.factors import FACTORS
 
 log = logging.getLogger(__name__)
 

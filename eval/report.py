@@ -27,10 +27,15 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from eval.metrics import (
-    METRIC_COLUMNS, EpisodesError, MetricsConfig, check_episodes, compute_all_metrics, policy_layouts,
+    METRIC_COLUMNS,
+    EpisodesError,
+    MetricsConfig,
+    check_episodes,
+    compute_all_metrics,
+    policy_layouts,
 )
 from eval.results import FORMAT_KEY, RESULTS_FORMAT
-from roboview_data.factors import VISUAL_FACTORS
+from roboview_data.variation.factors import VISUAL_FACTORS
 
 log = logging.getLogger(__name__)
 
@@ -319,7 +324,9 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     (out / METRICS_FILE).write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     outcome: dict[str, str | None] = {}
     if plots:
-        from eval.report_plots import make_plots  # matplotlib only when plots are asked for
+        from eval.report_plots import (
+            make_plots,  # matplotlib only when plots are asked for
+        )
 
         outcome = make_plots(policy_layouts(metrics), out)
     (out / REPORT_FILE).write_text(render_markdown(metrics, outcome))

@@ -21,10 +21,15 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from eval.metrics import wilson_interval  # noqa: E402
-from roboview_data.colors import CATEGORIES, COLORS  # noqa: E402
-from roboview_data.factors import (  # noqa: E402
-    DIST_SCALE_STEP_M, EULER_STEPS_DEG, N_ORBIT_POSES_PER_RING, N_ORBIT_RINGS, parse_camera_pose, parse_euler,
+from roboview_data.variation.colors import CATEGORIES, COLORS  # noqa: E402
+from roboview_data.variation.factors import (  # noqa: E402
+    DIST_SCALE_STEP_M,
+    EULER_STEPS_DEG,
+    N_ORBIT_POSES_PER_RING,
+    N_ORBIT_RINGS,
+    parse_camera_pose,
     parse_dist_scale,
+    parse_euler,
 )
 
 Layouts = dict[str, dict[str, Any]]

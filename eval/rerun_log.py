@@ -18,7 +18,7 @@ import numpy as np
 import rerun as rr
 
 from eval.rollout import EpisodeResult
-from roboview_data.factors import FACTOR_NAMES
+from roboview_data.variation.factors import FACTOR_NAMES
 
 
 def _safe(text: str) -> str:

@@ -18,9 +18,8 @@ import numpy as np
 
 from eval.benchmark import BenchmarkItem
 from policies.base import PolicyConfig, TransientPolicyError
-from roboview_data.env import IMAGE_KEY, PickPlaceEnv
-from roboview_data.instances import episode_seed
-from roboview_data.worker_life import exit_with_parent
+from roboview_data.sim.env import IMAGE_KEY, PickPlaceEnv
+from roboview_data.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
 
@@ -132,17 +131,3 @@ class EvalWorker:
         if not media:
             return EpisodeResult(row)
         return EpisodeResult(row, frames, np.array(ee), np.array(obj))
-
-
-_WORKER: EvalWorker | None = None
-
-
-def init_worker(spec: WorkerSpec) -> None:
-    exit_with_parent()
-    global _WORKER
-    _WORKER = EvalWorker(spec)
-
-
-def run_in_worker(work: WorkItem) -> EpisodeResult:
-    assert _WORKER is not None, "init_worker was not called in this process"
-    return _WORKER.run(work)

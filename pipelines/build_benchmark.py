@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import csv
 import logging
-import multiprocessing as mp
 import shutil
 import time
 from dataclasses import dataclass, field, replace
@@ -22,11 +21,17 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
-from roboview_data import benchmark_io as bio
-from roboview_data.contact_sheet import write_contact_sheet
-from roboview_data.fairness import FairnessThresholds
-from roboview_data.instance_render import init_worker, record_in_worker
-from roboview_data.instances import PRESETS, SuiteConfig, generate_suite, load_preset
+from roboview_data.benchmark import format as bio
+from roboview_data.benchmark.contact_sheet import write_contact_sheet
+from roboview_data.benchmark.fairness import FairnessThresholds
+from roboview_data.benchmark.render import InstanceRenderer
+from roboview_data.variation.instances import (
+    PRESETS,
+    SuiteConfig,
+    generate_suite,
+    load_preset,
+)
+from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
 
@@ -100,8 +105,8 @@ def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:
     args = (cfg.image_size, cfg.fairness)
     bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
     records, passed = [], 0
-    with mp.get_context("spawn").Pool(cfg.num_workers, initializer=init_worker, initargs=args) as pool:
-        for record in pool.imap(record_in_worker, instances, chunksize=8):
+    with WorkerPool(cfg.num_workers, InstanceRenderer, args, method="record") as pool:
+        for record in pool.imap(instances, lookahead=8 * cfg.num_workers):
             records.append(record)
             passed += record["fairness"]["passed"]
             bar.update(1)

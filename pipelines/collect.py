@@ -12,11 +12,10 @@ run stopped. Load the result with `LeRobotDataset(repo_id, root=root)`.
 
 from __future__ import annotations
 
+import itertools
 import logging
-import multiprocessing as mp
 import shutil
 import time
-from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,13 +23,22 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
-from roboview_data.cameras import ALL_CAMERAS
-from roboview_data.demo_dataset import (
-    ROBOT_TYPE, CollectionSignature, DatasetRootError, Progress, add_episode, check_root, demo_features, load_provenance,
-    roll_back, write_checkpoint,
+from roboview_data.demos.dataset import (
+    ROBOT_TYPE,
+    CollectionSignature,
+    DatasetRootError,
+    Progress,
+    add_episode,
+    check_root,
+    demo_features,
+    load_provenance,
+    roll_back,
+    write_checkpoint,
 )
-from roboview_data.randomization import validate_randomize
-from roboview_data.rollout import DemoCollector, DemoEpisode, init_worker, run_in_worker
+from roboview_data.demos.recorder import DemoCollector, DemoEpisode
+from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.variation.randomization import validate_randomize
+from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
 
@@ -137,13 +145,8 @@ def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
                 attempt += 1
         finally:
             collector.env.close()
-    with mp.get_context("spawn").Pool(cfg.num_workers, initializer=init_worker, initargs=args) as pool:
-        pending: deque = deque()
-        while True:
-            while len(pending) < 2 * cfg.num_workers:  # bounded look-ahead keeps memory flat
-                pending.append(pool.apply_async(run_in_worker, (attempt,)))
-                attempt += 1
-            yield pending.popleft().get()
+    with WorkerPool(cfg.num_workers, DemoCollector, args) as pool:
+        yield from pool.imap(itertools.count(attempt))
 
 
 def _open_dataset(cfg: CollectConfig, create: bool):

@@ -5,7 +5,7 @@
 
 For every value of every visual split: `exact` (some training episode showed it), `nearby` (within
 ΔE2000 `color_radius` in CIELAB, or within `pose_radius_m` and `pose_angle_deg` of camera pose) or
-`never`, with the distance to the nearest episode (roboview_data.coverage). Writes coverage.json,
+`never`, with the distance to the nearest episode (roboview_data.demos.coverage). Writes coverage.json,
 coverage.md and coverage.png (training colors and camera positions against the test values).
 """
 
@@ -21,7 +21,14 @@ import pandas as pd
 
 from eval.benchmark import load_benchmark
 from pipelines._cli import cli_main
-from roboview_data.coverage import STATUSES, Radii, TrainingVisuals, audit, load_training_visuals, summary
+from roboview_data.demos.coverage import (
+    STATUSES,
+    Radii,
+    TrainingVisuals,
+    audit,
+    load_training_visuals,
+    summary,
+)
 
 log = logging.getLogger(__name__)
 

@@ -16,7 +16,7 @@ from fnmatch import fnmatch
 from pathlib import Path
 
 from pipelines._cli import cli_main
-from roboview_data.benchmark_io import MANIFEST
+from roboview_data.benchmark.format import MANIFEST
 
 log = logging.getLogger(__name__)
 

@@ -11,9 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import PolicyConfig
-from roboview_data.env import PickPlaceEnv
-from roboview_data.expert import ScriptedExpert
-from roboview_data.instances import TaskInstance
+from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.sim.expert import ScriptedExpert
+from roboview_data.variation.instances import TaskInstance
+
 
 class ExpertPolicy:
     """The scripted expert with privileged state; its Bias Coefficient should be ≈ 0."""

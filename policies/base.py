@@ -19,8 +19,8 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import draccus
 import numpy as np
 
-from roboview_data.env import PickPlaceEnv
-from roboview_data.instances import TaskInstance
+from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.variation.instances import TaskInstance
 
 
 class TransientPolicyError(RuntimeError):

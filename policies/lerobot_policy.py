@@ -12,16 +12,15 @@ from __future__ import annotations
 import copy
 import functools
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from dataclasses import dataclass
-
 from policies.base import PolicyConfig
-from roboview_data.cameras import ALL_CAMERAS
-from roboview_data.env import ACTION_NAMES, STATE_KEY, STATE_NAMES, PickPlaceEnv
-from roboview_data.instances import TaskInstance
+from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES, PickPlaceEnv
+from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from roboview_data.cameras import CameraPose
+from roboview_data.sim.cameras import CameraPose
 
 # Table model: chroma (a*, b*) distance and lightness (L*) tolerance to the dominant colour.
 TABLE_CHROMA_TOL = 8.0

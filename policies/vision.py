@@ -2,7 +2,7 @@
 
 At the first observation of an episode it runs classic colour-based perception
 (`policies.perception`) on one scene camera (default `front`; `--policy.camera=left_top` picks
-another), then drives the scripted expert's motion (`ScriptedExpert.plan`) with the
+another), then drives the expert's motion planner (`PickPlacePlanner.plan`) with the
 *perceived* object position, heading and box center. It never looks again, so whatever the
 camera's view of that one frame gets wrong — a yellow object taken for the box, a grey one lost in
 the table, a far camera leaving a handful of pixels — is exactly what the benchmark measures.
@@ -15,17 +15,16 @@ expert's kinematic model, its own joint reading from ``observation.state``. Neve
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 
-from dataclasses import dataclass
-
 from policies.base import PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
-from roboview_data.cameras import ALL_CAMERAS
-from roboview_data.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY, PickPlaceEnv
-from roboview_data.expert import ScriptedExpert
-from roboview_data.instances import TaskInstance
+from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY, PickPlaceEnv
+from roboview_data.sim.motion import PickPlacePlanner
+from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +70,7 @@ class VisionPolicy:
                              f"{env.cameras} with depth={env.depth}")
         self.env = env
         self.camera = camera
-        self._motion = ScriptedExpert(env)
+        self._motion = PickPlacePlanner(env)
         self.perception: Perception | None = None
         self.last_failure = ""
         self._hold: np.ndarray | None = None
@@ -90,7 +89,7 @@ class VisionPolicy:
             self._plan_from(observation)
         if self._hold is not None:
             return self._hold
-        return self._motion.select_action(observation)
+        return self._motion.next_action()
 
     def _plan_from(self, observation: dict[str, np.ndarray]) -> None:
         self._planned = True

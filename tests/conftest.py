@@ -11,7 +11,7 @@ import pytest  # noqa: E402
 
 @pytest.fixture(scope="session")
 def env():
-    from roboview_data.env import PickPlaceEnv
+    from roboview_data.sim.env import PickPlaceEnv
 
     env = PickPlaceEnv(image_size=96, depth=False)
     yield env

@@ -14,11 +14,11 @@ import pytest
 
 from pipelines.build_benchmark import BuildConfig, run
 from pipelines.publish import PublishConfig, plan
-from roboview_data.cameras import WORKSPACE_CENTER, quat_to_mat
-from roboview_data.factors import parse_dist_scale, parse_euler
-from roboview_data.fairness import FairnessThresholds
-from roboview_data.instance_render import InstanceRenderer
-from roboview_data.instances import generate_suite, load_preset
+from roboview_data.benchmark.fairness import FairnessThresholds
+from roboview_data.benchmark.render import InstanceRenderer
+from roboview_data.sim.cameras import WORKSPACE_CENTER, quat_to_mat
+from roboview_data.variation.factors import parse_dist_scale, parse_euler
+from roboview_data.variation.instances import generate_suite, load_preset
 
 ROOT = Path(__file__).parents[1]
 

@@ -168,7 +168,7 @@ def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path):
 
 
 def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_actions(reference, tmp_path):
-    from roboview_data.cameras import BASE_CAMERAS, ORBIT_RINGS, WORKSPACE_CENTER
+    from roboview_data.sim.cameras import BASE_CAMERAS, ORBIT_RINGS, WORKSPACE_CENTER
 
     root = tmp_path / "rand"
     cfg = small_cfg(root, 2, workers=1)
@@ -204,8 +204,8 @@ def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_action
 
 
 def test_env_shows_the_recorded_visuals(env):
-    from roboview_data.env import baseline_instance
-    from roboview_data.randomization import sample_randomization
+    from roboview_data.sim.env import baseline_instance
+    from roboview_data.variation.randomization import sample_randomization
 
     visuals = sample_randomization(123, ("color", "camera_pose"))
     env.reset(seed=5, options={"instance": baseline_instance(), "object_rgb": visuals.object_rgb,

@@ -13,7 +13,7 @@ from pipelines.build_benchmark import BuildConfig
 from pipelines.build_benchmark import run as build
 from pipelines.collect import CollectConfig, DatasetConfig
 from pipelines.collect import run as collect
-from roboview_data.coverage import Radii, audit, load_training_visuals
+from roboview_data.demos.coverage import Radii, audit, load_training_visuals
 
 ROOT = Path(__file__).parents[1]
 
@@ -76,7 +76,7 @@ def test_randomized_data_is_never_exact_and_nearby_grows_with_the_radius(bench, 
     loose = audit(visuals, records, Radii(color_delta_e=500.0, pose_m=10.0, pose_deg=180.0))
     assert set(loose["status"]) == {"nearby"} and (loose["n_nearby"] == 3).all()
     # Distances reported are those to the nearest episode (checked against a direct computation).
-    from roboview_data.colors import delta_e_2000
+    from roboview_data.variation.colors import delta_e_2000
 
     row = next(r for r in records if r["split"] == "color" and r["value"] == "blue")
     expected = delta_e_2000(visuals.lab, np.asarray(row["color_lab"])[None]).min()

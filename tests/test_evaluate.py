@@ -52,7 +52,7 @@ def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
         assert sr >= 0.95, f"expert SR {sr:.0%} on {split}"
     assert (df["policy"] == "expert").all() and (df["failure_reason"] == "").all()
     # Episode seeds follow DESIGN.md's derivation.
-    from roboview_data.instances import episode_seed
+    from roboview_data.variation.instances import episode_seed
     assert all(episode_seed(c, r) == s for c, r, s in zip(df["context_id"], df["repeat"], df["episode_seed"]))
 
 

@@ -4,10 +4,10 @@ import itertools
 
 import numpy as np
 
-from roboview_data.env import PickPlaceEnv
-from roboview_data.expert import ScriptedExpert
-from roboview_data.factors import BASELINES, FACTORS
-from roboview_data.instances import TaskInstance
+from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.sim.expert import ScriptedExpert
+from roboview_data.variation.factors import BASELINES, FACTORS
+from roboview_data.variation.instances import TaskInstance
 
 
 def test_expert_success_rate_over_all_contexts():

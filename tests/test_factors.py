@@ -2,8 +2,8 @@
 
 import pytest
 
-from roboview_data.colors import COLORS
-from roboview_data.factors import (
+from roboview_data.variation.colors import COLORS
+from roboview_data.variation.factors import (
     BASELINES,
     CONTEXT_FACTORS,
     FACTOR_NAMES,

@@ -9,8 +9,15 @@ import pandas as pd
 import pytest
 
 from eval.metrics import (
-    EpisodesError, MetricsConfig, compute_all_metrics, compute_metrics, conditional_cv, interaction_metrics,
-    policy_layouts, split_metrics, wilson_interval,
+    EpisodesError,
+    MetricsConfig,
+    compute_all_metrics,
+    compute_metrics,
+    conditional_cv,
+    interaction_metrics,
+    policy_layouts,
+    split_metrics,
+    wilson_interval,
 )
 
 EPS = 1e-6

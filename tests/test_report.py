@@ -15,10 +15,10 @@ from PIL import Image
 
 from eval.metrics import EpisodesError, policy_layouts
 from eval.report import VERSION_KEY, load_results
-from eval.results import FORMAT_KEY
 from eval.report_plots import PLOTS
+from eval.results import FORMAT_KEY
 from pipelines.report import ReportConfig, main, run
-from roboview_data.instances import episode_seed, generate_suite, load_preset
+from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
 
 FAST = {"n_glm": 20, "n_perm": 50}
 

@@ -4,13 +4,18 @@ import mujoco
 import numpy as np
 import pytest
 
-from roboview_data.cameras import (
-    BASE_CAMERAS, WORKSPACE_CENTER, apply_distance, apply_euler, orbital_pose, scene_camera_poses,
+from roboview_data.sim.cameras import (
+    BASE_CAMERAS,
+    WORKSPACE_CENTER,
+    apply_distance,
+    apply_euler,
+    orbital_pose,
+    scene_camera_poses,
 )
-from roboview_data.colors import COLORS
-from roboview_data.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv, baseline_instance
-from roboview_data.factors import BASELINES, FACTORS
-from roboview_data.instances import TaskInstance
+from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv, baseline_instance
+from roboview_data.variation.colors import COLORS
+from roboview_data.variation.factors import BASELINES, FACTORS
+from roboview_data.variation.instances import TaskInstance
 
 OBSERVED = ("front", "left_top")
 

@@ -9,9 +9,9 @@ import hashlib
 
 import numpy as np
 
-from roboview_data.benchmark_io import suite_hash
-from roboview_data.env import PickPlaceEnv
-from roboview_data.instances import generate_suite, load_preset
+from roboview_data.benchmark.format import suite_hash
+from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.variation.instances import generate_suite, load_preset
 
 # benchmark_version paper-2ea2d26d1ca1: every candidate passed the gate, so the hash over all
 # candidates is the published suite hash.

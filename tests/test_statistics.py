@@ -15,7 +15,7 @@ import pytest
 from eval.metrics import MetricsConfig, interaction_metrics, split_metrics
 from eval.simulate import simulate_additive_factorial, simulate_split
 from eval.stats import lrt_power, repeats_needed
-from roboview_data.instances import episode_seed, generate_suite, load_preset
+from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
 
 SIM = MetricsConfig(n_perm=100, n_glm=40)
 

@@ -7,8 +7,13 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from roboview_data.factors import BASELINES, CONTEXT_FACTORS, VISUAL_FACTORS, load_factor
-from roboview_data.instances import (
+from roboview_data.variation.factors import (
+    BASELINES,
+    CONTEXT_FACTORS,
+    VISUAL_FACTORS,
+    load_factor,
+)
+from roboview_data.variation.instances import (
     DEFAULT_FACTORIAL_COLORS,
     PRESETS,
     SuiteConfig,
@@ -17,7 +22,7 @@ from roboview_data.instances import (
     generate_suite,
     load_preset,
 )
-from roboview_data.svgf import (
+from roboview_data.variation.svgf import (
     ContextSampler,
     FactorSampler,
     FixedSampler,

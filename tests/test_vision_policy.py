@@ -8,10 +8,10 @@ import pytest
 
 from policies.base import make_policy, policy_config, registered_policies
 from policies.perception import PerceptionError, perceive
-from roboview_data.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
-from roboview_data.factors import BASELINES
-from roboview_data.instances import TaskInstance, episode_seed
-from roboview_data.scene import BOX_CENTER
+from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
+from roboview_data.sim.scene import BOX_CENTER
+from roboview_data.variation.factors import BASELINES
+from roboview_data.variation.instances import TaskInstance, episode_seed
 
 CAMERA = "front"
 

@@ -13,7 +13,7 @@ factor assignment per task. The benchmark suite is built from these trees only:
 - the factorial split color_x_camera_pose in the baseline context c*;
 - optional full Cartesian products of chosen factors.
 
-`roboview_data.instances` turns these assignments into `TaskInstance`s and holds the suite presets:
+`roboview_data.variation.instances` turns these assignments into `TaskInstance`s and holds the suite presets:
 
     >>> tree = task_subspace("dist_scale", context_space("per_subspace"))
     >>> len(list(RecursiveVariantTaskManager(tree).generate()))
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from roboview_data.factors import (
+from roboview_data.variation.factors import (
     BASELINES,
     CONTEXT_FACTORS,
     FACTOR_NAMES,

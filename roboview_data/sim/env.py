@@ -10,14 +10,19 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from roboview_data.cameras import ALL_CAMERAS, scene_camera_poses
-from roboview_data.colors import get_color
-from roboview_data.factors import BASELINES, OBJECT_POSITIONS
-from roboview_data.instances import TaskInstance
-from roboview_data.scene import (
-    BOX_CENTER, BOX_INNER_HALF, BOX_WALL_HEIGHT, GRIPPER_DRIVER_CLOSED, HOME_QPOS, SHAPES,
-    RenderQuality, Scene,
+from roboview_data.sim.cameras import ALL_CAMERAS, scene_camera_poses
+from roboview_data.sim.scene import (
+    BOX_CENTER,
+    BOX_INNER_HALF,
+    BOX_WALL_HEIGHT,
+    GRIPPER_DRIVER_CLOSED,
+    HOME_QPOS,
+    RenderQuality,
+    Scene,
 )
+from roboview_data.variation.colors import get_color
+from roboview_data.variation.factors import BASELINES, OBJECT_POSITIONS
+from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 
@@ -270,7 +275,7 @@ class PickPlaceEnv(gym.Env):
 def register() -> None:
     """Register ENV_ID with gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="roboview_data.env:PickPlaceEnv", max_episode_steps=DEFAULT_MAX_STEPS)
+        gym.register(id=ENV_ID, entry_point="roboview_data.sim.env:PickPlaceEnv", max_episode_steps=DEFAULT_MAX_STEPS)
 
 
 register()

@@ -235,5 +235,5 @@ def get_color(name: str) -> NamedColor:
             grey = " (the grey spellings are excluded; use the 'gray' spelling)"
         raise ValueError(
             f"unknown color {name!r}{grey};{hint} valid names are the {N_COLORS} keys of "
-            "roboview_data.colors.COLORS (CSS named colors, e.g. red, navy, rosybrown)"
+            "roboview_data.variation.colors.COLORS (CSS named colors, e.g. red, navy, rosybrown)"
         ) from None

@@ -16,7 +16,7 @@ from typing import Literal
 import mujoco
 import numpy as np
 
-from roboview_data.cameras import ALL_CAMERAS, BASE_CAMERAS, CameraPose
+from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, CameraPose
 
 log = logging.getLogger(__name__)
 

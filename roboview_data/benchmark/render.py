@@ -7,16 +7,18 @@ applied in place by the env's reset — no recompiles.
 from __future__ import annotations
 
 import io
-import os
 
 import numpy as np
 from PIL import Image
 
-from roboview_data.cameras import ALL_CAMERAS
-from roboview_data.env import IMAGE_KEY, PickPlaceEnv
-from roboview_data.fairness import OBSERVED_CAMERAS, FairnessProbe, FairnessThresholds
-from roboview_data.instances import TaskInstance
-from roboview_data.worker_life import exit_with_parent
+from roboview_data.benchmark.fairness import (
+    OBSERVED_CAMERAS,
+    FairnessProbe,
+    FairnessThresholds,
+)
+from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.sim.env import IMAGE_KEY, PickPlaceEnv
+from roboview_data.variation.instances import TaskInstance
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
 
@@ -51,18 +53,3 @@ class InstanceRenderer:
 
     def close(self) -> None:
         self.env.close()
-
-
-_WORKER: InstanceRenderer | None = None
-
-
-def init_worker(image_size: int, thresholds: FairnessThresholds) -> None:
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    exit_with_parent()
-    global _WORKER
-    _WORKER = InstanceRenderer(image_size, thresholds)
-
-
-def record_in_worker(instance: TaskInstance) -> dict:
-    assert _WORKER is not None, "init_worker was not called in this process"
-    return _WORKER.record(instance)

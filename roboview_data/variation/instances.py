@@ -3,7 +3,7 @@
 A task instance fixes the value of every factor. Its id is a hash of its canonical parameters,
 so the same instance gets the same id on any machine and any backend; episode seeds come from
 (context, repeat), shared by every value of a context (DESIGN.md, "Identity, seeds, actions"). A `SuiteConfig` (or a named preset) says which SVGF
-variant trees (`roboview_data.svgf`) make up a benchmark; `generate_suite` walks them.
+variant trees (`roboview_data.variation.svgf`) make up a benchmark; `generate_suite` walks them.
 
     >>> len(generate_suite(load_preset("paper")))
     2127
@@ -18,15 +18,15 @@ from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
-from roboview_data.colors import get_color
-from roboview_data.factors import (
+from roboview_data.variation.colors import get_color
+from roboview_data.variation.factors import (
     BASELINES,
     CONTEXT_FACTORS,
     FACTOR_NAMES,
     VISUAL_FACTORS,
     load_factor,
 )
-from roboview_data.svgf import (
+from roboview_data.variation.svgf import (
     SUBSPACE_KEY,
     UNION_MODES,
     FactorSampler,

@@ -7,19 +7,17 @@ what makes parallel collection deterministic and resumable.
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from roboview_data.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv
-from roboview_data.expert import ScriptedExpert
-from roboview_data.factors import CONTEXT_FACTORS
-from roboview_data.instances import TaskInstance, seed_from_text
-from roboview_data.randomization import Randomization, sample_randomization
-from roboview_data.svgf import ContextSampler
-from roboview_data.worker_life import exit_with_parent
+from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv
+from roboview_data.sim.expert import ScriptedExpert
+from roboview_data.variation.factors import CONTEXT_FACTORS
+from roboview_data.variation.instances import TaskInstance, seed_from_text
+from roboview_data.variation.randomization import Randomization, sample_randomization
+from roboview_data.variation.svgf import ContextSampler
 
 
 def attempt_seed(seed: int, attempt: int) -> int:
@@ -95,20 +93,3 @@ class DemoCollector:
             episode.states = np.stack(states).astype(np.float32)
             episode.actions = np.stack(actions).astype(np.float32)
         return episode
-
-
-# -- process-pool plumbing (spawn start method: EGL contexts do not survive fork) ---------------
-_WORKER: DemoCollector | None = None
-
-
-def init_worker(seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int,
-                randomize: tuple[str, ...] = ()) -> None:
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    exit_with_parent()
-    global _WORKER
-    _WORKER = DemoCollector(seed, cameras, image_size, fps, max_steps, randomize)
-
-
-def run_in_worker(attempt: int) -> DemoEpisode:
-    assert _WORKER is not None, "init_worker was not called in this process"
-    return _WORKER.run(attempt)

@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from roboview_data.cameras import PERTURBED_CAMERAS, quat_to_mat
-from roboview_data.colors import delta_e_2000
-from roboview_data.demo_dataset import PROVENANCE_FILE
-from roboview_data.factors import CONTEXT_FACTORS
-from roboview_data.randomization import baseline_randomization
+from roboview_data.demos.dataset import PROVENANCE_FILE
+from roboview_data.sim.cameras import PERTURBED_CAMERAS, quat_to_mat
+from roboview_data.variation.colors import delta_e_2000
+from roboview_data.variation.factors import CONTEXT_FACTORS
+from roboview_data.variation.randomization import baseline_randomization
 
 STATUSES = ("exact", "nearby", "never")
 EXACT_DELTA_E = 0.01

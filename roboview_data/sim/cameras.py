@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from roboview_data.factors import parse_dist_scale, parse_euler
+from roboview_data.variation.factors import parse_dist_scale, parse_euler
 
 # Point every orbital camera (and the fixed scene cameras) looks at: between the object
 # positions and the receiver box, slightly above the table.

@@ -22,11 +22,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from roboview_data.cameras import (
-    BASE_CAMERAS, ORBIT_RINGS, PERTURBED_CAMERAS, WORKSPACE_CENTER, CameraPose, look_at,
+from roboview_data.sim.cameras import (
+    BASE_CAMERAS,
+    ORBIT_RINGS,
+    PERTURBED_CAMERAS,
+    WORKSPACE_CENTER,
+    CameraPose,
+    look_at,
 )
-from roboview_data.colors import get_color, srgb_to_lab
-from roboview_data.factors import BASELINES
+from roboview_data.variation.colors import get_color, srgb_to_lab
+from roboview_data.variation.factors import BASELINES
 
 RANDOMIZABLE = ("color", "camera_pose")
 RING_COORD_RANGE = (-0.1, 1.1)

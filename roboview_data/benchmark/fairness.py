@@ -15,8 +15,8 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from roboview_data.colors import delta_e_2000, get_color, srgb_to_lab
-from roboview_data.env import PickPlaceEnv
+from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.variation.colors import delta_e_2000, get_color, srgb_to_lab
 
 # Cameras a policy observes: VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
 OBSERVED_CAMERAS = ("front", "left_top", "wrist")

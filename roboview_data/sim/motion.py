@@ -1,10 +1,12 @@
-"""Scripted expert with privileged state: reach, grasp, lift, carry, release over the box.
+"""Pick-and-place motion planner: minimum-jerk Cartesian waypoints + damped-least-squares IK.
 
-It reads the object's true pose from the simulator at reset and plans a Cartesian path of the
-gripper's pinch point through fixed waypoints, interpolated with a minimum-jerk profile. Each
-control step solves damped-least-squares inverse kinematics (position + "pointing down at yaw ψ")
-on a scratch `MjData`, so the action it emits is exactly the env's action: 7 joint targets +
-gripper command.
+`PickPlacePlanner.plan` takes an object pose (center, heading, rotational symmetry) and a box
+center, and lays out the gripper's pinch-point path through fixed waypoints (hover, descend, close,
+lift, carry, lower, open, retreat), each segment interpolated with a minimum-jerk profile. Each
+`next_action` solves inverse kinematics (position + "pointing down at yaw ψ") on a scratch
+`MjData`, so it emits exactly the env's action: 7 joint targets + gripper command. It never reads
+the simulator's object state: whoever calls `plan` decides where the object is — the privileged
+`ScriptedExpert` (roboview_data.sim.expert) from ground truth, the `vision` policy from perception.
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from roboview_data.env import PickPlaceEnv
-from roboview_data.scene import BOX_CENTER, BOX_WALL_HEIGHT, HOME_QPOS, SHAPES
+from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.sim.scene import BOX_CENTER, BOX_WALL_HEIGHT, HOME_QPOS
 
 # Heights (m) of the pinch point: hover above the object, carry over the box, release.
 HOVER_Z = 0.12
@@ -35,7 +37,8 @@ class Segment:
     grip: float
 
 
-def _yaw_of(quat: np.ndarray) -> float:
+def yaw_of(quat: np.ndarray) -> float:
+    """Heading (rad, about world z) of a [w, x, y, z] quaternion."""
     w, x, y, z = quat
     return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
 
@@ -44,10 +47,8 @@ def _min_jerk(s: float) -> float:
     return s ** 3 * (10 - 15 * s + 6 * s * s)
 
 
-class ScriptedExpert:
-    """Solves every context at baseline visuals; acts through the env's own action space."""
-
-    name = "expert"
+class PickPlacePlanner:
+    """Plans a grasp-carry-release path for a given object pose and follows it, one action per step."""
 
     def __init__(self, env: PickPlaceEnv) -> None:
         self.env = env
@@ -68,18 +69,12 @@ class ScriptedExpert:
         self._t = 0
         self._q = HOME_QPOS.copy()
 
-    def reset(self) -> None:
-        """Plan from the current (just reset) simulator state, reading the object's true pose."""
-        obj_pos, obj_quat = self.env.object_pose()
-        self.plan(obj_pos, _yaw_of(obj_quat), SHAPES[self.env.shape].symmetry)
-
     def plan(self, obj_pos: np.ndarray, obj_yaw: float, symmetry: float,
              box_xy: np.ndarray = BOX_CENTER, arm_qpos: np.ndarray | None = None) -> None:
         """Plan the pick-and-place for an object at `obj_pos` (its center) with heading `obj_yaw`.
 
-        Split from `reset` so a non-privileged agent (the vision policy) can drive the same motion
-        from perceived values: it passes its perceived box center and its own joint reading
-        `arm_qpos`; without one the plan starts from the simulator's current arm state.
+        A non-privileged agent (the vision policy) passes its perceived box center and its own joint
+        reading `arm_qpos`; without one the plan starts from the env's current arm state.
         `symmetry` is the object's rotational symmetry about z (rad), which bounds the wrist turn.
         """
         if arm_qpos is None:
@@ -119,7 +114,8 @@ class ScriptedExpert:
         self._t = 0
         self._q = q_start
 
-    def select_action(self, observation: dict | None = None) -> np.ndarray:
+    def next_action(self) -> np.ndarray:
+        """The env action for the next control step of the plan (the last one repeats at its end)."""
         target, yaw, grip = self._plan[min(self._t, len(self._plan) - 1)]
         self._t += 1
         self._q = self._solve_ik(target, yaw, self._q)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import difflib
 from dataclasses import dataclass
 
-from roboview_data.colors import COLORS
+from roboview_data.variation.colors import COLORS
 
 FACTOR_KINDS = ("visual", "context")
 
@@ -88,7 +88,7 @@ _FACTOR_LIST = (
         kind="visual",
         values=tuple(sorted(COLORS)),
         baseline="red",
-        doc="RGB of the manipulated object: a CSS named color (roboview_data.colors).",
+        doc="RGB of the manipulated object: a CSS named color (roboview_data.variation.colors).",
     ),
     Factor(
         name="camera_pose",

@@ -16,7 +16,7 @@ from pathlib import Path
 import datasets
 import numpy as np
 
-from roboview_data.instances import canonical_json
+from roboview_data.variation.instances import canonical_json
 
 MANIFEST = "benchmark.json"
 # 2: the `seed` column is the common-random-numbers seed of (context_id, repeat 0); 1 hashed the id.

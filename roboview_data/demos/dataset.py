@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from roboview_data.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
-from roboview_data.rollout import DemoEpisode
+from roboview_data.demos.recorder import DemoEpisode
+from roboview_data.sim.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 
