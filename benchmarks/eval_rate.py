@@ -48,8 +48,8 @@ def breakdown(bench: str, policy: PolicyConfig, splits: str, limit: int) -> dict
     """Seconds per episode in render, inference and physics (+ other), one worker, one thread pool."""
     import os
 
-    from eval.benchmark import load_benchmark
     from eval.rollout import EvalWorker, WorkerSpec, WorkItem
+    from roboview_data.benchmark.format import load_benchmark
 
     worker = EvalWorker(WorkerSpec(policy, resolve_image_size(policy, 0), torch_threads=os.cpu_count() or 1))
     totals: dict[str, float] = defaultdict(float)
@@ -68,7 +68,7 @@ def breakdown(bench: str, policy: PolicyConfig, splits: str, limit: int) -> dict
     parts = {"render": totals["render"], "inference": totals["inference"],
              "physics": totals["step_incl_render"] - render_in_step}
     parts["other"] = total - sum(parts.values())
-    worker.env.close()
+    worker.close()
     return {"episodes": len(items), "steps": steps, "seconds_per_episode": round(total / len(items), 3),
             "ms_per_step": round(1000 * total / steps, 2),
             "share": {k: round(v / total, 3) for k, v in parts.items()},

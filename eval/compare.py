@@ -127,13 +127,13 @@ def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
     splits; `agreement` is the share of (context, repeat) pairs seen in ≥ 2 splits whose outcomes all
     agree (1.0 for a deterministic policy), `sr_by_split` the baseline SR in each split.
     None when the table lacks the factor columns or no pair repeats."""
-    from roboview_data.variation.factors import BASELINES, VISUAL_FACTORS
+    from roboview_data.variation.factors import baselines, visual_factors
 
-    if any(f not in episodes.columns for f in VISUAL_FACTORS):
+    if any(f not in episodes.columns for f in visual_factors()):
         return None
     base = episodes[~episodes["factor"].astype(str).str.contains("|", regex=False)]
-    for factor in VISUAL_FACTORS:
-        base = base[base[factor].astype(str) == str(BASELINES[factor])]
+    for factor in visual_factors():
+        base = base[base[factor].astype(str) == str(baselines()[factor])]
     groups = base.groupby(["context_id", "repeat"])["success"]
     spread = groups.agg(["nunique", "size"])
     spread = spread[spread["size"] >= 2]

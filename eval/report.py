@@ -35,7 +35,7 @@ from eval.metrics import (
     policy_layouts,
 )
 from eval.results import FORMAT_KEY, RESULTS_FORMAT
-from roboview_data.variation.factors import VISUAL_FACTORS
+from roboview_data.variation.factors import visual_factors
 
 log = logging.getLogger(__name__)
 
@@ -138,7 +138,7 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
 
 def _split_order(layouts: dict[str, dict], key: str) -> list[str]:
     present = {s for layout in layouts.values() for s in layout[key]}
-    return [s for s in VISUAL_FACTORS if s in present] + sorted(present - set(VISUAL_FACTORS))
+    return [s for s in visual_factors() if s in present] + sorted(present - set(visual_factors()))
 
 
 def _significant_pairs(metrics: dict[str, Any], split: str) -> dict[frozenset[str], float | None]:

@@ -23,7 +23,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from eval.metrics import wilson_interval  # noqa: E402
 from roboview_data.variation.colors import CATEGORIES, COLORS  # noqa: E402
 from roboview_data.variation.factors import (  # noqa: E402
-    DIST_SCALE_STEP_M,
+    DIST_STEP_M,
     EULER_STEPS_DEG,
     N_ORBIT_POSES_PER_RING,
     N_ORBIT_RINGS,
@@ -162,7 +162,7 @@ def plot_dist_scale(layouts: Layouts, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
     for i, (policy, values) in enumerate(_per_value(layouts, "dist_scale").items()):
         items = sorted(values.items(), key=lambda kv: parse_dist_scale(kv[0]))
-        x = [DIST_SCALE_STEP_M * parse_dist_scale(v) for v, _ in items]
+        x = [DIST_STEP_M * parse_dist_scale(v) for v, _ in items]
         sr = np.array([s["sr"] for _, s in items])
         err = _wilson_err([s for _, s in items])
         ax.plot(x, sr, marker=_MARKERS[i % len(_MARKERS)], label=policy)

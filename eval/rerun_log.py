@@ -18,7 +18,7 @@ import numpy as np
 import rerun as rr
 
 from eval.rollout import EpisodeResult
-from roboview_data.variation.factors import FACTOR_NAMES
+from roboview_data.variation.factors import factor_names
 
 
 def _safe(text: str) -> str:
@@ -38,7 +38,7 @@ class RerunLogger:
         base = (f"episodes/{_safe(row['split'])}/{_safe(row['factor'] + '=' + row['value'])}/"
                 f"{row['instance_id']}/r{row['repeat']}")
         rec = self.rec
-        facts = "\n".join(f"{name}: {row[name]}" for name in FACTOR_NAMES)
+        facts = "\n".join(f"{name}: {row[name]}" for name in factor_names())
         rec.log(f"{base}/instance", rr.TextDocument(
             f"{facts}\nepisode_seed: {row['episode_seed']}\npolicy: {row['policy']}"), static=True)
         for step in range(len(result.ee_path)):

@@ -16,9 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eval.benchmark import BenchmarkItem
-from policies.base import PolicyConfig, TransientPolicyError
-from roboview_data.sim.env import IMAGE_KEY, PickPlaceEnv
+from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy
+from roboview_data.benchmark.format import BenchmarkItem
+from roboview_data.sim.env import IMAGE_KEY
+from roboview_data.sim.tasks import DEFAULT_TASK, make_env
 from roboview_data.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
@@ -43,6 +44,8 @@ class WorkerSpec:
     record_media: bool = False
     # Intra-op threads of a torch policy in this worker (cores / workers); 0 leaves torch's default.
     torch_threads: int = 0
+    # The task of every instance this worker runs (roboview_data.sim.tasks).
+    task: str = DEFAULT_TASK
 
 
 @dataclass(frozen=True)
@@ -76,9 +79,9 @@ class EvalWorker:
     def __init__(self, spec: WorkerSpec) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
         self.spec = spec
-        self.env = PickPlaceEnv(cameras=spec.policy.cameras(), image_size=spec.image_size,
-                                max_steps=spec.max_steps, depth=spec.policy.depth)
-        self.policy = spec.policy.build(self.env)
+        self.env = make_env(spec.task, cameras=spec.policy.cameras(), image_size=spec.image_size,
+                            max_steps=spec.max_steps, depth=spec.policy.depth)
+        self.policy = make_policy(spec.policy, self.env)
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 
@@ -107,7 +110,7 @@ class EvalWorker:
         ee, obj = [], []
         success, info, error = False, {}, ""
         try:
-            self._call_policy(self.policy.reset, instance)
+            self._call_policy(self.policy.reset, Episode.of(self.env, seed))
             for _ in range(self.env.max_steps):
                 if media:
                     for cam in self.env.cameras:
@@ -123,7 +126,7 @@ class EvalWorker:
                     break
         except PolicyFailed as exc:
             error = str(exc)
-        reason = "" if success else (error or info.get("failure_reason") or getattr(self.policy, "last_failure", "")
+        reason = "" if success else (error or info.get("failure_reason") or getattr(self.policy, "failure_reason", "")
                                      or f"object not released inside the box within {self.env.max_steps} steps")
         row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
                "steps": self.env.steps, "duration_s": time.perf_counter() - start,
@@ -131,3 +134,9 @@ class EvalWorker:
         if not media:
             return EpisodeResult(row)
         return EpisodeResult(row, frames, np.array(ee), np.array(obj))
+
+    def close(self) -> None:
+        close = getattr(self.policy, "close", None)
+        if close is not None:
+            close()
+        self.env.close()

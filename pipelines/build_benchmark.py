@@ -22,9 +22,11 @@ from tqdm import tqdm
 
 from pipelines._cli import cli_main
 from roboview_data.benchmark import format as bio
+from roboview_data.benchmark.card import fairness_stats, write_card
 from roboview_data.benchmark.contact_sheet import write_contact_sheet
 from roboview_data.benchmark.fairness import FairnessThresholds
 from roboview_data.benchmark.render import InstanceRenderer
+from roboview_data.benchmark.review import adjudicate, read_decisions
 from roboview_data.variation.instances import (
     PRESETS,
     SuiteConfig,
@@ -120,10 +122,10 @@ def run(cfg: BuildConfig) -> BuildResult:
     _check_output_dir(out)
     suite = cfg.suite
     instances = generate_suite(suite)
-    decisions = bio.read_decisions(Path(cfg.decisions), {i.instance_id for i in instances}) if cfg.decisions else {}
+    decisions = read_decisions(Path(cfg.decisions), {i.instance_id for i in instances}) if cfg.decisions else {}
     t0 = time.perf_counter()
     records = _render_all(cfg, instances)
-    verdicts = [bio.adjudicate(r, decisions.get(r["instance_id"])) for r in records]
+    verdicts = [adjudicate(r, decisions.get(r["instance_id"])) for r in records]
     accepted = [ok for ok, _ in verdicts]
     rejected_by = [who for _, who in verdicts]
     gate_rate = sum(r["fairness"]["passed"] for r in records) / len(records)
@@ -149,7 +151,7 @@ def run(cfg: BuildConfig) -> BuildResult:
             bio.write_split(rejected_rows, tmp / "rejected" / "rejected.parquet", rejected=True)
     digest = bio.suite_hash(by_split)
     manifest = {
-        "format": bio.FORMAT_VERSION, "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
+        "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
         "suite": {"preset": suite.preset, "union_mode": suite.union_mode, "splits": list(suite.splits),
                   "factorial_colors": list(suite.factorial_colors),
                   "cartesian": [list(c) for c in suite.cartesian],
@@ -159,11 +161,11 @@ def run(cfg: BuildConfig) -> BuildResult:
         "splits": bio.split_counts(records, accepted, rejected_by), "rejected": len(rejected_rows),
         "decisions": len(decisions), "reviewers": sorted({d.reviewer for d in decisions.values()}),
         "suite_hash": digest, "benchmark_version": f"{suite.preset}-{digest[:12]}",
-        "fairness_stats": bio.fairness_stats(records),
+        "fairness_stats": fairness_stats(records),
     }
     bio.write_manifest(tmp, manifest)
     if manifest["status"] == "ok":
-        bio.write_card(tmp, manifest)
+        write_card(tmp, manifest)
     shutil.rmtree(out, ignore_errors=True)
     tmp.rename(out)
     sheet = out / sheet.relative_to(tmp)

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from eval.benchmark import load_benchmark
 from pipelines._cli import cli_main
+from roboview_data.benchmark.format import load_benchmark
 from roboview_data.demos.coverage import (
     STATUSES,
     Radii,

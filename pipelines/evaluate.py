@@ -21,11 +21,12 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eval.backends import BACKENDS, EpisodeLost, run_local, run_ray
-from eval.benchmark import load_benchmark
 from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
+from roboview_data.benchmark.format import load_benchmark
+from roboview_data.sim.tasks import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
 
@@ -165,6 +166,9 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         keep = set(cfg.benchmark.value_list)
         bench.splits.update({s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()})
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
+    tasks = sorted({i.instance.task for items in bench.splits.values() for i in items})
+    if len(tasks) > 1:
+        raise ValueError(f"the chosen splits mix tasks {tasks}; evaluate one task at a time (--benchmark.splits)")
     image_size = resolve_image_size(policy, cfg.eval.image_size)
     run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
                 "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
@@ -188,7 +192,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         rerun = RerunLogger(Path(cfg.eval.rerun))
     # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
     threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
-    worker = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None, torch_threads=threads)
+    worker = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None, torch_threads=threads,
+                        task=tasks[0] if tasks else DEFAULT_TASK)
     if cfg.eval.backend == "ray":
         stream = run_ray(worker, todo, cfg.eval.num_workers, cfg.eval.ray_address or None)
     else:

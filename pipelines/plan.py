@@ -57,7 +57,7 @@ class SplitPlan:
 def _layouts(cfg: PlanConfig) -> list[tuple[str, str, int, int]]:
     """(split, factor, |V|, strata) for every tested factor of every split."""
     if cfg.benchmark_path:
-        from eval.benchmark import load_benchmark
+        from roboview_data.benchmark.format import load_benchmark
 
         items = {s: [i.instance for i in v] for s, v in load_benchmark(cfg.benchmark_path).splits.items()}
     else:

@@ -10,47 +10,54 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from policies.base import PolicyConfig
+from policies.base import AgentView, Episode, PolicyConfig
 from roboview_data.sim.env import PickPlaceEnv
-from roboview_data.sim.expert import ScriptedExpert
-from roboview_data.variation.instances import TaskInstance
+from roboview_data.sim.tasks import load_task
 
 
 class ExpertPolicy:
-    """The scripted expert with privileged state; its Bias Coefficient should be ≈ 0."""
+    """The task's scripted expert with privileged state; its Bias Coefficient should be ≈ 0."""
 
     name = "expert"
+    failure_reason = ""
 
     def __init__(self, env: PickPlaceEnv) -> None:
-        self._expert = ScriptedExpert(env)
+        self._expert = load_task(env.instance.task).make_expert(env)
 
-    def reset(self, instance: TaskInstance) -> None:
+    def reset(self, episode: Episode) -> None:
         self._expert.reset()
 
     def select_action(self, observation: dict) -> np.ndarray:
         return self._expert.select_action(observation)
+
+    def close(self) -> None:
+        pass
 
 
 class RandomPolicy:
     """Uniform random joint targets near the current pose and a random gripper: the floor."""
 
     name = "random"
+    failure_reason = ""
 
-    def __init__(self, env: PickPlaceEnv, step_rad: float = 0.15) -> None:
-        self.env = env
+    def __init__(self, view: AgentView, step_rad: float = 0.15) -> None:
+        self.action_space = view.action_space
         self.step_rad = step_rad
         self._rng = np.random.default_rng(0)
 
-    def reset(self, instance: TaskInstance) -> None:
-        # Seeded from the episode's own generator so repeats differ and reruns agree.
-        self._rng = np.random.default_rng(self.env.np_random.integers(2**63))
+    def reset(self, episode: Episode) -> None:
+        # Seeded by the episode seed: repeats differ, reruns agree, values of one context share draws.
+        self._rng = np.random.default_rng(episode.seed)
 
     def select_action(self, observation: dict) -> np.ndarray:
         q = observation["observation.state"][:7]
         target = q + self._rng.uniform(-self.step_rad, self.step_rad, size=7)
-        low, high = self.env.action_space.low, self.env.action_space.high
+        low, high = self.action_space.low, self.action_space.high
         action = np.append(target, self._rng.uniform(0.0, 1.0)).astype(np.float32)
         return np.clip(action, low, high)
+
+    def close(self) -> None:
+        pass
 
 
 @PolicyConfig.register_subclass("expert")
@@ -59,6 +66,7 @@ class ExpertConfig(PolicyConfig):
     """The scripted expert, reading ground-truth object and box poses from the simulator."""
 
     doc = "privileged scripted expert (upper bound)"
+    privileged = True
 
     def build(self, env: PickPlaceEnv) -> ExpertPolicy:
         return ExpertPolicy(env)
@@ -71,5 +79,5 @@ class RandomConfig(PolicyConfig):
 
     doc = "random joint targets around the current pose (floor)"
 
-    def build(self, env: PickPlaceEnv) -> RandomPolicy:
-        return RandomPolicy(env)
+    def build(self, view: AgentView) -> RandomPolicy:
+        return RandomPolicy(view)

@@ -3,10 +3,16 @@
 `eval/` and `pipelines/` never import a concrete policy: a `PolicyConfig` subclass per type, chosen
 with `--policy.type=NAME` (draccus.ChoiceRegistry, as lerobot's `PreTrainedConfig`), knows which
 cameras its policy consumes (and whether it wants depth) so the evaluator renders only those, and
-builds the policy once the env exists; the env is handed over for sensor calibration (camera
-intrinsics and extrinsics) and, for the privileged expert only, ground-truth state. To add a type,
-write one module like `policies/vision.py` (config + policy) and list it in BUILTIN_MODULES, or
-publish it from your own package under the `roboview.policies` entry-point group.
+builds the policy once the env exists. To add a type, write one module like `policies/vision.py`
+(config + policy) and list it in BUILTIN_MODULES, or publish it from your own package under the
+`roboview.policies` entry-point group.
+
+**A policy sees only what a real agent would.** It is built from an `AgentView` (the env's action
+and observation spaces, its cameras and image size, and the robot's kinematic model compiled at
+defaults) and told about each episode through an `Episode`: the instruction, the episode seed and
+the observed cameras' calibration. Never the `TaskInstance`, whose factor values name the object's
+color and shape, and never the env, whose state holds the object's pose. Only a config that declares
+`privileged = True` (the scripted `expert`) is built from the env itself.
 """
 
 from __future__ import annotations
@@ -17,10 +23,13 @@ from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import draccus
+import gymnasium as gym
+import mujoco
 import numpy as np
 
+from roboview_data.sim.cameras import CameraPose
 from roboview_data.sim.env import PickPlaceEnv
-from roboview_data.variation.instances import TaskInstance
+from roboview_data.sim.scene import Scene
 
 
 class TransientPolicyError(RuntimeError):
@@ -31,15 +40,65 @@ class TransientPolicyError(RuntimeError):
     """
 
 
+@dataclass(frozen=True)
+class Episode:
+    """What an agent is told when an episode starts: what a real robot's operator would tell it."""
+
+    # The task's name (roboview_data.sim.tasks) and its instruction in words.
+    task: str
+    instruction: str
+    # The episode seed (common random numbers: shared by every value of one context and repeat);
+    # a stochastic policy seeds its draws from it so reruns agree.
+    seed: int
+    # World pose and vertical field of view of every observed camera at t = 0 (extrinsics + intrinsics).
+    cameras: dict[str, CameraPose]
+    # Side of the square images (pixels).
+    image_size: int
+
+    @classmethod
+    def of(cls, env: PickPlaceEnv, seed: int) -> Episode:
+        """The episode an env just reset into (reads its instruction and camera calibration only)."""
+        return cls(env.instance.task, env.instruction, seed,
+                   {c: env.scene.camera_pose(c) for c in env.cameras}, env.image_size)
+
+
+@dataclass(frozen=True)
+class AgentView:
+    """What a non-privileged policy is built from: the env's interface, never its state."""
+
+    task: str
+    cameras: tuple[str, ...]
+    image_size: int
+    depth: bool
+    fps: int
+    action_space: gym.spaces.Box
+    observation_space: gym.spaces.Dict
+
+    @classmethod
+    def of(cls, env: PickPlaceEnv) -> AgentView:
+        return cls(env.instance.task, env.cameras, env.image_size, env.depth, env.fps, env.action_space,
+                   env.observation_space)
+
+    def kinematic_model(self) -> mujoco.MjModel:
+        """The robot and static scene compiled at defaults (for inverse kinematics); no episode's state."""
+        return Scene().model
+
+
 @runtime_checkable
 class Policy(Protocol):
     name: str
+    # Why the last episode failed, in the policy's own words ("" when it has nothing to add); the
+    # evaluator records it as the episode's failure reason.
+    failure_reason: str
 
-    def reset(self, instance: TaskInstance) -> None:
+    def reset(self, episode: Episode) -> None:
         """Called after every env reset, before the first action of an episode."""
 
     def select_action(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         """Env action (8,) float32: 7 joint targets (rad) + gripper command (0 open … 1 closed)."""
+
+    def close(self) -> None:
+        """Release what the policy holds (models, sessions, connections); called once, at the end."""
 
 
 # Builtin policy types: modules that define and register a PolicyConfig subclass. Imported on
@@ -68,6 +127,8 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
     # Whether the policy wants depth images too.
     depth: ClassVar[bool] = False
+    # Whether `build` gets the env itself (ground-truth state): the scripted expert only.
+    privileged: ClassVar[bool] = False
     # One line for listings and error messages.
     doc: ClassVar[str] = ""
 
@@ -96,7 +157,8 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """The type's own settings, recorded in run.json (a resume must match them)."""
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("name", "path")}
 
-    def build(self, env: PickPlaceEnv) -> Policy:
+    def build(self, view: AgentView) -> Policy:
+        """The policy, from the agent's view of the env (privileged types: from the env itself)."""
         raise NotImplementedError(f"policy type {self.type!r} does not say how to build its policy")
 
 
@@ -126,4 +188,5 @@ def default_policy_config() -> PolicyConfig:
 
 
 def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
-    return config.build(env)
+    """Build `config`'s policy for `env`: from the env only if the type is privileged."""
+    return config.build(env if config.privileged else AgentView.of(env))

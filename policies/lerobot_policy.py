@@ -17,10 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from policies.base import PolicyConfig
+from policies.base import AgentView, Episode, PolicyConfig
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES, PickPlaceEnv
-from roboview_data.variation.instances import TaskInstance
+from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +113,9 @@ def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
 
 
 class LeRobotPolicy:
-    def __init__(self, path: str, device: str, env: PickPlaceEnv) -> None:
+    failure_reason = ""
+
+    def __init__(self, path: str, device: str) -> None:
         import torch
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
@@ -123,7 +124,6 @@ class LeRobotPolicy:
         config.device = device
         self.name = f"lerobot:{config.type}"
         self._torch = torch
-        self.env = env  # its np_random, seeded by the episode seed at reset, seeds the policy's draws
         self.policy = get_policy_class(config.type).from_pretrained(root, config=config)
         self.policy.eval()
         self.preprocessor, self.postprocessor = make_pre_post_processors(
@@ -132,12 +132,12 @@ class LeRobotPolicy:
         self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
         self.task = ""
 
-    def reset(self, instance: TaskInstance) -> None:
+    def reset(self, episode: Episode) -> None:
         self.policy.reset()  # clears action-chunk queues
-        self.task = instance.get("instruction")
+        self.task = episode.instruction
         # Policy randomness (diffusion noise, sampled latents) from the episode seed: common random
         # numbers cover the policy too, so two values of one (context, repeat) see the same draws.
-        self._torch.manual_seed(int(self.env.np_random.integers(2**31)))
+        self._torch.manual_seed(episode.seed)
 
     def select_action(self, observation: dict) -> np.ndarray:
         torch = self._torch
@@ -150,6 +150,9 @@ class LeRobotPolicy:
             action = self.policy.select_action(batch)
         action = self.postprocessor(action)
         return action.squeeze(0).cpu().numpy().astype(np.float32)
+
+    def close(self) -> None:
+        del self.policy, self.preprocessor, self.postprocessor
 
 
 @PolicyConfig.register_subclass("lerobot")
@@ -178,5 +181,5 @@ class LeRobotConfig(PolicyConfig):
     def image_size(self) -> int | None:
         return checkpoint_image_size(self.path)
 
-    def build(self, env: PickPlaceEnv) -> LeRobotPolicy:
-        return LeRobotPolicy(self.path, self.device, env)
+    def build(self, view: AgentView) -> LeRobotPolicy:
+        return LeRobotPolicy(self.path, self.device)

@@ -7,9 +7,9 @@ another), then drives the expert's motion planner (`PickPlacePlanner.plan`) with
 camera's view of that one frame gets wrong — a yellow object taken for the box, a grey one lost in
 the table, a far camera leaving a handful of pixels — is exactly what the benchmark measures.
 
-What it reads from the env: the rendered observation, the camera's calibration
-(`env.scene.camera_pose`, intrinsics + extrinsics, as a real robot would have) and, through the
-expert's kinematic model, its own joint reading from ``observation.state``. Never the object pose.
+What it reads: the rendered observation, the camera's calibration from the `Episode` (intrinsics +
+extrinsics, as a real robot would have), the robot's kinematic model from its `AgentView` and its
+own joint reading from ``observation.state``. Never the object pose, never the instance.
 """
 
 from __future__ import annotations
@@ -19,12 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from policies.base import PolicyConfig
+from policies.base import AgentView, Episode, PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
-from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY, PickPlaceEnv
+from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
+from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
-from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 
@@ -49,38 +48,38 @@ class VisionConfig(PolicyConfig):
     def cameras(self) -> tuple[str, ...]:
         return (self.camera,)
 
-    def build(self, env: PickPlaceEnv) -> VisionPolicy:
-        return VisionPolicy(env, self.camera)
+    def build(self, view: AgentView) -> VisionPolicy:
+        return VisionPolicy(view, self.camera)
 
 
 class VisionPolicy:
     """Perceive once, then follow the expert's min-jerk plan through the perceived poses.
 
     If perception fails the episode is spent holding the first observed joint positions with the
-    gripper open — deterministic, harmless — and `last_failure` says why (the evaluator records it
-    as the episode's failure reason). `last_failure` is empty whenever perception succeeded, so a
+    gripper open — deterministic, harmless — and `failure_reason` says why (the evaluator records it
+    as the episode's failure reason). `failure_reason` is empty whenever perception succeeded, so a
     botched grasp is reported by the evaluator's own outcome text instead.
     """
 
     name = "vision"
 
-    def __init__(self, env: PickPlaceEnv, camera: str = DEFAULT_CAMERA) -> None:
-        if camera not in env.cameras or not env.depth:
+    def __init__(self, view: AgentView, camera: str = DEFAULT_CAMERA) -> None:
+        if camera not in view.cameras or not view.depth:
             raise ValueError(f"vision policy needs RGB-D from camera {camera!r}; env renders "
-                             f"{env.cameras} with depth={env.depth}")
-        self.env = env
+                             f"{view.cameras} with depth={view.depth}")
         self.camera = camera
-        self._motion = PickPlacePlanner(env)
+        self._motion = PickPlacePlanner(view.kinematic_model())
+        self._calibration: CameraPose | None = None
         self.perception: Perception | None = None
-        self.last_failure = ""
+        self.failure_reason = ""
         self._hold: np.ndarray | None = None
         self._planned = False
 
-    def reset(self, instance: TaskInstance) -> None:
-        # The instance names the object's colour and shape: reading it would be cheating, so
-        # only episode bookkeeping is reset here and perception waits for the first observation.
+    def reset(self, episode: Episode) -> None:
+        # Perception waits for the first observation; the episode gives the camera's calibration.
+        self._calibration = episode.cameras[self.camera]
         self.perception = None
-        self.last_failure = ""
+        self.failure_reason = ""
         self._hold = None
         self._planned = False
 
@@ -97,11 +96,14 @@ class VisionPolicy:
         try:
             self.perception = perceive(observation[IMAGE_KEY.format(self.camera)],
                                        observation[DEPTH_KEY.format(self.camera)],
-                                       self.env.scene.camera_pose(self.camera))
+                                       self._calibration)
         except PerceptionError as err:
-            self.last_failure = err.reason
+            self.failure_reason = err.reason
             self._hold = np.append(arm_q, 0.0).astype(np.float32)
             log.debug("vision policy: %s; holding still", err.reason)
             return
         p = self.perception
         self._motion.plan(p.object_pos, p.object_yaw, p.symmetry, box_xy=p.box_xy, arm_qpos=arm_q)
+
+    def close(self) -> None:
+        pass

@@ -168,7 +168,8 @@ def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path):
 
 
 def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_actions(reference, tmp_path):
-    from roboview_data.sim.cameras import BASE_CAMERAS, ORBIT_RINGS, WORKSPACE_CENTER
+    from roboview_data.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
+    from roboview_data.variation.factors.camera import ORBIT_RINGS
 
     root = tmp_path / "rand"
     cfg = small_cfg(root, 2, workers=1)

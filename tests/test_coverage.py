@@ -39,7 +39,7 @@ def datasets(tmp_path_factory) -> dict[str, Path]:
 
 
 def _records(bench: Path) -> list[dict]:
-    from eval.benchmark import load_benchmark
+    from roboview_data.benchmark.format import load_benchmark
 
     return [item.record for items in load_benchmark(bench).splits.values() for item in items]
 

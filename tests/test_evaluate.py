@@ -205,7 +205,7 @@ def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):
 
 
 def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench, tmp_path):
-    from eval.benchmark import load_benchmark
+    from roboview_data.benchmark.format import load_benchmark
 
     full = load_benchmark(bench, ["camera_pose", "dist_scale"]).splits
     cfg = EvaluateConfig(BenchmarkConfig(str(bench), "camera_pose,dist_scale"), policy_config("random", name="coin"),
@@ -269,7 +269,7 @@ class _Flaky:
     def __init__(self, errors):
         self.errors, self.calls = list(errors), 0
 
-    def reset(self, instance) -> None:
+    def reset(self, episode) -> None:
         pass
 
     def select_action(self, observation):
@@ -290,7 +290,7 @@ class _Flaky:
 ])
 def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, errors, steps, calls, reason):
     import eval.rollout as rollout
-    from eval.benchmark import load_benchmark
+    from roboview_data.benchmark.format import load_benchmark
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     policy = _Flaky(errors)
 
@@ -304,6 +304,6 @@ def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, error
     worker = rollout.EvalWorker(rollout.WorkerSpec(FlakyConfig(), image_size=32, max_steps=4))
     item = load_benchmark(bench, ["color"]).splits["color"][0]
     row = worker.run(rollout.WorkItem(item, 0)).row
-    worker.env.close()
+    worker.close()
     assert not row["success"] and row["steps"] == steps and reason in row["failure_reason"]
     assert policy.calls == calls  # every retry is a real call

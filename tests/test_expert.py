@@ -6,7 +6,7 @@ import numpy as np
 
 from roboview_data.sim.env import PickPlaceEnv
 from roboview_data.sim.expert import ScriptedExpert
-from roboview_data.variation.factors import BASELINES, FACTORS
+from roboview_data.variation.factors import FACTORS, baselines
 from roboview_data.variation.instances import TaskInstance
 
 
@@ -18,7 +18,7 @@ def test_expert_success_rate_over_all_contexts():
     assert len(contexts) == 48
     outcomes, steps = [], []
     for i, (position, shape, instruction) in enumerate(contexts):
-        values = dict(BASELINES, initial_position=position, shape=shape, instruction=instruction)
+        values = dict(baselines(), initial_position=position, shape=shape, instruction=instruction)
         instance = TaskInstance("train", ("initial_position", "shape"), values, "cartesian")
         obs, _ = env.reset(seed=1000 + i, options={"instance": instance})  # a distinct jitter per episode
         expert.reset()

@@ -4,28 +4,28 @@ import pytest
 
 from roboview_data.variation.colors import COLORS
 from roboview_data.variation.factors import (
-    BASELINES,
-    CONTEXT_FACTORS,
-    FACTOR_NAMES,
     FACTORS,
     OBJECT_POSITIONS,
-    VISUAL_FACTORS,
+    baselines,
+    context_factors,
+    factor_names,
     load_factor,
     parse_camera_pose,
     parse_dist_scale,
     parse_euler,
+    visual_factors,
 )
 
 
 def test_factor_names_and_kinds():
-    assert VISUAL_FACTORS == ("color", "camera_pose", "camera_euler", "dist_scale")
-    assert CONTEXT_FACTORS == ("initial_position", "shape", "instruction")
-    assert tuple(FACTORS) == FACTOR_NAMES == VISUAL_FACTORS + CONTEXT_FACTORS
-    assert [load_factor(n).kind for n in FACTOR_NAMES] == ["visual"] * 4 + ["context"] * 3
+    assert visual_factors() == ("color", "camera_pose", "camera_euler", "dist_scale")
+    assert context_factors() == ("initial_position", "shape", "instruction")
+    assert tuple(FACTORS) == factor_names() == visual_factors() + context_factors()
+    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 4 + ["context"] * 3
 
 
 def test_baselines():
-    assert BASELINES == {
+    assert baselines() == {
         "color": "red",
         "camera_pose": "original",
         "camera_euler": "0,0",
@@ -83,7 +83,7 @@ def test_context_factor_values():
     assert load_factor("shape").values == ("cube", "cylinder", "hex_prism", "cuboid")
     instructions = load_factor("instruction").values
     assert len(instructions) == 3
-    assert instructions[0] == BASELINES["instruction"]
+    assert instructions[0] == baselines()["instruction"]
 
 
 def test_instructions_name_neither_color_nor_shape():

@@ -4,24 +4,23 @@ import mujoco
 import numpy as np
 import pytest
 
-from roboview_data.sim.cameras import (
-    BASE_CAMERAS,
-    WORKSPACE_CENTER,
+from roboview_data.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
+from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv, baseline_instance
+from roboview_data.variation.colors import COLORS
+from roboview_data.variation.factors import FACTORS, baselines
+from roboview_data.variation.factors.camera import (
     apply_distance,
     apply_euler,
     orbital_pose,
     scene_camera_poses,
 )
-from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv, baseline_instance
-from roboview_data.variation.colors import COLORS
-from roboview_data.variation.factors import BASELINES, FACTORS
 from roboview_data.variation.instances import TaskInstance
 
 OBSERVED = ("front", "left_top")
 
 
 def make_instance(**values) -> TaskInstance:
-    factors = dict(BASELINES) | values
+    factors = baselines() | values
     varied = tuple(values) or ("color",)
     return TaskInstance(split="test", varied=varied, factors=factors, context_subspace="base")
 
@@ -92,7 +91,7 @@ def test_observation_and_action_spaces(env):
     obs, info = env.reset(options={"instance": baseline_instance()})
     assert set(obs) == {IMAGE_KEY.format(c) for c in ("front", "left_top", "right_top", "wrist")} | {STATE_KEY}
     assert obs[STATE_KEY].shape == (8,) and env.action_space.shape == (8,)
-    assert info["task"] == BASELINES["instruction"]
+    assert info["task"] == baselines()["instruction"]
     # Holding the current joints with the gripper open leaves the arm where it is.
     obs2, reward, terminated, truncated, _ = env.step(np.append(obs[STATE_KEY][:7], 0.0))
     np.testing.assert_allclose(obs2[STATE_KEY][:7], obs[STATE_KEY][:7], atol=2e-3)

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from roboview_data.variation.factors import (
-    BASELINES,
-    CONTEXT_FACTORS,
-    VISUAL_FACTORS,
+    baselines,
+    context_factors,
     load_factor,
+    visual_factors,
 )
 from roboview_data.variation.instances import (
     DEFAULT_FACTORIAL_COLORS,
@@ -74,27 +74,27 @@ def test_tiny_preset_counts():
 def test_context_space_modes():
     per = list(RecursiveVariantTaskManager(context_space("per_subspace")).generate())
     assert len(per) == 11
-    baseline = {name: BASELINES[name] for name in CONTEXT_FACTORS}
-    base_rows = [row for row in per if {k: row[k] for k in CONTEXT_FACTORS} == baseline]
-    assert sorted(row["context_subspace"] for row in base_rows) == sorted(CONTEXT_FACTORS)
+    baseline = {name: baselines()[name] for name in context_factors()}
+    base_rows = [row for row in per if {k: row[k] for k in context_factors()} == baseline]
+    assert sorted(row["context_subspace"] for row in base_rows) == sorted(context_factors())
 
     dedupe = list(RecursiveVariantTaskManager(context_space("dedupe")).generate())
     assert len(dedupe) == 9
     assert dedupe[0] == {"context_subspace": "base", **baseline}
-    contexts = {tuple(row[k] for k in CONTEXT_FACTORS) for row in dedupe}
+    contexts = {tuple(row[k] for k in context_factors()) for row in dedupe}
     assert len(contexts) == 9
-    assert contexts == {tuple(row[k] for k in CONTEXT_FACTORS) for row in per}
+    assert contexts == {tuple(row[k] for k in context_factors()) for row in per}
     with pytest.raises(ValueError, match="unknown union_mode 'set'"):
         context_space("set")
 
 
 def test_single_factor_splits_hold_other_visual_factors_at_baseline(paper_suite):
     for instance in paper_suite:
-        if instance.split in VISUAL_FACTORS:
+        if instance.split in visual_factors():
             assert instance.varied == (instance.split,)
-            for name in VISUAL_FACTORS:
+            for name in visual_factors():
                 if name != instance.split:
-                    assert instance.get(name) == BASELINES[name]
+                    assert instance.get(name) == baselines()[name]
     color_split = [i for i in paper_suite if i.split == "color"]
     # Context-major: the first 141 instances sweep every color in the first context.
     assert [i.value for i in color_split[:141]] == list(load_factor("color").values)
@@ -108,7 +108,7 @@ def test_factorial_split(paper_suite):
     )
     assert {i.context_subspace for i in factorial} == {"base"}
     assert {tuple(i.context.values()) for i in factorial} == {
-        tuple(BASELINES[name] for name in CONTEXT_FACTORS)
+        tuple(baselines()[name] for name in context_factors())
     }
     first = factorial[0]
     assert (first.factor, first.value) == ("color|camera_pose", "red|orbit_r0_0")
@@ -126,7 +126,7 @@ def test_instance_id_equals_hand_computed_sha256():
     instance = TaskInstance(
         split="color",
         varied=("color",),
-        factors={**BASELINES, "color": "navy", "shape": "cylinder"},
+        factors={**baselines(), "color": "navy", "shape": "cylinder"},
         context_subspace="shape",
     )
     canonical = (
@@ -167,10 +167,10 @@ def test_episode_seed_matches_hand_computation():
 
 
 def test_to_record_columns_and_values():
-    instance = TaskInstance("color", ("color",), dict(BASELINES), "base")
+    instance = TaskInstance("color", ("color",), baselines(), "base")
     record = instance.to_record()
     assert list(record) == [
-        "instance_id", "split", "factor", "value", "context_id", "color", "camera_pose",
+        "instance_id", "task", "split", "factor", "value", "context_id", "context_subspace", "color", "camera_pose",
         "camera_euler", "dist_scale", "initial_position", "shape", "instruction", "color_hex",
         "color_rgb", "color_lab", "seed",
     ]
@@ -181,17 +181,17 @@ def test_to_record_columns_and_values():
 
 
 def test_task_instance_validation_and_order():
-    shuffled = dict(reversed(list(BASELINES.items())))
+    shuffled = dict(reversed(list(baselines().items())))
     a = TaskInstance("color", ("color",), shuffled, "base")
-    b = TaskInstance("color", ("color",), tuple(BASELINES.items()), "base")
+    b = TaskInstance("color", ("color",), tuple(baselines().items()), "base")
     assert a == b and a.instance_id == b.instance_id
     with pytest.raises(ValueError, match="unknown shape 'sphere'"):
-        TaskInstance("color", ("color",), {**BASELINES, "shape": "sphere"}, "base")
+        TaskInstance("color", ("color",), {**baselines(), "shape": "sphere"}, "base")
     with pytest.raises(ValueError, match=r"missing \['shape'\]"):
-        no_shape = {k: v for k, v in BASELINES.items() if k != "shape"}
+        no_shape = {k: v for k, v in baselines().items() if k != "shape"}
         TaskInstance("color", ("color",), no_shape, "base")
     with pytest.raises(ValueError, match="unknown context_subspace 'nowhere'"):
-        TaskInstance("color", ("color",), dict(BASELINES), "nowhere")
+        TaskInstance("color", ("color",), baselines(), "nowhere")
 
 
 def test_sample_context_is_seeded_and_covers_all_values():
@@ -202,10 +202,10 @@ def test_sample_context_is_seeded_and_covers_all_values():
     assert seq_a == seq_b
     rng_c = np.random.default_rng(12)
     assert [sampler.sample_context(rng_c) for _ in range(400)] != seq_a
-    for name in CONTEXT_FACTORS:
+    for name in context_factors():
         assert {draw[name] for draw in seq_a} == set(load_factor(name).values)
-    for name in VISUAL_FACTORS:
-        assert {draw[name] for draw in seq_a} == {BASELINES[name]}
+    for name in visual_factors():
+        assert {draw[name] for draw in seq_a} == {baselines()[name]}
 
 
 def test_context_sampler_rejects_visual_restrictions():

@@ -6,11 +6,11 @@ Privileged state (object pose, box center) is read here only to grade what the p
 import numpy as np
 import pytest
 
-from policies.base import make_policy, policy_config, registered_policies
+from policies.base import Episode, make_policy, policy_config, registered_policies
 from policies.perception import PerceptionError, perceive
 from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
 from roboview_data.sim.scene import BOX_CENTER
-from roboview_data.variation.factors import BASELINES
+from roboview_data.variation.factors import baselines
 from roboview_data.variation.instances import TaskInstance, episode_seed
 
 CAMERA = "front"
@@ -18,7 +18,7 @@ CAMERA = "front"
 
 def _instance(**factors: str) -> TaskInstance:
     varied = tuple(factors) or ("color",)
-    return TaskInstance("color", varied, dict(BASELINES, **factors), "base")
+    return TaskInstance("color", varied, dict(baselines(), **factors), "base")
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +72,9 @@ def test_registered_with_camera_option():
 
 
 def _rollout(env: PickPlaceEnv, policy, instance: TaskInstance, repeat: int) -> tuple[bool, list[np.ndarray]]:
-    obs, _ = env.reset(seed=episode_seed(instance.context_id, repeat), options={"instance": instance})
-    policy.reset(instance)
+    seed = episode_seed(instance.context_id, repeat)
+    obs, _ = env.reset(seed=seed, options={"instance": instance})
+    policy.reset(Episode.of(env, seed))
     actions = []
     for _ in range(env.max_steps):
         actions.append(policy.select_action(obs))
@@ -88,12 +89,12 @@ def test_succeeds_at_baseline_and_holds_still_when_blind(rgbd_env):
     baseline = _instance()
     for repeat in range(2):
         success, _ = _rollout(rgbd_env, policy, baseline, repeat)
-        assert success and policy.last_failure == ""
+        assert success and policy.failure_reason == ""
     # A yellow object is never found: the policy reports why and holds its pose with the gripper open.
     rgbd_env.max_steps = 5
     try:
         success, actions = _rollout(rgbd_env, policy, _instance(color="yellow"), 0)
     finally:
         rgbd_env.max_steps = 120
-    assert not success and policy.last_failure == "object not found"
+    assert not success and policy.failure_reason == "object not found"
     assert all(np.array_equal(a, actions[0]) for a in actions) and actions[0][7] == 0.0

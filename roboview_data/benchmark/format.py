@@ -1,27 +1,43 @@
-"""The frozen benchmark as a Hugging Face dataset folder: parquet splits, rejected table, card.
+"""The frozen benchmark folder — written and read here, nowhere else.
+
+A benchmark is a Hugging Face dataset folder:
+
+    benchmark.json             manifest: format, suite, thresholds, counts, suite hash, version
+    data/<split>.parquet       one row per accepted instance (the instance record + fairness + preview)
+    rejected/rejected.parquet  rejected instances, with who rejected them
+    README.md                  the dataset card (roboview_data.benchmark.card)
 
 Everything written is a pure function of the instance records: no timestamps, no machine paths,
-so building twice gives the same bytes.
+so building twice gives the same bytes. `load_benchmark` reads it back into `TaskInstance`s; every
+row must hash to its stored id.
 """
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import datasets
-import numpy as np
+import pyarrow.parquet as pq
 
-from roboview_data.variation.instances import canonical_json
+from roboview_data.variation.factors import FACTORS, factor_names, record_columns
+from roboview_data.variation.instances import (
+    TaskInstance,
+    canonical_json,
+    context_subspaces,
+)
 
 MANIFEST = "benchmark.json"
-# 2: the `seed` column is the common-random-numbers seed of (context_id, repeat 0); 1 hashed the id.
-FORMAT_VERSION = 2
-VERDICTS = ("accept", "reject")
+# 3: rows store `task` and `context_subspace`. 2: `context_subspace` is recovered by hashing (it is
+# read still). 1: the `seed` column hashed instance_id (no longer read: other episode seeds).
+FORMAT_VERSION = 3
+READABLE_FORMATS = (2, 3)
+# Columns that never travel into episode rows (DESIGN.md: everything but fairness and preview does).
+NOT_IN_EPISODES = ("fairness", "preview")
 
 _CAMERA = {"name": datasets.Value("string"), "pos": datasets.List(datasets.Value("float64")),
            "quat": datasets.List(datasets.Value("float64")), "fovy": datasets.Value("float64")}
@@ -30,63 +46,37 @@ _FAIR_CAMERA = {"camera": datasets.Value("string"), "object_visible": datasets.V
                 "box_visible": datasets.Value("float64"), "box_pixels": datasets.Value("int64"),
                 "box_in_frame": datasets.Value("bool"), "delta_e_nominal": datasets.Value("float64"),
                 "delta_e_table": datasets.Value("float64")}
-_STR_COLUMNS = ("instance_id", "split", "factor", "value", "context_id", "color", "camera_pose",
-                "camera_euler", "dist_scale", "initial_position", "shape", "instruction", "color_hex")
 
 
-def instance_features(rejected: bool = False) -> datasets.Features:
-    """DESIGN.md's instance record; the rejected table adds who rejected it."""
-    cols = {name: datasets.Value("string") for name in _STR_COLUMNS}
-    cols |= {"color_rgb": datasets.List(datasets.Value("float64")),
-             "color_lab": datasets.List(datasets.Value("float64")),
-             "cameras": datasets.List(_CAMERA), "seed": datasets.Value("int64"),
+class BenchmarkError(ValueError):
+    """A folder that is not a readable RoboView benchmark (missing, failed, edited, other format)."""
+
+
+def _feature(example: Any) -> Any:
+    if isinstance(example, bool):
+        return datasets.Value("bool")
+    if isinstance(example, int):
+        return datasets.Value("int64")
+    if isinstance(example, float):
+        return datasets.Value("float64")
+    if isinstance(example, (list, tuple)):
+        return datasets.List(_feature(example[0]))
+    return datasets.Value("string")
+
+
+def instance_features(task: str, rejected: bool = False) -> datasets.Features:
+    """The instance record's schema for `task`: ids, every factor, each factor's extra columns."""
+    cols = {name: datasets.Value("string") for name in ("instance_id", "task", "split", "factor", "value",
+                                                         "context_id", "context_subspace", *factor_names(task))}
+    examples = record_columns({name: FACTORS[name].baseline for name in factor_names(task)})
+    cols |= {name: _feature(value) for name, value in examples.items()}
+    cols |= {"cameras": datasets.List(_CAMERA), "seed": datasets.Value("int64"),
              "fairness": {"cameras": datasets.List(_FAIR_CAMERA), "passed": datasets.Value("bool"),
                           "reject_reason": datasets.Value("string")},
              "preview": datasets.Image()}
     if rejected:
         cols["rejected_by"] = datasets.Value("string")
     return datasets.Features(cols)
-
-
-@dataclass(frozen=True)
-class Decision:
-    instance_id: str
-    verdict: str
-    reviewer: str
-    note: str
-
-
-def read_decisions(path: Path, known_ids: set[str]) -> dict[str, Decision]:
-    """Stage-2 adjudication CSV (instance_id, verdict, reviewer, note). A VLM screen writes the same
-    file with reviewer "vlm:<model>"; every id must belong to the suite being built."""
-    if not path.is_file():
-        raise ValueError(f"--decisions={path} does not exist")
-    with path.open(newline="") as f:
-        reader = csv.DictReader(f)
-        missing = {"instance_id", "verdict"} - set(reader.fieldnames or [])
-        if missing:
-            raise ValueError(f"--decisions={path} lacks column(s) {sorted(missing)}; "
-                             "expected: instance_id, verdict, reviewer, note")
-        rows = list(reader)
-    unknown = sorted({r["instance_id"] for r in rows} - known_ids)
-    if unknown:
-        raise ValueError(f"--decisions={path} names {len(unknown)} instance id(s) not in this suite: "
-                         f"{', '.join(unknown[:5])}{' …' if len(unknown) > 5 else ''}")
-    bad = sorted({r["verdict"] for r in rows} - set(VERDICTS))
-    if bad:
-        raise ValueError(f"--decisions={path}: unknown verdict(s) {bad}; allowed: {', '.join(VERDICTS)}")
-    return {r["instance_id"]: Decision(r["instance_id"], r["verdict"], r.get("reviewer") or "human",
-                                       r.get("note") or "") for r in rows}
-
-
-def adjudicate(record: dict, decision: Decision | None) -> tuple[bool, str]:
-    """(accepted, rejected_by) after stage 1 (the gate) and stage 2 (a decision, if any)."""
-    gate_passed = record["fairness"]["passed"]
-    if decision is None:
-        return gate_passed, "" if gate_passed else "gate"
-    if decision.verdict == "reject":
-        return False, f"{decision.reviewer}: {decision.note}".rstrip(": ")
-    return True, ""  # a reviewer may accept what the gate flagged; the card counts these
 
 
 def suite_hash(accepted: dict[str, list[dict]]) -> str:
@@ -97,113 +87,13 @@ def suite_hash(accepted: dict[str, list[dict]]) -> str:
 
 def write_split(rows: list[dict], path: Path, rejected: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    ds = datasets.Dataset.from_list(rows, features=instance_features(rejected))
+    task = rows[0].get("task", "pick_place")
+    ds = datasets.Dataset.from_list(rows, features=instance_features(task, rejected))
     ds.to_parquet(str(path))
 
 
-def _size_category(n: int) -> str:
-    for bound, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K")):
-        if n < bound:
-            return name
-    return "100K<n<1M"
-
-
-def fairness_stats(records: list[dict]) -> dict[str, dict[str, float]]:
-    """Per observed camera: quantiles of the measured fairness numbers over all candidates."""
-    out: dict[str, dict[str, float]] = {}
-    for cam in sorted({c["camera"] for r in records for c in r["fairness"]["cameras"]}):
-        rows = [c for r in records for c in r["fairness"]["cameras"] if c["camera"] == cam]
-        for key in ("object_visible", "box_visible", "object_pixels", "delta_e_table", "delta_e_nominal"):
-            vals = np.array([c[key] for c in rows], dtype=float)
-            vals = vals[~np.isnan(vals)]
-            if vals.size:
-                out.setdefault(cam, {})[key] = [round(float(q), 3) for q in np.percentile(vals, [5, 50, 95])]
-    return out
-
-
-def write_card(out: Path, manifest: dict) -> None:
-    splits = manifest["splits"]
-    total = sum(s["accepted"] for s in splits.values())
-    configs = ["- config_name: default", "  data_files:"]
-    for split in splits:
-        configs += [f"  - split: {split}", f"    path: data/{split}.parquet"]
-    if manifest["rejected"]:
-        configs += ["- config_name: rejected", "  data_files:", "  - split: rejected",
-                    "    path: rejected/rejected.parquet"]
-    table = ["| split | candidates | accepted | rejected (gate) | rejected (review) | accepted over gate |",
-             "|---|---|---|---|---|---|"]
-    for name, s in splits.items():
-        table.append(f"| {name} | {s['candidates']} | {s['accepted']} | {s['rejected_gate']} | "
-                     f"{s['rejected_review']} | {s['accepted_over_gate']} |")
-    stats = ["| camera | measure | p5 | median | p95 |", "|---|---|---|---|---|"]
-    for cam, measures in manifest["fairness_stats"].items():
-        for key, (p5, p50, p95) in measures.items():
-            stats.append(f"| {cam} | {key} | {p5} | {p50} | {p95} |")
-    suite = manifest["suite"]
-    text = f"""---
-license: apache-2.0
-task_categories:
-- robotics
-tags:
-- roboview
-- visual-bias
-- benchmark
-- mujoco
-- lerobot
-size_categories:
-- {_size_category(total)}
-pretty_name: RoboView-Bias benchmark instances ({suite['preset']})
-configs:
-{chr(10).join(configs)}
----
-
-# RoboView-Bias benchmark instances — preset `{suite['preset']}`
-
-Frozen task instances of the RoboView-Bias benchmark: a simulated Franka Panda (MuJoCo) puts one
-small object into a yellow box while exactly one visual factor varies per split. Every row is one
-instance (DESIGN.md instance record); `preview` shows the observed cameras (front, left_top, wrist)
-at t = 0. Load a split with `datasets.load_dataset(PATH, split="color")`.
-
-**Suite hash** (SHA-256 over the accepted instance ids per split): `{manifest['suite_hash']}`
-**Benchmark version**: `{manifest['benchmark_version']}`
-
-## Counts
-
-{chr(10).join(table)}
-
-Total accepted: {total}.
-
-## How the instances were built
-
-Structured Variant-Generation Framework with the `{suite['preset']}` preset: union mode
-`{suite['union_mode']}` for the generalization context space C_Gen (Structured Union over initial
-position × shape × instruction), each visual split V_i × C_Gen(V_i) with every other visual factor
-at its baseline (color red, camera pose original, Euler 0,0, distance 0); factorial split
-color × camera_pose over colors {', '.join(suite['factorial_colors'])} in the baseline context c*.
-Extra Cartesian splits: {suite['cartesian'] or 'none'}. Value subsets: {suite['value_subsets'] or 'none (full factor sets)'}.
-`instance_id` is the first 16 hex digits of SHA-256 over the canonical JSON of the instance's
-parameters; `seed` (used by env reset) derives from the id alone.
-
-## Perceptual fairness
-
-Stage 1 (programmatic, at t = 0, from every observed camera): segmentation renders give the
-object's and box's visible fraction (visible pixels / pixels covered when rendered unoccluded),
-pixel area and whether they lie wholly in frame; CIEDE2000 compares the object's rendered color
-with its nominal color and with the table. Thresholds: `{json.dumps(manifest['thresholds'])}`.
-Stage-1 pass rate: {manifest['gate_pass_rate']:.2%} of {manifest['candidates']} candidates (the build
-requires ≥ {manifest['min_pass_rate']:.0%}). Stage 2 (review): {manifest['decisions']} decision(s)
-applied from a decisions file (reviewers: {', '.join(manifest['reviewers']) or 'none'}).
-Rejected instances are kept in the `rejected` config with the reason and who rejected them.
-
-Measured over all candidates (p5 / median / p95):
-
-{chr(10).join(stats)}
-"""
-    (out / "README.md").write_text(text)
-
-
 def write_manifest(out: Path, manifest: dict) -> None:
-    (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    (out / MANIFEST).write_text(json.dumps({**manifest, "format": FORMAT_VERSION}, indent=2, sort_keys=True) + "\n")
 
 
 def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[str]) -> dict[str, dict]:
@@ -221,3 +111,67 @@ def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[st
 
 def thresholds_dict(thresholds) -> dict:
     return asdict(thresholds)
+
+
+# --- reading ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BenchmarkItem:
+    instance: TaskInstance
+    record: dict  # the row's columns but fairness and preview: they travel into every episode row
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    path: Path
+    version: str
+    splits: dict[str, list[BenchmarkItem]]
+
+
+def read_manifest(root: Path) -> dict:
+    """The manifest of a finished, readable benchmark folder (else BenchmarkError saying what to do)."""
+    path = Path(root) / MANIFEST
+    if not path.is_file():
+        raise BenchmarkError(f"{root} holds no RoboView benchmark ({MANIFEST} missing); "
+                             "build one with `python -m pipelines.build_benchmark`")
+    manifest = json.loads(path.read_text())
+    if manifest.get("format") not in READABLE_FORMATS:
+        raise BenchmarkError(f"{root} has benchmark format {manifest.get('format')!r}; this version reads formats "
+                             f"{', '.join(map(str, READABLE_FORMATS))} (episode seeds shared per context and repeat); "
+                             "rebuild it with `python -m pipelines.build_benchmark`")
+    if manifest.get("status") != "ok":
+        raise BenchmarkError(f"{root} is a failed build; rebuild it")
+    return manifest
+
+
+def instance_from_record(record: dict) -> TaskInstance:
+    """Rebuild the instance; its id must reproduce the stored one (else the row was edited)."""
+    task = record.get("task") or "pick_place"
+    factors = {name: record[name] for name in factor_names(task) if name in record}
+    varied = tuple(record["factor"].split("|"))
+    # Format 2 rows lack context_subspace: find the one that reproduces the id.
+    subspaces = [record["context_subspace"]] if record.get("context_subspace") else context_subspaces(task)
+    for subspace in subspaces:
+        instance = TaskInstance(record["split"], varied, factors, subspace, task)
+        if instance.instance_id == record["instance_id"]:
+            return instance
+    raise BenchmarkError(f"benchmark row {record['instance_id']} does not hash to its id: the split was "
+                         "modified after it was built; rebuild it with pipelines.build_benchmark")
+
+
+def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchmark:
+    """The instances of `splits` (default: all) of the benchmark folder at `path`."""
+    root = Path(path)
+    manifest = read_manifest(root)
+    available = [s for s in manifest["splits"] if (root / "data" / f"{s}.parquet").is_file()]
+    chosen = splits or available
+    unknown = [s for s in chosen if s not in available]
+    if unknown:
+        raise BenchmarkError(f"unknown split(s) {unknown}; the benchmark at {root} has: {', '.join(available)}")
+    out: dict[str, list[BenchmarkItem]] = {}
+    for split in chosen:
+        file = pq.ParquetFile(root / "data" / f"{split}.parquet")
+        columns = [c for c in file.schema_arrow.names if c not in NOT_IN_EPISODES]
+        out[split] = [BenchmarkItem(instance_from_record(row), row) for row in file.read(columns=columns).to_pylist()]
+    return Benchmark(root, manifest["benchmark_version"], out)

@@ -17,7 +17,8 @@ from roboview_data.benchmark.fairness import (
     FairnessThresholds,
 )
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import IMAGE_KEY, PickPlaceEnv
+from roboview_data.sim.env import IMAGE_KEY
+from roboview_data.sim.tasks import DEFAULT_TASK, make_env
 from roboview_data.variation.instances import TaskInstance
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
@@ -35,8 +36,8 @@ def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
 
 
 class InstanceRenderer:
-    def __init__(self, image_size: int, thresholds: FairnessThresholds) -> None:
-        self.env = PickPlaceEnv(cameras=OBSERVED_CAMERAS, image_size=image_size)
+    def __init__(self, image_size: int, thresholds: FairnessThresholds, task: str = DEFAULT_TASK) -> None:
+        self.env = make_env(task, cameras=OBSERVED_CAMERAS, image_size=image_size)
         self.probe = FairnessProbe(self.env)
         self.thresholds = thresholds
 

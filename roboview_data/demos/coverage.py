@@ -31,7 +31,7 @@ import pandas as pd
 from roboview_data.demos.dataset import PROVENANCE_FILE
 from roboview_data.sim.cameras import PERTURBED_CAMERAS, quat_to_mat
 from roboview_data.variation.colors import delta_e_2000
-from roboview_data.variation.factors import CONTEXT_FACTORS
+from roboview_data.variation.factors import context_factors
 from roboview_data.variation.randomization import baseline_randomization
 
 STATUSES = ("exact", "nearby", "never")
@@ -92,7 +92,7 @@ def load_training_visuals(root: str | Path) -> TrainingVisuals:
             pos, rot = np.tile(pose.pos, (n, 1)), np.tile(pose.rotation, (n, 1, 1))
             fovy = np.full(n, pose.fovy)
     randomized = tuple(prov["randomized"].iloc[0]) if "randomized" in prov and n else ()
-    contexts = {tuple(str(r[f]) for f in CONTEXT_FACTORS) for r in prov.to_dict("records")}
+    contexts = {tuple(str(r[f]) for f in context_factors()) for r in prov.to_dict("records")}
     return TrainingVisuals(lab, audited, pos, rot, fovy, contexts, randomized)
 
 
@@ -116,7 +116,7 @@ def audit(visuals: TrainingVisuals, records: list[dict], radii: Radii = Radii())
     contexts: dict[tuple[str, str], list[bool]] = {}
     for rec in records:
         key = (rec["split"], rec["value"])
-        contexts.setdefault(key, []).append(tuple(str(rec[f]) for f in CONTEXT_FACTORS) in visuals.contexts)
+        contexts.setdefault(key, []).append(tuple(str(rec[f]) for f in context_factors()) in visuals.contexts)
         if key in seen:
             continue
         seen.add(key)

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv
-from roboview_data.sim.expert import ScriptedExpert
-from roboview_data.variation.factors import CONTEXT_FACTORS
+from roboview_data.sim.env import IMAGE_KEY, STATE_KEY
+from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
+from roboview_data.variation.factors import context_factors
 from roboview_data.variation.instances import TaskInstance, seed_from_text
 from roboview_data.variation.randomization import Randomization, sample_randomization
 from roboview_data.variation.svgf import ContextSampler
@@ -28,7 +28,7 @@ def attempt_seed(seed: int, attempt: int) -> int:
 def training_instance(rng: np.random.Generator) -> TaskInstance:
     """Context-only randomization: context factors drawn at random, visual factors at baseline."""
     values = ContextSampler().sample_context(rng)
-    return TaskInstance(split="train", varied=CONTEXT_FACTORS, factors=values, context_subspace="cartesian")
+    return TaskInstance(split="train", varied=context_factors(), factors=values, context_subspace="cartesian")
 
 
 @dataclass
@@ -58,11 +58,11 @@ class DemoCollector:
     """Owns one env + expert (one renderer) per process; reused for every attempt it runs."""
 
     def __init__(self, seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int,
-                 randomize: tuple[str, ...] = ()) -> None:
+                 randomize: tuple[str, ...] = (), task: str = DEFAULT_TASK) -> None:
         self.seed = seed
         self.randomize = randomize
-        self.env = PickPlaceEnv(cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps)
-        self.expert = ScriptedExpert(self.env)
+        self.env = make_env(task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps)
+        self.expert = load_task(task).make_expert(self.env)
 
     def run(self, attempt: int) -> DemoEpisode:
         start = time.perf_counter()

@@ -1,14 +1,9 @@
-"""Camera geometry: the fixed scene cameras and the three camera factors of the paper.
+"""Camera geometry: poses, look-at, quaternions, and the scene's unperturbed cameras.
 
 Every pose is world-frame, MuJoCo convention: the camera looks along its local −z with +y up,
-`quat` is [w, x, y, z]. Factor values are applied to the *base* pose of a scene camera:
-
-- ``camera_pose`` (orbital): replaces the pose by one of 21 look-at poses on three concentric
-  rings above the workspace, in front of the arm (appendix "Camera Settings").
-- ``camera_euler`` (yaw, pitch): rotates the camera about its own +y (yaw) and +x (pitch) axes.
-- ``dist_scale`` k: moves the camera backward along its optical axis by 0.05·k m.
-
-Only ``front`` and ``left_top`` are perturbed (DESIGN.md); ``right_top`` and ``wrist`` never are.
+`quat` is [w, x, y, z]. The camera *factors* (orbital pose, Euler turn, pull-back) live with the
+other factors in `roboview_data.variation.factors.camera`; they move only ``front`` and
+``left_top`` (PERTURBED_CAMERAS), never ``right_top`` or ``wrist``.
 """
 
 from __future__ import annotations
@@ -16,8 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from roboview_data.variation.factors import parse_dist_scale, parse_euler
 
 # Point every orbital camera (and the fixed scene cameras) looks at: between the object
 # positions and the receiver box, slightly above the table.
@@ -28,15 +21,7 @@ PERTURBED_CAMERAS = ("front", "left_top")
 SCENE_CAMERAS = ("front", "left_top", "right_top")
 ALL_CAMERAS = ("front", "left_top", "right_top", "wrist")
 
-# Orbital rings: horizontal radius (m) around WORKSPACE_CENTER and height above the table (m);
-# seven azimuths per ring, spread over the half-space in front of the arm (+x).
-ORBIT_RINGS = ((0.30, 0.80), (0.45, 0.72), (0.60, 0.62))
-ORBIT_AZIMUTHS_DEG = tuple(np.linspace(-72.0, 72.0, 7))
-
-DIST_STEP_M = 0.05
 DEFAULT_FOVY_DEG = 45.0
-# Orbital cameras see the whole workspace (objects and box) from closer in: a wider lens.
-ORBIT_FOVY_DEG = 50.0
 
 
 @dataclass(frozen=True)
@@ -105,55 +90,9 @@ def look_at(name: str, eye: np.ndarray, target: np.ndarray = WORKSPACE_CENTER,
     return CameraPose(name, tuple(eye.tolist()), tuple(quat.tolist()), fovy)
 
 
-# The unperturbed ("original") scene cameras.
+# The unperturbed scene cameras (the camera factors' baseline).
 BASE_CAMERAS: dict[str, CameraPose] = {
     "front": look_at("front", np.array([1.18, -0.02, 0.62]), np.array([0.48, -0.02, 0.03]), fovy=50.0),
     "left_top": look_at("left_top", np.array([0.60, 0.64, 0.64])),
     "right_top": look_at("right_top", np.array([0.60, -0.64, 0.64])),
 }
-
-
-def orbital_pose(name: str, value: str) -> CameraPose:
-    """Pose of camera `name` at orbital value "orbit_r{ring}_{k}": on ring `ring`, azimuth index k."""
-    ring, k = (int(part[1:]) if part.startswith("r") else int(part) for part in value.split("_")[1:])
-    radius, height = ORBIT_RINGS[ring]
-    azimuth = np.deg2rad(ORBIT_AZIMUTHS_DEG[k])
-    eye = WORKSPACE_CENTER + np.array([radius * np.cos(azimuth), radius * np.sin(azimuth), height])
-    return look_at(name, eye, fovy=ORBIT_FOVY_DEG)
-
-
-def apply_euler(pose: CameraPose, yaw_deg: float, pitch_deg: float) -> CameraPose:
-    """Rotate about the camera's own up axis (yaw), then its right axis (pitch)."""
-    yaw, pitch = np.deg2rad(yaw_deg), np.deg2rad(pitch_deg)
-    r_yaw = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
-    r_pitch = np.array([[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]])
-    rot = pose.rotation @ r_yaw @ r_pitch
-    return CameraPose(pose.name, pose.pos, tuple(mat_to_quat(rot).tolist()), pose.fovy)
-
-
-def apply_distance(pose: CameraPose, k: int) -> CameraPose:
-    """Move the camera backward along its optical axis by DIST_STEP_M·k."""
-    pos = np.asarray(pose.pos) - DIST_STEP_M * k * pose.optical_axis
-    return CameraPose(pose.name, tuple(pos.tolist()), pose.quat, pose.fovy)
-
-
-def scene_camera_poses(camera_pose: str, camera_euler: str, dist_scale: str) -> dict[str, CameraPose]:
-    """World poses of the three scene cameras for one instance's camera factor values.
-
-    The factors compose in a fixed order (orbital placement, then Euler, then distance), although
-    each benchmark instance varies at most one of them.
-    """
-    yaw, pitch = parse_euler(camera_euler)
-    k = parse_dist_scale(dist_scale)
-    poses = {}
-    for name, base in BASE_CAMERAS.items():
-        pose = base
-        if name in PERTURBED_CAMERAS:
-            if camera_pose != "original":
-                pose = orbital_pose(name, camera_pose)
-            if (yaw, pitch) != (0, 0):
-                pose = apply_euler(pose, yaw, pitch)
-            if k:
-                pose = apply_distance(pose, k)
-        poses[name] = pose
-    return poses

@@ -10,7 +10,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from roboview_data.sim.cameras import ALL_CAMERAS, scene_camera_poses
+from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS
 from roboview_data.sim.scene import (
     BOX_CENTER,
     BOX_INNER_HALF,
@@ -20,13 +20,19 @@ from roboview_data.sim.scene import (
     RenderQuality,
     Scene,
 )
-from roboview_data.variation.colors import get_color
-from roboview_data.variation.factors import BASELINES, OBJECT_POSITIONS
+from roboview_data.sim.tasks import DEFAULT_MAX_STEPS, load_task
+from roboview_data.variation.factors import (
+    OBJECT_POSITIONS,
+    SceneApplier,
+    baselines,
+    load_factor,
+    visual_factors,
+)
 from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 
-ENV_ID = "RoboView/PickPlace-v0"
+TASK = "pick_place"
 STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
 ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
 IMAGE_KEY = "observation.images.{}"
@@ -38,14 +44,13 @@ POSITION_JITTER_M = 0.01
 YAW_JITTER_RAD = 0.35
 # Success: the object is this still (m/s) and the gripper this open (0 open … 1 closed).
 REST_SPEED = 0.05
-DEFAULT_MAX_STEPS = 120
 UNSTABLE_REASON = "simulation unstable"
 RELEASED_GRIPPER = 0.25
 
 
 def baseline_instance() -> TaskInstance:
     """Every factor at its baseline: the scene the expert demos are rendered in."""
-    return TaskInstance(split="baseline", varied=("color",), factors=dict(BASELINES),
+    return TaskInstance(split="baseline", varied=("color",), factors=baselines(TASK),
                         context_subspace="base")
 
 
@@ -104,6 +109,7 @@ class PickPlaceEnv(gym.Env):
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
         self._open_renderers: list[mujoco.Renderer] = []
+        self._appliers: dict[str, SceneApplier] = {}
         self.instance = baseline_instance()
         self.instruction = self.instance.get("instruction")
         self.steps = 0
@@ -167,23 +173,34 @@ class PickPlaceEnv(gym.Env):
         self.instruction = instance.get("instruction")
         self.steps = 0
 
-        mujoco.mj_resetData(self.model, self.data)
-        values = instance.factor_values
-        poses = scene_camera_poses(values["camera_pose"], values["camera_euler"], values["dist_scale"])
-        for name, pose in options.get("cameras", {}).items():
-            if name not in poses or pose.name != name:
-                raise ValueError(f"options['cameras'][{name!r}]: only the scene cameras {sorted(poses)} can be "
-                                 f"posed (pose named {pose.name!r})")
-            poses[name] = pose
-        for pose in poses.values():
-            self.scene.set_camera(pose)
-        rgb = np.asarray(options.get("object_rgb", get_color(values["color"]).rgb), dtype=float)
+        if instance.task != TASK:
+            raise ValueError(f"instance {instance.instance_id} is a {instance.task!r} instance; this env runs {TASK!r}")
+        cameras = options.get("cameras", {})
+        for name, pose in cameras.items():
+            if name not in BASE_CAMERAS or pose.name != name:
+                raise ValueError(f"options['cameras'][{name!r}]: only the scene cameras {sorted(BASE_CAMERAS)} can "
+                                 f"be posed (pose named {pose.name!r})")
+        rgb = np.asarray(options.get("object_rgb", (0.0, 0.0, 0.0)), dtype=float)
         if rgb.shape != (3,) or not np.all((rgb >= 0) & (rgb <= 1)):
             raise ValueError(f"options['object_rgb']={options['object_rgb']!r} must be 3 sRGB values in [0, 1]")
+
+        mujoco.mj_resetData(self.model, self.data)
+        values = instance.factor_values
+        # Context (the task's own): the object, at its named position with the episode's jitter.
         xy = np.asarray(OBJECT_POSITIONS[values["initial_position"]])
         xy = xy + rng.uniform(-POSITION_JITTER_M, POSITION_JITTER_M, size=2)
         yaw = rng.uniform(-YAW_JITTER_RAD, YAW_JITTER_RAD)
-        self.scene.place_object(values["shape"], xy, yaw, np.array([*rgb, 1.0]))
+        self.scene.place_object(values["shape"], xy, yaw)
+        # Visual factors: every registered one writes its value into the compiled model, in order.
+        for pose in BASE_CAMERAS.values():
+            self.scene.set_camera(pose)
+        for name in visual_factors():
+            self.applier(name).apply(values[name], rng)
+        # Training-time domain randomization overrides the instance's visuals.
+        for pose in cameras.values():
+            self.scene.set_camera(pose)
+        if "object_rgb" in options:
+            self.model.geom_rgba[self.scene.active_geom] = [*rgb, 1.0]
         self.scene.reset_robot(HOME_QPOS)
         mujoco.mj_forward(self.model, self.data)
         return self._observation(), self._info()
@@ -205,6 +222,12 @@ class PickPlaceEnv(gym.Env):
         success = self.is_success()
         truncated = self.steps >= self.max_steps and not success
         return self._observation(), float(success), success, truncated, self._info(success)
+
+    def applier(self, factor: str) -> SceneApplier:
+        """The factor's applier bound to this env's scene (bound on first use, then reused)."""
+        if factor not in self._appliers:
+            self._appliers[factor] = load_factor(factor).bind(self.scene)
+        return self._appliers[factor]
 
     @property
     def unstable(self) -> bool:
@@ -273,9 +296,8 @@ class PickPlaceEnv(gym.Env):
 
 
 def register() -> None:
-    """Register ENV_ID with gymnasium (idempotent)."""
-    if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="roboview_data.sim.env:PickPlaceEnv", max_episode_steps=DEFAULT_MAX_STEPS)
+    """Register the task's gymnasium id (idempotent; the task registry does it on import)."""
+    load_task(TASK)
 
 
 register()

@@ -21,12 +21,14 @@ class ScriptedExpert:
 
     def __init__(self, env: PickPlaceEnv) -> None:
         self.env = env
-        self.planner = PickPlacePlanner(env)
+        self.planner = PickPlacePlanner(env.model)
 
     def reset(self) -> None:
         """Plan from the current (just reset) simulator state, reading the object's true pose."""
         obj_pos, obj_quat = self.env.object_pose()
-        self.planner.plan(obj_pos, yaw_of(obj_quat), SHAPES[self.env.shape].symmetry)
+        arm_qpos = self.env.data.qpos[self.env.scene.ids.arm_qpos]
+        self.planner.plan(obj_pos, yaw_of(obj_quat), SHAPES[self.env.shape].symmetry, arm_qpos,
+                          ee_pos=self.env.ee_position())
 
     def select_action(self, observation: dict | None = None) -> np.ndarray:
         return self.planner.next_action()

@@ -16,8 +16,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from roboview_data.sim.env import PickPlaceEnv
-from roboview_data.sim.scene import BOX_CENTER, BOX_WALL_HEIGHT, HOME_QPOS
+from roboview_data.sim.scene import BOX_CENTER, BOX_WALL_HEIGHT, HOME_QPOS, SceneIds
 
 # Heights (m) of the pinch point: hover above the object, carry over the box, release.
 HOVER_Z = 0.12
@@ -50,11 +49,10 @@ def _min_jerk(s: float) -> float:
 class PickPlacePlanner:
     """Plans a grasp-carry-release path for a given object pose and follows it, one action per step."""
 
-    def __init__(self, env: PickPlaceEnv) -> None:
-        self.env = env
-        self.model = env.model
-        self._scratch = mujoco.MjData(env.model)
-        ids = env.scene.ids
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model  # the robot's kinematics: the scene compiled at defaults is enough
+        self._scratch = mujoco.MjData(model)
+        ids = SceneIds.lookup(model)
         self._qadr, self._dof, self._site = ids.arm_qpos, ids.arm_dof, ids.pinch_site
         self._jac_p = np.zeros((3, self.model.nv))
         self._jac_r = np.zeros((3, self.model.nv))
@@ -69,22 +67,21 @@ class PickPlacePlanner:
         self._t = 0
         self._q = HOME_QPOS.copy()
 
-    def plan(self, obj_pos: np.ndarray, obj_yaw: float, symmetry: float,
-             box_xy: np.ndarray = BOX_CENTER, arm_qpos: np.ndarray | None = None) -> None:
+    def plan(self, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, arm_qpos: np.ndarray,
+             box_xy: np.ndarray = BOX_CENTER, ee_pos: np.ndarray | None = None) -> None:
         """Plan the pick-and-place for an object at `obj_pos` (its center) with heading `obj_yaw`.
 
-        A non-privileged agent (the vision policy) passes its perceived box center and its own joint
-        reading `arm_qpos`; without one the plan starts from the env's current arm state.
+        `arm_qpos` is the arm's joint reading now; `ee_pos` the pinch point's position, computed from
+        it when not given. `box_xy` is the box center (perceived, for a non-privileged agent).
         `symmetry` is the object's rotational symmetry about z (rad), which bounds the wrist turn.
         """
-        if arm_qpos is None:
-            start = self.env.ee_position()
-            q_start = self.env.data.qpos[self._qadr].copy()
-        else:
-            q_start = np.asarray(arm_qpos, dtype=float).copy()
+        q_start = np.asarray(arm_qpos, dtype=float).copy()
+        if ee_pos is None:
             self._scratch.qpos[self._qadr] = q_start
             mujoco.mj_kinematics(self.model, self._scratch)
             start = self._scratch.site_xpos[self._site].copy()
+        else:
+            start = np.asarray(ee_pos, dtype=float).copy()
         # Fingers close along the site's y axis: align it with the object's x axis, picking the
         # symmetric equivalent nearest the current wrist yaw so the wrist turns as little as possible.
         half_turn = min(symmetry, np.pi)

@@ -241,12 +241,19 @@ class Scene:
         self.model = self.spec.compile()
         self.data = mujoco.MjData(self.model)
         self.ids = SceneIds.lookup(self.model)
+        self.active_shape = next(iter(SHAPES))
 
     def set_camera(self, pose: CameraPose) -> None:
         cam = self.ids.cameras[pose.name]
         self.model.cam_pos[cam] = pose.pos
         self.model.cam_quat[cam] = pose.quat
         self.model.cam_fovy[cam] = pose.fovy
+
+    def model_camera_pose(self, name: str) -> CameraPose:
+        """The pose a scene camera is compiled with now (its model pos/quat/fovy; world frame)."""
+        cam = self.ids.cameras[name]
+        return CameraPose(name, tuple(self.model.cam_pos[cam].tolist()), tuple(self.model.cam_quat[cam].tolist()),
+                          float(self.model.cam_fovy[cam]))
 
     def camera_pose(self, name: str) -> CameraPose:
         """Current world pose of any camera (including the wrist camera, after mj_forward)."""
@@ -258,15 +265,19 @@ class Scene:
         return CameraPose(name, tuple(self.data.cam_xpos[cam].tolist()), tuple(quat.tolist()),
                           float(self.model.cam_fovy[cam]))
 
-    def place_object(self, shape: str, xy: np.ndarray, yaw: float, rgba: np.ndarray) -> None:
+    @property
+    def active_geom(self) -> int:
+        """Geom id of the object on the table (what the `color` factor paints)."""
+        return self.ids.shape_geom[self.active_shape]
+
+    def place_object(self, shape: str, xy: np.ndarray, yaw: float) -> None:
         """Put `shape` on the table at `xy` with heading `yaw`; park every other shape."""
+        self.active_shape = shape
         for i, (name, spec) in enumerate(SHAPES.items()):
             adr = self.ids.shape_qpos[name]
-            geom = self.ids.shape_geom[name]
             if name == shape:
                 pos = [xy[0], xy[1], spec.half_height]
                 quat = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
-                self.model.geom_rgba[geom] = rgba
             else:
                 pos = [PARK_XY[0], PARK_XY[1] + 0.1 * i, spec.half_height]
                 quat = [1.0, 0.0, 0.0, 0.0]

@@ -20,11 +20,13 @@ from typing import Any
 
 from roboview_data.variation.colors import get_color
 from roboview_data.variation.factors import (
-    BASELINES,
-    CONTEXT_FACTORS,
-    FACTOR_NAMES,
-    VISUAL_FACTORS,
+    DEFAULT_TASK,
+    baselines,
+    context_factors,
+    factor_names,
     load_factor,
+    record_columns,
+    visual_factors,
 )
 from roboview_data.variation.svgf import (
     SUBSPACE_KEY,
@@ -41,10 +43,20 @@ from roboview_data.variation.svgf import (
 
 # Which variation subspace of C_Gen a context came from: a context factor's C_k^gen, "base" (the
 # baseline context G, in dedupe mode or as the factorial split's c*), or "cartesian".
-CONTEXT_SUBSPACES = ("base", "cartesian", *CONTEXT_FACTORS)
 SEED_MODULUS = 2**31
 FACTORIAL_SPLIT = "color_x_camera_pose"
-SPLITS = (*VISUAL_FACTORS, FACTORIAL_SPLIT)
+# The paper's splits: its four visual factors and their factorial (the `paper` preset's default).
+SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", FACTORIAL_SPLIT)
+
+
+def context_subspaces(task: str = DEFAULT_TASK) -> tuple[str, ...]:
+    """Where a context can come from: "base" (G), "cartesian", or one context factor's C_k^gen."""
+    return ("base", "cartesian", *context_factors(task))
+
+
+def known_splits() -> tuple[str, ...]:
+    """Every split a suite may generate: one per registered visual factor, and the factorial."""
+    return (*visual_factors(), FACTORIAL_SPLIT)
 # Saturated (red, green, blue), achromatic (black, white, gray) and low-saturation (rosybrown).
 DEFAULT_FACTORIAL_COLORS = ("red", "green", "blue", "black", "white", "gray", "rosybrown")
 
@@ -91,39 +103,49 @@ class TaskInstance:
 
     `factors` may be given as a mapping or as (name, value) pairs; it is stored as pairs in the
     canonical factor order (visual, then context) so instances are hashable and compare equal
-    whatever order they were built in.
+    whatever order they were built in. The paper's seven factors must all be given; a factor
+    registered later may be left out, which means its baseline.
+
+    Policies never see an instance: its factor values name the object's color and shape
+    (`policies.base.Episode` is what they get).
     """
 
     # Split the instance belongs to (color, camera_pose, ..., color_x_camera_pose, cartesian_*).
     split: str
     # The factor(s) this split varies, in the order of the `value` column.
     varied: tuple[str, ...]
-    # The value of all 7 factors, as (name, value) pairs in FACTOR_NAMES order.
+    # Every factor's value, as (name, value) pairs in factor_names(task) order.
     factors: tuple[tuple[str, str], ...]
-    # Variation subspace of C_Gen the context came from (one of CONTEXT_SUBSPACES).
+    # Variation subspace of C_Gen the context came from (one of context_subspaces(task)).
     context_subspace: str
+    # The task (roboview_data.sim.tasks); kept out of the id for the paper's pick_place.
+    task: str = DEFAULT_TASK
 
     def __post_init__(self) -> None:
         pairs = dict(self.factors.items() if isinstance(self.factors, Mapping) else self.factors)
-        if set(pairs) != set(FACTOR_NAMES):
-            missing = sorted(set(FACTOR_NAMES) - set(pairs))
-            extra = sorted(set(pairs) - set(FACTOR_NAMES))
+        names = factor_names(self.task)
+        for name in names:
+            if name not in pairs and not load_factor(name).always_in_id:
+                pairs[name] = load_factor(name).baseline
+        if set(pairs) != set(names):
+            missing = sorted(set(names) - set(pairs))
+            extra = sorted(set(pairs) - set(names))
             raise ValueError(
                 f"instance of split {self.split!r} must set every factor exactly once; "
                 f"missing {missing}, unknown {extra}"
             )
         for name, value in pairs.items():
             load_factor(name).validate(value)
-        object.__setattr__(self, "factors", tuple((name, pairs[name]) for name in FACTOR_NAMES))
+        object.__setattr__(self, "factors", tuple((name, pairs[name]) for name in names))
         object.__setattr__(self, "varied", tuple(self.varied))
         if not self.varied or len(set(self.varied)) != len(self.varied):
             raise ValueError(f"varied must name distinct factors, got {self.varied!r}")
         for name in self.varied:
             load_factor(name)
-        if self.context_subspace not in CONTEXT_SUBSPACES:
+        if self.context_subspace not in context_subspaces(self.task):
             raise ValueError(
                 f"unknown context_subspace {self.context_subspace!r}; "
-                f"allowed: {', '.join(CONTEXT_SUBSPACES)}"
+                f"allowed: {', '.join(context_subspaces(self.task))}"
             )
 
     @property
@@ -139,24 +161,32 @@ class TaskInstance:
     def context(self) -> dict[str, str]:
         """The task context c: the context factor values of this instance."""
         values = self.factor_values
-        return {name: values[name] for name in CONTEXT_FACTORS}
+        return {name: values[name] for name in context_factors(self.task)}
+
+    @property
+    def id_factors(self) -> dict[str, str]:
+        """The factor values an id hashes: the paper's seven always, any later factor only off its baseline
+        (so registering a factor changes no existing id; DESIGN.md "Stable ids")."""
+        return {name: value for name, value in self.factors
+                if load_factor(name).always_in_id or value != load_factor(name).baseline}
+
+    def _with_task(self, params: dict[str, Any]) -> dict[str, Any]:
+        return params if self.task == DEFAULT_TASK else params | {"task": self.task}
 
     @cached_property
     def instance_id(self) -> str:
-        """Stable id over split, varied, all factor values and the context subspace."""
-        return stable_id(
-            {
-                "split": self.split,
-                "varied": list(self.varied),
-                "factors": self.factor_values,
-                "context_subspace": self.context_subspace,
-            }
-        )
+        """Stable id over split, varied, the factor values, the context subspace and a non-default task."""
+        return stable_id(self._with_task({
+            "split": self.split,
+            "varied": list(self.varied),
+            "factors": self.id_factors,
+            "context_subspace": self.context_subspace,
+        }))
 
     @cached_property
     def context_id(self) -> str:
         """Stable id of the context c; shared by every instance that runs in the same context."""
-        return stable_id({"context": self.context, "context_subspace": self.context_subspace})
+        return stable_id(self._with_task({"context": self.context, "context_subspace": self.context_subspace}))
 
     @property
     def factor(self) -> str:
@@ -176,17 +206,16 @@ class TaskInstance:
 
     def to_record(self) -> dict[str, Any]:
         """The instance-record columns that need no simulator (DESIGN.md, "Instance record")."""
-        color = get_color(self.get("color"))
         return {
             "instance_id": self.instance_id,
+            "task": self.task,
             "split": self.split,
             "factor": self.factor,
             "value": self.value,
             "context_id": self.context_id,
+            "context_subspace": self.context_subspace,
             **self.factor_values,
-            "color_hex": color.hex,
-            "color_rgb": list(color.rgb),
-            "color_lab": list(color.lab),
+            **record_columns(self.factor_values),
             "seed": self.seed,
         }
 
@@ -223,8 +252,8 @@ class SuiteConfig:
         if self.union_mode not in UNION_MODES:
             raise ValueError(f"unknown union_mode {self.union_mode!r}; allowed: {UNION_MODES}")
         for split in self.splits:
-            if split not in SPLITS:
-                raise ValueError(f"unknown split {split!r}; allowed: {', '.join(SPLITS)}")
+            if split not in known_splits():
+                raise ValueError(f"unknown split {split!r}; allowed: {', '.join(known_splits())}")
         if len(set(self.splits)) != len(self.splits):
             raise ValueError(f"splits listed twice in {self.splits!r}")
         if not self.factorial_colors and FACTORIAL_SPLIT in self.splits:
@@ -277,7 +306,7 @@ PRESETS: dict[str, SuiteConfig] = {
             ("dist_scale", ("0", "4", "8")),
             ("initial_position", ("center", "left")),
             ("shape", ("cube", "cylinder")),
-            ("instruction", (BASELINES["instruction"],)),
+            ("instruction", (baselines()["instruction"],)),
         ),
     ),
 }

@@ -24,14 +24,14 @@ import numpy as np
 
 from roboview_data.sim.cameras import (
     BASE_CAMERAS,
-    ORBIT_RINGS,
     PERTURBED_CAMERAS,
     WORKSPACE_CENTER,
     CameraPose,
     look_at,
 )
 from roboview_data.variation.colors import get_color, srgb_to_lab
-from roboview_data.variation.factors import BASELINES
+from roboview_data.variation.factors import baselines
+from roboview_data.variation.factors.camera import ORBIT_RINGS
 
 RANDOMIZABLE = ("color", "camera_pose")
 RING_COORD_RANGE = (-0.1, 1.1)
@@ -79,7 +79,7 @@ class Randomization:
 
 def baseline_randomization() -> Randomization:
     """What a context-only episode shows: the baseline color and the original cameras."""
-    return Randomization(get_color(BASELINES["color"]).rgb,
+    return Randomization(get_color(baselines()["color"]).rgb,
                          {name: BASE_CAMERAS[name] for name in PERTURBED_CAMERAS})
 
 

@@ -30,12 +30,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from roboview_data.variation.factors import (
-    BASELINES,
-    CONTEXT_FACTORS,
-    FACTOR_NAMES,
-    VISUAL_FACTORS,
     Factor,
+    baselines,
+    context_factors,
+    factor_names,
     load_factor,
+    visual_factors,
 )
 
 # Assignment key under which a tree labels the C_Gen subspace a context came from.
@@ -108,14 +108,14 @@ class ContextSampler:
 
     def __init__(self, values: Mapping[str, Sequence[str]] | None = None) -> None:
         values = dict(values or {})
-        unknown = sorted(set(values) - set(CONTEXT_FACTORS))
+        unknown = sorted(set(values) - set(context_factors()))
         if unknown:
-            raise ValueError(f"not context factors: {unknown}; allowed: {CONTEXT_FACTORS}")
-        self.modules = tuple(FactorSampler(name, values.get(name)) for name in CONTEXT_FACTORS)
+            raise ValueError(f"not context factors: {unknown}; allowed: {context_factors()}")
+        self.modules = tuple(FactorSampler(name, values.get(name)) for name in context_factors())
 
     def sample_context(self, rng: np.random.Generator) -> dict[str, str]:
-        """All 7 factor values: visual at baseline, context drawn in CONTEXT_FACTORS order."""
-        context = dict(BASELINES)
+        """All 7 factor values: visual at baseline, context drawn in context_factors() order."""
+        context = baselines()
         for module in self.modules:
             context[module.name] = module.sample(rng)
         return context
@@ -217,12 +217,12 @@ def _sampler(name: str, subsets: Mapping[str, Sequence[str]]) -> FactorSampler:
 
 
 def _fixed_at_baseline(names: Sequence[str]) -> tuple[FixedSampler, ...]:
-    return tuple(FixedSampler(name, BASELINES[name]) for name in names)
+    return tuple(FixedSampler(name, baselines()[name]) for name in names)
 
 
 def baseline_context() -> Product:
     """The baseline context G (c* of the factorial split), labelled "base"."""
-    return Product(Label(SUBSPACE_KEY, "base"), *_fixed_at_baseline(CONTEXT_FACTORS))
+    return Product(Label(SUBSPACE_KEY, "base"), *_fixed_at_baseline(context_factors()))
 
 
 def context_space(
@@ -238,14 +238,14 @@ def context_space(
     subsets = subsets or {}
     subspaces: list[VariantNode] = []
     contains_baseline = False
-    for name in CONTEXT_FACTORS:
+    for name in context_factors():
         values = _sampler(name, subsets).values()
         if union_mode == "dedupe":
-            contains_baseline |= BASELINES[name] in values
-            values = tuple(v for v in values if v != BASELINES[name])
+            contains_baseline |= baselines()[name] in values
+            values = tuple(v for v in values if v != baselines()[name])
             if not values:
                 continue
-        others = [other for other in CONTEXT_FACTORS if other != name]
+        others = [other for other in context_factors() if other != name]
         subspaces.append(
             Product(
                 Label(SUBSPACE_KEY, name),
@@ -266,11 +266,11 @@ def task_subspace(
     Context-major order (all values of V_i within one context, then the next context), so the
     first N instances of a split already give a per-context spread over V_i.
     """
-    if factor not in VISUAL_FACTORS:
+    if factor not in visual_factors():
         raise ValueError(
-            f"task subspaces exist for visual factors {VISUAL_FACTORS}, not {factor!r}"
+            f"task subspaces exist for visual factors {visual_factors()}, not {factor!r}"
         )
-    others = [name for name in VISUAL_FACTORS if name != factor]
+    others = [name for name in visual_factors() if name != factor]
     return Product(c_gen, _sampler(factor, subsets or {}), *_fixed_at_baseline(others))
 
 
@@ -278,7 +278,7 @@ def factorial_subspace(
     colors: Sequence[str], subsets: Mapping[str, Sequence[str]] | None = None
 ) -> Product:
     """color × camera_pose in the single baseline context c*, color-major."""
-    others = [name for name in VISUAL_FACTORS if name not in ("color", "camera_pose")]
+    others = [name for name in visual_factors() if name not in ("color", "camera_pose")]
     return Product(
         baseline_context(),
         FactorSampler("color", colors),
@@ -296,7 +296,7 @@ def cartesian_subspace(
     factors: Sequence[str], subsets: Mapping[str, Sequence[str]] | None = None
 ) -> Product:
     """Full Cartesian product over `factors` (first slowest); every other factor at baseline."""
-    others = [name for name in FACTOR_NAMES if name not in factors]
+    others = [name for name in factor_names() if name not in factors]
     return Product(
         Label(SUBSPACE_KEY, "cartesian"),
         *(_sampler(name, subsets or {}) for name in factors),

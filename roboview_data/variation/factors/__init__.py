@@ -1,0 +1,63 @@
+"""The factor registry: every axis of variation, each declared in one module.
+
+The paper (§5.1) partitions factors into visual perturbation dimensions V, whose bias we measure,
+and task context dimensions D, which only diversify the scenarios. Every factor value is a string
+exactly as it is stored in the instance records, so the records, the samplers and the env all
+speak one vocabulary.
+
+To add a visual factor, write one module like `color.py` — a `Factor` with its values, baseline,
+title and an applier that writes a value into the compiled scene — and add it to BUILTIN_MODULES
+(or call `register_factor` from your own package before building a suite).
+
+    >>> load_factor("dist_scale").values
+    ('0', '1', '2', '3', '4', '5', '6', '7', '8')
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from roboview_data.variation.factors.base import (
+    DEFAULT_TASK,
+    FACTOR_KINDS,
+    FACTORS,
+    Factor,
+    SceneApplier,
+    baselines,
+    context_factors,
+    factor_names,
+    load_factor,
+    record_columns,
+    register_factor,
+    unregister_factor,
+    visual_factors,
+)
+
+# Registry lines: imported in this order, which is the order of the record columns and of the
+# appliers at reset (orbital pose before Euler turn before pull-back).
+BUILTIN_MODULES = (
+    "roboview_data.variation.factors.color",
+    "roboview_data.variation.factors.camera",
+    "roboview_data.variation.factors.context",
+)
+for _module in BUILTIN_MODULES:
+    importlib.import_module(_module)
+
+from roboview_data.variation.factors.camera import (  # noqa: E402  (after registration)
+    CAMERA_POSE_BASELINE,
+    DIST_STEP_M,
+    EULER_STEPS_DEG,
+    N_ORBIT_POSES_PER_RING,
+    N_ORBIT_RINGS,
+    parse_camera_pose,
+    parse_dist_scale,
+    parse_euler,
+)
+from roboview_data.variation.factors.context import OBJECT_POSITIONS  # noqa: E402
+
+__all__ = [
+    "BUILTIN_MODULES", "CAMERA_POSE_BASELINE", "DEFAULT_TASK", "DIST_STEP_M", "EULER_STEPS_DEG", "FACTORS",
+    "FACTOR_KINDS", "N_ORBIT_POSES_PER_RING", "N_ORBIT_RINGS", "OBJECT_POSITIONS", "Factor", "SceneApplier", "baselines", "context_factors", "factor_names",
+    "load_factor", "parse_camera_pose", "parse_dist_scale", "parse_euler", "record_columns", "register_factor",
+    "unregister_factor", "visual_factors",
+]

@@ -1,0 +1,146 @@
+"""What a factor is, and the live registry of them.
+
+A `Factor` declares everything the rest of RoboView needs to know about one axis of variation: its
+values (strings, exactly as stored in the instance records), its baseline, the record columns a
+value adds, the title reports give it, and — for a visual factor — how a value changes the compiled
+scene. That last part is an *applier* (dm_control's `PhysicsVariator`: `bind_attributes`, then
+`apply_variations`): `bind(scene)` looks up and keeps the model attributes it writes, once per env;
+`apply(value, rng)` writes them in place at every reset, with the episode's generator. `env.reset`
+applies every registered visual factor in registration order, so a factor never needs the env to
+know about it.
+
+Context factors (kind "context") belong to one task: they diversify its scenarios (where the object
+starts, which solid it is, how the instruction is phrased) and the task's env places them itself.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+FACTOR_KINDS = ("visual", "context")
+DEFAULT_TASK = "pick_place"
+
+
+class SceneApplier(Protocol):
+    """Bound to one env's compiled scene; writes a factor value into it in place."""
+
+    def apply(self, value: str, rng: np.random.Generator) -> None: ...
+
+
+@dataclass(frozen=True)
+class Factor:
+    """One variable factor: the values a split sweeps, its baseline, and what a value does.
+
+    `values` are the swept values. The baseline is usually one of them; for `camera_pose` it is
+    not (the unperturbed cameras are not an orbital pose), so use `is_valid` / `validate`, which
+    accept the baseline too, to check a stored value.
+    """
+
+    # Factor name as used in records and split names.
+    name: str
+    # "visual" (V: bias is measured over it) or "context" (D: diversifies task scenarios).
+    kind: str
+    # The values a split over this factor sweeps, in their canonical order.
+    values: tuple[str, ...]
+    # The value held fixed while other factors vary (paper's b_k or g_k).
+    baseline: str
+    # What a value means physically.
+    doc: str
+    # Title of the factor's section and column in reports.
+    title: str = ""
+    # Visual factors: `bind(scene) -> SceneApplier`. None for context factors (the task places them).
+    bind: Callable[[Any], SceneApplier] | None = field(default=None, compare=False, repr=False)
+    # Extra instance-record columns for a value (e.g. color -> color_hex / color_rgb / color_lab).
+    record_columns: Callable[[str], dict[str, Any]] | None = field(default=None, compare=False, repr=False)
+    # Context factors: the task they belong to. Visual factors apply to every task (None).
+    task: str | None = None
+    # The paper's seven factors are always in an instance's canonical JSON (its id); a factor added
+    # later is there only when set away from its baseline, so every published id stays the same.
+    always_in_id: bool = False
+
+    def __post_init__(self) -> None:
+        if self.kind not in FACTOR_KINDS:
+            raise ValueError(f"factor {self.name!r}: kind {self.kind!r} not in {FACTOR_KINDS}")
+        if not self.values:
+            raise ValueError(f"factor {self.name!r} has no values")
+        if len(set(self.values)) != len(self.values):
+            raise ValueError(f"factor {self.name!r} has duplicate values")
+        if self.kind == "visual" and (self.bind is None or self.task is not None):
+            raise ValueError(f"visual factor {self.name!r} needs a `bind` applier and no task")
+        if self.kind == "context" and self.task is None:
+            raise ValueError(f"context factor {self.name!r} must name its task")
+        if not self.title:
+            object.__setattr__(self, "title", self.name.replace("_", " ").capitalize())
+
+    def is_valid(self, value: str) -> bool:
+        """True for a swept value or the baseline."""
+        return value == self.baseline or value in self.values
+
+    def validate(self, value: str) -> str:
+        """Return `value` if valid; otherwise raise naming the value and the allowed set."""
+        if self.is_valid(value):
+            return value
+        allowed = self.values if self.baseline in self.values else (self.baseline, *self.values)
+        close = difflib.get_close_matches(str(value), allowed, n=3)
+        hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+        raise ValueError(f"unknown {self.name} {value!r}; allowed: {', '.join(allowed)}{hint}")
+
+
+# The live registry, in registration order: the order of record columns and of appliers at reset.
+FACTORS: dict[str, Factor] = {}
+
+
+def register_factor(factor: Factor) -> Factor:
+    """Add `factor` to the registry (a name can be registered once)."""
+    if factor.name in FACTORS:
+        raise ValueError(f"factor {factor.name!r} is already registered")
+    FACTORS[factor.name] = factor
+    return factor
+
+
+def unregister_factor(name: str) -> None:
+    """Remove a factor (tests that register a throwaway factor clean up with this)."""
+    FACTORS.pop(name, None)
+
+
+def load_factor(name: str) -> Factor:
+    """Return the registered factor `name`; unknown names raise listing the valid ones."""
+    try:
+        return FACTORS[name]
+    except KeyError:
+        raise ValueError(f"unknown factor {name!r}; valid factors: {', '.join(FACTORS)}") from None
+
+
+def visual_factors() -> tuple[str, ...]:
+    """Names of the visual factors V, in registration order."""
+    return tuple(f.name for f in FACTORS.values() if f.kind == "visual")
+
+
+def context_factors(task: str = DEFAULT_TASK) -> tuple[str, ...]:
+    """Names of `task`'s context factors D, in registration order."""
+    return tuple(f.name for f in FACTORS.values() if f.kind == "context" and f.task == task)
+
+
+def factor_names(task: str = DEFAULT_TASK) -> tuple[str, ...]:
+    """Every factor an instance of `task` sets: visual, then context."""
+    return visual_factors() + context_factors(task)
+
+
+def baselines(task: str = DEFAULT_TASK) -> dict[str, str]:
+    """Every factor of `task` at its baseline."""
+    return {name: FACTORS[name].baseline for name in factor_names(task)}
+
+
+def record_columns(values: Mapping[str, str]) -> dict[str, Any]:
+    """The extra record columns every factor derives from its value (e.g. the color's hex and Lab)."""
+    out: dict[str, Any] = {}
+    for name, value in values.items():
+        factor = FACTORS[name]
+        if factor.record_columns is not None:
+            out |= factor.record_columns(value)
+    return out
