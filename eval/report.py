@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import pyarrow.parquet as pq
 
 from eval.metrics import (
     METRIC_COLUMNS,
@@ -34,7 +33,7 @@ from eval.metrics import (
     compute_all_metrics,
     policy_layouts,
 )
-from eval.results import FORMAT_KEY, RESULTS_FORMAT
+from eval.results import ResultsError, read_episodes, read_version
 from roboview_data.variation.factors import visual_factors
 
 log = logging.getLogger(__name__)
@@ -58,13 +57,6 @@ class ReportResult:
     plots: dict[str, str | None]  # file name → None when written, else why it was skipped
 
 
-def read_version(path: Path) -> str | None:
-    """The file's `roboview_benchmark_version` parquet metadata, None when it has none."""
-    meta = pq.read_schema(path).metadata or {}
-    raw = meta.get(VERSION_KEY.encode())
-    return None if raw is None else raw.decode()
-
-
 def load_results(paths: Sequence[str | Path],
                  names: Sequence[str | None] | None = None) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
     """Read and validate episode tables; returns their concatenation and per-file provenance.
@@ -81,14 +73,12 @@ def load_results(paths: Sequence[str | Path],
     if missing:
         raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
     sources = [{"path": str(p), VERSION_KEY: read_version(p)} for p in paths]
+    tables = []
     for path in paths:
-        fmt = (pq.read_schema(path).metadata or {}).get(FORMAT_KEY)
-        if fmt != str(RESULTS_FORMAT).encode():
-            found = "none (format 1)" if fmt is None else fmt.decode()
-            raise EpisodesError(
-                f"{path} was written with results format {found}, whose episode seeds hashed instance_id; "
-                f"this version reports format {RESULTS_FORMAT} only (seeds shared per context and repeat, the "
-                "pairing its statistics rely on). Re-run pipelines.evaluate into a new --output_dir")
+        try:
+            tables.append(read_episodes(path))
+        except ResultsError as exc:
+            raise EpisodesError(str(exc)) from exc
     versioned = [s for s in sources if s[VERSION_KEY] is not None]
     for s in versioned[1:]:
         if s[VERSION_KEY] != versioned[0][VERSION_KEY]:
@@ -97,8 +87,7 @@ def load_results(paths: Sequence[str | Path],
                 f"{VERSION_KEY}={versioned[0][VERSION_KEY]!r}, {s['path']} has {s[VERSION_KEY]!r}; "
                 "report runs of one benchmark version together")
     frames = []
-    for path, name in zip(paths, names):
-        frame = pd.read_parquet(path)
+    for path, name, frame in zip(paths, names, tables):
         check_episodes(frame, REQUIRED_COLUMNS, source=str(path))
         if name:
             if frame["policy"].nunique() > 1:

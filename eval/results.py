@@ -1,4 +1,11 @@
-"""Crash-safe episode results: a line-per-episode journal plus an atomically refreshed parquet.
+"""Episode results — written and read here, nowhere else.
+
+A results folder holds `run.json` (what was run: benchmark version, policy and its options, repeats,
+image size, results format), `episodes.jsonl` (the journal) and `episodes.parquet` (its table, with
+the benchmark version, policy and results format in the parquet metadata). `EpisodeStore` writes a
+folder crash-safely; `read_episodes` reads one parquet back, refusing other results formats.
+
+Crash safety: a line-per-episode journal plus an atomically refreshed parquet.
 
 Each finished episode is appended to `episodes.jsonl` and flushed to disk before anything else
 happens, so a killed run loses at most the episodes still in flight. `episodes.parquet` is
@@ -14,6 +21,7 @@ import os
 import time
 from pathlib import Path
 
+import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -44,22 +52,22 @@ class EpisodeStore:
     def _check_and_load(self) -> None:
         out = self.out
         if out.exists() and not out.is_dir():
-            raise ResultsError(f"--output_dir={out} is a file; give a folder")
+            raise ResultsError(f"results folder {out} is a file; give a folder")
         run_file = out / RUN_FILE
         if out.is_dir() and any(out.iterdir()) and not run_file.is_file():
-            raise ResultsError(f"--output_dir={out} is not empty and holds no RoboView evaluation "
+            raise ResultsError(f"results folder {out} is not empty and holds no RoboView evaluation "
                                f"({RUN_FILE} missing); choose a new folder")
         if run_file.is_file():
             previous = json.loads(run_file.read_text())
             if previous.get("results_format", 1) != RESULTS_FORMAT:
                 raise ResultsError(
-                    f"--output_dir={out} holds results of format {previous.get('results_format', 1)} (episode seeds "
+                    f"results folder {out} holds results of format {previous.get('results_format', 1)} (episode seeds "
                     f"hashed from instance_id); this version writes format {RESULTS_FORMAT} (seeds shared per "
                     "context and repeat) and never mixes the two: choose a new folder")
             diffs = [f"{k}: existing {previous.get(k)!r} vs requested {v!r}"
                      for k, v in self.run_info.items() if previous.get(k) != v]
             if diffs:
-                raise ResultsError(f"--output_dir={out} holds results of a different run ({'; '.join(diffs)}); "
+                raise ResultsError(f"results folder {out} holds results of a different run ({'; '.join(diffs)}); "
                                    "rerun the same command to resume, or choose a new folder")
         out.mkdir(parents=True, exist_ok=True)
         run_file.write_text(json.dumps(self.run_info, indent=2, sort_keys=True))
@@ -106,3 +114,21 @@ class EpisodeStore:
     def close(self) -> None:
         self.write_parquet()
         self._journal.close()
+
+
+def read_version(path: str | Path) -> str | None:
+    """The results file's benchmark version (parquet metadata); None when it records none."""
+    raw = (pq.read_schema(path).metadata or {}).get(VERSION_KEY)
+    return None if raw is None else raw.decode()
+
+
+def read_episodes(path: str | Path) -> pd.DataFrame:
+    """The episode rows of one results parquet; other results formats raise ResultsError."""
+    fmt = (pq.read_schema(path).metadata or {}).get(FORMAT_KEY)
+    if fmt != str(RESULTS_FORMAT).encode():
+        found = "none (format 1)" if fmt is None else fmt.decode()
+        raise ResultsError(
+            f"{path} was written with results format {found}, whose episode seeds hashed instance_id; "
+            f"this version reads format {RESULTS_FORMAT} only (seeds shared per context and repeat, the "
+            "pairing its statistics rely on). Re-run pipelines.evaluate into a new output folder")
+    return pd.read_parquet(path)

@@ -23,6 +23,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
+from roboview_data.cli_errors import flag_errors
 from roboview_data.demos.dataset import (
     ROBOT_TYPE,
     CollectionSignature,
@@ -83,7 +84,8 @@ class DatasetConfig:
                              f"allowed: {', '.join(ALL_CAMERAS)}")
         if self.vcodec not in VCODECS:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
-        self.randomize = list(validate_randomize(self.randomize))
+        with flag_errors("--dataset.randomize"):
+            self.randomize = list(validate_randomize(self.randomize))
 
 
 @dataclass
@@ -167,7 +169,8 @@ def _open_dataset(cfg: CollectConfig, create: bool):
 
 def run(cfg: CollectConfig) -> CollectResult:
     root = Path(cfg.dataset.root)
-    progress = check_root(root, cfg.signature)  # every input error surfaces here, before work
+    with flag_errors("--dataset.root"):
+        progress = check_root(root, cfg.signature)  # every input error surfaces here, before work
     if progress is not None:
         roll_back(root, progress)
         if progress.episodes_saved == 0:  # nothing complete yet: start over cleanly

@@ -21,6 +21,7 @@ import pandas as pd
 
 from pipelines._cli import cli_main
 from roboview_data.benchmark.format import load_benchmark
+from roboview_data.cli_errors import flag_errors
 from roboview_data.demos.coverage import (
     STATUSES,
     Radii,
@@ -131,9 +132,11 @@ def _markdown(cfg: CoverageConfig, visuals: TrainingVisuals, table: pd.DataFrame
 
 
 def run(cfg: CoverageConfig) -> pd.DataFrame:
-    visuals = load_training_visuals(cfg.dataset.root)
+    with flag_errors("--dataset.root"):
+        visuals = load_training_visuals(cfg.dataset.root)
     splits = [s.strip() for s in cfg.benchmark.splits.split(",") if s.strip()] or None
-    bench = load_benchmark(cfg.benchmark.path, splits)
+    with flag_errors("--benchmark.path"):
+        bench = load_benchmark(cfg.benchmark.path, splits)
     records = [item.record for items in bench.splits.values() for item in items]
     table = audit(visuals, records, Radii(cfg.color_radius, cfg.pose_radius_m, cfg.pose_angle_deg))
     out = Path(cfg.output_dir)

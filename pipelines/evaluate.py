@@ -26,6 +26,7 @@ from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
 from roboview_data.benchmark.format import load_benchmark
+from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.tasks import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -151,7 +152,8 @@ def resolve_image_size(policy: PolicyConfig, requested: int) -> int:
 
 
 def run(cfg: EvaluateConfig) -> EvaluateResult:
-    bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
+    with flag_errors("--benchmark.path"):
+        bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
     policy = cfg.policy
     unknown = [s for s in cfg.eval.split_repeat_table if s not in bench.splits]
     if unknown:
@@ -174,7 +176,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
                 "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
                 "policy_options": policy.options(), "n_repeats": repeats,
                 "max_steps": cfg.eval.max_steps, "image_size": image_size}
-    store = EpisodeStore(Path(cfg.output_dir), run_info)
+    with flag_errors("--output_dir"):
+        store = EpisodeStore(Path(cfg.output_dir), run_info)
     work = []
     for split, items in bench.splits.items():
         if cfg.eval.contexts:

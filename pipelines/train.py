@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pipelines._cli import cli_main
-from policies.lerobot_policy import DEVICES, resolve_device
+from policies.devices import DEVICES, resolve_device
+from roboview_data.cli_errors import flag_errors
 
 
 @dataclass
@@ -75,6 +76,11 @@ def last_checkpoint(output_dir: Path) -> Path | None:
     return config if config.is_file() else None
 
 
+def _device(device: str) -> str:
+    with flag_errors("--device"):
+        return resolve_device(device)
+
+
 def command(cfg: TrainConfig) -> list[str]:
     """lerobot-train's argument list: a fresh run, or a resume from the run folder's last checkpoint."""
     out = Path(cfg.output_dir)
@@ -86,7 +92,7 @@ def command(cfg: TrainConfig) -> list[str]:
         raise ValueError(f"--output_dir={out} is not empty and holds no checkpoint to resume; choose a new folder")
     return [*trainer, f"--dataset.repo_id={cfg.dataset.repo_id}", f"--dataset.root={cfg.dataset.root}",
             "--policy.type=act", "--policy.pretrained_backbone_weights=null", "--policy.push_to_hub=false",
-            f"--policy.device={resolve_device(cfg.device, '--device')}", "--policy.dim_model=256",
+            f"--policy.device={_device(cfg.device)}", "--policy.dim_model=256",
             "--policy.dim_feedforward=1024", "--policy.n_encoder_layers=2", "--policy.n_vae_encoder_layers=2",
             f"--policy.chunk_size={cfg.chunk_size}", f"--policy.n_action_steps={cfg.n_action_steps}",
             f"--policy.optimizer_lr={cfg.lr}", f"--policy.optimizer_lr_backbone={cfg.lr}",

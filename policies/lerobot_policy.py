@@ -18,13 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
+from policies.devices import resolve_device
+from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 
 
-DEVICES = ("auto", "cpu", "cuda")
 
 
 class CheckpointError(ValueError):
@@ -33,13 +34,13 @@ class CheckpointError(ValueError):
 
 def _checkpoint_dir(path: str | None) -> Path:
     if not path:
-        raise CheckpointError("--policy.type=lerobot needs --policy.path=DIR (a `pretrained_model` folder "
+        raise CheckpointError("a LeRobot policy needs a checkpoint path (a `pretrained_model` folder "
                               "written by lerobot-train, e.g. outputs/train/checkpoints/last/pretrained_model)")
     root = Path(path)
     if (root / "pretrained_model" / "config.json").is_file():
         root = root / "pretrained_model"
     if not (root / "config.json").is_file():
-        raise CheckpointError(f"--policy.path={path} holds no LeRobot checkpoint (config.json missing)")
+        raise CheckpointError(f"{path} holds no LeRobot checkpoint (config.json missing)")
     return root
 
 
@@ -92,17 +93,6 @@ def checkpoint_image_size(path: str | None) -> int | None:
         raise CheckpointError(f"checkpoint image shapes {shapes}: the env renders every camera as one square "
                               "size; retrain on a dataset collected with --dataset.image_size=N")
     return sides.pop() if sides else None
-
-
-def resolve_device(device: str, flag: str = "--policy.device") -> str:
-    """auto → cuda when a CUDA device is visible, else cpu; cuda without one is an error."""
-    import torch
-
-    if device not in DEVICES:
-        raise CheckpointError(f"unknown {flag}={device!r}; allowed: {', '.join(DEVICES)}")
-    if device == "cuda" and not torch.cuda.is_available():
-        raise CheckpointError(f"{flag}=cuda but no CUDA device is visible here; use auto or cpu")
-    return ("cuda" if torch.cuda.is_available() else "cpu") if device == "auto" else device
 
 
 def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
@@ -168,8 +158,10 @@ class LeRobotConfig(PolicyConfig):
     doc = "any LeRobot checkpoint (--policy.path=DIR)"
 
     def __post_init__(self) -> None:
-        load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
-        resolve_device(self.device)
+        with flag_errors("--policy.path"):
+            load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
+        with flag_errors(f"--policy.device={self.device!r}"):
+            resolve_device(self.device)
 
     @property
     def checkpoint(self) -> str | None:

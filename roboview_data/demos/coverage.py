@@ -21,14 +21,13 @@ baseline color and original cameras in every episode).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from roboview_data.demos.dataset import PROVENANCE_FILE
+from roboview_data.demos.dataset import read_provenance
 from roboview_data.sim.cameras import PERTURBED_CAMERAS, quat_to_mat
 from roboview_data.variation.colors import delta_e_2000
 from roboview_data.variation.factors import context_factors
@@ -37,7 +36,6 @@ from roboview_data.variation.randomization import baseline_randomization
 STATUSES = ("exact", "nearby", "never")
 EXACT_DELTA_E = 0.01
 EXACT_POS_M, EXACT_ANGLE_DEG, EXACT_FOVY_DEG = 1e-3, 0.01, 0.01
-IMAGE_PREFIX = "observation.images."
 
 
 @dataclass(frozen=True)
@@ -65,16 +63,8 @@ class TrainingVisuals:
 
 
 def load_training_visuals(root: str | Path) -> TrainingVisuals:
-    root = Path(root)
-    info_path = root / "meta" / "info.json"
-    prov_path = root / PROVENANCE_FILE
-    if not info_path.is_file() or not prov_path.is_file():
-        raise ValueError(f"--dataset.root={root} is not a pipelines.collect dataset ({info_path.relative_to(root)} "
-                         f"or {PROVENANCE_FILE} missing)")
-    cameras = [k[len(IMAGE_PREFIX):] for k in json.loads(info_path.read_text())["features"]
-               if k.startswith(IMAGE_PREFIX)]
+    prov, cameras = read_provenance(root)
     audited = next((c for c in cameras if c in PERTURBED_CAMERAS), None)
-    prov = pd.read_parquet(prov_path)
     base = baseline_randomization()
     n = len(prov)
     if "object_lab" in prov:

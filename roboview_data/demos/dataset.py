@@ -98,12 +98,12 @@ class Progress:
 def check_root(root: Path, signature: CollectionSignature) -> Progress | None:
     """Validate `root` before any work: None = start fresh, else the checkpoint to resume from."""
     if root.exists() and not root.is_dir():
-        raise DatasetRootError(f"--dataset.root={root} is a file; give a folder (new or from an earlier run)")
+        raise DatasetRootError(f"dataset root {root} is a file; give a folder (new or from an earlier run)")
     if not root.exists() or not any(root.iterdir()):
         return None
     if not (root / PROGRESS_FILE).is_file():
         raise DatasetRootError(
-            f"--dataset.root={root} is not empty and holds no RoboView collection "
+            f"dataset root {root} is not empty and holds no RoboView collection "
             f"({PROGRESS_FILE} missing); choose a new folder or delete this one")
     progress = Progress.load(root)
     if progress.signature != signature:
@@ -111,7 +111,7 @@ def check_root(root: Path, signature: CollectionSignature) -> Progress | None:
                  if (tuple(v) if isinstance(v, list) else v) != getattr(signature, k)}
         detail = ", ".join(f"{k}: existing {old!r} vs requested {new!r}" for k, (old, new) in diffs.items())
         raise DatasetRootError(
-            f"--dataset.root={root} holds a collection made with different settings ({detail}); "
+            f"dataset root {root} holds a collection made with different settings ({detail}); "
             "rerun with the same settings to resume, or choose a new root")
     return progress
 
@@ -138,8 +138,22 @@ def write_checkpoint(root: Path, progress: Progress, provenance: list[dict]) -> 
 
 
 def load_provenance(root: Path) -> list[dict]:
+    """The per-episode provenance rows collected so far (none yet: empty)."""
     path = root / PROVENANCE_FILE
     return pd.read_parquet(path).to_dict("records") if path.exists() else []
+
+
+def read_provenance(root: str | Path) -> tuple[pd.DataFrame, list[str]]:
+    """A finished collection's per-episode provenance and its camera names (from meta/info.json)."""
+    root = Path(root)
+    info_path = root / "meta" / "info.json"
+    if not info_path.is_file() or not (root / PROVENANCE_FILE).is_file() or not (root / PROGRESS_FILE).is_file():
+        raise DatasetRootError(f"{root} is not a pipelines.collect dataset (meta/info.json, {PROVENANCE_FILE} or "
+                               f"{PROGRESS_FILE} missing)")
+    Progress.load(root)  # checks the format version
+    prefix = IMAGE_KEY.format("")
+    cameras = [k[len(prefix):] for k in json.loads(info_path.read_text())["features"] if k.startswith(prefix)]
+    return pd.read_parquet(root / PROVENANCE_FILE), cameras
 
 
 def roll_back(root: Path, progress: Progress) -> int:

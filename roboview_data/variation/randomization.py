@@ -45,8 +45,8 @@ def validate_randomize(names: list[str] | tuple[str, ...]) -> tuple[str, ...]:
     """The randomized factors in canonical order; unknown or repeated names raise, naming the allowed ones."""
     bad = [n for n in names if n not in RANDOMIZABLE]
     if bad or len(set(names)) != len(names):
-        raise ValueError(f"--dataset.randomize={list(names)}: unknown or repeated factor(s) {bad}; "
-                         f"allowed: {', '.join(RANDOMIZABLE)} (e.g. --dataset.randomize='[camera_pose]')")
+        raise ValueError(f"randomize={list(names)}: unknown or repeated factor(s) {bad}; "
+                         f"allowed: {', '.join(RANDOMIZABLE)}")
     return tuple(n for n in RANDOMIZABLE if n in names)
 
 
