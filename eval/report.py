@@ -34,7 +34,7 @@ from eval.metrics import (
     policy_layouts,
 )
 from eval.results import ResultsError, read_episodes, read_version
-from roboview_data.variation.factors import visual_factors
+from roboview_data.variation.factors import FACTORS, visual_factors
 
 log = logging.getLogger(__name__)
 
@@ -42,8 +42,11 @@ VERSION_KEY = "roboview_benchmark_version"
 REQUIRED_COLUMNS = (*METRIC_COLUMNS, "repeat")
 METRICS_FILE = "metrics.json"
 REPORT_FILE = "report.md"
-_TITLES = {"color": "Color", "camera_pose": "Camera Pose", "camera_euler": "Camera Euler",
-           "dist_scale": "Dist Scale"}
+def _title(split: str) -> str:
+    """A split's column title: its factor's own title (factor registry), else the split name."""
+    return FACTORS[split].title if split in FACTORS else split
+
+
 _N_EXTREMES = 3  # values listed at each end of the per-value deviation ranking
 ALPHA = 0.05  # level at which the report calls a difference significant
 
@@ -164,7 +167,7 @@ def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
 
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
     splits = _split_order(layouts, "splits")
-    header = ["Policy", *(f"{_TITLES.get(s, s)} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
+    header = ["Policy", *(f"{_title(s)} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
               "Average SR", "Average CV", "Average cv_excess"]
     rows = []
     for name, layout in layouts.items():

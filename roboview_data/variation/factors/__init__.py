@@ -7,7 +7,8 @@ speak one vocabulary.
 
 To add a visual factor, write one module like `color.py` — a `Factor` with its values, baseline,
 title and an applier that writes a value into the compiled scene — and add it to BUILTIN_MODULES
-(or call `register_factor` from your own package before building a suite).
+(or publish it from your own package under the `roboview.factors` entry-point group, so every
+worker process registers it too).
 
     >>> load_factor("dist_scale").values
     ('0', '1', '2', '3', '4', '5', '6', '7', '8')
@@ -16,6 +17,7 @@ title and an applier that writes a value into the compiled scene — and add it 
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 
 from roboview_data.variation.factors.base import (
     DEFAULT_TASK,
@@ -40,8 +42,12 @@ BUILTIN_MODULES = (
     "roboview_data.variation.factors.camera",
     "roboview_data.variation.factors.context",
 )
+# Third-party factors: a package lists its factor modules under this entry-point group.
+ENTRY_POINT_GROUP = "roboview.factors"
 for _module in BUILTIN_MODULES:
     importlib.import_module(_module)
+for _entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+    importlib.import_module(_entry.value.split(":")[0])
 
 from roboview_data.variation.factors.camera import (  # noqa: E402  (after registration)
     CAMERA_POSE_BASELINE,

@@ -144,7 +144,7 @@ CAMERA_POSE = register_factor(Factor(
     baseline=CAMERA_POSE_BASELINE,
     doc=("Pose of the front and left_top cameras: one of 21 orbital poses (ring r, index k) "
          f"looking at the workspace center, or {CAMERA_POSE_BASELINE!r} for the unperturbed cameras."),
-    title="Camera pose (orbital)",
+    title="Camera Pose",
     bind=OrbitalPose,
     always_in_id=True,
 ))
@@ -154,7 +154,7 @@ CAMERA_EULER = register_factor(Factor(
     values=tuple(f"{yaw},{pitch}" for yaw in EULER_STEPS_DEG for pitch in EULER_STEPS_DEG),
     baseline="0,0",
     doc="'yaw,pitch' in degrees: rotation of front and left_top about their own axes.",
-    title="Camera Euler (yaw, pitch)",
+    title="Camera Euler",
     bind=EulerTurn,
     always_in_id=True,
 ))
@@ -164,7 +164,7 @@ DIST_SCALE = register_factor(Factor(
     values=tuple(str(k) for k in range(N_DIST_SCALE_LEVELS)),
     baseline="0",
     doc=f"k: front and left_top moved back along their optical axis by {DIST_STEP_M}*k m.",
-    title="Camera distance",
+    title="Dist Scale",
     bind=PullBack,
     always_in_id=True,
 ))
