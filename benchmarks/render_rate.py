@@ -20,6 +20,7 @@ import numpy as np  # noqa: E402
 
 from roboview_data.sim.cameras import ALL_CAMERAS  # noqa: E402
 from roboview_data.sim.env import PickPlaceEnv  # noqa: E402
+from roboview_data.sim.tasks import make_env  # noqa: E402
 
 
 def bare_fps(env: PickPlaceEnv, frames: int) -> float:
@@ -53,7 +54,7 @@ def main() -> None:
     args = parser.parse_args()
     results = {}
     for quality in ("fast", "high"):
-        env = PickPlaceEnv(image_size=args.size, quality=quality)
+        env = make_env("pick_place", image_size=args.size, quality=quality)
         env.reset()
         # Interleaved rounds and medians: llvmpipe timings drift with whatever else the machine does.
         rounds = [(bare_fps(env, args.frames), pipeline_fps(env, args.frames)) for _ in range(args.rounds)]

@@ -100,7 +100,10 @@ class EpisodeStore:
 
     def write_parquet(self) -> Path:
         rows = sorted(self.rows.values(), key=lambda r: (r["split"], r["instance_id"], r["repeat"]))
-        table = pa.Table.from_pylist(rows) if rows else pa.table({})
+        # Every row gets every column (a policy's own columns may be missing from some rows, e.g.
+        # those journalled before a resume); pyarrow would take the first row's keys only.
+        columns = list(dict.fromkeys(k for row in rows for k in row))
+        table = pa.Table.from_pylist([{k: row.get(k) for k in columns} for row in rows]) if rows else pa.table({})
         meta = {VERSION_KEY: self.run_info["benchmark_version"].encode(),
                 b"roboview_policy": self.run_info["policy"].encode(), FORMAT_KEY: str(RESULTS_FORMAT).encode()}
         table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})

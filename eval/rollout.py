@@ -131,6 +131,9 @@ class EvalWorker:
         row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
                "steps": self.env.steps, "duration_s": time.perf_counter() - start,
                "policy": self.spec.policy.name or self.policy.name, "failure_reason": reason}
+        extra = getattr(self.policy, "episode_record", None)
+        if extra is not None:  # a policy's own columns (VLM usage, the refined instruction, ...)
+            row |= {k: v for k, v in extra().items() if k not in row}
         if not media:
             return EpisodeResult(row)
         return EpisodeResult(row, frames, np.array(ee), np.array(obj))

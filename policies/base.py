@@ -27,17 +27,11 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from policies.errors import TransientPolicyError  # noqa: F401  (part of the policy API)
+from policies.vlm.client import Endpoint
 from roboview_data.sim.cameras import CameraPose
 from roboview_data.sim.env import PickPlaceEnv
 from roboview_data.sim.scene import Scene
-
-
-class TransientPolicyError(RuntimeError):
-    """A failure worth retrying (an HTTP timeout, a rate limit): raise it from `select_action`/`reset`.
-
-    The evaluator retries such calls a few times (as it does `TimeoutError` and `ConnectionError`);
-    any other exception ends the episode as a failure recording the error as its reason.
-    """
 
 
 @dataclass(frozen=True)
@@ -98,13 +92,18 @@ class Policy(Protocol):
         """Env action (8,) float32: 7 joint targets (rad) + gripper command (0 open … 1 closed)."""
 
     def close(self) -> None:
-        """Release what the policy holds (models, sessions, connections); called once, at the end."""
+        """Release what the policy holds (models, sessions, connections); called once, at the end.
+
+        Optionally, `episode_record() -> dict` adds the policy's own columns to the episode's row (the
+        VLM agents' request and token counts, the SGL's refined instruction); same keys every episode.
+        """
 
 
 # Builtin policy types: modules that define and register a PolicyConfig subclass. Imported on
 # demand (by name, never at import time of this module); third-party packages add types through the
 # ENTRY_POINT_GROUP entry points, each naming such a module.
-BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy")
+BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy", "policies.vlm.simple",
+                   "policies.vlm.moka")
 ENTRY_POINT_GROUP = "roboview.policies"
 DEFAULT_POLICY_TYPE = "expert"
 # The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
@@ -122,8 +121,15 @@ class PolicyConfig(draccus.ChoiceRegistry):
     """
 
     # Name written in the results' `policy` column (e.g. act_ref vs act_campose for two checkpoints);
-    # empty: the policy's own name (expert, vision, lerobot:act).
+    # empty: the policy's own name (expert, vision, lerobot:act; "+sgl" appended with the SGL).
     name: str = ""
+    # Wrap the policy in the Semantic Grounding Layer (policies.vlm.sgl): a VLM parses the first
+    # frame and the instruction is refined ("the small object" → "the small red cube") before it acts.
+    sgl: bool = False
+    # The SGL's VLM endpoint (VLM agents default to their own): base URL, model, API-key variable name.
+    sgl_base_url: str = ""
+    sgl_model: str = ""
+    sgl_api_key_env: str = "OPENAI_API_KEY"
 
     # Whether the policy wants depth images too.
     depth: ClassVar[bool] = False
@@ -132,9 +138,17 @@ class PolicyConfig(draccus.ChoiceRegistry):
     # One line for listings and error messages.
     doc: ClassVar[str] = ""
 
+    def __post_init__(self) -> None:
+        if self.sgl:
+            self.sgl_endpoint().validate()
+
     @classmethod
     def default_choice_name(cls) -> str:
         return DEFAULT_POLICY_TYPE
+
+    def sgl_endpoint(self) -> Endpoint:
+        """Where the SGL asks: `--policy.sgl_base_url` / `--policy.sgl_model`."""
+        return Endpoint(self.sgl_base_url, self.sgl_model, self.sgl_api_key_env)
 
     @property
     def type(self) -> str:
@@ -155,7 +169,8 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
     def options(self) -> dict[str, Any]:
         """The type's own settings, recorded in run.json (a resume must match them)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("name", "path")}
+        skip = {"name", "path"} | ({"sgl", "sgl_base_url", "sgl_model", "sgl_api_key_env"} if not self.sgl else set())
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
     def build(self, view: AgentView) -> Policy:
         """The policy, from the agent's view of the env (privileged types: from the env itself)."""
@@ -188,5 +203,11 @@ def default_policy_config() -> PolicyConfig:
 
 
 def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
-    """Build `config`'s policy for `env`: from the env only if the type is privileged."""
-    return config.build(env if config.privileged else AgentView.of(env))
+    """Build `config`'s policy for `env`: from the env only if the type is privileged; wrapped in the
+    Semantic Grounding Layer when `config.sgl`."""
+    policy = config.build(env if config.privileged else AgentView.of(env))
+    if config.sgl:
+        from policies.vlm.sgl import SemanticGroundingLayer
+
+        policy = SemanticGroundingLayer(policy, config.sgl_endpoint(), config.cameras()[0])
+    return policy

@@ -162,6 +162,7 @@ class LeRobotConfig(PolicyConfig):
             load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
         with flag_errors(f"--policy.device={self.device!r}"):
             resolve_device(self.device)
+        super().__post_init__()
 
     @property
     def checkpoint(self) -> str | None:

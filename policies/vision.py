@@ -44,6 +44,7 @@ class VisionConfig(PolicyConfig):
     def __post_init__(self) -> None:
         if self.camera not in ALL_CAMERAS:
             raise ValueError(f"vision policy: unknown camera {self.camera!r}; allowed: {', '.join(ALL_CAMERAS)}")
+        super().__post_init__()
 
     def cameras(self) -> tuple[str, ...]:
         return (self.camera,)

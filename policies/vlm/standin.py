@@ -1,0 +1,129 @@
+"""The classic-CV stand-in "model" behind `pipelines.serve_vlm`: NOT a VLM.
+
+It answers the RoboView agents' requests — image points, a plan with object descriptions, a mark
+choice, a scene parse, the fairness yes/no — from the image it is sent, with classic computer vision
+(the table is the image's dominant color, the box is the largest yellow blob, the object the most
+salient compact blob left; marks are read back by template matching the digits the agent drew). It
+never sees simulator state, depth or calibration. It exists so that the whole VLM path (client,
+agents, SGL, fairness screen, caching, failures) runs and is measured on a machine that reaches no
+VLM; every table labels its results as the classic-CV stand-in.
+"""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+
+from policies.vlm.blobs import (
+    color_word,
+    components,
+    find_box,
+    find_objects,
+    position_word,
+    shape_word,
+)
+from policies.vlm.marks import MARK_RGB
+from policies.vlm.prompts import kind_of
+
+MODEL_NAME = "roboview-classic-cv-standin"
+
+
+def read_marks(rgb: np.ndarray) -> dict[int, tuple[float, float]]:
+    """Mark number → center (x, y): magenta disks, their white digits matched against cv2's own glyphs."""
+    magenta = np.all(rgb == MARK_RGB, axis=-1)
+    n, labels, stats, centroids = components(cv2.dilate(magenta.astype(np.uint8), np.ones((3, 3), np.uint8)))
+    marks = {}
+    for i in range(1, n):
+        x, y, w, h = (int(v) for v in stats[i, :4])
+        crop = rgb[y:y + h, x:x + w]
+        white = np.all(crop > 200, axis=-1).astype(np.uint8)
+        number = _match_number(white)
+        if number is not None:
+            marks[number] = (float(centroids[i][0]), float(centroids[i][1]))
+    return marks
+
+
+def _match_number(white: np.ndarray) -> int | None:
+    from policies.vlm.marks import FONT, FONT_SCALE, FONT_THICKNESS
+
+    if white.sum() == 0:
+        return None
+    ys, xs = np.nonzero(white)
+    glyph = white[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    best, best_score = None, -1.0
+    for number in range(1, 100):
+        text = str(number)
+        (tw, th), _ = cv2.getTextSize(text, FONT, FONT_SCALE, FONT_THICKNESS)
+        canvas = np.zeros((th + 8, tw + 8), np.uint8)
+        cv2.putText(canvas, text, (4, th + 4), FONT, FONT_SCALE, 1, FONT_THICKNESS, cv2.LINE_8)
+        cy, cx = np.nonzero(canvas)
+        template = canvas[cy.min():cy.max() + 1, cx.min():cx.max() + 1]
+        if abs(template.shape[1] - glyph.shape[1]) > 2 or abs(template.shape[0] - glyph.shape[0]) > 2:
+            continue
+        resized = cv2.resize(glyph, (template.shape[1], template.shape[0]), interpolation=cv2.INTER_NEAREST)
+        score = float((resized == template).mean())
+        if score > best_score:
+            best, best_score = number, score
+    return best if best_score > 0.8 else None
+
+
+class ClassicCVModel:
+    """Answers the RoboView prompts about one image with classic CV; the reply text is JSON."""
+
+    name = MODEL_NAME
+
+    def answer(self, prompt: str, images: list[np.ndarray]) -> str:
+        kind = kind_of(prompt)
+        if kind is None or not images:
+            return ("I am RoboView's classic-CV stand-in and only answer the RoboView agents' own prompts "
+                    "about one attached image.")
+        return json.dumps(getattr(self, f"_{kind}")(prompt, images[0]))
+
+    def _points(self, prompt: str, rgb: np.ndarray) -> dict:
+        box, objects = find_box(rgb), find_objects(rgb)
+        return {"object_point": [round(v, 1) for v in objects[0].center] if objects else None,
+                "target_point": [round(v, 1) for v in box.center] if box else None}
+
+    def _plan(self, prompt: str, rgb: np.ndarray) -> dict:
+        objects = find_objects(rgb)
+        obj = f"small {color_word(objects[0].rgb)} {shape_word(objects[0])}" if objects else "small object"
+        return {"object_description": obj, "target_description": "yellow box"}
+
+    def _marks(self, prompt: str, rgb: np.ndarray) -> dict:
+        marks = read_marks(rgb)
+        if not marks:
+            return {"grasp_mark": None, "place_mark": None}
+        box, objects = find_box(rgb), find_objects(rgb)
+
+        def nearest(point):
+            return min(marks, key=lambda m: np.hypot(marks[m][0] - point[0], marks[m][1] - point[1]))
+
+        return {"grasp_mark": nearest(objects[0].center) if objects else None,
+                "place_mark": nearest(box.center) if box else None}
+
+    def _scene_parse(self, prompt: str, rgb: np.ndarray) -> list:
+        out = []
+        objects = find_objects(rgb)
+        for i, blob in enumerate(objects[:3]):
+            out.append({"ID": len(out) + 1, "object_type": "manipulation object" if i == 0 else "other object",
+                        "name": shape_word(blob), "category": [shape_word(blob), "geometry"], "state": "solid",
+                        "color": color_word(blob.rgb), "size": "small", "position": position_word(blob, rgb.shape[1])})
+        box = find_box(rgb)
+        if box is not None:
+            out.append({"ID": len(out) + 1, "object_type": "receiver object", "name": "box",
+                        "category": ["box", "container", "rectangular shape"], "state": "hollow",
+                        "color": "yellow", "size": "normal", "position": position_word(box, rgb.shape[1])})
+        return out
+
+    def _fairness(self, prompt: str, rgb: np.ndarray) -> dict:
+        box, objects = find_box(rgb), find_objects(rgb)
+        if box is None:
+            return {"analysis": "No yellow box is visible.", "final_answer": "no"}
+        if not objects:
+            return {"analysis": "A yellow box is visible but no small solid object stands out from the table.",
+                    "final_answer": "no"}
+        word = color_word(objects[0].rgb)
+        return {"analysis": f"A small {word} object ({objects[0].pixels} px) and a yellow box are clearly visible.",
+                "final_answer": "yes"}
