@@ -11,7 +11,7 @@ FONT_THICKNESS = 1
 MARK_RGB = (255, 0, 255)
 MARK_RADIUS = 9
 # Images are upscaled by this factor before marking, so numbers stay legible on small renders.
-UPSCALE = 2
+UPSCALE = 4
 
 
 def draw_marks(rgb: np.ndarray, points: list[tuple[float, float]]) -> np.ndarray:

@@ -34,8 +34,10 @@ from policies.vlm.prompts import MOKA_MARKS, MOKA_PLAN
 from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
 
-# Keypoints along each principal axis of a mask, as a fraction of its half-extent.
+# Keypoints along each principal axis of a mask, as a fraction of its half-extent, and at least this
+# many pixels from the centroid (so the drawn marks never merge; see policies.vlm.marks).
 AXIS_FRACTION = 0.5
+MIN_OFFSET_PX = 5.0
 
 
 @PolicyConfig.register_subclass("vlm_moka")
@@ -81,7 +83,7 @@ def keypoints(detection: Detection) -> list[tuple[float, float]]:
     for value, vector in zip(values[::-1], vectors.T[::-1]):
         half = 2.0 * np.sqrt(max(value, 0.0))  # ~ half-extent of a uniform blob
         for sign in (1, -1):
-            out.append(tuple(center + sign * AXIS_FRACTION * half * vector))
+            out.append(tuple(center + sign * max(AXIS_FRACTION * half, MIN_OFFSET_PX) * vector))
     return [(float(x), float(y)) for x, y in out]
 
 

@@ -12,6 +12,7 @@ VLM; every table labels its results as the classic-CV stand-in.
 from __future__ import annotations
 
 import json
+import re
 
 import cv2
 import numpy as np
@@ -33,7 +34,7 @@ MODEL_NAME = "roboview-classic-cv-standin"
 def read_marks(rgb: np.ndarray) -> dict[int, tuple[float, float]]:
     """Mark number → center (x, y): magenta disks, their white digits matched against cv2's own glyphs."""
     magenta = np.all(rgb == MARK_RGB, axis=-1)
-    n, labels, stats, centroids = components(cv2.dilate(magenta.astype(np.uint8), np.ones((3, 3), np.uint8)))
+    n, labels, stats, centroids = components(magenta)
     marks = {}
     for i in range(1, n):
         x, y, w, h = (int(v) for v in stats[i, :4])
@@ -69,6 +70,11 @@ def _match_number(white: np.ndarray) -> int | None:
     return best if best_score > 0.8 else None
 
 
+def _spans(prompt: str) -> list[tuple[int, int]]:
+    """The mark ranges a MOKA prompt names, in order: "Marks 1-5 ...; marks 6-10 ..." → [(1, 5), (6, 10)]."""
+    return [(int(a), int(b or a)) for a, b in re.findall(r"[Mm]arks? (\d+)(?:-(\d+))?", prompt)]
+
+
 class ClassicCVModel:
     """Answers the RoboView prompts about one image with classic CV; the reply text is JSON."""
 
@@ -92,16 +98,24 @@ class ClassicCVModel:
         return {"object_description": obj, "target_description": "yellow box"}
 
     def _marks(self, prompt: str, rgb: np.ndarray) -> dict:
+        # The prompt says which marks lie on the object and which on the target ("Marks 1-5 lie on the
+        # object"); the image says where each mark is. Grasp: the object mark nearest the middle of the
+        # object's marks. Place: the target mark nearest the middle of the yellow box.
         marks = read_marks(rgb)
-        if not marks:
+        spans = _spans(prompt)
+        if not marks or len(spans) < 2:
             return {"grasp_mark": None, "place_mark": None}
-        box, objects = find_box(rgb), find_objects(rgb)
+        obj_ids = [m for m in range(spans[0][0], spans[0][1] + 1) if m in marks]
+        target_ids = [m for m in range(spans[1][0], spans[1][1] + 1) if m in marks]
+        box = find_box(rgb)
+        if not obj_ids or not target_ids or box is None:
+            return {"grasp_mark": None, "place_mark": None}
+        middle = np.mean([marks[m] for m in obj_ids], axis=0)
 
-        def nearest(point):
-            return min(marks, key=lambda m: np.hypot(marks[m][0] - point[0], marks[m][1] - point[1]))
+        def nearest(ids, point):
+            return min(ids, key=lambda m: np.hypot(marks[m][0] - point[0], marks[m][1] - point[1]))
 
-        return {"grasp_mark": nearest(objects[0].center) if objects else None,
-                "place_mark": nearest(box.center) if box else None}
+        return {"grasp_mark": nearest(obj_ids, middle), "place_mark": nearest(target_ids, box.center)}
 
     def _scene_parse(self, prompt: str, rgb: np.ndarray) -> list:
         out = []
