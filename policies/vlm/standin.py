@@ -27,6 +27,7 @@ from policies.vlm.blobs import (
 )
 from policies.vlm.marks import MARK_RGB
 from policies.vlm.prompts import kind_of
+from roboview_data.variation.colors import delta_e_2000, srgb_to_lab
 
 MODEL_NAME = "roboview-classic-cv-standin"
 
@@ -75,6 +76,20 @@ def _spans(prompt: str) -> list[tuple[int, int]]:
     return [(int(a), int(b or a)) for a, b in re.findall(r"[Mm]arks? (\d+)(?:-(\d+))?", prompt)]
 
 
+def _as_instructed(prompt: str, blobs: list) -> list:
+    """Candidates with the one the instruction names first: when the instruction names a colour
+    ("the small red cube"), the blob closest to it (CIELAB ΔE2000); otherwise saliency order."""
+    from policies.vlm.grounding import named_color
+
+    quoted = re.search(r'Instruction: "([^"]*)"', prompt)
+    # The colour of the object to move, not of the target ("the yellow box").
+    subject = re.sub(r"\b(\w+\s+)?(box|container|bin|basket|tray)\b", "", quoted.group(1)) if quoted else ""
+    named = named_color(subject) if subject else None
+    if named is None or not blobs:
+        return blobs
+    return sorted(blobs, key=lambda b: float(delta_e_2000(srgb_to_lab(np.asarray(b.rgb)), named[1])))
+
+
 class ClassicCVModel:
     """Answers the RoboView prompts about one image with classic CV; the reply text is JSON."""
 
@@ -88,12 +103,12 @@ class ClassicCVModel:
         return json.dumps(getattr(self, f"_{kind}")(prompt, images[0]))
 
     def _points(self, prompt: str, rgb: np.ndarray) -> dict:
-        box, objects = find_box(rgb), find_objects(rgb)
+        box, objects = find_box(rgb), _as_instructed(prompt, find_objects(rgb))
         return {"object_point": [round(v, 1) for v in objects[0].center] if objects else None,
                 "target_point": [round(v, 1) for v in box.center] if box else None}
 
     def _plan(self, prompt: str, rgb: np.ndarray) -> dict:
-        objects = find_objects(rgb)
+        objects = _as_instructed(prompt, find_objects(rgb))
         obj = f"small {color_word(objects[0].rgb)} {shape_word(objects[0])}" if objects else "small object"
         return {"object_description": obj, "target_description": "yellow box"}
 
