@@ -83,7 +83,8 @@ def refine(instruction: str, objects: list[dict]) -> Grounding:
             chosen = attribute
             break
     name = str(manipulated.get("name") or "object")
-    phrase = f"{manipulated[chosen]} {name}" if chosen else name
+    said = instruction[:noun.start()].split()[-3:] if noun is not None else []
+    phrase = f"{manipulated[chosen]} {name}" if chosen and str(manipulated[chosen]) not in said else name
     if noun is not None:
         refined = instruction[:noun.start()] + phrase + instruction[noun.end():]
     else:  # named by its own noun but shared a category: put the attribute in front of that noun
