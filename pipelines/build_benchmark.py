@@ -21,12 +21,17 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
+from policies.vlm.client import Endpoint, VLMClient
 from roboview_data.benchmark import format as bio
 from roboview_data.benchmark.card import fairness_stats, write_card
 from roboview_data.benchmark.contact_sheet import write_contact_sheet
 from roboview_data.benchmark.fairness import FairnessThresholds
 from roboview_data.benchmark.render import InstanceRenderer
 from roboview_data.benchmark.review import adjudicate, read_decisions
+from roboview_data.benchmark.screen import agreement
+from roboview_data.benchmark.screen import write_decisions as write_screen_decisions
+from roboview_data.cli_errors import flag_errors
+from roboview_data.sim.tasks import DEFAULT_TASK
 from roboview_data.variation.instances import (
     PRESETS,
     SuiteConfig,
@@ -36,6 +41,28 @@ from roboview_data.variation.instances import (
 from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
+
+
+@dataclass
+class ScreenConfig:
+    """Stage 1b, optional: the paper's VLM fairness screen over every candidate's front image."""
+
+    # OpenAI-compatible endpoint and model (e.g. https://api.openai.com/v1 and gpt-4o); empty model: no screen.
+    base_url: str = "http://127.0.0.1:8000/v1"
+    model: str = ""
+    # Name of the environment variable holding the API key.
+    api_key_env: str = "OPENAI_API_KEY"
+    # Answer cache ("" turns it off) and requests in flight at once across the build's workers.
+    cache_dir: str = ".cache/roboview/vlm"
+    max_in_flight: int = 4
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.model)
+
+    def endpoint(self) -> Endpoint:
+        return Endpoint(self.base_url, self.model, self.api_key_env, max_in_flight=self.max_in_flight,
+                        cache_dir=self.cache_dir)
 
 
 @dataclass
@@ -60,6 +87,9 @@ class BuildConfig:
     min_pass_rate: float = 0.95
     # Stage-1 thresholds.
     fairness: FairnessThresholds = field(default_factory=FairnessThresholds)
+    # Stage 1b: the VLM fairness screen (--vlm_screen.model=gpt-4o --vlm_screen.base_url=...), reported
+    # with its agreement with the gate; it rejects nothing itself (see vlm_screen.csv).
+    vlm_screen: ScreenConfig = field(default_factory=ScreenConfig)
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
@@ -71,6 +101,9 @@ class BuildConfig:
         if not 0.0 < self.min_pass_rate <= 1.0:
             raise ValueError(f"--min_pass_rate={self.min_pass_rate} must lie in (0, 1]")
         self.suite  # validates union mode, colors and factor names now, before any work
+        if self.vlm_screen.enabled:
+            with flag_errors("--vlm_screen"):
+                self.vlm_screen.endpoint().validate()
 
     @property
     def suite(self) -> SuiteConfig:
@@ -104,7 +137,8 @@ def _check_output_dir(out: Path) -> None:
 
 
 def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:
-    args = (cfg.image_size, cfg.fairness)
+    screen = (VLMClient, cfg.vlm_screen.endpoint()) if cfg.vlm_screen.enabled else None
+    args = (cfg.image_size, cfg.fairness, DEFAULT_TASK, screen)
     bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
     records, passed = [], 0
     with WorkerPool(cfg.num_workers, InstanceRenderer, args, method="record") as pool:
@@ -135,6 +169,10 @@ def run(cfg: BuildConfig) -> BuildResult:
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     sheet = write_contact_sheet(tmp, records, accepted, rejected_by)
+    screen = agreement(records) if cfg.vlm_screen.enabled else None
+    if screen is not None:
+        screen |= {"model": cfg.vlm_screen.model, "base_url": cfg.vlm_screen.base_url}
+        write_screen_decisions(tmp / "vlm_screen.csv", records, f"vlm:{cfg.vlm_screen.model}")
     by_split: dict[str, list[dict]] = {}
     rejected_rows = []
     for r, ok, who in zip(records, accepted, rejected_by):
@@ -162,6 +200,7 @@ def run(cfg: BuildConfig) -> BuildResult:
         "decisions": len(decisions), "reviewers": sorted({d.reviewer for d in decisions.values()}),
         "suite_hash": digest, "benchmark_version": f"{suite.preset}-{digest[:12]}",
         "fairness_stats": fairness_stats(records),
+        **({"vlm_screen": screen} if screen is not None else {}),
     }
     bio.write_manifest(tmp, manifest)
     if manifest["status"] == "ok":
@@ -174,6 +213,12 @@ def run(cfg: BuildConfig) -> BuildResult:
                           f"(need {cfg.min_pass_rate:.0%}); offenders in {out / 'fairness_report.csv'}, "
                           f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold.")
     _print_summary(manifest)
+    if screen is not None:
+        kappa = "undefined" if screen["cohens_kappa"] is None else f"{screen['cohens_kappa']:.3f}"
+        print(f"VLM screen ({screen['model']}): {screen['pass_rate']:.1%} yes over {screen['screened']} "
+              f"(paper target ≥ 95 %: {'met' if screen['meets_paper_target'] else 'NOT met'}), agreement with the "
+              f"gate {screen['observed_agreement']:.1%}, Cohen's κ {kappa}, {len(screen['disagreements'])} "
+              f"disagreements (contact sheet; answers in vlm_screen.csv)")
     return BuildResult(out, len(records), sum(accepted), gate_rate, digest, time.perf_counter() - t0, sheet)
 
 

@@ -290,3 +290,38 @@ def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_noth
         assert again["vlm_cache_hits"].iloc[3:].tolist() == [1, 1]
     finally:
         s.close()
+
+
+def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tmp_path):
+    from pipelines.build_benchmark import BuildConfig, ScreenConfig
+    from pipelines.build_benchmark import run as build
+
+    no = ("text", json.dumps({"analysis": "The object is hard to make out.", "final_answer": "no"}))
+    s = ScriptedServer(ClassicCVModel(), [no] * 3 + [("text", "not json"), ("text", "still not")])
+    try:
+        out = tmp_path / "bench"
+        build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64, num_workers=1,
+                          vlm_screen=ScreenConfig(base_url=s.url, model=MODEL_NAME, cache_dir="")))
+    finally:
+        s.close()
+    manifest = json.loads((out / "benchmark.json").read_text())
+    screen = manifest["vlm_screen"]
+    rows = pd.concat([pd.read_parquet(out / "data" / f"{split}.parquet") for split in manifest["splits"]])
+    answers = rows.set_index("instance_id")["fairness"].map(lambda f: f["vlm_answer"])
+    n_no = int((answers == "no").sum())
+    # The gate passes all 57. The screen said no to the first three (scripted) and to what the stand-in
+    # itself cannot make out, and failed on the fourth.
+    assert manifest["rejected"] == 0 and screen["screened"] == 56 and screen["errors"] == 1 and n_no >= 3
+    assert screen["table"] == {"gate_pass_vlm_yes": 56 - n_no, "gate_pass_vlm_no": n_no, "gate_fail_vlm_yes": 0,
+                               "gate_fail_vlm_no": 0}
+    assert screen["pass_rate"] == round((56 - n_no) / 56, 4) and not screen["meets_paper_target"]
+    assert screen["cohens_kappa"] == 0.0  # one rater says "pass" to everything: chance-level agreement
+    assert len(screen["disagreements"]) == n_no
+    assert sum(d["analysis"] == "The object is hard to make out." for d in screen["disagreements"]) == 3
+    color = pd.read_parquet(out / "data" / "color.parquet")["fairness"].map(lambda f: f["vlm_answer"]).tolist()
+    assert color[:4] == ["no", "no", "no", "error"]  # one worker: instances in order
+    decisions = pd.read_csv(out / "vlm_screen.csv")
+    assert len(decisions) == 56 and (decisions["verdict"] == "reject").sum() == n_no
+    assert set(decisions["reviewer"]) == {f"vlm:{MODEL_NAME}"}
+    assert (out / "contact_sheet" / "index.html").read_text().count("DISAGREES with the gate") == n_no
+    assert "Cohen's κ 0.0" in (out / "README.md").read_text()

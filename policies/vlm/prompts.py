@@ -6,6 +6,8 @@ VLM for image points; MOKA asks for a plan with object descriptions, then for a 
 numbered marks). Each prompt names the JSON it wants; `policies.vlm.client` enforces it.
 """
 
+from roboview_data.benchmark.screen import FAIRNESS_SCREEN as _FAIRNESS_SCREEN
+
 SIMPLE_POINTS = """You control a robot arm that sees the scene through the attached camera image ({width}x{height} pixels).
 Instruction: "{instruction}"
 
@@ -98,33 +100,9 @@ Each object in the output list must have the following attributes:
 ---
 **Note:** You must only refer to the **format** of the example output. The content of your response must be based on the actual image and instruction provided to you."""
 
-FAIRNESS_SCREEN = """You are an expert image analyst acting as aJSON API. Your task is to analyze the provided image and return a single, valid JSON object. Do not output any text before or after the JSON object.
-**1. Conditions to Check:**
-- Is there a small solid geometry object in the image?
-- Is there a yellow box in the image?
-- Can a person clearly identify both the geometry object and the yellow box?
+# The benchmark's own prompt (its stage-1b screen), re-exported for the stand-in and the docs.
+FAIRNESS_SCREEN = _FAIRNESS_SCREEN
 
-**2. Rule for the Final Answer:**
-- If ALL THREE conditions are true, the `final_answer` value is "yes".
-- If ANY condition is false, the `final_answer` value is "no".
-
-**3. Required JSON Output Format:**
-Your entire output must be a single JSON object with these two keys:
-- `analysis`: A string containing a brief explanation of your reasoning.
-- `final_answer`: A string that is either "yes" or "no".
----
-**Example 1 (All conditions met):**
-{
-  "analysis": "The image clearly shows a small blue pyramid and a yellow box, and both are identifiable.",
-  "final_answer": "yes"
-}
-**Example 2 (One condition fails):**
-{
-  "analysis": "The image contains a small pyramid, but the box is red, not yellow.",
-  "final_answer": "no"
-}
----
-Now, analyze the image I provide and respond only with a valid JSON object as specified."""
 
 # How the stand-in server tells the requests apart (it reads the prompt, as a VLM would).
 KINDS = {

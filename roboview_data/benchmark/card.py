@@ -101,9 +101,27 @@ Stage-1 pass rate: {manifest['gate_pass_rate']:.2%} of {manifest['candidates']} 
 requires ≥ {manifest['min_pass_rate']:.0%}). Stage 2 (review): {manifest['decisions']} decision(s)
 applied from a decisions file (reviewers: {', '.join(manifest['reviewers']) or 'none'}).
 Rejected instances are kept in the `rejected` config with the reason and who rejected them.
+{_screen_section(manifest)}
 
 Measured over all candidates (p5 / median / p95):
 
 {chr(10).join(stats)}
 """
     (out / "README.md").write_text(text)
+
+
+def _screen_section(manifest: dict) -> str:
+    screen = manifest.get("vlm_screen")
+    if not screen:
+        return ""
+    t = screen["table"]
+    kappa = "undefined (one rater gave one answer to everything)" if screen["cohens_kappa"] is None else screen["cohens_kappa"]
+    return f"""
+Stage 1b (VLM screen, `{screen['model']}` at `{screen['base_url']}`, the paper's appendix prompt on the
+`front` image): {screen['pass_rate']:.2%} "yes" over {screen['screened']} screened ({screen['errors']} errors); the
+paper's loop target of ≥ 95 % is {'met' if screen['meets_paper_target'] else 'not met'}. The screen rejects
+nothing itself. Agreement with the programmatic gate: {screen['observed_agreement']:.2%}, Cohen's κ {kappa}
+(gate pass & VLM yes {t['gate_pass_vlm_yes']}, gate pass & VLM no {t['gate_pass_vlm_no']}, gate fail & VLM yes
+{t['gate_fail_vlm_yes']}, gate fail & VLM no {t['gate_fail_vlm_no']}); {len(screen['disagreements'])} disagreements are
+flagged in the contact sheet, and the answers are in `vlm_screen.csv` (a decisions file).
+"""

@@ -17,6 +17,7 @@ body {{ font-family: sans-serif; margin: 1em; }}
 .grid {{ display: flex; flex-wrap: wrap; gap: 8px; }}
 .card {{ border: 1px solid #ccc; padding: 4px; width: 392px; font-size: 11px; }}
 .card.rejected {{ border-color: #c00; background: #fee; }}
+.card.disagree {{ outline: 3px solid #f90; }}
 .card img {{ width: 384px; image-rendering: pixelated; }}
 code {{ font-size: 11px; }}
 </style></head><body>
@@ -25,7 +26,7 @@ code {{ font-size: 11px; }}
 <code>accept</code> or <code>reject</code>; pass it to the next build with <code>--decisions=FILE</code>.</p>
 <label>split <select id="split"><option value="">all</option>{split_options}</select></label>
 <label>status <select id="status"><option value="">all</option><option>passed</option>
-<option>rejected</option></select></label> <span id="count"></span>
+<option>rejected</option><option>disagree</option></select></label> <span id="count"></span>
 <div class="grid">
 {cards}
 </div>
@@ -34,7 +35,7 @@ function apply() {{
   const s = document.getElementById('split').value, st = document.getElementById('status').value;
   let n = 0;
   for (const c of document.querySelectorAll('.card')) {{
-    const show = (!s || c.dataset.split === s) && (!st || c.dataset.status === st);
+    const show = (!s || c.dataset.split === s) && (!st || c.dataset.status.split(' ').includes(st));
     c.style.display = show ? '' : 'none'; n += show;
   }}
   document.getElementById('count').textContent = n + ' shown';
@@ -55,6 +56,12 @@ def _card(record: dict, accepted: bool, rejected_by: str) -> str:
         for c in fair["cameras"])
     status = "passed" if accepted else "rejected"
     reason = "" if accepted else f"<br><b>rejected by {html.escape(rejected_by)}</b>: {html.escape(fair['reject_reason'])}"
+    vlm = fair.get("vlm_answer") or ""
+    if vlm:
+        disagree = vlm in ("yes", "no") and (vlm == "yes") != fair["passed"]
+        status += " disagree" if disagree else ""
+        flag = " <b>DISAGREES with the gate</b>" if disagree else ""
+        reason += f"<br>VLM screen: <b>{html.escape(vlm)}</b>{flag} — {html.escape(fair.get('vlm_analysis') or '')}"
     return (f'<div class="card {status}" data-split="{record["split"]}" data-status="{status}">'
             f'<img loading="lazy" src="previews/{record["instance_id"]}.png" alt="preview">'
             f'<br><code>{record["instance_id"]}</code> {html.escape(record["split"])}: '

@@ -72,7 +72,9 @@ def instance_features(task: str, rejected: bool = False) -> datasets.Features:
     cols |= {name: _feature(value) for name, value in examples.items()}
     cols |= {"cameras": datasets.List(_CAMERA), "seed": datasets.Value("int64"),
              "fairness": {"cameras": datasets.List(_FAIR_CAMERA), "passed": datasets.Value("bool"),
-                          "reject_reason": datasets.Value("string")},
+                          "reject_reason": datasets.Value("string"),
+                          # stage 1b (optional): the VLM screen's yes / no / error and its analysis
+                          "vlm_answer": datasets.Value("string"), "vlm_analysis": datasets.Value("string")},
              "preview": datasets.Image()}
     if rejected:
         cols["rejected_by"] = datasets.Value("string")

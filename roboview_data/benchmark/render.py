@@ -7,6 +7,7 @@ applied in place by the env's reset — no recompiles.
 from __future__ import annotations
 
 import io
+from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -16,6 +17,7 @@ from roboview_data.benchmark.fairness import (
     FairnessProbe,
     FairnessThresholds,
 )
+from roboview_data.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_image
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.env import IMAGE_KEY
 from roboview_data.sim.tasks import DEFAULT_TASK, make_env
@@ -36,19 +38,24 @@ def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
 
 
 class InstanceRenderer:
-    def __init__(self, image_size: int, thresholds: FairnessThresholds, task: str = DEFAULT_TASK) -> None:
+    def __init__(self, image_size: int, thresholds: FairnessThresholds, task: str = DEFAULT_TASK,
+                 screen: tuple[Any, Any] | None = None) -> None:
+        """`screen`: (client class, endpoint) of the stage-1b VLM fairness screen, built here in the worker."""
         self.env = make_env(task, cameras=OBSERVED_CAMERAS, image_size=image_size)
+        self.screen = screen[0](screen[1]) if screen is not None else None
         self.probe = FairnessProbe(self.env)
         self.thresholds = thresholds
 
     def record(self, instance: TaskInstance) -> dict:
         obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
         rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in OBSERVED_CAMERAS}
-        fairness = self.probe.measure(rgb, self.thresholds)
+        fairness = self.probe.measure(rgb, self.thresholds).to_record()
+        vlm = screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
+        fairness |= {"vlm_answer": vlm.get("answer", ""), "vlm_analysis": vlm.get("analysis", "")}
         return {
             **instance.to_record(),
             "cameras": [self.env.scene.camera_pose(cam).to_record() for cam in ALL_CAMERAS],
-            "fairness": fairness.to_record(),
+            "fairness": fairness,
             "preview": {"bytes": preview_png([rgb[c] for c in OBSERVED_CAMERAS]), "path": None},
         }
 
