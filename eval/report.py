@@ -25,6 +25,7 @@ from typing import Any
 
 import pandas as pd
 
+from eval.agents import agents_markdown, describe_agents
 from eval.metrics import (
     METRIC_COLUMNS,
     EpisodesError,
@@ -298,7 +299,7 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
     lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _diagnostics(layouts) + _extremes(layouts))
+              + _diagnostics(layouts) + _extremes(layouts) + agents_markdown(metrics.get("agents", {})))
     lines += ["## Plots", ""]
     for name, reason in plots.items():
         lines.append(f"![{name}]({name})" if reason is None else f"- {name} skipped: {reason}")
@@ -313,6 +314,9 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     metrics = compute_all_metrics(episodes, cfg)
     if sources is not None:
         metrics["sources"] = sources
+    agents = describe_agents(episodes)
+    if agents:
+        metrics["agents"] = agents
     (out / METRICS_FILE).write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     outcome: dict[str, str | None] = {}
     if plots:
