@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).parents[1]
-ENTRY_POINTS = ("collect", "build_benchmark", "publish", "evaluate", "report", "plan", "train", "coverage")
+ENTRY_POINTS = ("collect", "build_benchmark", "publish", "evaluate", "report", "plan", "train", "coverage", "serve_vlm",
+                "probe_grounding")
 
 
 @pytest.mark.parametrize("name", ENTRY_POINTS)

@@ -254,14 +254,21 @@ def test_sgl_records_the_refined_instruction(standin, rgbd_env, tmp_path):
     assert "manipulation object" in prompts[0] and "small blue cube" in prompts[1]
 
 
-def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_nothing(tmp_path):
+@pytest.fixture(scope="module")
+def tiny_bench(tmp_path_factory):
     from pipelines.build_benchmark import BuildConfig
     from pipelines.build_benchmark import run as build
+
+    bench = tmp_path_factory.mktemp("vlm") / "bench"
+    build(BuildConfig(output_dir=str(bench), preset="tiny", image_size=64))
+    return bench
+
+
+def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_nothing(tiny_bench, tmp_path):
     from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
     from pipelines.evaluate import run as evaluate
 
-    bench = tmp_path / "bench"
-    build(BuildConfig(output_dir=str(bench), preset="tiny", image_size=96))
+    bench = tiny_bench
     # Episode by episode (one worker, in order): prose twice, a refusal, a 500 storm, then answers.
     script = [("text", "no"), ("text", "no"), ("refusal", "nope"), *[("status", 500)] * 9]
     s = ScriptedServer(ClassicCVModel(), script)
@@ -325,3 +332,32 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
     assert set(decisions["reviewer"]) == {f"vlm:{MODEL_NAME}"}
     assert (out / "contact_sheet" / "index.html").read_text().count("DISAGREES with the gate") == n_no
     assert "Cohen's κ 0.0" in (out / "README.md").read_text()
+
+
+def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path):
+    from eval.agents import color_words, describe_agents, head_noun
+    from pipelines.probe_grounding import BenchmarkPath, ProbeConfig, neighbours
+    from pipelines.probe_grounding import run as probe
+
+    assert color_words("small dark red cube") == ["darkred"] and color_words("small object") == []
+    assert head_noun("small gray cube") == "cube"
+    rows = pd.DataFrame({"policy": ["vlm_moka"] * 4, "vlm_requests": [3, 3, 2, 0], "vlm_cache_hits": [0, 0, 1, 3],
+                         "moka_object_description": ["small red cube", "small gray cube", "small object", None]})
+    agents = describe_agents(rows)["vlm_moka"]
+    assert agents["vlm"]["requests"] == 8 and agents["vlm"]["cache_hits"] == 4
+    assert agents["descriptions"]["head_nouns"] == {"cube": round(2 / 3, 4), "object": round(1 / 3, 4)}
+    assert agents["descriptions"]["without_color"] == round(1 / 3, 4)
+    # The probe re-renders the frames of a real MOKA run and regrounds with neighbouring colour names.
+    assert len(neighbours("red", 2)) == 2 and "red" not in neighbours("red", 2)
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from pipelines.evaluate import run as evaluate
+
+    bench = tiny_bench
+    config = policy_config("vlm_moka", base_url=standin.url, model=MODEL_NAME, cache_dir=str(tmp_path / "c"))
+    evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
+                            EvalConfig(n_repeats=1, limit=3, num_workers=1, max_steps=2, image_size=224), str(tmp_path / "e")))
+    result = probe(ProbeConfig(results=str(tmp_path / "e" / "episodes.parquet"), benchmark=BenchmarkPath(str(bench)),
+                               output_dir=str(tmp_path / "p"), neighbours=3))
+    assert result["episodes"] == 3 and result["cases"] == 9
+    assert result["rises"] == sum(c["rise"] > 0.03 for c in result["detail"])
+    assert all(c["base"] > 0 for c in result["detail"])  # each description grounded in its own frame
