@@ -126,7 +126,7 @@ class TransformersGrounder:
                 outputs = self.model(**inputs)
             # OWLv2 pads images to a square: boxes are relative to the padded side.
             side = max(h, w)
-            result = self.processor.post_process_object_detection(
+            result = self.processor.post_process_grounded_object_detection(
                 outputs, threshold=self.threshold, target_sizes=torch.tensor([[side, side]]))[0]
         else:
             inputs = self.processor(images=rgb, text=description.lower().rstrip(".") + ".", return_tensors="pt")
@@ -135,8 +135,11 @@ class TransformersGrounder:
             result = self.processor.post_process_grounded_object_detection(
                 outputs, inputs["input_ids"], threshold=self.threshold, text_threshold=self.threshold,
                 target_sizes=[(h, w)])[0]
-        boxes = [tuple(float(v) for v in b) for b in result["boxes"].tolist()]
-        scores = [float(s) for s in result["scores"].tolist()]
+        # Clip to the image; a box wholly inside OWLv2's padding holds nothing of the image: dropped.
+        kept = [((max(0.0, x0), max(0.0, y0), min(float(w), x1), min(float(h), y1)), float(s))
+                for (x0, y0, x1, y1), s in zip(result["boxes"].tolist(), result["scores"].tolist())
+                if min(float(w), x1) > max(0.0, x0) and min(float(h), y1) > max(0.0, y0)]
+        boxes, scores = [b for b, _ in kept], [s for _, s in kept]
         masks = self._segment(rgb, boxes) if boxes else []
         detections = [Detection(b, s, m) for b, s, m in zip(boxes, scores, masks or [None] * len(boxes))]
         return sorted(detections, key=lambda d: -d.score)
