@@ -18,10 +18,14 @@ from roboview_data.variation.factors import (
 
 
 def test_factor_names_and_kinds():
-    assert visual_factors() == ("color", "camera_pose", "camera_euler", "dist_scale")
+    # The paper's four visual factors, then the `extended` preset's four (DESIGN.md: names and counts fixed).
+    assert visual_factors() == ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture",
+                                "distractors", "object_size")
     assert context_factors() == ("initial_position", "shape", "instruction")
-    assert tuple(FACTORS) == factor_names() == visual_factors() + context_factors()
-    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 4 + ["context"] * 3
+    assert set(FACTORS) == set(factor_names()) and factor_names() == visual_factors() + context_factors()
+    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 8 + ["context"] * 3
+    assert {n: len(load_factor(n).values) for n in visual_factors()[4:]} == {
+        "lighting": 9, "table_texture": 8, "distractors": 5, "object_size": 7}
 
 
 def test_baselines():
@@ -30,10 +34,16 @@ def test_baselines():
         "camera_pose": "original",
         "camera_euler": "0,0",
         "dist_scale": "0",
+        "lighting": "default",
+        "table_texture": "plain",
+        "distractors": "0",
+        "object_size": "1.0",
         "initial_position": "center",
         "shape": "cube",
         "instruction": "put the small object into the yellow box",
     }
+    # Every baseline is one of its factor's values (camera_pose's "original" is the exception).
+    assert all(load_factor(n).baseline in load_factor(n).values for n in factor_names() if n != "camera_pose")
 
 
 def test_color_values():

@@ -171,7 +171,8 @@ def test_to_record_columns_and_values():
     record = instance.to_record()
     assert list(record) == [
         "instance_id", "task", "split", "factor", "value", "context_id", "context_subspace", "color", "camera_pose",
-        "camera_euler", "dist_scale", "initial_position", "shape", "instruction", "color_hex",
+        "camera_euler", "dist_scale", "lighting", "table_texture", "distractors", "object_size",
+        "initial_position", "shape", "instruction", "color_hex",
         "color_rgb", "color_lab", "seed",
     ]
     assert record["color_hex"] == "#ff0000"

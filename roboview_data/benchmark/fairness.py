@@ -17,6 +17,7 @@ import numpy as np
 
 from roboview_data.sim.env import PickPlaceEnv
 from roboview_data.variation.colors import delta_e_2000, get_color, srgb_to_lab
+from roboview_data.variation.factors import FACTORS
 
 # Cameras a policy observes: VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
 OBSERVED_CAMERAS = ("front", "left_top", "wrist")
@@ -103,6 +104,10 @@ class FairnessProbe:
         obj = ids.shape_geom[self.env.shape]
         box = list(ids.box_geoms)
         nominal_lab = np.asarray(get_color(self.env.instance.get("color")).lab)
+        # Under a non-default light the rendered colour moves away from the nominal one by design: only
+        # the object-table contrast (which a light that hides the object still fails) is judged.
+        judge_nominal = all(FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
+                            for name, value in self.env.instance.factors)
         results, reasons = [], []
         for cam in self.cameras:
             seg = self._segment(cam)
@@ -124,7 +129,8 @@ class FairnessProbe:
             )
             results.append(result)
             min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
-            reasons += _violations(result, thresholds, min_pixels, scene_camera=cam != "wrist")
+            reasons += _violations(result, thresholds, min_pixels, scene_camera=cam != "wrist",
+                                   judge_nominal=judge_nominal)
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
 
@@ -149,7 +155,8 @@ def _delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
     return float(delta_e_2000(a, b)) if a is not None and b is not None else float("nan")
 
 
-def _violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, scene_camera: bool) -> list[str]:
+def _violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, scene_camera: bool,
+                judge_nominal: bool = True) -> list[str]:
     out = []
     if r.object_visible < t.min_object_visible:
         out.append(f"{r.camera}: object visible {r.object_visible:.2f} < {t.min_object_visible}")
@@ -164,6 +171,6 @@ def _violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, sce
             out.append(f"{r.camera}: box not wholly in frame")
     if not np.isnan(r.delta_e_table) and r.delta_e_table < t.min_delta_e_table:
         out.append(f"{r.camera}: object-table ΔE2000 {r.delta_e_table:.1f} < {t.min_delta_e_table}")
-    if not np.isnan(r.delta_e_nominal) and r.delta_e_nominal > t.max_delta_e_nominal:
+    if judge_nominal and not np.isnan(r.delta_e_nominal) and r.delta_e_nominal > t.max_delta_e_nominal:
         out.append(f"{r.camera}: rendered-nominal ΔE2000 {r.delta_e_nominal:.1f} > {t.max_delta_e_nominal}")
     return out

@@ -54,7 +54,7 @@ OBJECT_MASS = 0.06  # kg
 OBJECT_FRICTION = (1.2, 0.01, 0.0005)
 
 
-def _hex_prism_vertices(circumradius: float, half_height: float) -> list[float]:
+def hex_prism_vertices(circumradius: float, half_height: float) -> list[float]:
     angles = np.arange(6) * np.pi / 3
     ring = np.stack([circumradius * np.cos(angles), circumradius * np.sin(angles)], axis=1)
     top = np.column_stack([ring, np.full(6, half_height)])
@@ -138,6 +138,13 @@ def build_spec(quality: RenderQuality = "fast") -> mujoco.MjSpec:
 
     _add_receiver(world)
     _add_shapes(spec, world)
+    # What registered factors need in the model (textures, distractor bodies, mesh variants), in
+    # registration order: compiled once, switched in place by each factor's applier.
+    from roboview_data.variation.factors import FACTORS
+
+    for factor in FACTORS.values():
+        if factor.extend_spec is not None:
+            factor.extend_spec(spec)
 
     for name, pose in BASE_CAMERAS.items():
         world.add_camera(name=name, pos=list(pose.pos), quat=list(pose.quat), fovy=pose.fovy)
@@ -171,7 +178,7 @@ def _add_receiver(world: mujoco.MjsBody) -> None:
 
 
 def _add_shapes(spec: mujoco.MjSpec, world: mujoco.MjsBody) -> None:
-    spec.add_mesh(name="hex_prism", uservert=_hex_prism_vertices(HEX_CIRCUMRADIUS, SHAPES["hex_prism"].half_height))
+    spec.add_mesh(name="hex_prism", uservert=hex_prism_vertices(HEX_CIRCUMRADIUS, SHAPES["hex_prism"].half_height))
     for i, (name, shape) in enumerate(SHAPES.items()):
         body = world.add_body(name=f"obj_{name}", pos=[PARK_XY[0], PARK_XY[1] + 0.1 * i, shape.half_height])
         body.add_freejoint(name=f"obj_{name}")

@@ -41,6 +41,11 @@ BUILTIN_MODULES = (
     "roboview_data.variation.factors.color",
     "roboview_data.variation.factors.camera",
     "roboview_data.variation.factors.context",
+    # Beyond the paper (the `extended` preset): each one module.
+    "roboview_data.variation.factors.lighting",
+    "roboview_data.variation.factors.table_texture",
+    "roboview_data.variation.factors.distractors",
+    "roboview_data.variation.factors.object_size",
 )
 # Third-party factors: a package lists its factor modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.factors"

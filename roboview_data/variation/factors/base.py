@@ -55,6 +55,13 @@ class Factor:
     title: str = ""
     # Visual factors: `bind(scene) -> SceneApplier`. None for context factors (the task places them).
     bind: Callable[[Any], SceneApplier] | None = field(default=None, compare=False, repr=False)
+    # Scene additions the applier needs, made once when the scene is built (materials, parked bodies,
+    # mesh variants): `extend_spec(spec)`. Compiled with everything else: no recompiles per instance.
+    extend_spec: Callable[[Any], None] | None = field(default=None, compare=False, repr=False)
+    # Whether the object's rendered colour stays near its nominal colour away from the baseline; the
+    # fairness gate's ΔE-to-nominal check applies only where every factor says so (lighting: False —
+    # a dim light darkens every colour by design, which is not a fairness failure).
+    keeps_nominal_color: bool = True
     # Extra instance-record columns for a value (e.g. color -> color_hex / color_rgb / color_lab).
     record_columns: Callable[[str], dict[str, Any]] | None = field(default=None, compare=False, repr=False)
     # Context factors: the task they belong to. Visual factors apply to every task (None).
