@@ -233,6 +233,89 @@ def plot_forest(split: str) -> Callable[[Layouts, Path], None]:
     return draw
 
 
+def plot_lighting(layouts: Layouts, path: Path) -> None:
+    """SR over key-light intensity (rows) × direction (columns)."""
+    from roboview_data.variation.factors.lighting import (
+        INTENSITIES,
+        POSITIONS,
+    )
+
+    per = _per_value(layouts, "lighting")
+    fig, axes = _grid_axes(len(per), 3.8, 3.2)
+    intensities, directions = list(INTENSITIES), list(POSITIONS)
+    for ax, (policy, values) in zip(axes, per.items()):
+        grid = np.full((len(intensities), len(directions)), math.nan)
+        for value, s in values.items():
+            name = "normal_top" if value == "default" else value
+            grid[intensities.index(name.split("_")[0]), directions.index(name.split("_")[1])] = s["sr"]
+        _heatmap(ax, grid, intensities, directions, policy)
+    fig.suptitle("Success rate by key light (intensity × direction)")
+    _save(fig, path)
+
+
+def _bars(layouts: Layouts, split: str, path: Path, title: str, order: list[str]) -> None:
+    per = _per_value(layouts, split)
+    fig, ax = plt.subplots(figsize=(max(6, 0.7 * len(order) * len(per)), 4), layout="constrained")
+    width = 0.8 / len(per)
+    for i, (policy, values) in enumerate(per.items()):
+        items = [(v, values[v]) for v in order if v in values]
+        x = np.array([order.index(v) for v, _ in items]) + (i - (len(per) - 1) / 2) * width
+        err = _wilson_err([s for _, s in items])
+        ax.bar(x, [s["sr"] for _, s in items], width, yerr=err, capsize=3, label=policy)
+    ax.set_xticks(range(len(order)), order, rotation=30, ha="right")
+    ax.set(ylabel="success rate", ylim=(0, 1.05), title=title)
+    ax.legend()
+    _save(fig, path)
+
+
+def plot_table_texture(layouts: Layouts, path: Path) -> None:
+    """SR per table texture, Wilson 95 % intervals."""
+    from roboview_data.variation.factors import FACTORS
+
+    _bars(layouts, "table_texture", path, "Success rate by table texture", list(FACTORS["table_texture"].values))
+
+
+def _trend(xs: np.ndarray, successes: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """Binomial GLM (logit) success ~ x fitted to per-value counts: (fitted SR on a grid, slope, p)."""
+    import statsmodels.api as sm
+
+    if len(xs) < 3 or n.sum() == 0 or successes.sum() in (0, n.sum()):
+        return None
+    model = sm.GLM(np.column_stack([successes, n - successes]), sm.add_constant(xs), family=sm.families.Binomial())
+    fit = model.fit()
+    grid = np.linspace(xs.min(), xs.max(), 50)
+    return fit.predict(sm.add_constant(grid)), float(fit.params[1]), float(fit.pvalues[1])
+
+
+def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title: str) -> None:
+    fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
+    for i, (policy, values) in enumerate(_per_value(layouts, split).items()):
+        items = sorted(values.items(), key=lambda kv: float(kv[0]))
+        x = np.array([float(v) for v, _ in items])
+        sr = np.array([s["sr"] for _, s in items])
+        n = np.array([s["n_episodes"] for _, s in items], dtype=float)
+        err = _wilson_err([s for _, s in items])
+        line = ax.errorbar(x, sr, yerr=err, marker=_MARKERS[i % len(_MARKERS)], ls="none", capsize=3, label=policy)
+        trend = _trend(x, np.round(sr * n), n)
+        if trend is not None:
+            fitted, slope, p = trend
+            ax.plot(np.linspace(x.min(), x.max(), 50), fitted, color=line[0].get_color(),
+                    label=f"{policy}: logistic trend, slope {slope:+.2f}/unit, p {p:.2g}")
+    ax.set(xlabel=xlabel, ylabel="success rate", ylim=(-0.05, 1.05), title=title)
+    ax.legend(fontsize=8)
+    _save(fig, path)
+
+
+def plot_distractors(layouts: Layouts, path: Path) -> None:
+    """Dose-response: SR against the number of distractors, with a fitted logistic trend."""
+    _dose_response(layouts, "distractors", path, "distractors on the table", "Success rate vs distractor count")
+
+
+def plot_object_size(layouts: Layouts, path: Path) -> None:
+    """SR against the object's scale, with a fitted logistic trend."""
+    _dose_response(layouts, "object_size", path, "object scale", "Success rate vs object size")
+
+
 # file name → (split it needs, section of the layout holding it, drawing function)
 PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_by_color_category.png": ("color", "splits", plot_color_categories),
@@ -241,8 +324,13 @@ PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_camera_euler.png": ("camera_euler", "splits", plot_camera_euler),
     "sr_dist_scale.png": ("dist_scale", "splits", plot_dist_scale),
     "sr_color_x_camera_pose.png": ("color_x_camera_pose", "interactions", plot_color_x_camera_pose),
+    "sr_lighting.png": ("lighting", "splits", plot_lighting),
+    "sr_table_texture.png": ("table_texture", "splits", plot_table_texture),
+    "sr_distractors.png": ("distractors", "splits", plot_distractors),
+    "sr_object_size.png": ("object_size", "splits", plot_object_size),
     **{f"forest_{split}.png": (split, "splits", plot_forest(split))
-       for split in ("color", "camera_pose", "camera_euler", "dist_scale")},
+       for split in ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture", "distractors",
+                     "object_size")},
 }
 
 

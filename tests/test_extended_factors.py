@@ -141,3 +141,42 @@ def test_the_gate_judges_a_dim_light_by_contrast_not_by_colour_shift():
     hidden = CameraFairness("front", 1.0, 200, True, 1.0, 900, True, delta_e_nominal=60.0, delta_e_table=1.5)
     assert any("object-table" in r for r in _violations(hidden, t, 25, True, judge_nominal=False))
     assert not FACTORS["lighting"].keeps_nominal_color and FACTORS["table_texture"].keeps_nominal_color
+
+
+def test_the_dose_response_trend_recovers_a_known_slope():
+    from eval.report_plots import _trend
+
+    rng = np.random.default_rng(0)
+    x = np.arange(5.0)
+    slopes = []
+    for _ in range(200):
+        n = np.full(5, 40.0)
+        p = 1 / (1 + np.exp(-(1.5 - 0.8 * x)))
+        _, slope, _ = _trend(x, rng.binomial(40, p).astype(float), n)
+        slopes.append(slope)
+    assert abs(np.mean(slopes) + 0.8) < 0.05  # unbiased around the true slope
+    _, slope, pval = _trend(x, np.array([38.0, 30, 20, 10, 4]), np.full(5, 40.0))
+    assert slope < 0 and pval < 1e-6
+    assert _trend(x, np.full(5, 40.0), np.full(5, 40.0)) is None  # no failures: no trend to fit
+
+
+def test_reports_draw_the_new_factors(tmp_path):
+    import pandas as pd
+
+    from eval.report import write_report
+
+    suite = [i for i in generate_suite(load_preset("extended")) if i.split in NEW]
+    rng = np.random.default_rng(0)
+    rows = []
+    for inst in suite:
+        for repeat in range(2):
+            level = {"distractors": lambda v: 1 - 0.2 * int(v), "object_size": lambda v: 0.9,
+                     "lighting": lambda v: 0.3 if v.startswith("dim") else 0.9,
+                     "table_texture": lambda v: 0.5 if v.startswith("checker") else 0.9}[inst.split](inst.value)
+            success = rng.random() < level
+            rows.append({**inst.to_record(), "repeat": repeat, "success": bool(success), "policy": "sim"})
+    result = write_report(pd.DataFrame(rows), tmp_path, plots=True)
+    for name in ("sr_lighting.png", "sr_table_texture.png", "sr_distractors.png", "sr_object_size.png"):
+        assert result.plots[name] is None and (tmp_path / name).stat().st_size > 10_000, name
+    table1 = (tmp_path / "report.md").read_text()
+    assert "Lighting SR" in table1 and "Distractors SR" in table1
