@@ -38,6 +38,7 @@ from roboview_data.demos.dataset import (
 )
 from roboview_data.demos.recorder import DemoCollector, DemoEpisode
 from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.sim.tasks import load_task
 from roboview_data.variation.randomization import validate_randomize
 from roboview_data.workers import WorkerPool
 
@@ -68,6 +69,8 @@ class DatasetConfig:
     # left_top on the continuous orbital surface). What was drawn is recorded per episode in
     # meta/roboview/episodes.parquet. Empty: context-only randomization, as in the paper.
     randomize: list[str] = field(default_factory=list)
+    # Task the expert demonstrates: pick_place (the paper's) or push (roboview_data.sim.tasks).
+    task: str = "pick_place"
 
     def __post_init__(self) -> None:
         if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):
@@ -86,6 +89,8 @@ class DatasetConfig:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
         with flag_errors("--dataset.randomize"):
             self.randomize = list(validate_randomize(self.randomize))
+        with flag_errors("--dataset.task"):
+            load_task(self.task)
 
 
 @dataclass
@@ -113,7 +118,7 @@ class CollectConfig:
     def signature(self) -> CollectionSignature:
         d = self.dataset
         return CollectionSignature(d.repo_id, d.fps, d.image_size, tuple(d.cameras), self.seed, self.max_steps,
-                                   tuple(d.randomize))
+                                   tuple(d.randomize), d.task)
 
 
 @dataclass(frozen=True)
@@ -137,7 +142,7 @@ class CollectResult:
 def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
     """Attempts first_attempt, first_attempt+1, … in order, computed by the worker pool."""
     d = cfg.dataset
-    args = (cfg.seed, tuple(d.cameras), d.image_size, d.fps, cfg.max_steps, tuple(d.randomize))
+    args = (cfg.seed, tuple(d.cameras), d.image_size, d.fps, cfg.max_steps, tuple(d.randomize), d.task)
     attempt = first_attempt
     if cfg.num_workers == 1:
         collector = DemoCollector(*args)

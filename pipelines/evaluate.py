@@ -168,9 +168,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         keep = set(cfg.benchmark.value_list)
         bench.splits.update({s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()})
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
-    tasks = sorted({i.instance.task for items in bench.splits.values() for i in items})
-    if len(tasks) > 1:
-        raise ValueError(f"the chosen splits mix tasks {tasks}; evaluate one task at a time (--benchmark.splits)")
+    tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
     image_size = resolve_image_size(policy, cfg.eval.image_size)
     run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
                 "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
@@ -195,12 +193,25 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         rerun = RerunLogger(Path(cfg.eval.rerun))
     # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
     threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
-    worker = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None, torch_threads=threads,
-                        task=tasks[0] if tasks else DEFAULT_TASK)
-    if cfg.eval.backend == "ray":
-        stream = run_ray(worker, todo, cfg.eval.num_workers, cfg.eval.ray_address or None)
-    else:
-        stream = run_local(worker, todo, cfg.eval.num_workers)
+
+    def streams():
+        # One pool per task (each worker holds one task's env and the policy), tasks one after another.
+        for task in tasks or [DEFAULT_TASK]:
+            spec = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None,
+                              torch_threads=threads, task=task)
+            items = [w for w in todo if w.item.instance.task == task]
+            if not items:
+                continue
+            if cfg.eval.backend == "ray":
+                inner = run_ray(spec, items, cfg.eval.num_workers, cfg.eval.ray_address or None)
+            else:
+                inner = run_local(spec, items, cfg.eval.num_workers)
+            try:
+                yield from inner
+            finally:
+                inner.close()
+
+    stream = streams()
 
     per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     for row in store.rows.values():

@@ -37,6 +37,9 @@ HIST_BIN = np.array([10.0, 4.0, 4.0])
 # "Yellow" in OpenCV HSV (hue 0–180): 40°–70°, clearly saturated and not dark.
 YELLOW_LOW = np.array([20, 115, 64], dtype=np.uint8)
 YELLOW_HIGH = np.array([35, 255, 255], dtype=np.uint8)
+# The push task's marked zone: a saturated light blue (hue ≈ 215°), flat on the table.
+ZONE_LOW = np.array([98, 110, 110], dtype=np.uint8)
+ZONE_HIGH = np.array([118, 255, 255], dtype=np.uint8)
 # Robot exclusion: points higher than this above the table or this close to the arm's base (m).
 ROBOT_CLEARANCE_Z = 0.10
 ROBOT_BASE_RADIUS = 0.25
@@ -114,6 +117,11 @@ def yellow_mask(rgb: np.ndarray) -> np.ndarray:
     return cv2.inRange(hsv, YELLOW_LOW, YELLOW_HIGH) > 0
 
 
+def zone_mask(rgb: np.ndarray) -> np.ndarray:
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+    return cv2.inRange(hsv, ZONE_LOW, ZONE_HIGH) > 0
+
+
 def robot_mask(points: np.ndarray) -> np.ndarray:
     """Where the robot can be: above the table's object layer or around its own base."""
     near_base = np.linalg.norm(points[..., :2], axis=-1) < ROBOT_BASE_RADIUS
@@ -183,16 +191,20 @@ def locate_object(candidates: np.ndarray, lab: np.ndarray, table_lab: np.ndarray
     return center, yaw, symmetry, int(stats[best, cv2.CC_STAT_AREA]), float(delta_e[labels == best].mean())
 
 
-def perceive(rgb: np.ndarray, depth: np.ndarray, camera: CameraPose) -> Perception:
-    """Find the small object and the yellow box in one RGB-D frame; raise PerceptionError if not."""
+def perceive(rgb: np.ndarray, depth: np.ndarray, camera: CameraPose, target: str = "box") -> Perception:
+    """Find the small object and the target — the yellow box, or the push task's marked zone — in one
+    RGB-D frame; raise PerceptionError if not. `box_xy` is the target's center."""
     if rgb.shape[:2] != depth.shape:
         raise ValueError(f"rgb {rgb.shape} and depth {depth.shape} differ in size")
     scale = rgb.shape[0] * rgb.shape[1] / 224**2
     points = back_project(depth.astype(np.float64), camera)
     lab = to_lab(rgb)
     table_lab = dominant_color(lab)
-    yellow = yellow_mask(rgb)
-    box_xy, box_pixels = locate_box(yellow, points, max(1, round(MIN_BOX_PIXELS_224 * scale)))
+    yellow = yellow_mask(rgb) if target == "box" else zone_mask(rgb)
+    try:
+        box_xy, box_pixels = locate_box(yellow, points, max(1, round(MIN_BOX_PIXELS_224 * scale)))
+    except PerceptionError:
+        raise PerceptionError(f"{target} not found") from None
     on_table = points[..., 2] > TABLE_SURFACE_MIN_Z
     candidates = on_table & ~table_mask(lab, table_lab) & ~yellow & ~robot_mask(points)
     center, yaw, symmetry, pixels, saliency = locate_object(

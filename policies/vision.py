@@ -24,10 +24,13 @@ from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
 from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
+from roboview_data.sim.push import push_segments
 
 log = logging.getLogger(__name__)
 
 DEFAULT_CAMERA = "front"
+# The object's extent along a push, assumed (the policy does not know the shape): a 4 cm solid.
+PUSH_REACH_M = 0.04
 
 
 @PolicyConfig.register_subclass("vision")
@@ -71,6 +74,7 @@ class VisionPolicy:
         self.camera = camera
         self._motion = PickPlacePlanner(view.kinematic_model())
         self._calibration: CameraPose | None = None
+        self._task = "pick_place"
         self.perception: Perception | None = None
         self.failure_reason = ""
         self._hold: np.ndarray | None = None
@@ -79,6 +83,7 @@ class VisionPolicy:
     def reset(self, episode: Episode) -> None:
         # Perception waits for the first observation; the episode gives the camera's calibration.
         self._calibration = episode.cameras[self.camera]
+        self._task = episode.task
         self.perception = None
         self.failure_reason = ""
         self._hold = None
@@ -97,14 +102,18 @@ class VisionPolicy:
         try:
             self.perception = perceive(observation[IMAGE_KEY.format(self.camera)],
                                        observation[DEPTH_KEY.format(self.camera)],
-                                       self._calibration)
+                                       self._calibration, target="zone" if self._task == "push" else "box")
         except PerceptionError as err:
             self.failure_reason = err.reason
             self._hold = np.append(arm_q, 0.0).astype(np.float32)
             log.debug("vision policy: %s; holding still", err.reason)
             return
         p = self.perception
-        self._motion.plan(p.object_pos, p.object_yaw, p.symmetry, box_xy=p.box_xy, arm_qpos=arm_q)
+        if self._task == "push":  # slide it onto the perceived zone, as the push expert does
+            segments = push_segments(self._motion, p.object_pos[:2], p.box_xy, reach=PUSH_REACH_M)
+            self._motion.follow(segments, self._motion.pinch_position(arm_q), arm_q)
+        else:
+            self._motion.plan(p.object_pos, p.object_yaw, p.symmetry, box_xy=p.box_xy, arm_qpos=arm_q)
 
     def close(self) -> None:
         pass

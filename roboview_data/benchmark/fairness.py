@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.sim.tasks import load_task
 from roboview_data.variation.colors import delta_e_2000, get_color, srgb_to_lab
 from roboview_data.variation.factors import FACTORS
 
@@ -102,7 +103,10 @@ class FairnessProbe:
         """Measure the current scene; `rgb` holds the already rendered RGB frame of each camera."""
         ids = self.env.scene.ids
         obj = ids.shape_geom[self.env.shape]
-        box = list(ids.box_geoms)
+        # The task's target: the receiver box (pick_place) or the marked zone (push); the record's
+        # box_* fields measure it.
+        targets = load_task(self.env.task).fairness_targets
+        box = list(ids.box_geoms) if "box" in targets else [self.env.model.geom("zone").id]
         nominal_lab = np.asarray(get_color(self.env.instance.get("color")).lab)
         # Under a non-default light the rendered colour moves away from the nominal one by design: only
         # the object-table contrast (which a light that hides the object still fails) is judged.

@@ -38,15 +38,26 @@ def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
 
 
 class InstanceRenderer:
+    """One env (and fairness probe) per task, made on first use; every instance applied in place."""
+
     def __init__(self, image_size: int, thresholds: FairnessThresholds, task: str = DEFAULT_TASK,
                  screen: tuple[Any, Any] | None = None) -> None:
         """`screen`: (client class, endpoint) of the stage-1b VLM fairness screen, built here in the worker."""
-        self.env = make_env(task, cameras=OBSERVED_CAMERAS, image_size=image_size)
+        self.image_size = image_size
+        self.envs: dict[str, Any] = {}
+        self.probes: dict[str, FairnessProbe] = {}
         self.screen = screen[0](screen[1]) if screen is not None else None
-        self.probe = FairnessProbe(self.env)
         self.thresholds = thresholds
+        self._use(task)
+
+    def _use(self, task: str) -> None:
+        if task not in self.envs:
+            self.envs[task] = make_env(task, cameras=OBSERVED_CAMERAS, image_size=self.image_size)
+            self.probes[task] = FairnessProbe(self.envs[task])
+        self.env, self.probe = self.envs[task], self.probes[task]
 
     def record(self, instance: TaskInstance) -> dict:
+        self._use(instance.task)
         obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
         rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in OBSERVED_CAMERAS}
         fairness = self.probe.measure(rgb, self.thresholds).to_record()
@@ -60,4 +71,5 @@ class InstanceRenderer:
         }
 
     def close(self) -> None:
-        self.env.close()
+        for env in self.envs.values():
+            env.close()

@@ -52,6 +52,7 @@ class CollectionSignature:
     seed: int
     max_steps: int
     randomize: tuple[str, ...] = ()  # collections made before randomization existed had none
+    task: str = "pick_place"  # collections made before the task axis were pick_place
 
 
 def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
@@ -178,7 +179,8 @@ def roll_back(root: Path, progress: Progress) -> int:
 
 def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRobotDataset
     """Append one successful expert episode through lerobot's add_frame / save_episode."""
-    task = episode.instance.get("instruction")
+    values = episode.instance.factor_values
+    task = next(values[name] for name in values if name.endswith("instruction"))  # instruction / push_instruction
     for t in range(episode.steps):
         frame = {IMAGE_KEY.format(cam): frames[t] for cam, frames in episode.images.items()}
         frame[STATE_KEY] = episode.states[t]

@@ -25,10 +25,11 @@ def attempt_seed(seed: int, attempt: int) -> int:
     return seed_from_text(f"collect:{seed}:{attempt}")
 
 
-def training_instance(rng: np.random.Generator) -> TaskInstance:
-    """Context-only randomization: context factors drawn at random, visual factors at baseline."""
-    values = ContextSampler().sample_context(rng)
-    return TaskInstance(split="train", varied=context_factors(), factors=values, context_subspace="cartesian")
+def training_instance(rng: np.random.Generator, task: str = DEFAULT_TASK) -> TaskInstance:
+    """Context-only randomization: the task's context factors drawn at random, visual factors at baseline."""
+    values = ContextSampler(task=task).sample_context(rng)
+    return TaskInstance(split="train", varied=context_factors(task), factors=values, context_subspace="cartesian",
+                        task=task)
 
 
 @dataclass
@@ -61,13 +62,14 @@ class DemoCollector:
                  randomize: tuple[str, ...] = (), task: str = DEFAULT_TASK) -> None:
         self.seed = seed
         self.randomize = randomize
+        self.task = task
         self.env = make_env(task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps)
         self.expert = load_task(task).make_expert(self.env)
 
     def run(self, attempt: int) -> DemoEpisode:
         start = time.perf_counter()
         ep_seed = attempt_seed(self.seed, attempt)
-        instance = training_instance(np.random.default_rng(ep_seed))
+        instance = training_instance(np.random.default_rng(ep_seed), self.task)
         visuals = sample_randomization(ep_seed, self.randomize)
         options = {"instance": instance}
         if self.randomize:  # context-only collections reset exactly as before

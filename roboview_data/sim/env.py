@@ -48,10 +48,10 @@ UNSTABLE_REASON = "simulation unstable"
 RELEASED_GRIPPER = 0.25
 
 
-def baseline_instance() -> TaskInstance:
+def baseline_instance(task: str = TASK) -> TaskInstance:
     """Every factor at its baseline: the scene the expert demos are rendered in."""
-    return TaskInstance(split="baseline", varied=("color",), factors=baselines(TASK),
-                        context_subspace="base")
+    return TaskInstance(split="baseline", varied=("color",), factors=baselines(task), context_subspace="base",
+                        task=task)
 
 
 class PickPlaceEnv(gym.Env):
@@ -81,6 +81,9 @@ class PickPlaceEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    # The task this env runs (roboview_data.sim.tasks) and the context factor naming its instruction.
+    task = TASK
+    instruction_factor = "instruction"
 
     def __init__(self, cameras: Sequence[str] = ALL_CAMERAS, image_size: int = 224, fps: int = 10,
                  max_steps: int = DEFAULT_MAX_STEPS, depth: bool = False, quality: RenderQuality = "fast",
@@ -110,8 +113,8 @@ class PickPlaceEnv(gym.Env):
         self._depth_renderer: mujoco.Renderer | None = None
         self._open_renderers: list[mujoco.Renderer] = []
         self._appliers: dict[str, SceneApplier] = {}
-        self.instance = baseline_instance()
-        self.instruction = self.instance.get("instruction")
+        self.instance = baseline_instance(self.task)
+        self.instruction = self.instance.get(self.instruction_factor)
         self.steps = 0
 
         arm_range = self.scene.ids.arm_range
@@ -169,12 +172,13 @@ class PickPlaceEnv(gym.Env):
         episode_seed = instance.seed if seed is None else seed
         super().reset(seed=episode_seed)
         rng = np.random.default_rng(episode_seed)
+        if instance.task != self.task:
+            raise ValueError(f"instance {instance.instance_id} is a {instance.task!r} instance; this env runs "
+                             f"{self.task!r} (make the env with make_env({instance.task!r}))")
         self.instance = instance
-        self.instruction = instance.get("instruction")
+        self.instruction = instance.get(self.instruction_factor)
         self.steps = 0
 
-        if instance.task != TASK:
-            raise ValueError(f"instance {instance.instance_id} is a {instance.task!r} instance; this env runs {TASK!r}")
         cameras = options.get("cameras", {})
         for name, pose in cameras.items():
             if name not in BASE_CAMERAS or pose.name != name:
@@ -186,11 +190,8 @@ class PickPlaceEnv(gym.Env):
 
         mujoco.mj_resetData(self.model, self.data)
         values = instance.factor_values
-        # Context (the task's own): the object, at its named position with the episode's jitter.
-        xy = np.asarray(OBJECT_POSITIONS[values["initial_position"]])
-        xy = xy + rng.uniform(-POSITION_JITTER_M, POSITION_JITTER_M, size=2)
-        yaw = rng.uniform(-YAW_JITTER_RAD, YAW_JITTER_RAD)
-        self.scene.place_object(values["shape"], xy, yaw)
+        # Context (the task's own): where the object starts, with the episode's jitter, and the rest.
+        self.place_context(values, rng)
         # Visual factors: every registered one writes its value into the compiled model, in order.
         for pose in BASE_CAMERAS.values():
             self.scene.set_camera(pose)
@@ -229,6 +230,13 @@ class PickPlaceEnv(gym.Env):
             self._appliers[factor] = load_factor(factor).bind(self.scene)
         return self._appliers[factor]
 
+    def place_context(self, values: dict[str, str], rng: np.random.Generator) -> None:
+        """pick_place: the object at its named position (± 1 cm, ± 0.35 rad); the box stays where it is."""
+        xy = np.asarray(OBJECT_POSITIONS[values["initial_position"]])
+        xy = xy + rng.uniform(-POSITION_JITTER_M, POSITION_JITTER_M, size=2)
+        yaw = rng.uniform(-YAW_JITTER_RAD, YAW_JITTER_RAD)
+        self.scene.place_object(values["shape"], xy, yaw)
+
     @property
     def unstable(self) -> bool:
         """True once MuJoCo reported an unstable simulation (bad accelerations) this episode."""
@@ -237,7 +245,7 @@ class PickPlaceEnv(gym.Env):
     # -- state -------------------------------------------------------------------------------
     @property
     def shape(self) -> str:
-        return self.instance.get("shape")
+        return self.scene.active_shape
 
     def gripper_closure(self) -> float:
         return float(np.clip(self.data.qpos[self.scene.ids.gripper_qpos] / GRIPPER_DRIVER_CLOSED, 0.0, 1.0))

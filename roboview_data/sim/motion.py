@@ -101,6 +101,23 @@ class PickPlacePlanner:
             Segment(box_release, 0.0, 4, 0.0),
             Segment(box_above, 0.0, 30, 0.0),
         ]
+        self.follow(segments, start, q_start)
+
+    def finger_yaw(self, closing_axis_heading: float, symmetry: float = np.pi) -> float:
+        """The plan's yaw that turns the fingers' closing axis to `closing_axis_heading` (world, rad),
+        taking the equivalent (modulo `symmetry`) nearest the home wrist so the wrist turns least."""
+        half_turn = min(symmetry, np.pi)
+        delta = closing_axis_heading - self._home_finger_yaw
+        return (delta + half_turn / 2) % half_turn - half_turn / 2
+
+    def pinch_position(self, arm_qpos: np.ndarray) -> np.ndarray:
+        """Where the pinch point is for a joint reading (forward kinematics on the scratch data)."""
+        self._scratch.qpos[self._qadr] = arm_qpos
+        mujoco.mj_kinematics(self.model, self._scratch)
+        return self._scratch.site_xpos[self._site].copy()
+
+    def follow(self, segments: list[Segment], start: np.ndarray, q_start: np.ndarray) -> None:
+        """Lay out `segments` from `start` (pinch point) and `q_start` (arm joints), min-jerk each."""
         self._plan = []
         pos, yaw = start, 0.0
         for seg in segments:

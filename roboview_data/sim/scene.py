@@ -49,6 +49,10 @@ BOX_FLOOR_THICK = 0.008
 
 # Where shapes not used by the current instance wait: off the table, out of every view.
 PARK_XY = np.array([-3.0, 0.0])
+# The push task's target zone: a flat marked square on the table (visual only, no collision).
+ZONE_HALF = 0.05
+ZONE_RGBA = (0.30, 0.55, 0.95, 1.0)
+ZONE_PARK = np.array([-3.0, -1.5])
 
 OBJECT_MASS = 0.06  # kg
 OBJECT_FRICTION = (1.2, 0.01, 0.0005)
@@ -138,6 +142,8 @@ def build_spec(quality: RenderQuality = "fast") -> mujoco.MjSpec:
 
     _add_receiver(world)
     _add_shapes(spec, world)
+    world.add_geom(name="zone", type=mujoco.mjtGeom.mjGEOM_BOX, size=[ZONE_HALF, ZONE_HALF, 0.0005],
+                   pos=[ZONE_PARK[0], ZONE_PARK[1], 0.0005], rgba=list(ZONE_RGBA), contype=0, conaffinity=0)
     # What registered factors need in the model (textures, distractor bodies, mesh variants), in
     # registration order: compiled once, switched in place by each factor's applier.
     from roboview_data.variation.factors import FACTORS
@@ -292,6 +298,16 @@ class Scene:
             self.data.qpos[adr + 3:adr + 7] = quat
             dof = self.ids.shape_dof[name]
             self.data.qvel[dof:dof + 6] = 0.0
+
+    def place_box(self, xy: np.ndarray | None) -> None:
+        """The receiver box at `xy` (pick_place: BOX_CENTER), or parked out of every view (None)."""
+        self.model.body_pos[self.ids.box_body][:2] = PARK_XY + [0.0, -3.0] if xy is None else np.asarray(xy, float)
+
+    def place_zone(self, xy: np.ndarray | None) -> None:
+        """The push task's marked zone centered at `xy`, or parked out of every view (None)."""
+        zone = self.model.geom("zone").id
+        target = ZONE_PARK if xy is None else np.asarray(xy, dtype=float)
+        self.model.geom_pos[zone][:2] = target
 
     def reset_robot(self, qpos: np.ndarray = HOME_QPOS) -> None:
         self.data.qpos[self.ids.arm_qpos] = qpos

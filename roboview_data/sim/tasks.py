@@ -81,3 +81,11 @@ register_task(Task(
     success=("the object's center lies inside the box below its rim, moves slower than 5 cm/s, touches no "
              "part of the robot, and the gripper is open"),
 ))
+register_task(Task(
+    name="push",
+    gym_id="RoboView/Push-v0",
+    env="roboview_data.sim.push:PushEnv",
+    expert="roboview_data.sim.push:PushExpert",
+    success="the object's center lies inside the marked zone, it moves slower than 5 cm/s and touches no part of the robot",
+    fairness_targets=("object", "zone"),
+))

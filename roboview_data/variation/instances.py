@@ -21,6 +21,7 @@ from typing import Any
 from roboview_data.variation.colors import get_color
 from roboview_data.variation.factors import (
     DEFAULT_TASK,
+    FACTORS,
     baselines,
     context_factors,
     factor_names,
@@ -241,10 +242,17 @@ class SuiteConfig:
     # Restrictions of factors to some of their values, as (factor, values) pairs; a small suite
     # for demos and tests without changing the registry.
     value_subsets: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    # Tasks (roboview_data.sim.tasks): every split is built for each, over the task's own contexts.
+    # Splits of a task other than pick_place are named "<task>_<split>" (push_color, ...).
+    tasks: tuple[str, ...] = (DEFAULT_TASK,)
 
     def __post_init__(self) -> None:
         # Config parsers may hand in lists; tuples keep the config frozen and hashable.
         object.__setattr__(self, "splits", tuple(self.splits))
+        object.__setattr__(self, "tasks", tuple(self.tasks))
+        if not self.tasks or len(set(self.tasks)) != len(self.tasks) or any(not context_factors(t) for t in self.tasks):
+            known = sorted({f.task for f in FACTORS.values() if f.task})
+            raise ValueError(f"tasks {self.tasks!r}: give distinct registered tasks; allowed: {', '.join(known)}")
         object.__setattr__(self, "factorial_colors", tuple(self.factorial_colors))
         object.__setattr__(self, "cartesian", tuple(tuple(f) for f in self.cartesian))
         subsets = tuple((name, tuple(values)) for name, values in self.value_subsets)
@@ -312,11 +320,13 @@ PRESETS: dict[str, SuiteConfig] = {
 }
 
 
-# Beyond the paper: its splits plus one split per new visual factor (DESIGN.md, the `extended`
-# preset): 11 × (141 + 21 + 9 + 9 + 9 + 8 + 5 + 7) + 147 = 2,446 pick_place instances.
+# Beyond the paper (DESIGN.md, the `extended` preset): its splits plus one per new visual factor, for
+# both tasks. pick_place: 11 × (141 + 21 + 9 + 9 + 9 + 8 + 5 + 7) + 147 = 2,446 instances; push over its
+# own 4 × 3 = 12 per-subspace contexts (start, zone, shape, instruction; 3 values each):
+# 12 × 209 + 147 = 2,655; 5,101 in all.
 EXTENDED_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture", "distractors",
                    "object_size", FACTORIAL_SPLIT)
-PRESETS["extended"] = replace(PAPER, preset="extended", splits=EXTENDED_SPLITS)
+PRESETS["extended"] = replace(PAPER, preset="extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push"))
 
 
 def load_preset(name: str) -> SuiteConfig:
@@ -327,30 +337,36 @@ def load_preset(name: str) -> SuiteConfig:
         raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}") from None
 
 
-def split_trees(cfg: SuiteConfig) -> dict[str, tuple[tuple[str, ...], VariantNode]]:
-    """Each split's name → (varied factors, variant tree), in generation order."""
-    subsets = cfg.subsets
-    c_gen = context_space(cfg.union_mode, subsets)
+def split_name(split: str, task: str) -> str:
+    """A split's name in the benchmark: bare for pick_place (the paper's names), "<task>_<split>" otherwise."""
+    return split if task == DEFAULT_TASK else f"{task}_{split}"
+
+
+def split_trees(cfg: SuiteConfig, task: str = DEFAULT_TASK) -> dict[str, tuple[tuple[str, ...], VariantNode]]:
+    """Each split's name → (varied factors, variant tree) for one task, in generation order."""
+    subsets = {k: v for k, v in cfg.subsets.items() if load_factor(k).task in (None, task)}
+    c_gen = context_space(cfg.union_mode, subsets, task)
     trees: dict[str, tuple[tuple[str, ...], VariantNode]] = {}
     for split in cfg.splits:
         if split == FACTORIAL_SPLIT:
-            tree = factorial_subspace(cfg.factorial_colors, subsets)
-            trees[split] = (("color", "camera_pose"), tree)
+            tree = factorial_subspace(cfg.factorial_colors, subsets, task)
+            trees[split_name(split, task)] = (("color", "camera_pose"), tree)
         else:
-            trees[split] = ((split,), task_subspace(split, c_gen, subsets))
+            trees[split_name(split, task)] = ((split,), task_subspace(split, c_gen, subsets))
     for factors in cfg.cartesian:
-        tree = cartesian_subspace(factors, subsets)
-        trees[cartesian_split_name(factors)] = (tuple(factors), tree)
+        tree = cartesian_subspace(factors, subsets, task)
+        trees[split_name(cartesian_split_name(factors), task)] = (tuple(factors), tree)
     return trees
 
 
 def generate_suite(cfg: SuiteConfig) -> list[TaskInstance]:
-    """All task instances of a suite, split by split in a fixed, deterministic order."""
+    """All task instances of a suite, task by task and split by split, in a fixed, deterministic order."""
     instances = []
-    for split, (varied, tree) in split_trees(cfg).items():
-        for assignment in RecursiveVariantTaskManager(tree).generate():
-            subspace = assignment.pop(SUBSPACE_KEY)
-            instances.append(TaskInstance(split, varied, tuple(assignment.items()), subspace))
+    for task in cfg.tasks:
+        for split, (varied, tree) in split_trees(cfg, task).items():
+            for assignment in RecursiveVariantTaskManager(tree).generate():
+                subspace = assignment.pop(SUBSPACE_KEY)
+                instances.append(TaskInstance(split, varied, tuple(assignment.items()), subspace, task))
     ids = [instance.instance_id for instance in instances]
     if len(set(ids)) != len(ids):
         raise RuntimeError(f"suite {cfg.preset!r} produced duplicate instance ids")

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from roboview_data.variation.factors import (
+    DEFAULT_TASK,
     Factor,
     baselines,
     context_factors,
@@ -106,16 +107,17 @@ class ContextSampler:
     the visual perturbations the benchmark measures.
     """
 
-    def __init__(self, values: Mapping[str, Sequence[str]] | None = None) -> None:
+    def __init__(self, values: Mapping[str, Sequence[str]] | None = None, task: str = DEFAULT_TASK) -> None:
         values = dict(values or {})
-        unknown = sorted(set(values) - set(context_factors()))
+        self.task = task
+        unknown = sorted(set(values) - set(context_factors(task)))
         if unknown:
-            raise ValueError(f"not context factors: {unknown}; allowed: {context_factors()}")
-        self.modules = tuple(FactorSampler(name, values.get(name)) for name in context_factors())
+            raise ValueError(f"not context factors of {task}: {unknown}; allowed: {context_factors(task)}")
+        self.modules = tuple(FactorSampler(name, values.get(name)) for name in context_factors(task))
 
     def sample_context(self, rng: np.random.Generator) -> dict[str, str]:
         """All 7 factor values: visual at baseline, context drawn in context_factors() order."""
-        context = baselines()
+        context = baselines(self.task)
         for module in self.modules:
             context[module.name] = module.sample(rng)
         return context
@@ -217,16 +219,16 @@ def _sampler(name: str, subsets: Mapping[str, Sequence[str]]) -> FactorSampler:
 
 
 def _fixed_at_baseline(names: Sequence[str]) -> tuple[FixedSampler, ...]:
-    return tuple(FixedSampler(name, baselines()[name]) for name in names)
+    return tuple(FixedSampler(name, load_factor(name).baseline) for name in names)
 
 
-def baseline_context() -> Product:
+def baseline_context(task: str = DEFAULT_TASK) -> Product:
     """The baseline context G (c* of the factorial split), labelled "base"."""
-    return Product(Label(SUBSPACE_KEY, "base"), *_fixed_at_baseline(context_factors()))
+    return Product(Label(SUBSPACE_KEY, "base"), *_fixed_at_baseline(context_factors(task)))
 
 
 def context_space(
-    union_mode: str = "per_subspace", subsets: Mapping[str, Sequence[str]] | None = None
+    union_mode: str = "per_subspace", subsets: Mapping[str, Sequence[str]] | None = None, task: str = DEFAULT_TASK
 ) -> Union:
     """D_context = ∪_k C_k^gen: vary one context factor at a time, the others at baseline.
 
@@ -238,14 +240,14 @@ def context_space(
     subsets = subsets or {}
     subspaces: list[VariantNode] = []
     contains_baseline = False
-    for name in context_factors():
+    for name in context_factors(task):
         values = _sampler(name, subsets).values()
         if union_mode == "dedupe":
-            contains_baseline |= baselines()[name] in values
-            values = tuple(v for v in values if v != baselines()[name])
+            contains_baseline |= load_factor(name).baseline in values
+            values = tuple(v for v in values if v != load_factor(name).baseline)
             if not values:
                 continue
-        others = [other for other in context_factors() if other != name]
+        others = [other for other in context_factors(task) if other != name]
         subspaces.append(
             Product(
                 Label(SUBSPACE_KEY, name),
@@ -275,12 +277,12 @@ def task_subspace(
 
 
 def factorial_subspace(
-    colors: Sequence[str], subsets: Mapping[str, Sequence[str]] | None = None
+    colors: Sequence[str], subsets: Mapping[str, Sequence[str]] | None = None, task: str = DEFAULT_TASK
 ) -> Product:
     """color × camera_pose in the single baseline context c*, color-major."""
     others = [name for name in visual_factors() if name not in ("color", "camera_pose")]
     return Product(
-        baseline_context(),
+        baseline_context(task),
         FactorSampler("color", colors),
         _sampler("camera_pose", subsets or {}),
         *_fixed_at_baseline(others),
@@ -293,10 +295,10 @@ def cartesian_split_name(factors: Sequence[str]) -> str:
 
 
 def cartesian_subspace(
-    factors: Sequence[str], subsets: Mapping[str, Sequence[str]] | None = None
+    factors: Sequence[str], subsets: Mapping[str, Sequence[str]] | None = None, task: str = DEFAULT_TASK
 ) -> Product:
     """Full Cartesian product over `factors` (first slowest); every other factor at baseline."""
-    others = [name for name in factor_names() if name not in factors]
+    others = [name for name in factor_names(task) if name not in factors]
     return Product(
         Label(SUBSPACE_KEY, "cartesian"),
         *(_sampler(name, subsets or {}) for name in factors),

@@ -41,6 +41,7 @@ BUILTIN_MODULES = (
     "roboview_data.variation.factors.color",
     "roboview_data.variation.factors.camera",
     "roboview_data.variation.factors.context",
+    "roboview_data.variation.factors.push_context",
     # Beyond the paper (the `extended` preset): each one module.
     "roboview_data.variation.factors.lighting",
     "roboview_data.variation.factors.table_texture",

@@ -1,0 +1,85 @@
+"""The second task, `push`: its scripted expert, its contexts, its collection path and its suite."""
+
+import itertools
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from roboview_data.sim.tasks import load_task, make_env
+from roboview_data.variation.factors import baselines, context_factors
+from roboview_data.variation.factors.push_context import PUSH_STARTS, ZONE_OFFSETS
+from roboview_data.variation.instances import (
+    TaskInstance,
+    episode_seed,
+    generate_suite,
+    load_preset,
+)
+
+
+def push_instance(**values):
+    return TaskInstance("t", ("color",), baselines("push") | values, "base", task="push")
+
+
+def test_the_push_expert_solves_every_context():
+    env = make_env("push", cameras=("front",), image_size=32)
+    expert = load_task("push").make_expert(env)
+    outcomes = []
+    try:
+        for start, zone, shape in itertools.product(PUSH_STARTS, ZONE_OFFSETS, ("cube", "cuboid", "hex_prism")):
+            inst = push_instance(push_start=start, zone=zone, push_shape=shape)
+            for repeat in range(2):
+                obs, _ = env.reset(seed=episode_seed(inst.context_id, repeat), options={"instance": inst})
+                expert.reset()
+                for _ in range(env.max_steps):
+                    obs, _, success, truncated, _ = env.step(expert.select_action(obs))
+                    if success or truncated:
+                        break
+                outcomes.append(success)
+                # Success means the object's center rests inside the zone.
+                if success:
+                    assert np.all(np.abs(env.object_pose()[0][:2] - env.zone_center) < 0.05)
+    finally:
+        env.close()
+    assert np.mean(outcomes) >= 0.95, np.mean(outcomes)
+
+
+def test_push_is_not_a_free_success():
+    env = make_env("push", cameras=("front",), image_size=32)
+    try:
+        obs, _ = env.reset(seed=0, options={"instance": push_instance()})
+        for _ in range(20):  # holding still never succeeds: the object starts 15 cm from the zone
+            obs, _, success, _, _ = env.step(np.append(obs["observation.state"][:7], 0.0))
+            assert not success
+        assert np.linalg.norm(env.object_pose()[0][:2] - env.zone_center) > 0.1
+    finally:
+        env.close()
+
+
+def test_push_instances_have_their_own_contexts_and_ids():
+    assert context_factors("push") == ("push_start", "zone", "push_shape", "push_instruction")
+    suite = generate_suite(load_preset("extended"))
+    push = [i for i in suite if i.task == "push"]
+    assert len(suite) == 5101 and len(push) == 2655
+    assert {i.split for i in push} == {f"push_{s}" for s in load_preset("extended").splits}
+    assert len({i.context_id for i in push if i.split == "push_color"}) == 12
+    # A pick_place instance and a push instance with the same visual values never share an id.
+    assert not {i.instance_id for i in push} & {i.instance_id for i in suite if i.task == "pick_place"}
+    with pytest.raises(ValueError, match="this env runs 'pick_place'"):
+        make_env("pick_place", cameras=("front",), image_size=32).reset(options={"instance": push[0]})
+
+
+def test_collect_push_demos(tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from pipelines.collect import CollectConfig, DatasetConfig
+    from pipelines.collect import run as collect
+
+    root = tmp_path / "push"
+    result = collect(CollectConfig(DatasetConfig(repo_id="t/push", root=str(root), num_episodes=2, image_size=32,
+                                                 cameras=["front"], task="push"), num_workers=1))
+    assert result.episodes == 2
+    dataset = LeRobotDataset("t/push", root=root)
+    assert dataset.num_episodes == 2 and dataset[0]["task"].startswith(("push", "slide"))
+    provenance = pd.read_parquet(root / "meta" / "roboview" / "episodes.parquet")
+    assert {"push_start", "zone", "push_shape", "push_instruction"} <= set(provenance.columns)
