@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from eval.agents import agents_markdown, describe_agents
@@ -166,9 +167,35 @@ def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
     return [*lines, ""]
 
 
+def task_of(split: str) -> tuple[str, str]:
+    """(task, factor split) of a split name: "push_color" → ("push", "color"); bare names are pick_place."""
+    from roboview_data.sim.tasks import DEFAULT_TASK, TASKS
+
+    for task in TASKS:
+        if task != DEFAULT_TASK and split.startswith(f"{task}_"):
+            return task, split.removeprefix(f"{task}_")
+    return DEFAULT_TASK, split
+
+
+def _average(layout: dict, splits: list[str], key: str) -> float | None:
+    values = [layout["splits"][s][key] for s in splits if s in layout["splits"]]
+    return float(np.mean(values)) if values and None not in values else None
+
+
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
-    splits = _split_order(layouts, "splits")
-    header = ["Policy", *(f"{_title(s)} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
+    """Table 1, one per task (the pick_place table keeps the paper's title)."""
+    all_splits = _split_order(layouts, "splits")
+    tasks = list(dict.fromkeys(task_of(s)[0] for s in all_splits))
+    lines: list[str] = []
+    for task in tasks:
+        splits = [s for s in all_splits if task_of(s)[0] == task]
+        splits = sorted(splits, key=lambda s: (visual_factors() + (task_of(s)[1],)).index(task_of(s)[1]))
+        lines += _task_table1(metrics, layouts, splits, task if len(tasks) > 1 else None)
+    return lines
+
+
+def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str], task: str | None) -> list[str]:
+    header = ["Policy", *(f"{_title(task_of(s)[1])} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
               "Average SR", "Average CV", "Average cv_excess"]
     rows = []
     for name, layout in layouts.items():
@@ -177,13 +204,17 @@ def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
             m = layout["splits"].get(s)
             row += ["—"] * 4 if m is None else [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]),
                                                 pct(m["cv_excess"]), p_fmt(m["p_value"])]
-        row += [pct(layout["average"]["sr"]), pct(layout["average"]["cv"]), pct(layout["average"]["cv_excess"])]
+        if task is None:
+            row += [pct(layout["average"]["sr"]), pct(layout["average"]["cv"]), pct(layout["average"]["cv_excess"])]
+        else:
+            row += [pct(_average(layout, splits, k)) for k in ("sr", "cv", "cv_excess")]
         rows.append(row)
     for j, s in enumerate(splits):
         column = 1 + 4 * j + 2
         _bold_lowest(rows, column, [lay["splits"].get(s, {}).get("cv_excess") for lay in layouts.values()],
                      _significant_pairs(metrics, s))
-    return ["## Table 1 — success rate and Bias Coefficient (×100)", "", *_table(header, rows),
+    title = "## Table 1 — success rate and Bias Coefficient (×100)" + (f", task `{task}`" if task else "")
+    return [title, "", *_table(header, rows),
             "SR: successes / episodes of the split (weighted by episodes, not averaged over instances as in "
             "the paper), Wilson 95 % interval. CV: the paper's Bias Coefficient, mean over contexts of "
             "σ_v SR(v,c) / (μ_v SR(v,c) + ε); a context where everything failed enters as 0. cv_excess: "
