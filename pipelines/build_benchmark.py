@@ -24,7 +24,7 @@ from pipelines._cli import cli_main
 from policies.vlm.client import Endpoint, VLMClient
 from roboview_data.benchmark import format as bio
 from roboview_data.benchmark.card import fairness_stats, write_card
-from roboview_data.benchmark.contact_sheet import write_contact_sheet
+from roboview_data.benchmark.contact_sheet import context_text, write_contact_sheet
 from roboview_data.benchmark.fairness import FairnessThresholds
 from roboview_data.benchmark.render import InstanceRenderer
 from roboview_data.benchmark.review import adjudicate, read_decisions
@@ -229,10 +229,10 @@ class GateFailure(RuntimeError):
 def _write_offenders(out: Path, records: list[dict]) -> None:
     with (out / "fairness_report.csv").open("w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["instance_id", "split", "value", "initial_position", "shape", "reject_reason"])
+        writer.writerow(["instance_id", "task", "split", "value", "context", "reject_reason"])
         for r in records:
             if not r["fairness"]["passed"]:
-                writer.writerow([r["instance_id"], r["split"], r["value"], r["initial_position"], r["shape"],
+                writer.writerow([r["instance_id"], r.get("task", "pick_place"), r["split"], r["value"], context_text(r),
                                  r["fairness"]["reject_reason"]])
 
 

@@ -329,6 +329,17 @@ EXTENDED_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighti
 PRESETS["extended"] = replace(PAPER, preset="extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push"))
 
 
+# Demo/test suite over both tasks and every factor: the tiny preset's values, two of each new factor's,
+# two push starts × two zones.
+PRESETS["tiny_extended"] = replace(
+    PRESETS["tiny"], preset="tiny_extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push"),
+    value_subsets=(*PRESETS["tiny"].value_subsets,
+                   ("lighting", ("dim_left", "default", "bright_front")), ("table_texture", ("plain", "checker_dark")),
+                   ("distractors", ("0", "4")), ("object_size", ("0.7", "1.3")),
+                   ("push_start", ("center", "left")), ("zone", ("right", "far")), ("push_shape", ("cube",)),
+                   ("push_instruction", ("push the small object into the marked zone",))))
+
+
 def load_preset(name: str) -> SuiteConfig:
     """Return the registered suite preset `name`; unknown names raise listing the valid ones."""
     try:

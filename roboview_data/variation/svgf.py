@@ -256,7 +256,7 @@ def context_space(
             )
         )
     if contains_baseline:
-        subspaces.insert(0, baseline_context())
+        subspaces.insert(0, baseline_context(task))
     return Union(*subspaces)
 
 
