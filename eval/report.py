@@ -169,12 +169,9 @@ def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
 
 def task_of(split: str) -> tuple[str, str]:
     """(task, factor split) of a split name: "push_color" → ("push", "color"); bare names are pick_place."""
-    from roboview_data.sim.tasks import DEFAULT_TASK, TASKS
+    from roboview_data.variation.instances import split_task
 
-    for task in TASKS:
-        if task != DEFAULT_TASK and split.startswith(f"{task}_"):
-            return task, split.removeprefix(f"{task}_")
-    return DEFAULT_TASK, split
+    return split_task(split)
 
 
 def _average(layout: dict, splits: list[str], key: str) -> float | None:

@@ -83,3 +83,25 @@ def test_collect_push_demos(tmp_path):
     assert dataset.num_episodes == 2 and dataset[0]["task"].startswith(("push", "slide"))
     provenance = pd.read_parquet(root / "meta" / "roboview" / "episodes.parquet")
     assert {"push_start", "zone", "push_shape", "push_instruction"} <= set(provenance.columns)
+
+
+def test_a_two_task_benchmark_builds_loads_and_evaluates(tmp_path):
+    import datasets
+
+    from pipelines.build_benchmark import BuildConfig
+    from pipelines.build_benchmark import run as build
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from pipelines.evaluate import run as evaluate
+    from policies.base import policy_config
+
+    bench = tmp_path / "bench"
+    result = build(BuildConfig(output_dir=str(bench), preset="tiny_extended", image_size=64))
+    assert result.candidates == 168 and result.accepted == 168
+    # One dataset config per task: their context columns differ.
+    push = datasets.load_dataset(str(bench), "push", split="push_distractors")
+    assert push.num_rows == 6 and {"push_start", "zone", "distractors"} <= set(push.column_names)
+    assert "initial_position" in datasets.load_dataset(str(bench), split="lighting").column_names
+    out = evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "lighting,push_lighting"), policy_config("expert"),
+                                  EvalConfig(n_repeats=1, num_workers=2, image_size=32), str(tmp_path / "eval")))
+    rows = pd.read_parquet(tmp_path / "eval" / "episodes.parquet")
+    assert out.episodes == 18 and set(rows["task"]) == {"pick_place", "push"} and rows["success"].all()

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from roboview_data.variation.instances import split_task
+
 
 def _size_category(n: int) -> str:
     for bound, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K")):
@@ -31,12 +33,17 @@ def fairness_stats(records: list[dict]) -> dict[str, dict[str, float]]:
 def write_card(out: Path, manifest: dict) -> None:
     splits = manifest["splits"]
     total = sum(s["accepted"] for s in splits.values())
-    configs = ["- config_name: default", "  data_files:"]
+    # One config per task (their context columns differ): `default` holds pick_place, the paper's task.
+    by_task: dict[str, list[str]] = {}
     for split in splits:
-        configs += [f"  - split: {split}", f"    path: data/{split}.parquet"]
-    if manifest["rejected"]:
-        configs += ["- config_name: rejected", "  data_files:", "  - split: rejected",
-                    "    path: rejected/rejected.parquet"]
+        by_task.setdefault(split_task(split)[0], []).append(split)
+    configs = []
+    for task, names in sorted(by_task.items(), key=lambda kv: kv[0] != "pick_place"):
+        configs += [f"- config_name: {'default' if task == 'pick_place' else task}", "  data_files:"]
+        for split in names:
+            configs += [f"  - split: {split}", f"    path: data/{split}.parquet"]
+    for name in manifest.get("rejected_tables", ["rejected"] if manifest["rejected"] else []):
+        configs += [f"- config_name: {name}", "  data_files:", f"  - split: {name}", f"    path: rejected/{name}.parquet"]
     table = ["| split | candidates | accepted | rejected (gate) | rejected (review) | accepted over gate |",
              "|---|---|---|---|---|---|"]
     for name, s in splits.items():
@@ -69,7 +76,8 @@ configs:
 Frozen task instances of the RoboView-Bias benchmark: a simulated Franka Panda (MuJoCo) puts one
 small object into a yellow box while exactly one visual factor varies per split. Every row is one
 instance (see the RoboView docs, "Instance record"); `preview` shows the observed cameras (front, left_top, wrist)
-at t = 0. Load a split with `datasets.load_dataset(PATH, split="color")`.
+at t = 0. Load a split with `datasets.load_dataset(PATH, split="color")`; another task's splits are its own
+config: `datasets.load_dataset(PATH, "push", split="push_color")`.
 
 **Suite hash** (SHA-256 over the accepted instance ids per split): `{manifest['suite_hash']}`
 **Benchmark version**: `{manifest['benchmark_version']}`

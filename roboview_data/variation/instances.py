@@ -353,6 +353,14 @@ def split_name(split: str, task: str) -> str:
     return split if task == DEFAULT_TASK else f"{task}_{split}"
 
 
+def split_task(split: str) -> tuple[str, str]:
+    """Inverse of `split_name`: "push_color" → ("push", "color"); a bare name is pick_place's."""
+    for task in {f.task for f in FACTORS.values() if f.task and f.task != DEFAULT_TASK}:
+        if split.startswith(f"{task}_"):
+            return task, split.removeprefix(f"{task}_")
+    return DEFAULT_TASK, split
+
+
 def split_trees(cfg: SuiteConfig, task: str = DEFAULT_TASK) -> dict[str, tuple[tuple[str, ...], VariantNode]]:
     """Each split's name → (varied factors, variant tree) for one task, in generation order."""
     subsets = {k: v for k, v in cfg.subsets.items() if load_factor(k).task in (None, task)}
