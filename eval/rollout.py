@@ -19,7 +19,7 @@ import numpy as np
 from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy
 from roboview_data.benchmark.format import BenchmarkItem
 from roboview_data.sim.env import IMAGE_KEY
-from roboview_data.sim.tasks import DEFAULT_TASK, make_env
+from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
 from roboview_data.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
@@ -127,7 +127,7 @@ class EvalWorker:
         except PolicyFailed as exc:
             error = str(exc)
         reason = "" if success else (error or info.get("failure_reason") or getattr(self.policy, "failure_reason", "")
-                                     or f"object not released inside the box within {self.env.max_steps} steps")
+                                     or f"{load_task(self.spec.task).timeout_reason} within {self.env.max_steps} steps")
         row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
                "steps": self.env.steps, "duration_s": time.perf_counter() - start,
                "policy": self.spec.policy.name or self.policy.name, "failure_reason": reason}

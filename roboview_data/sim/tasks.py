@@ -38,6 +38,8 @@ class Task:
     success: str
     # What the fairness gate requires to be visible in every observed camera.
     fairness_targets: tuple[str, ...] = ("object", "box")
+    # What an episode that runs out of steps is recorded as ("… within N steps").
+    timeout_reason: str = "object not released inside the box"
     max_episode_steps: int = DEFAULT_MAX_STEPS
 
     def context_factors(self) -> tuple[str, ...]:
@@ -88,4 +90,5 @@ register_task(Task(
     expert="roboview_data.sim.push:PushExpert",
     success="the object's center lies inside the marked zone, it moves slower than 5 cm/s and touches no part of the robot",
     fairness_targets=("object", "zone"),
+    timeout_reason="object not at rest inside the zone",
 ))
