@@ -112,7 +112,7 @@ class ContextSampler:
         self.task = task
         unknown = sorted(set(values) - set(context_factors(task)))
         if unknown:
-            raise ValueError(f"not context factors of {task}: {unknown}; allowed: {context_factors(task)}")
+            raise ValueError(f"not context factors: {unknown}; allowed for {task}: {context_factors(task)}")
         self.modules = tuple(FactorSampler(name, values.get(name)) for name in context_factors(task))
 
     def sample_context(self, rng: np.random.Generator) -> dict[str, str]:
