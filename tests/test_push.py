@@ -28,7 +28,7 @@ def test_the_push_expert_solves_every_context():
     try:
         for start, zone, shape in itertools.product(PUSH_STARTS, ZONE_OFFSETS, ("cube", "cuboid", "hex_prism")):
             inst = push_instance(push_start=start, zone=zone, push_shape=shape)
-            for repeat in range(2):
+            for repeat in range(1):  # every context once (the README's 54 / 54 ran two repeats)
                 obs, _ = env.reset(seed=episode_seed(inst.context_id, repeat), options={"instance": inst})
                 expert.reset()
                 for _ in range(env.max_steps):
