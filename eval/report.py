@@ -37,6 +37,7 @@ from eval.metrics import (
 )
 from eval.results import ResultsError, read_episodes, read_version
 from roboview_data.variation.factors import FACTORS, visual_factors
+from roboview_data.variation.instances import split_task
 
 log = logging.getLogger(__name__)
 
@@ -167,13 +168,6 @@ def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
     return [*lines, ""]
 
 
-def task_of(split: str) -> tuple[str, str]:
-    """(task, factor split) of a split name: "push_color" → ("push", "color"); bare names are pick_place."""
-    from roboview_data.variation.instances import split_task
-
-    return split_task(split)
-
-
 def _average(layout: dict, splits: list[str], key: str) -> float | None:
     values = [layout["splits"][s][key] for s in splits if s in layout["splits"]]
     return float(np.mean(values)) if values and None not in values else None
@@ -182,17 +176,17 @@ def _average(layout: dict, splits: list[str], key: str) -> float | None:
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
     """Table 1, one per task (the pick_place table keeps the paper's title)."""
     all_splits = _split_order(layouts, "splits")
-    tasks = list(dict.fromkeys(task_of(s)[0] for s in all_splits))
+    tasks = list(dict.fromkeys(split_task(s)[0] for s in all_splits))
     lines: list[str] = []
     for task in tasks:
-        splits = [s for s in all_splits if task_of(s)[0] == task]
-        splits = sorted(splits, key=lambda s: (visual_factors() + (task_of(s)[1],)).index(task_of(s)[1]))
+        splits = [s for s in all_splits if split_task(s)[0] == task]
+        splits = sorted(splits, key=lambda s: (visual_factors() + (split_task(s)[1],)).index(split_task(s)[1]))
         lines += _task_table1(metrics, layouts, splits, task if len(tasks) > 1 else None)
     return lines
 
 
 def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str], task: str | None) -> list[str]:
-    header = ["Policy", *(f"{_title(task_of(s)[1])} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
+    header = ["Policy", *(f"{_title(split_task(s)[1])} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
               "Average SR", "Average CV", "Average cv_excess"]
     rows = []
     for name, layout in layouts.items():

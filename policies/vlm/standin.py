@@ -11,6 +11,7 @@ VLM; every table labels its results as the classic-CV stand-in.
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 
@@ -47,21 +48,29 @@ def read_marks(rgb: np.ndarray) -> dict[int, tuple[float, float]]:
     return marks
 
 
-def _match_number(white: np.ndarray) -> int | None:
+@functools.cache
+def _digit_templates() -> dict[int, np.ndarray]:
+    """Binary glyphs of the numbers 1–99 as the MOKA agent draws them, cropped (rendered once per process)."""
     from policies.vlm.marks import FONT, FONT_SCALE, FONT_THICKNESS
 
-    if white.sum() == 0:
-        return None
-    ys, xs = np.nonzero(white)
-    glyph = white[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
-    best, best_score = None, -1.0
+    out = {}
     for number in range(1, 100):
         text = str(number)
         (tw, th), _ = cv2.getTextSize(text, FONT, FONT_SCALE, FONT_THICKNESS)
         canvas = np.zeros((th + 8, tw + 8), np.uint8)
         cv2.putText(canvas, text, (4, th + 4), FONT, FONT_SCALE, 1, FONT_THICKNESS, cv2.LINE_8)
         cy, cx = np.nonzero(canvas)
-        template = canvas[cy.min():cy.max() + 1, cx.min():cx.max() + 1]
+        out[number] = canvas[cy.min():cy.max() + 1, cx.min():cx.max() + 1]
+    return out
+
+
+def _match_number(white: np.ndarray) -> int | None:
+    if white.sum() == 0:
+        return None
+    ys, xs = np.nonzero(white)
+    glyph = white[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    best, best_score = None, -1.0
+    for number, template in _digit_templates().items():
         if abs(template.shape[1] - glyph.shape[1]) > 2 or abs(template.shape[0] - glyph.shape[0]) > 2:
             continue
         resized = cv2.resize(glyph, (template.shape[1], template.shape[0]), interpolation=cv2.INTER_NEAREST)
