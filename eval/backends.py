@@ -31,31 +31,38 @@ def _retry(work: WorkItem, tries: dict, max_retries: int, why: str) -> None:
         raise EpisodeLost(f"episode {work.key[0]} repeat {work.key[1]} lost its worker {tries[work.key]} times")
 
 
+def chunks(spec: WorkerSpec, items: Iterable[WorkItem]) -> list[tuple[WorkItem, ...]]:
+    """What one worker call runs: one episode, or with K envs per worker 2K (slots refill as episodes end)."""
+    items = list(items)
+    size = 1 if spec.envs_per_worker == 1 else 2 * spec.envs_per_worker
+    return [tuple(items[i:i + size]) for i in range(0, len(items), size)]
+
+
 def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
               max_retries: int = 2) -> Iterator[tuple[WorkItem, EpisodeResult]]:
-    queue = list(items)[::-1]
+    queue = chunks(spec, items)[::-1]
     tries: dict = {}
     while queue:
-        pool = WorkerPool(num_workers, EvalWorker, (spec,))
+        pool = WorkerPool(num_workers, EvalWorker, (spec,), method="run_batch")
         in_flight: dict = {}
         broken = False
         try:
             while (queue or in_flight) and not broken:
                 while queue and len(in_flight) < 2 * num_workers:
                     work = queue.pop()
-                    in_flight[pool.submit(work)] = work
+                    in_flight[pool.submit(list(work))] = work
                 done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
                 for future in done:
                     work = in_flight.pop(future)
                     try:
-                        result = future.result()
+                        results = future.result()
                     except BrokenProcessPool as exc:
                         # A worker died: the pool is gone, so every episode in flight is requeued.
                         broken = True
-                        _retry(work, tries, max_retries, str(exc) or "worker process died")
+                        _retry(work[0], tries, max_retries, str(exc) or "worker process died")
                         queue.append(work)
                         continue
-                    yield work, result
+                    yield from zip(work, results)
             for work in in_flight.values():
                 queue.append(work)
         finally:
@@ -75,7 +82,7 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
                      runtime_env={"env_vars": {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}})
     actor_cls = ray.remote(num_cpus=1)(EvalWorker)
     actors = [actor_cls.remote(spec) for _ in range(num_workers)]
-    queue = list(items)[::-1]
+    queue = chunks(spec, items)[::-1]
     tries: dict = {}
     in_flight: dict = {}
     idle = list(range(num_workers))
@@ -84,17 +91,17 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
             while queue and idle:
                 slot = idle.pop()
                 work = queue.pop()
-                in_flight[actors[slot].run.remote(work)] = (slot, work)
+                in_flight[actors[slot].run_batch.remote(list(work))] = (slot, work)
             ready, _ = ray.wait(list(in_flight), num_returns=1)
             slot, work = in_flight.pop(ready[0])
             try:
-                result = ray.get(ready[0])
+                results = ray.get(ready[0])
             except RayActorError as exc:
-                _retry(work, tries, max_retries, type(exc).__name__)
+                _retry(work[0], tries, max_retries, type(exc).__name__)
                 actors[slot] = actor_cls.remote(spec)
                 queue.append(work)
             else:
-                yield work, result
+                yield from zip(work, results)
             idle.append(slot)
     finally:
         for actor in actors:

@@ -12,11 +12,11 @@ import logging
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy
+from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy_batch
 from roboview_data.benchmark.format import BenchmarkItem
 from roboview_data.sim.env import IMAGE_KEY
 from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
@@ -46,12 +46,20 @@ class WorkerSpec:
     torch_threads: int = 0
     # The task of every instance this worker runs (roboview_data.sim.tasks).
     task: str = DEFAULT_TASK
+    # Envs stepped in lockstep by this worker, the policy called once per step on their batch.
+    envs_per_worker: int = 1
+    # Videos (for work items that ask for one): keep them only for failed episodes.
+    videos_of_failures_only: bool = False
+    # Render observations eagerly (every camera, every step) instead of when read: for measurements only.
+    eager: bool = False
 
 
 @dataclass(frozen=True)
 class WorkItem:
     item: BenchmarkItem
     repeat: int
+    # Keep the observed cameras' frames of this episode for its video (every camera rendered every step).
+    video: bool = False
 
     @property
     def key(self) -> tuple[str, int]:
@@ -65,6 +73,8 @@ class EpisodeResult:
     frames: dict[str, list[bytes]] | None = None
     ee_path: np.ndarray | None = None
     object_path: np.ndarray | None = None
+    # Only for a work item with video: camera -> (T, H, W, 3) uint8, the frames the policy was shown.
+    video: dict[str, np.ndarray] | None = None
 
 
 def _jpeg(image: np.ndarray) -> bytes:
@@ -75,13 +85,35 @@ def _jpeg(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+@dataclass
+class _Running:
+    """One episode in flight in one slot of a worker."""
+
+    index: int
+    work: WorkItem
+    seed: int
+    start: float
+    obs: dict
+    frames: dict[str, list[bytes]]
+    video: dict[str, list[np.ndarray]]
+    ee: list = field(default_factory=list)
+    obj: list = field(default_factory=list)
+    success: bool = False
+    info: dict = field(default_factory=dict)
+    error: str = ""
+
+
 class EvalWorker:
+    """`envs_per_worker` envs (one renderer each) and one policy batch (one model) for a worker's life."""
+
     def __init__(self, spec: WorkerSpec) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
         self.spec = spec
-        self.env = make_env(spec.task, cameras=spec.policy.cameras(), image_size=spec.image_size,
-                            max_steps=spec.max_steps, depth=spec.policy.depth)
-        self.policy = make_policy(spec.policy, self.env)
+        self.envs = [make_env(spec.task, cameras=spec.policy.cameras(), image_size=spec.image_size,
+                              max_steps=spec.max_steps, depth=spec.policy.depth, lazy=not spec.eager)
+                     for _ in range(spec.envs_per_worker)]
+        self.batch = make_policy_batch(spec.policy, self.envs)
+        self.env, self.policy = self.envs[0], self.batch.policy(0)
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 
@@ -101,45 +133,99 @@ class EvalWorker:
                 raise PolicyFailed(f"policy error: {type(exc).__name__}: {exc}") from exc
 
     def run(self, work: WorkItem) -> EpisodeResult:
+        return self.run_batch([work])[0]
+
+    def run_batch(self, works: list[WorkItem]) -> list[EpisodeResult]:
+        """Every episode of `works` (results in that order), up to `envs_per_worker` of them in lockstep.
+
+        A slot whose episode ends starts the next one at once. An episode is a function of (policy, instance,
+        repeat) alone: its env is reset with the episode seed and its policy slot told the episode, whichever
+        slot runs it and whoever runs beside it (batched inference aside: see `make_policy_batch`).
+        """
+        queue = list(enumerate(works))[::-1]
+        results: list[EpisodeResult | None] = [None] * len(works)
+        running: dict[int, _Running] = {}
+        while queue or running:
+            for slot in range(len(self.envs)):
+                if slot not in running and queue:
+                    running[slot] = self._start(slot, *queue.pop())
+            acting = {slot: ep for slot, ep in running.items() if not ep.error}
+            for slot, ep in acting.items():
+                self._record(slot, ep)
+            actions = self._actions(acting)
+            for slot, ep in list(running.items()):
+                if not ep.error:
+                    self._step(slot, ep, actions[slot])
+                env = self.envs[slot]
+                if ep.error or ep.success or env.steps >= env.max_steps or ep.info.get("failure_reason"):
+                    results[ep.index] = self._finish(slot, running.pop(slot))
+        return results  # type: ignore[return-value]
+
+    def _start(self, slot: int, index: int, work: WorkItem) -> _Running:
+        env = self.envs[slot]
         instance, record = work.item.instance, work.item.record
         seed = episode_seed(record["context_id"], work.repeat)
         start = time.perf_counter()
-        obs, _ = self.env.reset(seed=seed, options={"instance": instance})
-        media = self.spec.record_media
-        frames: dict[str, list[bytes]] = {c: [] for c in self.env.cameras} if media else {}
-        ee, obj = [], []
-        success, info, error = False, {}, ""
+        obs, _ = env.reset(seed=seed, options={"instance": instance})
+        ep = _Running(index, work, seed, start, obs, {c: [] for c in env.cameras} if self.spec.record_media else {},
+                      {c: [] for c in env.cameras} if work.video else {})
         try:
-            self._call_policy(self.policy.reset, Episode.of(self.env, seed))
-            for _ in range(self.env.max_steps):
-                if media:
-                    for cam in self.env.cameras:
-                        frames[cam].append(_jpeg(obs[IMAGE_KEY.format(cam)]))
-                    ee.append(self.env.ee_position())
-                    obj.append(self.env.object_pose()[0])
-                action = np.asarray(self._call_policy(self.policy.select_action, obs), dtype=np.float32)
-                if action.shape != self.env.action_space.shape or not np.all(np.isfinite(action)):
-                    raise PolicyFailed(f"policy error: action of shape {action.shape} with values {action.ravel()[:8]} "
-                                       f"(the env takes {self.env.action_space.shape[0]} finite values)")
-                obs, _, success, truncated, info = self.env.step(action)
-                if success or truncated:
-                    break
+            self._call_policy(self.batch.reset, slot, Episode.of(env, seed))
         except PolicyFailed as exc:
-            error = str(exc)
-        reason = "" if success else (error or info.get("failure_reason") or getattr(self.policy, "failure_reason", "")
-                                     or f"{load_task(self.spec.task).timeout_reason} within {self.env.max_steps} steps")
-        row = {**record, "repeat": work.repeat, "episode_seed": seed, "success": bool(success),
-               "steps": self.env.steps, "duration_s": time.perf_counter() - start,
-               "policy": self.spec.policy.name or self.policy.name, "failure_reason": reason}
-        extra = getattr(self.policy, "episode_record", None)
-        if extra is not None:  # a policy's own columns (VLM usage, the refined instruction, ...)
-            row |= {k: v for k, v in extra().items() if k not in row}
-        if not media:
-            return EpisodeResult(row)
-        return EpisodeResult(row, frames, np.array(ee), np.array(obj))
+            ep.error = str(exc)
+        return ep
+
+    def _record(self, slot: int, ep: _Running) -> None:
+        env = self.envs[slot]
+        if self.spec.record_media:
+            for cam in env.cameras:
+                ep.frames[cam].append(_jpeg(ep.obs[IMAGE_KEY.format(cam)]))
+            ep.ee.append(env.ee_position())
+            ep.obj.append(env.object_pose()[0])
+        for cam in ep.video:
+            ep.video[cam].append(ep.obs[IMAGE_KEY.format(cam)])
+
+    def _actions(self, acting: dict[int, _Running]) -> dict[int, np.ndarray]:
+        """One action per acting slot: one policy call for the batch, or one per slot (a failure ends only
+        the episodes of the call that failed)."""
+        groups = [list(acting)] if self.batch.batched else [[slot] for slot in acting]
+        actions: dict[int, np.ndarray] = {}
+        for group in groups:
+            try:
+                actions |= self._call_policy(self.batch.select_actions, {s: acting[s].obs for s in group})
+            except PolicyFailed as exc:
+                for slot in group:
+                    acting[slot].error = str(exc)
+        return actions
+
+    def _step(self, slot: int, ep: _Running, action) -> None:
+        env = self.envs[slot]
+        action = np.asarray(action, dtype=np.float32)
+        if action.shape != env.action_space.shape or not np.all(np.isfinite(action)):
+            ep.error = (f"policy error: action of shape {action.shape} with values {action.ravel()[:8]} "
+                        f"(the env takes {env.action_space.shape[0]} finite values)")
+            return
+        ep.obs, _, ep.success, _, ep.info = env.step(action)
+
+    def _finish(self, slot: int, ep: _Running) -> EpisodeResult:
+        env, record = self.envs[slot], ep.work.item.record
+        reason = "" if ep.success else (ep.error or ep.info.get("failure_reason") or self.batch.failure_reason(slot)
+                                        or f"{load_task(self.spec.task).timeout_reason} within {env.max_steps} steps")
+        row = {**record, "repeat": ep.work.repeat, "episode_seed": ep.seed, "success": bool(ep.success),
+               "steps": env.steps, "duration_s": time.perf_counter() - ep.start,
+               "policy": self.spec.policy.name or self.batch.name, "failure_reason": reason}
+        # A policy's own columns (VLM usage, the refined instruction, ...).
+        row |= {k: v for k, v in self.batch.episode_record(slot).items() if k not in row}
+        result = EpisodeResult(row)
+        if self.spec.record_media:
+            result.frames, result.ee_path, result.object_path = ep.frames, np.array(ep.ee), np.array(ep.obj)
+        if ep.video and not (self.spec.videos_of_failures_only and ep.success):
+            for cam in ep.video:  # and the last observation: how the episode ended
+                ep.video[cam].append(ep.obs[IMAGE_KEY.format(cam)])
+            result.video = {cam: np.stack(frames) for cam, frames in ep.video.items() if frames}
+        return result
 
     def close(self) -> None:
-        close = getattr(self.policy, "close", None)
-        if close is not None:
-            close()
-        self.env.close()
+        self.batch.close()
+        for env in self.envs:
+            env.close()

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from eval import provenance, videos
 from eval.backends import BACKENDS, EpisodeLost, run_local, run_ray
 from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
@@ -52,6 +53,7 @@ class BenchmarkConfig:
 
 
 DEFAULT_IMAGE_SIZE = 224
+VIDEO_FPS = 10  # the env's control rate: videos play in real time
 # protocol → (repeats for splits not listed (0: n_repeats), per-split repeats)
 PROTOCOLS: dict[str, tuple[int, dict[str, int]]] = {"": (0, {}), "paper": (5, {"color_x_camera_pose": 10})}
 
@@ -71,8 +73,18 @@ class EvalConfig:
     # Evaluate only the first N task contexts of each chosen split, every value of each (a sample
     # that keeps every value, e.g. --eval.contexts=2 for a quick bias profile); 0 = all.
     contexts: int = 0
-    # Worker processes (local) or actors (ray); one env and renderer each.
+    # Worker processes (local) or actors (ray).
     num_workers: int = 2
+    # Envs per worker, stepped in lockstep: the policy is called once per step on their batch of
+    # observations (one model copy per worker, batched forward passes for checkpoints; see the README's
+    # GPU layout). 1: one env per worker.
+    envs_per_worker: int = 1
+    # Episode videos (MP4 per observed camera, linked from the report): N (the first N episodes run),
+    # failures, all; empty: none. A video episode renders every camera at every step.
+    videos: str = ""
+    # Render every camera at every step instead of when a policy reads it (same rows; slower): for
+    # measuring what lazy rendering saves.
+    eager_render: bool = False
     # local (process pool, spawn) or ray.
     backend: str = "local"
     # Address of an existing Ray cluster; empty starts a local one.
@@ -88,7 +100,7 @@ class EvalConfig:
     def __post_init__(self) -> None:
         if self.image_size < 0:
             raise ValueError(f"--eval.image_size={self.image_size} must be ≥ 0 (0 = the policy's own size)")
-        for name in ("n_repeats", "num_workers", "max_steps"):
+        for name in ("n_repeats", "num_workers", "max_steps", "envs_per_worker"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
         if self.limit < 0:
@@ -102,6 +114,12 @@ class EvalConfig:
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}")
         self.split_repeat_table  # parses split_repeats now, so a typo fails before any work
+        self.video_mode  # parses videos now
+
+    @property
+    def video_mode(self) -> str | int:
+        with flag_errors("--eval.videos"):
+            return videos.parse(self.videos)
 
     @property
     def split_repeat_table(self) -> dict[str, int]:
@@ -184,6 +202,11 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         chosen = items[: cfg.eval.limit] if cfg.eval.limit else items
         work += [WorkItem(item, r) for item in chosen for r in range(repeats[split])]
     todo = [w for w in work if not store.done(w.key)]
+    mode = cfg.eval.video_mode
+    if mode:
+        todo = [WorkItem(w.item, w.repeat, video=mode in videos.MODES or i < int(mode)) for i, w in enumerate(todo)]
+    entry = provenance.start_entry(bench.version, policy.checkpoint)
+    provenance.record(Path(cfg.output_dir), entry)
     log.info("%d episodes planned, %d already done, %d to run", len(work), len(work) - len(todo), len(todo))
 
     rerun = None
@@ -198,7 +221,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         # One pool per task (each worker holds one task's env and the policy), tasks one after another.
         for task in tasks or [DEFAULT_TASK]:
             spec = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None,
-                              torch_threads=threads, task=task)
+                              torch_threads=threads, task=task, envs_per_worker=cfg.eval.envs_per_worker,
+                              videos_of_failures_only=mode == "failures", eager=cfg.eval.eager_render)
             items = [w for w in todo if w.item.instance.task == task]
             if not items:
                 continue
@@ -223,6 +247,11 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     new = 0
     try:
         for _, result in stream:
+            if result.video:  # written before the row is journalled: a listed video exists
+                paths = [videos.relative_path(result.row, cam) for cam in result.video]
+                for path, frames in zip(paths, result.video.values()):
+                    videos.write_mp4(Path(cfg.output_dir) / path, frames, VIDEO_FPS)
+                result.row["video"] = ",".join(paths)
             store.add(result.row)
             if rerun is not None:
                 rerun.log_episode(result)
@@ -238,6 +267,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         store.close()
         if rerun is not None:
             rerun.close()
+        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": new})
     total = len(store.rows)
     successes = sum(r["success"] for r in store.rows.values())
     return EvaluateResult(Path(cfg.output_dir), total, new, successes / total if total else float("nan"),

@@ -176,6 +176,12 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """The policy, from the agent's view of the env (privileged types: from the env itself)."""
         raise NotImplementedError(f"policy type {self.type!r} does not say how to build its policy")
 
+    def build_batched(self, view: AgentView, slots: int) -> Policy | None:
+        """One policy that drives `slots` envs in lockstep (`reset(episode, slot)`, `select_actions({slot:
+        obs})`) with one model, or None: the evaluator then builds one policy per env. Types whose cost is
+        a model (checkpoints) override it; weightless ones need not."""
+        return None
+
 
 def load_policy_types() -> tuple[str, ...]:
     """Import the builtin policy modules and every `roboview.policies` entry point; the type names."""
@@ -200,6 +206,56 @@ def policy_config(type_name: str = DEFAULT_POLICY_TYPE, **settings: Any) -> Poli
 
 def default_policy_config() -> PolicyConfig:
     return policy_config(DEFAULT_POLICY_TYPE)
+
+
+class PolicyBatch:
+    """The policy side of `envs_per_worker` envs run in lockstep, slot i driving env i.
+
+    Either one natively batched policy (one model; each step's acting slots go through one call, so a
+    checkpoint's forward pass sees a batch of observations), or one policy per env called in turn.
+    """
+
+    def __init__(self, policies: list[Policy], batched: bool) -> None:
+        self.policies = policies
+        self.batched = batched
+        self.name = policies[0].name
+
+    def policy(self, slot: int) -> Policy:
+        return self.policies[0 if self.batched else slot]
+
+    def reset(self, slot: int, episode: Episode) -> None:
+        if self.batched:
+            self.policies[0].reset(episode, slot)
+        else:
+            self.policies[slot].reset(episode)
+
+    def select_actions(self, observations: dict[int, dict]) -> dict[int, np.ndarray]:
+        if self.batched:
+            return self.policies[0].select_actions(observations)
+        return {slot: self.policies[slot].select_action(obs) for slot, obs in observations.items()}
+
+    def failure_reason(self, slot: int) -> str:
+        return getattr(self.policy(slot), "failure_reason", "")
+
+    def episode_record(self, slot: int) -> dict:
+        record = getattr(self.policy(slot), "episode_record", None)
+        return {} if record is None else record()
+
+    def close(self) -> None:
+        for policy in self.policies:
+            close = getattr(policy, "close", None)
+            if close is not None:
+                close()
+
+
+def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyBatch:
+    """The policies for `envs` run in lockstep: one batched policy when the type builds one (and no SGL
+    wraps it), else one policy per env (`make_policy`)."""
+    if len(envs) > 1 and not config.privileged and not config.sgl:
+        native = config.build_batched(AgentView.of(envs[0]), len(envs))
+        if native is not None:
+            return PolicyBatch([native], batched=True)
+    return PolicyBatch([make_policy(config, env) for env in envs], batched=False)
 
 
 def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:

@@ -9,6 +9,7 @@ shape this env cannot provide fails before any rollout with the mismatch spelled
 
 from __future__ import annotations
 
+import collections
 import copy
 import functools
 import logging
@@ -24,8 +25,6 @@ from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
-
-
 
 
 class CheckpointError(ValueError):
@@ -102,10 +101,23 @@ def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
     return cams or ("front",)
 
 
+# Policy types whose `select_action` is "predict a chunk when the queue is empty, then pop": for these the
+# adapter keeps the queue itself and builds (renders) the observation only when a chunk is predicted, which
+# is what lerobot's own `select_action` computes. Other types (diffusion's observation history, temporal
+# ensembling) read every step's observation.
+CHUNKED_TYPES = ("act", "pi0", "pi05", "smolvla")
+
+
 class LeRobotPolicy:
+    """A checkpoint driving one env, or `slots` envs in lockstep with one model (batched inference).
+
+    Each slot has its own episode (instruction, action queue); `select_actions` predicts, in one forward
+    pass, a chunk for every slot whose queue is empty and pops one action per slot.
+    """
+
     failure_reason = ""
 
-    def __init__(self, path: str, device: str) -> None:
+    def __init__(self, path: str, device: str, slots: int = 1) -> None:
         import torch
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
@@ -120,26 +132,58 @@ class LeRobotPolicy:
             policy_cfg=config, pretrained_path=str(root),
             preprocessor_overrides={"device_processor": {"device": device}})
         self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
-        self.task = ""
+        # Chunked: the adapter pops the chunk itself (observations read once per chunk, slots batched).
+        self.chunked = (config.type in CHUNKED_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
+                        and hasattr(self.policy, "predict_action_chunk"))
+        self.n_action_steps = int(getattr(config, "n_action_steps", 1))
+        if slots > 1 and not self.chunked:
+            raise ValueError(f"batched inference needs a chunked policy ({', '.join(CHUNKED_TYPES)} without temporal "
+                             f"ensembling); {config.type!r} keeps per-episode observation state: use envs_per_worker=1")
+        self.slots = slots
+        self.tasks = [""] * slots
+        self.queues: list[collections.deque] = [collections.deque() for _ in range(slots)]
+        self.reads = 0  # observations turned into model input (chunks predicted, per slot)
 
-    def reset(self, episode: Episode) -> None:
-        self.policy.reset()  # clears action-chunk queues
-        self.task = episode.instruction
+    def reset(self, episode: Episode, slot: int = 0) -> None:
+        if not self.chunked:
+            self.policy.reset()  # clears lerobot's own queues
+        self.queues[slot].clear()
+        self.tasks[slot] = episode.instruction
         # Policy randomness (diffusion noise, sampled latents) from the episode seed: common random
         # numbers cover the policy too, so two values of one (context, repeat) see the same draws.
         self._torch.manual_seed(episode.seed)
 
-    def select_action(self, observation: dict) -> np.ndarray:
+    def _batch(self, observations: list[dict], tasks: list[str]) -> dict:
         torch = self._torch
-        batch = {STATE_KEY: torch.from_numpy(observation[STATE_KEY]).float().unsqueeze(0), "task": [self.task]}
+        batch = {STATE_KEY: torch.from_numpy(np.stack([o[STATE_KEY] for o in observations])).float(), "task": tasks}
         for key in self.image_keys:
-            img = torch.from_numpy(observation[key]).permute(2, 0, 1).float().div_(255.0)
-            batch[key] = img.unsqueeze(0)
-        batch = self.preprocessor(batch)
-        with torch.inference_mode():
-            action = self.policy.select_action(batch)
-        action = self.postprocessor(action)
-        return action.squeeze(0).cpu().numpy().astype(np.float32)
+            images = np.stack([o[key] for o in observations])
+            batch[key] = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
+        self.reads += len(observations)
+        return self.preprocessor(batch)
+
+    def select_action(self, observation: dict) -> np.ndarray:
+        return self.select_actions({0: observation})[0]
+
+    def select_actions(self, observations: dict[int, dict]) -> dict[int, np.ndarray]:
+        """One action per slot in `observations` (slot -> that env's observation at this step)."""
+        torch = self._torch
+        if not self.chunked:
+            (slot, observation), = observations.items()
+            with torch.inference_mode():
+                action = self.policy.select_action(self._batch([observation], [self.tasks[slot]]))
+            return {slot: self._postprocess(action)}
+        empty = [slot for slot in observations if not self.queues[slot]]
+        if empty:
+            batch = self._batch([observations[s] for s in empty], [self.tasks[s] for s in empty])
+            with torch.inference_mode():
+                chunk = self.policy.predict_action_chunk(batch)[:, : self.n_action_steps]
+            for row, slot in enumerate(empty):
+                self.queues[slot].extend(chunk[row : row + 1].transpose(0, 1))  # n × (1, action_dim)
+        return {slot: self._postprocess(self.queues[slot].popleft()) for slot in observations}
+
+    def _postprocess(self, action) -> np.ndarray:
+        return self.postprocessor(action).squeeze(0).cpu().numpy().astype(np.float32)
 
     def close(self) -> None:
         del self.policy, self.preprocessor, self.postprocessor
@@ -176,3 +220,11 @@ class LeRobotConfig(PolicyConfig):
 
     def build(self, view: AgentView) -> LeRobotPolicy:
         return LeRobotPolicy(self.path, self.device)
+
+    def build_batched(self, view: AgentView, slots: int) -> LeRobotPolicy | None:
+        _, config = load_config(self.path)
+        if config.type not in CHUNKED_TYPES or getattr(config, "temporal_ensemble_coeff", None) is not None:
+            log.warning("%s keeps per-episode observation state: one model copy per env instead of a batch",
+                        config.type)
+            return None
+        return LeRobotPolicy(self.path, self.device, slots)

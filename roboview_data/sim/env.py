@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import atexit
+import functools
 import logging
 from collections.abc import Sequence
 
@@ -11,6 +12,7 @@ import mujoco
 import numpy as np
 
 from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS
+from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.scene import (
     BOX_CENTER,
     BOX_INNER_HALF,
@@ -87,7 +89,7 @@ class PickPlaceEnv(gym.Env):
 
     def __init__(self, cameras: Sequence[str] = ALL_CAMERAS, image_size: int = 224, fps: int = 10,
                  max_steps: int = DEFAULT_MAX_STEPS, depth: bool = False, quality: RenderQuality = "fast",
-                 render_mode: str | None = "rgb_array") -> None:
+                 render_mode: str | None = "rgb_array", lazy: bool = False) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode={render_mode!r} unsupported; allowed: None, "
                              f"{', '.join(map(repr, self.metadata['render_modes']))}")
@@ -106,6 +108,10 @@ class PickPlaceEnv(gym.Env):
         self.fps = fps
         self.max_steps = max_steps
         self.depth = depth
+        # Lazy: observations render their cameras when read (roboview_data.sim.observation), so steps
+        # whose images no one reads cost physics only; the pixels are those eager rendering gives.
+        self.lazy = lazy
+        self._generation = 0  # bumped on every reset/step: a lazy observation is readable only at its own
         self.scene = Scene(quality)
         self.model, self.data = self.scene.model, self.scene.data
         self.n_substeps = round(1.0 / (fps * self.model.opt.timestep))
@@ -204,6 +210,7 @@ class PickPlaceEnv(gym.Env):
             self.model.geom_rgba[self.scene.active_geom] = [*rgb, 1.0]
         self.scene.reset_robot(HOME_QPOS)
         mujoco.mj_forward(self.model, self.data)
+        self._generation += 1
         return self._observation(), self._info()
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
@@ -213,6 +220,7 @@ class PickPlaceEnv(gym.Env):
         action = np.clip(action, self.action_space.low, self.action_space.high)
         self.data.ctrl[self.scene.ids.arm_actuators] = action[:7]
         self.data.ctrl[self.scene.ids.gripper_actuator] = 255.0 * action[7]
+        self._generation += 1  # before the state changes: any lazy observation still unread is now stale
         mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
         self.steps += 1
         if self.unstable:
@@ -282,12 +290,17 @@ class PickPlaceEnv(gym.Env):
         return speed < REST_SPEED and released and not self.object_touches_robot()
 
     def _observation(self) -> dict[str, np.ndarray]:
-        obs = {IMAGE_KEY.format(c): self.render_camera(c) for c in self.cameras}
+        renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}
         if self.depth:
-            obs |= {DEPTH_KEY.format(c): self.render_camera(c, depth=True).astype(np.float32)
-                    for c in self.cameras}
-        obs[STATE_KEY] = self.state()
-        return obs
+            renders |= {DEPTH_KEY.format(c): functools.partial(self._render_depth, c) for c in self.cameras}
+        state = {STATE_KEY: self.state()}
+        if self.lazy:
+            generation = self._generation
+            return LazyObservation(state, renders, lambda: self._generation == generation)
+        return {key: render() for key, render in renders.items()} | state
+
+    def _render_depth(self, camera: str) -> np.ndarray:
+        return self.render_camera(camera, depth=True).astype(np.float32)
 
     def _info(self, success: bool = False) -> dict:
         return {"is_success": success, "instance_id": self.instance.instance_id,
