@@ -26,7 +26,7 @@ from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
-from roboview_data.benchmark.format import load_benchmark
+from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.tasks import DEFAULT_TASK
 
@@ -196,10 +196,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         store = EpisodeStore(Path(cfg.output_dir), run_info)
     work = []
     for split, items in bench.splits.items():
-        if cfg.eval.contexts:
-            first = list(dict.fromkeys(i.record["context_id"] for i in items))[: cfg.eval.contexts]
-            items = [i for i in items if i.record["context_id"] in set(first)]
-        chosen = items[: cfg.eval.limit] if cfg.eval.limit else items
+        chosen = select_items(items, cfg.eval.contexts, cfg.eval.limit)
         work += [WorkItem(item, r) for item in chosen for r in range(repeats[split])]
     todo = [w for w in work if not store.done(w.key)]
     mode = cfg.eval.video_mode

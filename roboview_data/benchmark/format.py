@@ -177,3 +177,13 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
         columns = [c for c in file.schema_arrow.names if c not in NOT_IN_EPISODES]
         out[split] = [BenchmarkItem(instance_from_record(row), row) for row in file.read(columns=columns).to_pylist()]
     return Benchmark(root, manifest["benchmark_version"], out)
+
+
+def select_items(items: list[BenchmarkItem], contexts: int = 0, limit: int = 0) -> list[BenchmarkItem]:
+    """The items an evaluation runs, in the split's fixed order: those of the first `contexts` task contexts
+    (every value of each; 0 = all), then the first `limit` of those (0 = all). pipelines.evaluate and the
+    lerobot-eval plugin both use it, so episode i means the same (instance, repeat) in both."""
+    if contexts:
+        first = set(list(dict.fromkeys(i.record["context_id"] for i in items))[:contexts])
+        items = [i for i in items if i.record["context_id"] in first]
+    return items[:limit] if limit else items
