@@ -16,8 +16,8 @@ import json
 from pathlib import Path
 
 from eval.results import EpisodeStore
-from roboview_lerobot.env import episode_plan
 from roboview_data.variation.instances import episode_seed
+from roboview_lerobot.env import episode_plan
 
 NO_REASON = "failed in lerobot-eval (it records no failure reason)"
 

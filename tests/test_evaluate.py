@@ -31,10 +31,11 @@ def bench(tmp_path_factory) -> Path:
 
 def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
              backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120,
-             image_size: int = 64):
+             image_size: int = 64, envs_per_worker: int = 1, videos: str = "", eager: bool = False):
     cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), policy_config(policy, **({"path": path} if path else {})),
                          EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers, backend=backend,
-                                    rerun=rerun, image_size=image_size, max_steps=max_steps), str(out))
+                                    rerun=rerun, image_size=image_size, max_steps=max_steps,
+                                    envs_per_worker=envs_per_worker, videos=videos, eager_render=eager), str(out))
     return run(cfg)
 
 
@@ -307,3 +308,162 @@ def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, error
     worker.close()
     assert not row["success"] and row["steps"] == steps and reason in row["failure_reason"]
     assert policy.calls == calls  # every retry is a real call
+
+
+# -- issue 12: lazy rendering, batched inference, videos, provenance, lerobot-eval ------------------------------
+
+
+def test_lazy_observations_are_the_eager_pixels_and_render_only_what_is_read(bench):
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.sim.observation import StaleObservation
+    from roboview_data.sim.tasks import load_task, make_env
+
+    item = load_benchmark(bench, ["camera_pose"]).splits["camera_pose"][1]
+    lazy, eager = (make_env(cameras=("front", "wrist"), image_size=48, lazy=flag) for flag in (True, False))
+    expert = load_task().make_expert(eager)
+    obs_lazy, _ = lazy.reset(seed=7, options={"instance": item.instance})
+    obs_eager, _ = eager.reset(seed=7, options={"instance": item.instance})
+    expert.reset()
+    assert obs_lazy.rendered() == () and set(obs_lazy) == set(obs_eager)  # nothing rendered until read
+    for step in range(5):  # the last (step 4) is not read
+        if step % 2:  # read on odd steps only: skipped steps must not change what a later read shows
+            for key in obs_eager:
+                assert np.array_equal(obs_lazy[key], obs_eager[key]), (step, key)
+            assert obs_lazy.rendered() == ("observation.images.front", "observation.images.wrist")
+        action = expert.select_action(obs_eager)
+        previous = obs_lazy
+        obs_lazy, *_ = lazy.step(action)
+        obs_eager, *_ = eager.step(action)
+    assert previous.rendered() == ()
+    with pytest.raises(StaleObservation, match="read after the env stepped on"):
+        previous["observation.images.front"]
+    assert np.array_equal(obs_lazy.materialize()["observation.images.wrist"], obs_eager["observation.images.wrist"])
+    lazy.close()
+    eager.close()
+
+
+def test_batched_lockstep_evaluation_agrees_row_for_row_with_one_env_per_worker(bench, tmp_path):
+    # 3 envs per worker, 1 worker: episodes of unequal length share the worker, slots refill as they end.
+    # camera_euler's first 8 instances span three contexts (three episode seeds, three episode lengths).
+    one = evaluate(bench, tmp_path / "one", splits="camera_euler", limit=8, repeats=1, workers=1)
+    three = evaluate(bench, tmp_path / "three", splits="camera_euler", limit=8, repeats=1, workers=1,
+                     envs_per_worker=3)
+    eager = evaluate(bench, tmp_path / "eager", splits="camera_euler", limit=8, repeats=1, workers=1,
+                     eager=True)
+    assert one.episodes == three.episodes == eager.episodes == 8
+    pd.testing.assert_frame_equal(rows(tmp_path / "one"), rows(tmp_path / "three"))
+    pd.testing.assert_frame_equal(rows(tmp_path / "one"), rows(tmp_path / "eager"))
+    assert rows(tmp_path / "one")["steps"].nunique() > 1  # the episodes did end at different steps
+
+
+def test_one_checkpoint_batch_equals_separate_calls(bench, tiny_checkpoint):
+    from policies.base import Episode
+    from policies.lerobot_policy import LeRobotPolicy
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.sim.tasks import make_env
+
+    items = load_benchmark(bench, ["color"]).splits["color"][:2]
+    env = make_env(cameras=("left_top", "wrist"), image_size=64)
+    observations, episodes = [], []
+    for seed, item in enumerate(items):
+        obs, _ = env.reset(seed=seed, options={"instance": item.instance})
+        observations.append(obs)
+        episodes.append(Episode.of(env, seed))
+    env.close()
+    single = LeRobotPolicy(str(tiny_checkpoint), "cpu")
+    batched = LeRobotPolicy(str(tiny_checkpoint), "cpu", slots=2)
+    for slot, episode in enumerate(episodes):
+        batched.reset(episode, slot)
+    expected = []
+    for obs, episode in zip(observations, episodes):
+        single.reset(episode)
+        expected.append([single.select_action(obs) for _ in range(3)])  # the chunk's first three actions
+    got = [batched.select_actions({0: observations[0], 1: observations[1]}) for _ in range(3)]
+    assert batched.reads == 2 and single.reads == 2  # one model input per slot per chunk, not per step
+    for step in range(3):
+        for slot in range(2):
+            np.testing.assert_allclose(got[step][slot], expected[slot][step], rtol=0, atol=1e-5)
+    assert not np.allclose(expected[0][0], expected[1][0])  # two different episodes, two different actions
+
+
+def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tmp_path):
+    import av
+    import mujoco
+
+    from eval.provenance import checkpoint_hash
+
+    out = tmp_path / "ev"
+    evaluate(bench, out, policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=2, repeats=1, workers=1,
+             max_steps=5, image_size=0, videos="failures")
+    df = pd.read_parquet(out / "episodes.parquet")
+    assert (~df["success"]).all() and len(df) == 2  # a 2-step checkpoint: every episode fails, every one filmed
+    for row in df.itertuples():
+        paths = row.video.split(",")
+        assert [Path(p).name for p in paths] == [f"{row.instance_id}_r0_{cam}.mp4" for cam in ("left_top", "wrist")]
+        assert all(f"/color/{row.value}/" in f"/{p}" for p in paths)
+        with av.open(str(out / paths[0])) as container:
+            frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+        assert len(frames) == row.steps + 1 and frames[0].shape == (64, 64, 3)  # every observation + the last
+        assert frames[0].std() > 5  # a rendered scene, not a blank frame
+    (entry,) = json.loads((out / "provenance.json").read_text())
+    assert entry["packages"]["mujoco"] == mujoco.__version__
+    assert entry["benchmark_version"] == json.loads((out / "run.json").read_text())["benchmark_version"]
+    assert entry["checkpoint"]["sha256"] == checkpoint_hash(tiny_checkpoint)
+    assert entry["checkpoint"]["config"]["type"] == "act"
+    assert entry["machine"]["cpu_count"] == os.cpu_count() and entry["started"] <= entry["ended"]
+    assert entry["episodes_run"] == 2 and "context_id" in entry["seed_rule"]
+    assert entry["roboview_commit"] is None or len(entry["roboview_commit"].split("+")[0]) == 40
+    evaluate(bench, out, policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=3, repeats=1, workers=1,
+             max_steps=5, image_size=0)  # a resume adds an entry
+    assert [e["episodes_run"] for e in json.loads((out / "provenance.json").read_text())] == [2, 1]
+    with pytest.raises(ValueError, match="allowed: a count N"):
+        EvalConfig(videos="some")
+
+
+def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpoint, tmp_path):
+    from roboview_lerobot.convert import convert
+
+    lerobot_eval = Path(sys.executable).parent / "lerobot-eval"
+    args = [str(lerobot_eval), "--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
+            f"--env.benchmark_path={bench}", "--env.split=color", "--env.limit=2", "--env.cameras=left_top,wrist",
+            "--env.image_size=64", "--env.max_steps=6", f"--policy.path={tiny_checkpoint}", "--policy.device=cpu",
+            "--eval.n_episodes=2", "--eval.batch_size=2", f"--output_dir={tmp_path / 'le'}"]
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONPATH": str(ROOT)})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 2
+    converted = pd.read_parquet(convert(tmp_path / "le" / "eval_info.json", str(bench), "color", tmp_path / "conv",
+                                        limit=2))
+    evaluate(bench, tmp_path / "ours", policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=2,
+             repeats=1, workers=1, max_steps=6, image_size=0)
+    ours = pd.read_parquet(tmp_path / "ours" / "episodes.parquet")
+    cols = ["instance_id", "repeat", "episode_seed", "value", "success"]
+    pd.testing.assert_frame_equal(converted[cols], ours[cols])
+
+
+def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
+    import gymnasium as gym
+    from lerobot.envs.factory import make_env as lerobot_make_env
+    from lerobot.envs.utils import preprocess_observation
+
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.sim.tasks import make_env
+    from roboview_data.variation.instances import episode_seed
+    from roboview_lerobot import RoboViewEnv
+
+    cfg = RoboViewEnv(benchmark_path=str(bench), split="color", cameras="front", image_size=48, n_repeats=2)
+    vec = lerobot_make_env(cfg, n_envs=2)["roboview"][0]  # lerobot's own factory: gym.make + SyncVectorEnv
+    assert isinstance(vec, gym.vector.SyncVectorEnv) and vec.call("_max_episode_steps")[0] == 120
+    obs, _ = vec.reset(seed=[1000 + 2, 1000 + 3])  # episodes 2 and 3: instance 1, repeats 0 and 1
+    batch = preprocess_observation(obs)
+    item = load_benchmark(bench, ["color"]).splits["color"][1]
+    assert list(vec.call("task_description")) == [item.instance.get("instruction")] * 2
+    env = make_env(cameras=("front",), image_size=48)
+    for slot, repeat in enumerate((0, 1)):
+        own, _ = env.reset(seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.instance})
+        expected = own["observation.images.front"].astype(np.float32) / 255
+        assert np.array_equal(batch["observation.images.front"][slot].permute(1, 2, 0).numpy(), expected)
+    env.close()
+    vec.close()
+    with pytest.raises(ValueError, match="allowed: front, left_top, right_top, wrist"):
+        RoboViewEnv(benchmark_path=str(bench), cameras="top")
