@@ -45,11 +45,11 @@ demo: install
 test: install
 	$(PY) -m pytest -q
 
+# The throughput harness (README "Numbers"): one JSON with every rate, side by side with lerobot-eval.
+# BENCH_ARGS=--quick=true for the under-10-minute version; --checkpoint=DIR for another checkpoint.
+BENCH_ARGS ?=
 bench: install
-	$(PY) -m benchmarks.render_rate
-	$(PY) -m benchmarks.collect_rate
-	$(PY) -m benchmarks.eval_rate
-	$(PY) -m pipelines.build_benchmark --output_dir=outputs/benchmark_paper --preset=paper
+	$(PY) -m benchmarks.throughput --output=outputs/bench/throughput.json $(BENCH_ARGS)
 
 clean-demo:
 	rm -rf $(DEMO_DIR)

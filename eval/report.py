@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from eval import provenance
 from eval.agents import agents_markdown, describe_agents
 from eval.metrics import (
     METRIC_COLUMNS,
@@ -78,7 +80,7 @@ def load_results(paths: Sequence[str | Path],
     missing = [str(p) for p in paths if not p.is_file()]
     if missing:
         raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
-    sources = [{"path": str(p), VERSION_KEY: read_version(p)} for p in paths]
+    sources = [{"path": str(p), VERSION_KEY: read_version(p), "provenance": provenance.read(p.parent)} for p in paths]
     tables = []
     for path in paths:
         try:
@@ -100,6 +102,9 @@ def load_results(paths: Sequence[str | Path],
                 raise EpisodesError(f"{path} holds several policies ({', '.join(sorted(frame['policy'].unique()))}); "
                                     f"it cannot be renamed {name!r} as a whole")
             frame["policy"] = name
+        if "video" in frame:  # paths relative to the results folder → absolute (the report links them)
+            frame["video"] = frame["video"].map(
+                lambda v, root=path.parent.resolve(): ",".join(str(root / p) for p in v.split(",")) if isinstance(v, str) and v else None)
         frames.append(frame)
     episodes = pd.concat(frames, ignore_index=True)
     dup = episodes.duplicated(["policy", "instance_id", "repeat"])
@@ -310,6 +315,56 @@ def _extremes(layouts: dict[str, dict]) -> list[str]:
     return [*lines, ""]
 
 
+def _videos(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
+    """Per-value table of the episodes filmed (--eval.videos), each video linked."""
+    videos = metrics.get("videos") or {}
+    if not videos:
+        return []
+    rows = []
+    for name, splits in videos.items():
+        for split, values in splits.items():
+            per_value = layouts.get(name, {}).get("splits", {}).get(split, {}).get("per_value", {})
+            for value, episodes in values.items():
+                links = " ".join(f"[{e['label']} {Path(path).stem.split('_', 2)[-1]}]({path})"
+                                 for e in episodes for path in e["paths"])
+                rows.append([name, split, value, pct(per_value.get(value, {}).get("sr")), links])
+    return ["## Episode videos (per value; `--eval.videos`)", "",
+            *_table(["policy", "split", "value", "SR", "videos (instance, repeat, camera; ✗ failed)"], rows), ""]
+
+
+def _provenance(sources: list[dict[str, Any]]) -> list[str]:
+    """What produced each results file: versions, checkpoint hash, command, machine, times."""
+    lines = ["## Provenance", ""]
+    for source in sources:
+        for entry in source.get("provenance") or []:
+            ckpt = entry.get("checkpoint") or {}
+            packages = ", ".join(f"{k} {v}" for k, v in entry["packages"].items() if v)
+            machine = entry["machine"]
+            lines += [f"- `{source['path']}`: {entry['started']} → {entry.get('ended') or 'interrupted'}, "
+                      f"{entry.get('episodes_run', '?')} episodes; roboview commit {entry.get('roboview_commit') or '—'}",
+                      f"  - command: `{entry['command']}`",
+                      f"  - packages: {packages}",
+                      f"  - benchmark {entry['benchmark_version']}; checkpoint "
+                      f"{(ckpt.get('path', '') + ' sha256 ' + ckpt.get('sha256', '')[:16] + '…') if ckpt else '—'}",
+                      f"  - machine: {machine['cpu']} × {machine['cpu_count']}, GPU {machine.get('gpu') or 'none'}; "
+                      f"seeds: {entry['seed_rule']}"]
+    return lines + [""] if len(lines) > 2 else []
+
+
+def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[str, list[dict]]]]:
+    """policy → split → value → [{label, paths (relative to the report folder)}] for filmed episodes."""
+    if "video" not in episodes:
+        return {}
+    index: dict = {}
+    filmed = episodes[episodes["video"].notna()].sort_values(["policy", "split", "value", "instance_id", "repeat"])
+    for row in filmed.itertuples():
+        paths = [os.path.relpath(p, out) for p in row.video.split(",")]
+        label = f"{row.instance_id[:8]} r{row.repeat}{'' if row.success else ' ✗'}"
+        index.setdefault(row.policy, {}).setdefault(row.split, {}).setdefault(str(row.value), []).append(
+            {"label": label, "paths": paths})
+    return index
+
+
 def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> str:
     """report.md from a metrics dict (every number printed is read from it) and plot outcomes."""
     layouts = policy_layouts(metrics)
@@ -321,7 +376,8 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
     lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _diagnostics(layouts) + _extremes(layouts) + agents_markdown(metrics.get("agents", {})))
+              + _diagnostics(layouts) + _extremes(layouts) + _videos(metrics, layouts)
+              + agents_markdown(metrics.get("agents", {})) + _provenance(metrics.get("sources", [])))
     lines += ["## Plots", ""]
     for name, reason in plots.items():
         lines.append(f"![{name}]({name})" if reason is None else f"- {name} skipped: {reason}")
@@ -339,6 +395,9 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     agents = describe_agents(episodes)
     if agents:
         metrics["agents"] = agents
+    videos = video_index(episodes, out.resolve())
+    if videos:
+        metrics["videos"] = videos
     (out / METRICS_FILE).write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     outcome: dict[str, str | None] = {}
     if plots:

@@ -136,3 +136,16 @@ def test_only_the_expert_is_privileged():
         assert isinstance(make_policy(policy_config("random"), env), object)
     finally:
         env.close()
+
+
+def test_console_scripts_are_installed_and_answer_help():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    bindir = Path(sys.executable).parent
+    for script, flag in (("roboview-eval", "--eval.envs_per_worker"), ("roboview-collect", "--dataset.task"),
+                         ("roboview-build", "--preset"), ("roboview-report", "--results"),
+                         ("roboview-publish", "--"), ("roboview-train", "--steps")):
+        proc = subprocess.run([str(bindir / script), "--help"], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0 and flag in proc.stdout, (script, proc.stderr[-500:])

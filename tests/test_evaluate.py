@@ -413,6 +413,15 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     assert entry["machine"]["cpu_count"] == os.cpu_count() and entry["started"] <= entry["ended"]
     assert entry["episodes_run"] == 2 and "context_id" in entry["seed_rule"]
     assert entry["roboview_commit"] is None or len(entry["roboview_commit"].split("+")[0]) == 40
+    # The report links every video from its per-value table and prints the provenance.
+    from eval.report import load_results, write_report
+
+    episodes, sources = load_results([out / "episodes.parquet"])
+    report = write_report(episodes, tmp_path / "report", sources=sources, plots=False).output_dir / "report.md"
+    text = report.read_text()
+    first = df.iloc[0]
+    assert f"../ev/videos/color/{first['value']}/{first['instance_id']}_r0_wrist.mp4" in text
+    assert "## Provenance" in text and entry["checkpoint"]["sha256"][:16] in text
     evaluate(bench, out, policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=3, repeats=1, workers=1,
              max_steps=5, image_size=0)  # a resume adds an entry
     assert [e["episodes_run"] for e in json.loads((out / "provenance.json").read_text())] == [2, 1]
