@@ -11,7 +11,9 @@ import logging
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import replace
 
+from eval.policy_server import PolicyServer
 from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem
 from roboview_data.workers import WorkerPool
 
@@ -43,7 +45,11 @@ def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
     queue = chunks(spec, items)[::-1]
     tries: dict = {}
     while queue:
-        pool = WorkerPool(num_workers, EvalWorker, (spec,), method="run_batch")
+        # With a policy server: one server per pool (a replaced pool gets a fresh one, worker ids and all).
+        server = (PolicyServer(spec.policy, spec.task, spec.image_size, num_workers, spec.envs_per_worker)
+                  if spec.policy_server else None)
+        pool = WorkerPool(num_workers, EvalWorker, (spec if server is None else replace(spec, server=server.handle),),
+                          method="run_batch")
         in_flight: dict = {}
         broken = False
         try:
@@ -67,12 +73,17 @@ def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
                 queue.append(work)
         finally:
             pool.close()
+            if server is not None:
+                server.close()
 
 
 def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, address: str | None = None,
             max_retries: int = 2) -> Iterator[tuple[WorkItem, EpisodeResult]]:
     import ray
     from ray.exceptions import RayActorError
+
+    if spec.policy_server:
+        raise ValueError("a policy server runs with the local backend only (backend=local)")
 
     if not ray.is_initialized():
         if address:

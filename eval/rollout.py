@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from eval.policy_server import RemotePolicy, ServerHandle
 from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy_batch
 from roboview_data.benchmark.format import BenchmarkItem
 from roboview_data.sim.env import IMAGE_KEY
@@ -52,6 +53,10 @@ class WorkerSpec:
     videos_of_failures_only: bool = False
     # Render observations eagerly (every camera, every step) instead of when read: for measurements only.
     eager: bool = False
+    # Serve the policy from one server process shared by every worker (eval.policy_server); the backend
+    # starts the server and fills in `server` for the workers it spawns.
+    policy_server: bool = False
+    server: ServerHandle | None = None
 
 
 @dataclass(frozen=True)
@@ -112,7 +117,7 @@ class EvalWorker:
         self.envs = [make_env(spec.task, cameras=spec.policy.cameras(), image_size=spec.image_size,
                               max_steps=spec.max_steps, depth=spec.policy.depth, lazy=not spec.eager)
                      for _ in range(spec.envs_per_worker)]
-        self.batch = make_policy_batch(spec.policy, self.envs)
+        self.batch = RemotePolicy(spec.server) if spec.server is not None else make_policy_batch(spec.policy, self.envs)
         self.env, self.policy = self.envs[0], self.batch.policy(0)
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)

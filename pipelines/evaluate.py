@@ -79,6 +79,10 @@ class EvalConfig:
     # observations (one model copy per worker, batched forward passes for checkpoints; see the README's
     # GPU layout). 1: one env per worker.
     envs_per_worker: int = 1
+    # One policy server process holds the only model copy and answers every worker's envs in one batched
+    # forward pass per chunk (the GPU layout: many CPU render workers, one GPU model; local backend,
+    # chunked checkpoints). See eval/policy_server.py and the README.
+    policy_server: bool = False
     # Episode videos (MP4 per observed camera, linked from the report): N (the first N episodes run),
     # failures, all; empty: none. A video episode renders every camera at every step.
     videos: str = ""
@@ -185,6 +189,11 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
                              f"{', '.join(sorted(present)[:20])}{' …' if len(present) > 20 else ''}")
         keep = set(cfg.benchmark.value_list)
         bench.splits.update({s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()})
+    if cfg.eval.policy_server and not policy.batchable():
+        raise ValueError(f"--eval.policy_server=true needs a policy with one batched model (a chunked LeRobot "
+                         f"checkpoint: act, pi0, pi05, smolvla); {policy.type!r} has none: drop the flag")
+    if cfg.eval.policy_server and cfg.eval.backend != "local":
+        raise ValueError("--eval.policy_server=true runs with --eval.backend=local only")
     repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
     tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
     image_size = resolve_image_size(policy, cfg.eval.image_size)
@@ -219,7 +228,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         for task in tasks or [DEFAULT_TASK]:
             spec = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None,
                               torch_threads=threads, task=task, envs_per_worker=cfg.eval.envs_per_worker,
-                              videos_of_failures_only=mode == "failures", eager=cfg.eval.eager_render)
+                              videos_of_failures_only=mode == "failures", eager=cfg.eval.eager_render,
+                              policy_server=cfg.eval.policy_server)
             items = [w for w in todo if w.item.instance.task == task]
             if not items:
                 continue

@@ -176,6 +176,10 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """The policy, from the agent's view of the env (privileged types: from the env itself)."""
         raise NotImplementedError(f"policy type {self.type!r} does not say how to build its policy")
 
+    def batchable(self) -> bool:
+        """Whether `build_batched` returns a policy (one model for many envs; what a policy server serves)."""
+        return False
+
     def build_batched(self, view: AgentView, slots: int) -> Policy | None:
         """One policy that drives `slots` envs in lockstep (`reset(episode, slot)`, `select_actions({slot:
         obs})`) with one model, or None: the evaluator then builds one policy per env. Types whose cost is

@@ -141,7 +141,7 @@ class LeRobotPolicy:
                              f"ensembling); {config.type!r} keeps per-episode observation state: use envs_per_worker=1")
         self.slots = slots
         self.tasks = [""] * slots
-        self.queues: list[collections.deque] = [collections.deque() for _ in range(slots)]
+        self.queues: list[collections.deque] = [collections.deque() for _ in range(slots)]  # post-processed actions
         self.reads = 0  # observations turned into model input (chunks predicted, per slot)
 
     def reset(self, episode: Episode, slot: int = 0) -> None:
@@ -175,12 +175,20 @@ class LeRobotPolicy:
             return {slot: self._postprocess(action)}
         empty = [slot for slot in observations if not self.queues[slot]]
         if empty:
-            batch = self._batch([observations[s] for s in empty], [self.tasks[s] for s in empty])
-            with torch.inference_mode():
-                chunk = self.policy.predict_action_chunk(batch)[:, : self.n_action_steps]
-            for row, slot in enumerate(empty):
-                self.queues[slot].extend(chunk[row : row + 1].transpose(0, 1))  # n × (1, action_dim)
-        return {slot: self._postprocess(self.queues[slot].popleft()) for slot in observations}
+            for slot, actions in self.predict_chunks({s: observations[s] for s in empty}).items():
+                self.queues[slot].extend(actions)
+        return {slot: self.queues[slot].popleft() for slot in observations}
+
+    def predict_chunks(self, observations: dict[int, dict]) -> dict[int, list[np.ndarray]]:
+        """One forward pass over `observations` (slot -> observation): each slot's next `n_action_steps`
+        actions, post-processed (what lerobot's `select_action` would pop one at a time)."""
+        torch = self._torch
+        slots = list(observations)
+        batch = self._batch([observations[s] for s in slots], [self.tasks[s] for s in slots])
+        with torch.inference_mode():
+            chunk = self.policy.predict_action_chunk(batch)[:, : self.n_action_steps]
+        return {slot: [self._postprocess(chunk[row : row + 1, t]) for t in range(chunk.shape[1])]
+                for row, slot in enumerate(slots)}
 
     def _postprocess(self, action) -> np.ndarray:
         return self.postprocessor(action).squeeze(0).cpu().numpy().astype(np.float32)
@@ -221,10 +229,13 @@ class LeRobotConfig(PolicyConfig):
     def build(self, view: AgentView) -> LeRobotPolicy:
         return LeRobotPolicy(self.path, self.device)
 
-    def build_batched(self, view: AgentView, slots: int) -> LeRobotPolicy | None:
+    def batchable(self) -> bool:
         _, config = load_config(self.path)
-        if config.type not in CHUNKED_TYPES or getattr(config, "temporal_ensemble_coeff", None) is not None:
+        return config.type in CHUNKED_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
+
+    def build_batched(self, view: AgentView, slots: int) -> LeRobotPolicy | None:
+        if not self.batchable():
             log.warning("%s keeps per-episode observation state: one model copy per env instead of a batch",
-                        config.type)
+                        load_config(self.path)[1].type)
             return None
         return LeRobotPolicy(self.path, self.device, slots)

@@ -31,11 +31,13 @@ def bench(tmp_path_factory) -> Path:
 
 def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
              backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120,
-             image_size: int = 64, envs_per_worker: int = 1, videos: str = "", eager: bool = False):
+             image_size: int = 64, envs_per_worker: int = 1, videos: str = "", eager: bool = False,
+             policy_server: bool = False):
     cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), policy_config(policy, **({"path": path} if path else {})),
                          EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers, backend=backend,
                                     rerun=rerun, image_size=image_size, max_steps=max_steps,
-                                    envs_per_worker=envs_per_worker, videos=videos, eager_render=eager), str(out))
+                                    envs_per_worker=envs_per_worker, videos=videos, eager_render=eager,
+                                    policy_server=policy_server), str(out))
     return run(cfg)
 
 
@@ -476,3 +478,15 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
     vec.close()
     with pytest.raises(ValueError, match="allowed: front, left_top, right_top, wrist"):
         RoboViewEnv(benchmark_path=str(bench), cameras="top")
+
+
+def test_a_policy_server_feeds_every_worker_from_one_model(bench, tiny_checkpoint, tmp_path):
+    common = dict(policy="lerobot", path=str(tiny_checkpoint), splits="color,camera_pose", limit=3, repeats=1,
+                  max_steps=6, image_size=0)
+    served = evaluate(bench, tmp_path / "served", workers=2, envs_per_worker=2, policy_server=True, **common)
+    evaluate(bench, tmp_path / "alone", workers=1, **common)
+    cols = ["instance_id", "repeat", "episode_seed", "success", "steps", "policy", "failure_reason"]
+    assert served.episodes == 6
+    pd.testing.assert_frame_equal(rows(tmp_path / "served")[cols], rows(tmp_path / "alone")[cols])
+    with pytest.raises(ValueError, match="needs a policy with one batched model"):
+        evaluate(bench, tmp_path / "expert", policy_server=True)
