@@ -15,6 +15,7 @@ command resumes from the last one (lerobot's `--resume`). Measured step time: RE
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from dataclasses import dataclass, field
@@ -51,13 +52,20 @@ class TrainConfig:
     # ACT action chunk length, and how many of its actions run before the next inference.
     chunk_size: int = 20
     n_action_steps: int = 10
+    # Periodic evaluation while training, through lerobot-train's own eval loop on a frozen RoboView split
+    # (`--env.type=roboview`, the lerobot-eval plugin): a benchmark folder, its split, episodes per eval and
+    # how often (steps); empty benchmark: no periodic evaluation. Results land in OUT/eval/.
+    eval_benchmark: str = ""
+    eval_split: str = "color"
+    eval_episodes: int = 10
+    eval_freq: int = 1000
     # Print lerobot-train's command line instead of running it.
     dry_run: bool = False
 
     def __post_init__(self) -> None:
         if self.device not in DEVICES:
             raise ValueError(f"unknown --device={self.device!r}; allowed: {', '.join(DEVICES)}")
-        for name in ("steps", "save_freq", "batch_size", "chunk_size", "n_action_steps"):
+        for name in ("steps", "save_freq", "batch_size", "chunk_size", "n_action_steps", "eval_episodes", "eval_freq"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
         if self.n_action_steps > self.chunk_size:
@@ -69,6 +77,25 @@ class TrainConfig:
         cameras = [k for k in json.loads(info.read_text())["features"] if k.startswith("observation.images.")]
         if not cameras:
             raise ValueError(f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one")
+        if self.eval_benchmark:
+            from roboview_data.benchmark.format import load_benchmark
+
+            with flag_errors("--eval_benchmark"):
+                load_benchmark(self.eval_benchmark, [self.eval_split])  # an unknown folder or split fails now
+
+    def eval_flags(self) -> list[str]:
+        """lerobot-train's flags for periodic evals on the RoboView split (the dataset's cameras and size)."""
+        if not self.eval_benchmark:
+            return []
+        features = json.loads((Path(self.dataset.root) / "meta" / "info.json").read_text())["features"]
+        images = {k.removeprefix("observation.images."): v["shape"] for k, v in features.items()
+                  if k.startswith("observation.images.")}
+        side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
+        return ["--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
+                f"--env.benchmark_path={self.eval_benchmark}", f"--env.split={self.eval_split}",
+                f"--env.limit={self.eval_episodes}", f"--env.cameras={','.join(images)}", f"--env.image_size={side}",
+                f"--eval_freq={self.eval_freq}", f"--eval.n_episodes={self.eval_episodes}",
+                f"--eval.batch_size={min(self.eval_episodes, 8)}"]
 
 
 def last_checkpoint(output_dir: Path) -> Path | None:
@@ -98,7 +125,7 @@ def command(cfg: TrainConfig) -> list[str]:
             f"--policy.optimizer_lr={cfg.lr}", f"--policy.optimizer_lr_backbone={cfg.lr}",
             f"--batch_size={cfg.batch_size}", f"--steps={cfg.steps}", f"--save_freq={cfg.save_freq}",
             f"--log_freq={min(100, cfg.save_freq)}", "--num_workers=0", "--wandb.enable=false",
-            f"--output_dir={out}", f"--job_name={out.name}"]
+            f"--output_dir={out}", f"--job_name={out.name}", *cfg.eval_flags()]
 
 
 def run(cfg: TrainConfig) -> Path:
@@ -107,7 +134,10 @@ def run(cfg: TrainConfig) -> Path:
     if cfg.dry_run:
         print(" ".join(cmd))
         return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
-    proc = subprocess.run(cmd)
+    # lerobot imports the roboview_lerobot plugin by name: make this checkout importable in the trainer.
+    root = str(Path(__file__).resolve().parents[1])
+    env = os.environ | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
+    proc = subprocess.run(cmd, env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"lerobot-train exited with {proc.returncode}; its log is above")
     return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"

@@ -106,7 +106,7 @@ def test_rerun_recording_verifies(bench, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def tiny_checkpoint(tmp_path_factory) -> Path:
+def tiny_checkpoint(tmp_path_factory, bench) -> Path:
     from pipelines.collect import CollectConfig, DatasetConfig
     from pipelines.collect import run as collect
 
@@ -116,8 +116,11 @@ def tiny_checkpoint(tmp_path_factory) -> Path:
     # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
     args = [sys.executable, "-m", "pipelines.train", "--dataset.repo_id=t/demos", f"--dataset.root={root / 'ds'}",
             f"--output_dir={root / 'train'}", "--batch_size=2", "--save_freq=2", "--device=cpu"]
-    proc = subprocess.run([*args, "--steps=2"], capture_output=True, text=True, timeout=600)
+    # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
+    periodic = [f"--eval_benchmark={bench}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
+    proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "'task_group': 'roboview'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
     dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
     assert "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
     return root / "train" / "checkpoints" / "last" / "pretrained_model"
