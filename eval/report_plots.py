@@ -31,6 +31,7 @@ from roboview_data.variation.factors import (  # noqa: E402
     parse_dist_scale,
     parse_euler,
 )
+from roboview_data.variation.instances import DEFAULT_TASK, split_task  # noqa: E402
 
 Layouts = dict[str, dict[str, Any]]
 _MARKERS = "osD^vP*X"
@@ -334,13 +335,30 @@ PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
 }
 
 
+def _task_view(layouts: Layouts, task: str) -> Layouts:
+    """The layouts with only `task`'s splits, under their bare names (push_color → color), so every figure
+    drawn for the default task is drawn the same way for another."""
+    view: Layouts = {}
+    for policy, layout in layouts.items():
+        view[policy] = dict(layout)
+        for key in ("splits", "interactions"):
+            view[policy][key] = {split_task(s)[1]: v for s, v in layout.get(key, {}).items() if split_task(s)[0] == task}
+    return view
+
+
 def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
-    """Draw every figure whose split is present; file name → None if written, else the reason."""
+    """Draw every figure whose split is present, per task (another task's files are prefixed with its
+    name: push_sr_distractors.png); file name → None if written, else the reason."""
     outcome: dict[str, str | None] = {}
-    for name, (split, key, draw) in PLOTS.items():
-        if not any(split in layout[key] for layout in layouts.values()):
-            outcome[name] = f"no policy has the {split} split"
-            continue
-        draw(layouts, output_dir / name)
-        outcome[name] = None
+    tasks = sorted({split_task(s)[0] for layout in layouts.values() for key in ("splits", "interactions")
+                    for s in layout.get(key, {})} - {DEFAULT_TASK})
+    for task, view in [(DEFAULT_TASK, _task_view(layouts, DEFAULT_TASK))] + [(t, _task_view(layouts, t)) for t in tasks]:
+        prefix = "" if task == DEFAULT_TASK else f"{task}_"
+        for name, (split, key, draw) in PLOTS.items():
+            if not any(split in layout[key] for layout in view.values()):
+                if not prefix:
+                    outcome[name] = f"no policy has the {split} split"
+                continue
+            draw(view, output_dir / f"{prefix}{name}")
+            outcome[f"{prefix}{name}"] = None
     return outcome

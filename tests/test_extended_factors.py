@@ -165,18 +165,21 @@ def test_reports_draw_the_new_factors(tmp_path):
 
     from eval.report import write_report
 
-    suite = [i for i in generate_suite(load_preset("extended")) if i.split in NEW]
+    from roboview_data.variation.instances import split_task
+
+    suite = [i for i in generate_suite(load_preset("extended")) if split_task(i.split)[1] in NEW]
     rng = np.random.default_rng(0)
     rows = []
     for inst in suite:
         for repeat in range(2):
             level = {"distractors": lambda v: 1 - 0.2 * int(v), "object_size": lambda v: 0.9,
                      "lighting": lambda v: 0.3 if v.startswith("dim") else 0.9,
-                     "table_texture": lambda v: 0.5 if v.startswith("checker") else 0.9}[inst.split](inst.value)
+                     "table_texture": lambda v: 0.5 if v.startswith("checker") else 0.9}[split_task(inst.split)[1]](inst.value)
             success = rng.random() < level
             rows.append({**inst.to_record(), "repeat": repeat, "success": bool(success), "policy": "sim"})
     result = write_report(pd.DataFrame(rows), tmp_path, plots=True)
     for name in ("sr_lighting.png", "sr_table_texture.png", "sr_distractors.png", "sr_object_size.png"):
-        assert result.plots[name] is None and (tmp_path / name).stat().st_size > 10_000, name
+        for file in (name, f"push_{name}"):  # one figure per task
+            assert result.plots[file] is None and (tmp_path / file).stat().st_size > 10_000, file
     table1 = (tmp_path / "report.md").read_text()
     assert "Lighting SR" in table1 and "Distractors SR" in table1
