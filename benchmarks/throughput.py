@@ -112,12 +112,13 @@ def phase_eval(bench: str, policy: str, path: str, splits: str, limit: int, repe
 
 
 def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: int, out: Path) -> dict:
+    from policies.devices import resolve_device
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     cmd = [str(Path(sys.executable).parent / "lerobot-eval"), "--env.discover_packages_path=roboview_lerobot",
            "--env.type=roboview", f"--env.benchmark_path={bench}", f"--env.split={split}", f"--env.limit={episodes}",
            f"--env.cameras={','.join(checkpoint_cameras(path))}", f"--env.image_size={checkpoint_image_size(path)}",
-           f"--policy.path={path}", "--policy.device=cpu", f"--eval.n_episodes={episodes}",
+           f"--policy.path={path}", f"--policy.device={resolve_device('auto')}", f"--eval.n_episodes={episodes}",
            f"--eval.batch_size={batch}", f"--output_dir={out}"]
     start = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True,
