@@ -33,6 +33,8 @@ from policies.base import AgentView, Episode, PolicyConfig
 log = logging.getLogger(__name__)
 
 GATHER_S = 0.005  # once a request is in, how long to wait for the other workers' requests
+# A worker gives up on an answer after this long (a server that died building its model never answers).
+REPLY_TIMEOUT_S = 600.0
 
 
 @dataclass
@@ -63,7 +65,11 @@ class RemotePolicy:
 
     def _ask(self, message: tuple):
         self.handle.requests.put(message)
-        status, payload = self._reply.get()
+        try:
+            status, payload = self._reply.get(timeout=REPLY_TIMEOUT_S)
+        except queue.Empty:
+            raise RuntimeError(f"policy server did not answer within {REPLY_TIMEOUT_S:.0f} s (did it fail to load "
+                               "the model? its error is in the log above)") from None
         if status == "error":
             raise RuntimeError(f"policy server: {payload}")
         return payload

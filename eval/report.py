@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import provenance
+from eval import provenance, videos
 from eval.agents import agents_markdown, describe_agents
 from eval.metrics import (
     METRIC_COLUMNS,
@@ -325,8 +325,8 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
         for split, values in splits.items():
             per_value = layouts.get(name, {}).get("splits", {}).get(split, {}).get("per_value", {})
             for value, episodes in values.items():
-                links = " ".join(f"[{e['label']} {Path(path).stem.split('_', 2)[-1]}]({path})"
-                                 for e in episodes for path in e["paths"])
+                links = " ".join(f"[{e['label']} {camera}]({path})"
+                                 for e in episodes for camera, path in zip(e["cameras"], e["paths"]))
                 rows.append([name, split, value, pct(per_value.get(value, {}).get("sr")), links])
     return ["## Episode videos (per value; `--eval.videos`)", "",
             *_table(["policy", "split", "value", "SR", "videos (instance, repeat, camera; ✗ failed)"], rows), ""]
@@ -352,16 +352,17 @@ def _provenance(sources: list[dict[str, Any]]) -> list[str]:
 
 
 def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[str, list[dict]]]]:
-    """policy → split → value → [{label, paths (relative to the report folder)}] for filmed episodes."""
+    """policy → split → value → [{label, cameras, paths (relative to the report folder)}] for filmed episodes."""
     if "video" not in episodes:
         return {}
     index: dict = {}
     filmed = episodes[episodes["video"].notna()].sort_values(["policy", "split", "value", "instance_id", "repeat"])
     for row in filmed.itertuples():
-        paths = [os.path.relpath(p, out) for p in row.video.split(",")]
+        files = row.video.split(",")
         label = f"{row.instance_id[:8]} r{row.repeat}{'' if row.success else ' ✗'}"
         index.setdefault(row.policy, {}).setdefault(row.split, {}).setdefault(str(row.value), []).append(
-            {"label": label, "paths": paths})
+            {"label": label, "cameras": [videos.camera_of(f) for f in files],
+             "paths": [os.path.relpath(f, out) for f in files]})
     return index
 
 

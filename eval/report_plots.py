@@ -352,8 +352,8 @@ def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
     outcome: dict[str, str | None] = {}
     tasks = sorted({split_task(s)[0] for layout in layouts.values() for key in ("splits", "interactions")
                     for s in layout.get(key, {})} - {DEFAULT_TASK})
-    for task, view in [(DEFAULT_TASK, _task_view(layouts, DEFAULT_TASK))] + [(t, _task_view(layouts, t)) for t in tasks]:
-        prefix = "" if task == DEFAULT_TASK else f"{task}_"
+    for task in [DEFAULT_TASK, *tasks]:
+        view, prefix = _task_view(layouts, task), "" if task == DEFAULT_TASK else f"{task}_"
         for name, (split, key, draw) in PLOTS.items():
             if not any(split in layout[key] for layout in view.values()):
                 if not prefix:

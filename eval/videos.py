@@ -32,8 +32,14 @@ def _safe(text: str) -> str:
 
 
 def relative_path(row: dict, camera: str) -> str:
+    """Where an episode's video of `camera` goes, relative to the results folder."""
     return (f"videos/{_safe(row['split'])}/{_safe(row['value'])}/"
             f"{_safe(row['instance_id'])}_r{row['repeat']}_{_safe(camera)}.mp4")
+
+
+def camera_of(path: str) -> str:
+    """The camera of a video written at `relative_path` (instance ids and the repeat tag hold no "_")."""
+    return Path(path).stem.split("_", 2)[-1]
 
 
 def write_mp4(path: Path, frames: np.ndarray, fps: int) -> Path:
@@ -61,10 +67,7 @@ def write_mp4(path: Path, frames: np.ndarray, fps: int) -> Path:
     return path
 
 
-def wanted(mode: str | int, row: dict, written: int) -> bool:
-    """Whether this finished episode gets a video, given how many episodes already got one."""
-    if mode == "all":
-        return True
-    if mode == "failures":
-        return not row["success"]
-    return bool(mode) and written < int(mode)
+def filmed(mode: str | int, index: int) -> bool:
+    """Whether the `index`-th episode still to run records frames (`failures` records every episode: a failure
+    is known only at its end, when the worker drops the frames of a success)."""
+    return mode in MODES or (bool(mode) and index < int(mode))

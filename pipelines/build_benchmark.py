@@ -186,8 +186,7 @@ def run(cfg: BuildConfig) -> BuildResult:
         for split, rows in by_split.items():
             bio.write_split(rows, tmp / "data" / f"{split}.parquet")
         for task, rows in _by_task(rejected_rows).items():  # one table per task: their columns differ
-            name = "rejected" if task == DEFAULT_TASK else f"{task}_rejected"
-            bio.write_split(rows, tmp / "rejected" / f"{name}.parquet", rejected=True)
+            bio.write_split(rows, tmp / "rejected" / f"{_rejected_table(task)}.parquet", rejected=True)
     digest = bio.suite_hash(by_split)
     manifest = {
         "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
@@ -198,8 +197,7 @@ def run(cfg: BuildConfig) -> BuildResult:
         "image_size": cfg.image_size, "thresholds": bio.thresholds_dict(cfg.fairness),
         "candidates": len(records), "gate_pass_rate": gate_rate, "min_pass_rate": cfg.min_pass_rate,
         "splits": bio.split_counts(records, accepted, rejected_by), "rejected": len(rejected_rows),
-        **({"rejected_tables": sorted("rejected" if t == DEFAULT_TASK else f"{t}_rejected"
-                                      for t in _by_task(rejected_rows))} if rejected_rows else {}),
+        **({"rejected_tables": sorted(map(_rejected_table, _by_task(rejected_rows)))} if rejected_rows else {}),
         "decisions": len(decisions), "reviewers": sorted({d.reviewer for d in decisions.values()}),
         "suite_hash": digest, "benchmark_version": f"{suite.preset}-{digest[:12]}",
         "fairness_stats": fairness_stats(records),
@@ -223,6 +221,11 @@ def run(cfg: BuildConfig) -> BuildResult:
               f"gate {screen['observed_agreement']:.1%}, Cohen's κ {kappa}, {len(screen['disagreements'])} "
               f"disagreements (contact sheet; answers in vlm_screen.csv)")
     return BuildResult(out, len(records), sum(accepted), gate_rate, digest, time.perf_counter() - t0, sheet)
+
+
+def _rejected_table(task: str) -> str:
+    """The rejected table's name (and card config) of a task: `rejected` for pick_place, `<task>_rejected`."""
+    return "rejected" if task == DEFAULT_TASK else f"{task}_rejected"
 
 
 def _by_task(rows: list[dict]) -> dict[str, list[dict]]:

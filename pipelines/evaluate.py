@@ -210,7 +210,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     todo = [w for w in work if not store.done(w.key)]
     mode = cfg.eval.video_mode
     if mode:
-        todo = [WorkItem(w.item, w.repeat, video=mode in videos.MODES or i < int(mode)) for i, w in enumerate(todo)]
+        todo = [WorkItem(w.item, w.repeat, video=videos.filmed(mode, i)) for i, w in enumerate(todo)]
     entry = provenance.start_entry(bench.version, policy.checkpoint)
     provenance.record(Path(cfg.output_dir), entry)
     log.info("%d episodes planned, %d already done, %d to run", len(work), len(work) - len(todo), len(todo))

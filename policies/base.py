@@ -17,6 +17,7 @@ color and shape, and never the env, whose state holds the object's pose. Only a 
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.metadata
 from dataclasses import dataclass, fields
@@ -74,8 +75,16 @@ class AgentView:
                    env.observation_space)
 
     def kinematic_model(self) -> mujoco.MjModel:
-        """The robot and static scene compiled at defaults (for inverse kinematics); no episode's state."""
-        return Scene().model
+        """The robot and static scene compiled at defaults (for inverse kinematics); no episode's state.
+
+        Compiled once per process (≈ 1.3 s) and shared: planners only read it, each with its own MjData,
+        so K envs per worker do not compile it K times."""
+        return _kinematic_model()
+
+
+@functools.cache
+def _kinematic_model() -> mujoco.MjModel:
+    return Scene().model
 
 
 @runtime_checkable

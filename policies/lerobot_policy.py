@@ -108,6 +108,11 @@ def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
 CHUNKED_TYPES = ("act", "pi0", "pi05", "smolvla")
 
 
+def is_chunked(config) -> bool:
+    """Whether a checkpoint config runs as 'predict a chunk, pop it' (and so can be batched and served)."""
+    return config.type in CHUNKED_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
+
+
 class LeRobotPolicy:
     """A checkpoint driving one env, or `slots` envs in lockstep with one model (batched inference).
 
@@ -133,8 +138,7 @@ class LeRobotPolicy:
             preprocessor_overrides={"device_processor": {"device": device}})
         self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
         # Chunked: the adapter pops the chunk itself (observations read once per chunk, slots batched).
-        self.chunked = (config.type in CHUNKED_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
-                        and hasattr(self.policy, "predict_action_chunk"))
+        self.chunked = is_chunked(config) and hasattr(self.policy, "predict_action_chunk")
         self.n_action_steps = int(getattr(config, "n_action_steps", 1))
         if slots > 1 and not self.chunked:
             raise ValueError(f"batched inference needs a chunked policy ({', '.join(CHUNKED_TYPES)} without temporal "
@@ -230,8 +234,7 @@ class LeRobotConfig(PolicyConfig):
         return LeRobotPolicy(self.path, self.device)
 
     def batchable(self) -> bool:
-        _, config = load_config(self.path)
-        return config.type in CHUNKED_TYPES and getattr(config, "temporal_ensemble_coeff", None) is None
+        return is_chunked(load_config(self.path)[1])
 
     def build_batched(self, view: AgentView, slots: int) -> LeRobotPolicy | None:
         if not self.batchable():

@@ -12,11 +12,13 @@ no step counts or failure reasons, so those columns say so.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
 from eval.results import EpisodeStore
 from roboview_data.variation.instances import episode_seed
+from roboview_lerobot import RoboViewEnv
 from roboview_lerobot.env import episode_plan
 
 NO_REASON = "failed in lerobot-eval (it records no failure reason)"
@@ -57,10 +59,13 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--eval_info", required=True, help="lerobot-eval's OUT/eval_info.json")
     parser.add_argument("--output_dir", required=True, help="RoboView results folder to write")
     parser.add_argument("--policy_name", default="lerobot-eval", help="the results' policy column")
-    for flag, default in (("benchmark_path", None), ("split", None), ("n_repeats", 1), ("contexts", 0),
-                          ("limit", 0), ("start_seed", 1000), ("max_steps", 120), ("image_size", 96)):
-        parser.add_argument(f"--env.{flag}", dest=flag, default=default, required=default is None,
-                            type=str if default is None else int, help="as given to lerobot-eval")
+    parser.add_argument("--env.benchmark_path", dest="benchmark_path", required=True, help="as given to lerobot-eval")
+    parser.add_argument("--env.split", dest="split", required=True, help="as given to lerobot-eval")
+    # The plugin config's own defaults, so both tools agree on an omitted flag.
+    defaults = {f.name: f.default for f in dataclasses.fields(RoboViewEnv)}
+    for flag in ("n_repeats", "contexts", "limit", "start_seed", "max_steps", "image_size"):
+        parser.add_argument(f"--env.{flag}", dest=flag, default=defaults[flag], type=int,
+                            help=f"as given to lerobot-eval (default {defaults[flag]})")
     args = parser.parse_args(argv)
     if not Path(args.eval_info).is_file():
         parser.error(f"--eval_info={args.eval_info}: no such file (lerobot-eval writes OUT/eval_info.json)")

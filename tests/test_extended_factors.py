@@ -164,7 +164,6 @@ def test_reports_draw_the_new_factors(tmp_path):
     import pandas as pd
 
     from eval.report import write_report
-
     from roboview_data.variation.instances import split_task
 
     suite = [i for i in generate_suite(load_preset("extended")) if split_task(i.split)[1] in NEW]
