@@ -1,6 +1,10 @@
 # RoboView — `make demo` and `make test` work on a fresh machine: they install what is missing.
 SHELL := /bin/bash
-PYTHON ?= python3.11
+# Python 3.12 or 3.13 (LeRobot 0.6 needs >= 3.12): $(PYTHON) if given, else the first that runs of
+# python3.12, python3.13, pyenv's 3.12.x / 3.13.x, python3.
+PY_OK := import sys; sys.exit(not ((3, 12) <= sys.version_info[:2] < (3, 14)))
+PYTHON ?= $(shell for p in python3.12 python3.13 $$(pyenv root 2>/dev/null)/versions/3.1[23].*/bin/python3 python3; do \
+  PYENV_VERSION= "$$p" -c '$(PY_OK)' 2>/dev/null && { echo "$$p"; break; }; done)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
@@ -23,7 +27,13 @@ sysdeps:
 	fi
 
 $(STAMP): pyproject.toml requirements.lock
-	@test -x $(PY) || $(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
+	@if [ -x $(PY) ] && ! $(PY) -c '$(PY_OK)' 2>/dev/null; then \
+	  echo "[install] $(VENV) holds Python $$($(PY) -c 'import platform; print(platform.python_version())'); rebuilding it for 3.12"; \
+	  rm -rf $(VENV); fi
+	@if [ ! -x $(PY) ]; then \
+	  if [ -z "$(PYTHON)" ]; then echo "RoboView needs Python 3.12 or 3.13 (LeRobot 0.6 requires >= 3.12) and found none:" \
+	    "install one (pyenv install 3.12, or your system's python3.12 package) or pass PYTHON=/path/to/python3.12" >&2; exit 1; fi; \
+	  echo "[install] $(VENV) with $(PYTHON)"; $(PYTHON) -m venv $(VENV); fi
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c requirements.lock -e ".[dev]"
 	@touch $(STAMP)

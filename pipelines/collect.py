@@ -157,6 +157,7 @@ def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
 
 
 def _open_dataset(cfg: CollectConfig, create: bool):
+    from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     d = cfg.dataset
@@ -164,12 +165,12 @@ def _open_dataset(cfg: CollectConfig, create: bool):
     # was made for live capture); we feed frames faster than real time, so under CPU load frames went
     # missing (1 of ~13,000 per camera in a 250-demo run: an episode's video one frame short of its
     # parquet rows). A queue that holds a whole episode can never fill: no frame can be dropped.
-    kwargs = dict(vcodec=d.vcodec, streaming_encoding=True, encoder_threads=1,
+    kwargs = dict(rgb_encoder=RGBEncoderConfig(vcodec=d.vcodec), streaming_encoding=True, encoder_threads=1,
                   encoder_queue_maxsize=cfg.max_steps + 1)
     if create:
         return LeRobotDataset.create(d.repo_id, d.fps, demo_features(tuple(d.cameras), d.image_size),
                                      root=d.root, robot_type=ROBOT_TYPE, use_videos=True, **kwargs)
-    return LeRobotDataset(d.repo_id, root=d.root, **kwargs)
+    return LeRobotDataset.resume(d.repo_id, root=d.root, **kwargs)  # reopened for writing: new files
 
 
 def run(cfg: CollectConfig) -> CollectResult:

@@ -92,9 +92,9 @@ class TrainConfig:
                   if k.startswith("observation.images.")}
         side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
         return ["--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
-                f"--env.benchmark_path={self.eval_benchmark}", f"--env.split={self.eval_split}",
+                f"--env.benchmark_path={self.eval_benchmark}", f"--env.task={self.eval_split}",
                 f"--env.limit={self.eval_episodes}", f"--env.cameras={','.join(images)}", f"--env.image_size={side}",
-                f"--eval_freq={self.eval_freq}", f"--eval.n_episodes={self.eval_episodes}",
+                f"--env_eval_freq={self.eval_freq}", f"--eval.n_episodes={self.eval_episodes}",
                 f"--eval.batch_size={min(self.eval_episodes, 8)}"]
 
 

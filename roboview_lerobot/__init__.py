@@ -1,22 +1,28 @@
 """RoboView inside lerobot's own tools, unpatched: `lerobot-eval --env.type=roboview`.
 
     lerobot-eval --env.discover_packages_path=roboview_lerobot --env.type=roboview \
-        --env.benchmark_path=outputs/benchmark --env.split=color --env.cameras=left_top,wrist --env.image_size=96 \
-        --policy.path=CKPT/pretrained_model --eval.n_episodes=141 --eval.batch_size=8 --output_dir=outputs/lerobot_eval
+        --env.benchmark_path=outputs/benchmark --env.task=color,camera_pose --env.cameras=left_top,wrist \
+        --env.image_size=96 --policy.path=CKPT/pretrained_model --eval.n_episodes=141 --eval.batch_size=8 \
+        --output_dir=outputs/lerobot_eval
     python -m roboview_lerobot.convert --eval_info=outputs/lerobot_eval/eval_info.json \
-        --env.benchmark_path=outputs/benchmark --env.split=color --output_dir=outputs/eval/lerobot_eval
+        --env.benchmark_path=outputs/benchmark --output_dir=outputs/eval/lerobot_eval
 
-lerobot imports this package (and its submodules) for `--env.discover_packages_path`; importing it
-registers the `roboview` `EnvConfig` and the gymnasium id `RoboView/LeRobotEval-v0`. lerobot-eval then
-runs its own loop: episode i is reset with seed `--seed + i` (lerobot's rule), which this env maps to
-the i-th (instance, repeat) of the split — the order `pipelines.evaluate` uses — and runs it with
-RoboView's own episode seed, so both tools run the same episodes. `lerobot-train --env.type=roboview`
-takes the same flags for its periodic evals. `roboview_lerobot.convert` turns lerobot-eval's
-`eval_info.json` into a RoboView results folder that `pipelines.report` reads.
+As LeRobot's LIBERO / RoboCasa integrations do with their suites, `--env.task` names the benchmark's splits
+to run (comma-separated, or `all`): each split is one task group of `eval_info.json` (`per_group.<split>`
+holds its success rate), and its episodes are the split's instances × `--env.n_repeats` in the order
+`pipelines.evaluate` uses. lerobot-eval resets episode i of a group with seed `--seed + i` (lerobot's
+rule); the env maps that to the split's i-th (instance, repeat) and runs it with RoboView's own episode
+seed, so both tools run the same episodes. Every sub-env exposes `task` (the split), `task_description`
+(the episode's instruction, which reaches language-conditioned policies) and `_max_episode_steps`.
+
+lerobot imports this package for `--env.discover_packages_path`; importing it registers the `roboview`
+`EnvConfig` and the gymnasium id `RoboView/LeRobotEval-v0`. `lerobot-train --env.type=roboview` takes the
+same flags for its periodic evals. The same env is offered as a LeRobot EnvHub env: `roboview_lerobot/hub/`.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import gymnasium as gym
@@ -28,28 +34,29 @@ GYM_ID = "RoboView/LeRobotEval-v0"
 
 if GYM_ID not in gym.registry:
     # No TimeLimit/OrderEnforcing wrappers: the env truncates at max_steps itself and exposes
-    # `_max_episode_steps` and `task_description`, which lerobot's loop reads from each sub-env.
+    # `_max_episode_steps`, `task` and `task_description`, which lerobot's loop reads from each sub-env.
     gym.register(id=GYM_ID, entry_point="roboview_lerobot.env:RoboViewEvalEnv", order_enforce=False)
 
 
 @EnvConfig.register_subclass("roboview")
 @dataclass
 class RoboViewEnv(EnvConfig):
-    """A frozen RoboView split as a lerobot env (`--env.type=roboview`)."""
+    """Splits of a frozen RoboView benchmark as lerobot envs (`--env.type=roboview`)."""
 
-    task: str | None = "LeRobotEval-v0"
+    # Splits to run, comma-separated (color,camera_pose), or `all`: one task group per split.
+    task: str | None = "color"
     fps: int = 10
-    # Benchmark folder (pipelines.build_benchmark) and the split to run.
+    # Benchmark folder (pipelines.build_benchmark).
     benchmark_path: str = "outputs/benchmark"
-    split: str = "color"
     # The checkpoint's cameras (comma-separated) and square image side: what it was trained on.
     cameras: str = "left_top,wrist"
     image_size: int = 96
-    # Episodes: every selected instance × n_repeats, in the order pipelines.evaluate uses
-    # (--eval.n_episodes should equal their count, printed when the env is made).
+    # Episodes of a split: its selected instances × n_repeats, in the order pipelines.evaluate uses
+    # (--eval.n_episodes runs that many per split; the count is printed when the envs are made).
     n_repeats: int = 1
     contexts: int = 0
     limit: int = 0
+    # Steps before an episode is cut (lerobot reads it as the env's _max_episode_steps).
     max_steps: int = 120
     # Must equal lerobot-eval's --seed (default 1000): episode i is the one reset with seed start_seed + i.
     start_seed: int = 1000
@@ -64,9 +71,11 @@ class RoboViewEnv(EnvConfig):
         if unknown or not cams:
             raise ValueError(f"--env.cameras={self.cameras!r}: unknown camera(s) {unknown or cams}; "
                              f"allowed: {', '.join(ALL_CAMERAS)}")
-        for name in ("image_size", "n_repeats", "max_steps"):
+        for name in ("image_size", "n_repeats", "max_steps", "fps"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
+        if not self.split_names_given:
+            raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,)),
                          "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(8,))}
         self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
@@ -80,6 +89,24 @@ class RoboViewEnv(EnvConfig):
         return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
 
     @property
+    def split_names_given(self) -> tuple[str, ...]:
+        return tuple(s.strip() for s in (self.task or "").split(",") if s.strip())
+
+    def splits(self) -> list[str]:
+        """The splits `--env.task` names, checked against the benchmark (an unknown one fails here)."""
+        from roboview_data.benchmark.format import available_splits
+
+        available = available_splits(self.benchmark_path)
+        names = self.split_names_given
+        if names == ("all",):
+            return available
+        unknown = [s for s in names if s not in available]
+        if unknown:
+            raise ValueError(f"--env.task: unknown split(s) {unknown}; the benchmark at {self.benchmark_path} has: "
+                             f"{', '.join(available)} (or `all`)")
+        return list(names)
+
+    @property
     def package_name(self) -> str:
         return "roboview_lerobot"
 
@@ -89,6 +116,31 @@ class RoboViewEnv(EnvConfig):
 
     @property
     def gym_kwargs(self) -> dict:
-        return {"benchmark_path": self.benchmark_path, "split": self.split, "cameras": self.camera_list,
+        """The env's arguments for the first split (`create_envs` makes one env set per split)."""
+        return self.split_kwargs(self.splits()[0])
+
+    def split_kwargs(self, split: str) -> dict:
+        return {"benchmark_path": self.benchmark_path, "split": split, "cameras": self.camera_list,
                 "image_size": self.image_size, "n_repeats": self.n_repeats, "contexts": self.contexts,
                 "limit": self.limit, "max_steps": self.max_steps, "start_seed": self.start_seed, "fps": self.fps}
+
+    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        """{split: {0: VectorEnv of n_envs}}: lerobot-eval runs --eval.n_episodes episodes of each split.
+
+        Async envs start their worker processes only when lerobot reaches that split (lerobot's lazy
+        wrapper, as its LIBERO integration uses), so at most n_envs simulators are alive at a time."""
+        from lerobot.envs.utils import _LazyAsyncVectorEnv
+
+        from roboview_lerobot.env import RoboViewEvalEnv
+
+        envs: dict[str, dict[int, gym.vector.VectorEnv]] = {}
+        spaces: tuple = (None, None, None)  # probed from one env of the first split; every split shares them
+        for split in self.splits():
+            fns = [functools.partial(RoboViewEvalEnv, **self.split_kwargs(split)) for _ in range(n_envs)]
+            if use_async_envs and n_envs > 1:
+                vec = _LazyAsyncVectorEnv(fns, *spaces)
+                spaces = (vec.observation_space, vec.action_space, vec.metadata)
+            else:
+                vec = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP)
+            envs[split] = {0: vec}
+        return envs

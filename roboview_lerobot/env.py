@@ -45,6 +45,7 @@ class RoboViewEvalEnv(gym.Env):
         task = self.episodes[0][0].instance.task
         self.env = make_env(task, cameras=tuple(cameras), image_size=image_size, max_steps=max_steps, fps=fps)
         self.cameras = tuple(cameras)
+        self.split = split
         self.start_seed = start_seed
         self.render_mode = render_mode
         self._max_episode_steps = max_steps
@@ -57,7 +58,13 @@ class RoboViewEvalEnv(gym.Env):
                                                   "agent_pos": self.env.observation_space[STATE_KEY]})
 
     @property
+    def task(self) -> str:
+        """The split this env runs (lerobot's task group)."""
+        return self.split
+
+    @property
     def task_description(self) -> str:
+        """The current episode's instruction: what lerobot-eval hands a language-conditioned policy."""
         return self.env.instruction
 
     def _convert(self, obs: dict) -> dict:

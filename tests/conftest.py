@@ -16,3 +16,14 @@ def env():
     env = PickPlaceEnv(image_size=96, depth=False)
     yield env
     env.close()
+
+
+@pytest.fixture(scope="session")
+def tiny_benchmark(tmp_path_factory):
+    """The `tiny` preset built once for every test that only reads a benchmark (57 instances, 64² previews)."""
+    from pipelines.build_benchmark import BuildConfig
+    from pipelines.build_benchmark import run as build
+
+    out = tmp_path_factory.mktemp("bench") / "tiny"
+    build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64))
+    return out

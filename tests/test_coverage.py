@@ -9,8 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipelines.build_benchmark import BuildConfig
-from pipelines.build_benchmark import run as build
 from pipelines.collect import CollectConfig, DatasetConfig
 from pipelines.collect import run as collect
 from roboview_data.demos.coverage import Radii, audit, load_training_visuals
@@ -19,10 +17,8 @@ ROOT = Path(__file__).parents[1]
 
 
 @pytest.fixture(scope="module")
-def bench(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("bench") / "tiny"
-    build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64))
-    return out
+def bench(tiny_benchmark) -> Path:
+    return tiny_benchmark
 
 
 def _collect(root: Path, randomize: list[str]) -> Path:

@@ -13,8 +13,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines.build_benchmark import BuildConfig
-from pipelines.build_benchmark import run as build
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import PolicyConfig, policy_config
 
@@ -23,10 +21,8 @@ RERUN = Path(sys.executable).parent / "rerun"
 
 
 @pytest.fixture(scope="module")
-def bench(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("bench") / "tiny"
-    build(BuildConfig(output_dir=str(out), preset="tiny", image_size=96))
-    return out
+def bench(tiny_benchmark) -> Path:
+    return tiny_benchmark
 
 
 def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
@@ -120,7 +116,7 @@ def tiny_checkpoint(tmp_path_factory, bench) -> Path:
     periodic = [f"--eval_benchmark={bench}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
     proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "'task_group': 'roboview'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
+    assert "'task_group': 'color'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
     dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
     assert "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
     return root / "train" / "checkpoints" / "last" / "pretrained_model"
@@ -437,22 +433,25 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
 def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpoint, tmp_path):
     from roboview_lerobot.convert import convert
 
+    # Two splits by name, as LeRobot's LIBERO integration takes suites; lerobot's default async vector envs.
     lerobot_eval = Path(sys.executable).parent / "lerobot-eval"
     args = [str(lerobot_eval), "--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
-            f"--env.benchmark_path={bench}", "--env.split=color", "--env.limit=2", "--env.cameras=left_top,wrist",
-            "--env.image_size=64", "--env.max_steps=6", f"--policy.path={tiny_checkpoint}", "--policy.device=cpu",
-            "--eval.n_episodes=2", "--eval.batch_size=2", f"--output_dir={tmp_path / 'le'}"]
+            f"--env.benchmark_path={bench}", "--env.task=color,dist_scale", "--env.limit=2",
+            "--env.cameras=left_top,wrist", "--env.image_size=64", "--env.max_steps=6", f"--policy.path={tiny_checkpoint}",
+            "--policy.device=cpu", "--eval.n_episodes=2", "--eval.batch_size=2", f"--output_dir={tmp_path / 'le'}"]
     proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONPATH": str(ROOT)})
     assert proc.returncode == 0, proc.stderr[-3000:]
     info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
-    assert info["overall"]["n_episodes"] == 2
-    converted = pd.read_parquet(convert(tmp_path / "le" / "eval_info.json", str(bench), "color", tmp_path / "conv",
-                                        limit=2))
-    evaluate(bench, tmp_path / "ours", policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=2,
-             repeats=1, workers=1, max_steps=6, image_size=0)
+    assert info["overall"]["n_episodes"] == 4 and set(info["per_group"]) == {"color", "dist_scale"}
+    assert [t["task_group"] for t in info["per_task"]] == ["color", "dist_scale"]
+    converted = pd.read_parquet(convert(tmp_path / "le" / "eval_info.json", str(bench), tmp_path / "conv", limit=2))
+    evaluate(bench, tmp_path / "ours", policy="lerobot", path=str(tiny_checkpoint), splits="color,dist_scale",
+             limit=2, repeats=1, workers=1, max_steps=6, image_size=0)
     ours = pd.read_parquet(tmp_path / "ours" / "episodes.parquet")
-    cols = ["instance_id", "repeat", "episode_seed", "value", "success"]
-    pd.testing.assert_frame_equal(converted[cols], ours[cols])
+    cols = ["split", "instance_id", "repeat", "episode_seed", "value", "success"]
+    key = ["split", "instance_id", "repeat"]
+    pd.testing.assert_frame_equal(converted[cols].sort_values(key).reset_index(drop=True),
+                                  ours[cols].sort_values(key).reset_index(drop=True))
 
 
 def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
@@ -465,9 +464,11 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
     from roboview_data.variation.instances import episode_seed
     from roboview_lerobot import RoboViewEnv
 
-    cfg = RoboViewEnv(benchmark_path=str(bench), split="color", cameras="front", image_size=48, n_repeats=2)
-    vec = lerobot_make_env(cfg, n_envs=2)["roboview"][0]  # lerobot's own factory: gym.make + SyncVectorEnv
-    assert isinstance(vec, gym.vector.SyncVectorEnv) and vec.call("_max_episode_steps")[0] == 120
+    cfg = RoboViewEnv(benchmark_path=str(bench), task="color", cameras="front", image_size=48, n_repeats=2,
+                      max_steps=50)
+    vec = lerobot_make_env(cfg, n_envs=2)["color"][0]  # lerobot's own factory: one vector env per split
+    assert isinstance(vec, gym.vector.SyncVectorEnv) and vec.call("_max_episode_steps")[0] == 50
+    assert list(vec.call("task")) == ["color", "color"]
     obs, _ = vec.reset(seed=[1000 + 2, 1000 + 3])  # episodes 2 and 3: instance 1, repeats 0 and 1
     batch = preprocess_observation(obs)
     item = load_benchmark(bench, ["color"]).splits["color"][1]
@@ -479,8 +480,11 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
         assert np.array_equal(batch["observation.images.front"][slot].permute(1, 2, 0).numpy(), expected)
     env.close()
     vec.close()
+    assert list(RoboViewEnv(benchmark_path=str(bench), task="all").splits()) == list(load_benchmark(bench).splits)
     with pytest.raises(ValueError, match="allowed: front, left_top, right_top, wrist"):
         RoboViewEnv(benchmark_path=str(bench), cameras="top")
+    with pytest.raises(ValueError, match="colour"):
+        RoboViewEnv(benchmark_path=str(bench), task="colour").splits()
 
 
 def test_a_policy_server_feeds_every_worker_from_one_model(bench, tiny_checkpoint, tmp_path):

@@ -255,13 +255,8 @@ def test_sgl_records_the_refined_instruction(standin, rgbd_env, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def tiny_bench(tmp_path_factory):
-    from pipelines.build_benchmark import BuildConfig
-    from pipelines.build_benchmark import run as build
-
-    bench = tmp_path_factory.mktemp("vlm") / "bench"
-    build(BuildConfig(output_dir=str(bench), preset="tiny", image_size=64))
-    return bench
+def tiny_bench(tiny_benchmark):
+    return tiny_benchmark
 
 
 def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_nothing(tiny_bench, tmp_path):

@@ -162,11 +162,17 @@ def instance_from_record(record: dict) -> TaskInstance:
                          "modified after it was built; rebuild it with pipelines.build_benchmark")
 
 
+def available_splits(path: str | Path) -> list[str]:
+    """The splits the benchmark folder at `path` holds, in its manifest's order."""
+    root = Path(path)
+    return [s for s in read_manifest(root)["splits"] if (root / "data" / f"{s}.parquet").is_file()]
+
+
 def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchmark:
     """The instances of `splits` (default: all) of the benchmark folder at `path`."""
     root = Path(path)
     manifest = read_manifest(root)
-    available = [s for s in manifest["splits"] if (root / "data" / f"{s}.parquet").is_file()]
+    available = available_splits(root)
     chosen = splits or available
     unknown = [s for s in chosen if s not in available]
     if unknown:

@@ -1,0 +1,105 @@
+"""A tiny, randomly initialised VLA backbone written offline, to check a VLA's plumbing on RoboView data.
+
+    python -m roboview_lerobot.tiny_vla --output_dir=outputs/tiny_smolvlm
+
+writes a SmolVLM config and processor (no weights: `--policy.load_vlm_weights=false` builds the model
+from the config with random weights) and prints the `lerobot-train` flags that train SmolVLA on it:
+
+    lerobot-train --dataset.repo_id=ID --dataset.root=DIR --policy.type=smolvla \
+        --policy.vlm_model_name=outputs/tiny_smolvlm --policy.load_vlm_weights=false \
+        --policy.resize_imgs_with_padding='[64,64]' --policy.num_vlm_layers=4 ...
+
+Nothing is downloaded: the tokenizer is a `tokenizers` word-level vocabulary over every word of the
+benchmark's instructions (plus SmolVLM's special image tokens), so the instruction a policy receives
+can be decoded back word for word. A policy built this way acts at random (success 0): it exists to
+show that RoboView's cameras, 8-D state and action, and the instruction reach a VLA's inputs — in
+training, in `pipelines.evaluate --policy.type=lerobot` and in `lerobot-eval --env.type=roboview`. A user
+with real weights passes `--policy.path=lerobot/smolvla_base` (or `lerobot/pi05_base`) instead.
+
+Which LeRobot VLA types can be built this way, and why the others cannot: docs/vla.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+# SmolVLM's special tokens, in the roles its processor and SmolVLA's model look them up by.
+SPECIAL_TOKENS = {"pad_token": "<pad>", "unk_token": "<unk>", "bos_token": "<|im_start|>",
+                  "eos_token": "<end_of_utterance>"}
+IMAGE_TOKENS = {"fake_image_token": "<fake_token_around_image>", "image_token": "<image>",
+                "global_image_token": "<global-img>", "end_of_utterance_token": "<end_of_utterance>"}
+# The tiny model: 4 text layers 64 wide, a 2-layer 32-wide vision tower over 64-pixel images in 16-pixel
+# patches (16 patches, 4 image tokens after SmolVLM's 2x pixel shuffle).
+IMAGE_SIZE = 64
+TEXT_LAYERS = 4
+
+
+def instruction_words() -> list[str]:
+    """Every word of every instruction (pick_place and push), and every word the Semantic Grounding Layer
+    may put into one (color names and categories, shapes, sizes), in first-seen order."""
+    from policies.vlm.sgl import GENERIC_NOUNS, PRIORITY
+    from roboview_data.variation.colors import CATEGORIES
+    from roboview_data.variation.factors import FACTORS
+
+    texts = [*PRIORITY, *CATEGORIES, *GENERIC_NOUNS, "block", "prism", "small", "large", "medium", "big", "left",
+             "right", "front", "back"]
+    for factor in FACTORS.values():
+        if factor.name.endswith(("instruction", "shape")) or factor.name == "color":
+            texts += [str(v).replace("_", " ") for v in factor.values]
+    words: dict[str, None] = {}
+    for text in texts:
+        words.update(dict.fromkeys(re.findall(r"[\w']+|[^\w\s]", text.lower())))
+    return list(words)
+
+
+def write_smolvlm(output_dir: str | Path, extra_words: tuple[str, ...] = ()) -> Path:
+    """A SmolVLM config + processor (tokenizer, image processor) in `output_dir`; returns the folder."""
+    from tokenizers import Tokenizer, models, pre_tokenizers
+    from transformers import (PreTrainedTokenizerFast, SmolVLMConfig, SmolVLMImageProcessor, SmolVLMProcessor,
+                              SmolVLMVideoProcessor)
+
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    special = list(dict.fromkeys([*SPECIAL_TOKENS.values(), *IMAGE_TOKENS.values()]))
+    words = [w for w in dict.fromkeys([*instruction_words(), *extra_words]) if w not in special]
+    vocab = {token: i for i, token in enumerate(special + words)}
+    backend = Tokenizer(models.WordLevel(vocab, unk_token=SPECIAL_TOKENS["unk_token"]))
+    backend.pre_tokenizer = pre_tokenizers.Whitespace()
+    tokenizer = PreTrainedTokenizerFast(tokenizer_object=backend, extra_special_tokens=IMAGE_TOKENS,
+                                        **SPECIAL_TOKENS)
+    images = SmolVLMImageProcessor(do_resize=True, size={"longest_edge": IMAGE_SIZE},
+                                   max_image_size={"longest_edge": IMAGE_SIZE}, do_image_splitting=False)
+    SmolVLMProcessor(image_processor=images, tokenizer=tokenizer, video_processor=SmolVLMVideoProcessor(),
+                     image_seq_len=4).save_pretrained(out)
+    config = SmolVLMConfig(
+        text_config=dict(model_type="llama", vocab_size=len(vocab), hidden_size=64, intermediate_size=128,
+                         num_hidden_layers=TEXT_LAYERS, num_attention_heads=4, num_key_value_heads=2, head_dim=16,
+                         max_position_embeddings=512, pad_token_id=vocab[SPECIAL_TOKENS["pad_token"]]),
+        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=2, num_attention_heads=2,
+                           image_size=IMAGE_SIZE, patch_size=16),
+        scale_factor=2, image_token_id=vocab[IMAGE_TOKENS["image_token"]])
+    config.save_pretrained(out)
+    return out
+
+
+def smolvla_train_flags(backbone: str | Path, chunk_size: int = 10) -> list[str]:
+    """lerobot-train's --policy.* flags for SmolVLA on the tiny backbone (random weights, no download)."""
+    return ["--policy.type=smolvla", f"--policy.vlm_model_name={backbone}", "--policy.load_vlm_weights=false",
+            f"--policy.resize_imgs_with_padding=[{IMAGE_SIZE},{IMAGE_SIZE}]", f"--policy.num_vlm_layers={TEXT_LAYERS}",
+            f"--policy.chunk_size={chunk_size}", f"--policy.n_action_steps={chunk_size}", "--policy.push_to_hub=false"]
+
+
+def main(argv: list[str] | None = None) -> Path:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--output_dir", required=True, help="folder to write the SmolVLM config and processor into")
+    args = parser.parse_args(argv)
+    out = write_smolvlm(args.output_dir)
+    print(f"[tiny_vla] SmolVLM config + processor in {out}; train SmolVLA on it with lerobot-train "
+          + " ".join(smolvla_train_flags(out)))
+    return out
+
+
+if __name__ == "__main__":
+    main()

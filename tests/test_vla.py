@@ -1,0 +1,154 @@
+"""A VLA (SmolVLA: tiny, random weights, nothing downloaded) trained by lerobot-train on RoboView demos, then
+evaluated through `pipelines.evaluate --policy.type=lerobot` and through `lerobot-eval --env.type=roboview`:
+the instruction reaches its tokenizer, the four cameras its image inputs, the 8-D state its padded state."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+from pipelines.evaluate import run as evaluate
+from policies.base import policy_config
+from roboview_data.sim.cameras import ALL_CAMERAS
+
+ROOT = Path(__file__).parents[1]
+BIN = Path(sys.executable).parent
+ENV = os.environ | {"PYTHONPATH": str(ROOT)}
+
+
+@pytest.fixture(scope="module")
+def smolvla(tmp_path_factory) -> tuple[Path, Path]:
+    """(checkpoint, backbone folder): SmolVLA on the tiny SmolVLM, trained 2 steps on 2 four-camera demos."""
+    from pipelines.collect import CollectConfig, DatasetConfig
+    from pipelines.collect import run as collect
+    from roboview_lerobot.tiny_vla import smolvla_train_flags, write_smolvlm
+
+    root = tmp_path_factory.mktemp("vla")
+    backbone = write_smolvlm(root / "smolvlm")
+    collect(CollectConfig(DatasetConfig(repo_id="t/vla", root=str(root / "ds"), num_episodes=2, image_size=64,
+                                        cameras=list(ALL_CAMERAS)), num_workers=1))
+    cmd = [str(BIN / "lerobot-train"), "--dataset.repo_id=t/vla", f"--dataset.root={root / 'ds'}",
+           *smolvla_train_flags(backbone), "--policy.device=cpu", "--batch_size=2", "--steps=2", "--save_freq=2",
+           "--num_workers=0", "--wandb.enable=false", f"--output_dir={root / 'train'}", "--job_name=tiny_smolvla"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=ENV)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return root / "train" / "checkpoints" / "last" / "pretrained_model", backbone
+
+
+def _observation(instruction: str):
+    from roboview_data.sim.tasks import make_env
+    from roboview_data.variation.factors import baselines
+    from roboview_data.variation.instances import TaskInstance
+
+    instance = TaskInstance("color", ("color",), baselines() | {"instruction": instruction, "color": "blue"}, "base")
+    env = make_env(cameras=ALL_CAMERAS, image_size=64)
+    obs, _ = env.reset(seed=3, options={"instance": instance})
+    obs = {k: np.asarray(obs[k]) for k in obs}
+    env.close()
+    return obs
+
+
+def test_the_instruction_cameras_and_state_reach_smolvla(smolvla):
+    from transformers import AutoTokenizer
+
+    from policies.lerobot_policy import LeRobotPolicy
+
+    checkpoint, backbone = smolvla
+    policy = LeRobotPolicy(str(checkpoint), "cpu")
+    assert policy.name == "lerobot:smolvla" and policy.chunked
+    tokenizer = AutoTokenizer.from_pretrained(backbone)
+    said = "pick up the small object and place it in the yellow box"
+    obs = _observation(said)
+    batch = policy._batch([obs], [said])
+    # The instruction, word for word, is what the tokenizer gave the model (nothing unknown, nothing dropped).
+    mask = batch["observation.language.attention_mask"][0].bool()
+    ids = batch["observation.language.tokens"][0][mask].tolist()
+    assert tokenizer.convert_ids_to_tokens(ids) == said.split()
+    assert tokenizer.unk_token_id not in ids
+    other = policy._batch([obs], ["move the small object into the yellow box"])["observation.language.tokens"][0]
+    assert not np.array_equal(other.numpy(), batch["observation.language.tokens"][0].numpy())
+    # Every camera under the key the checkpoint expects; the 8-D state padded to SmolVLA's 32 with zeros.
+    assert sorted(k for k in batch if k.startswith("observation.images.")) == \
+        sorted(f"observation.images.{c}" for c in ALL_CAMERAS)
+    state = policy.policy.prepare_state(batch)
+    assert state.shape == (1, policy.policy.config.max_state_dim) == (1, 32)
+    assert np.array_equal(state[0, :8].numpy(), batch["observation.state"][0].numpy())
+    assert not state[0, 8:].any() and state[0, :8].abs().sum() > 0
+    # A chunk of n_action_steps 8-D actions, unnormalized into the env's action space.
+    chunk = policy.predict_chunks({0: obs})[0]
+    assert len(chunk) == policy.n_action_steps == 10 and all(a.shape == (8,) for a in chunk)
+    assert all(np.isfinite(a).all() for a in chunk)
+
+
+def _evaluate(bench: Path, out: Path, checkpoint: Path, **policy_fields):
+    config = policy_config("lerobot", path=str(checkpoint), device="cpu", **policy_fields)
+    return evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
+                                   EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6), str(out)))
+
+
+def test_a_smolvla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(smolvla, tiny_benchmark, tmp_path):
+    from roboview_lerobot.convert import convert
+
+    checkpoint, _ = smolvla
+    result = _evaluate(tiny_benchmark, tmp_path / "ours", checkpoint)
+    ours = pd.read_parquet(tmp_path / "ours" / "episodes.parquet")
+    assert result.episodes == 2 and (ours["policy"] == "lerobot:smolvla").all()
+    assert (ours["steps"] == 6).all() and not ours["success"].any()  # random weights: every episode runs out
+    args = [str(BIN / "lerobot-eval"), "--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
+            f"--env.benchmark_path={tiny_benchmark}", "--env.task=color", "--env.limit=2",
+            f"--env.cameras={','.join(ALL_CAMERAS)}", "--env.image_size=64", "--env.max_steps=6",
+            f"--policy.path={checkpoint}", "--policy.device=cpu", "--eval.n_episodes=2", "--eval.batch_size=2",
+            f"--output_dir={tmp_path / 'le'}"]
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=ENV)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
+    assert info["per_group"]["color"]["n_episodes"] == 2 and info["per_group"]["color"]["pc_success"] == 0.0
+    assert len(info["per_group"]["color"]["video_paths"]) == 2  # lerobot-eval's own episode videos
+    converted = pd.read_parquet(convert(tmp_path / "le" / "eval_info.json", str(tiny_benchmark), tmp_path / "conv",
+                                        limit=2, max_steps=6, image_size=64))
+    assert converted["instance_id"].tolist() == ours["instance_id"].tolist()
+
+
+def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_benchmark, tmp_path):
+    from transformers import AutoTokenizer
+
+    from policies.base import Episode, make_policy
+    from policies.vlm.standin import MODEL_NAME, ClassicCVModel
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.sim.tasks import make_env
+    from tests.vlm_servers import ScriptedServer
+
+    checkpoint, backbone = smolvla
+    server = ScriptedServer(ClassicCVModel())
+    try:
+        _evaluate(tiny_benchmark, tmp_path / "sgl", checkpoint, sgl=True, sgl_base_url=server.url,
+                  sgl_model=MODEL_NAME)
+        rows = pd.read_parquet(tmp_path / "sgl" / "episodes.parquet")
+        assert (rows["policy"] == "lerobot:smolvla+sgl").all() and rows["sgl_ambiguous"].all()
+        # "the small object" names the object by its colour in the instruction the checkpoint was reset with.
+        for color, said, refined in zip(rows["color"], rows["instruction"], rows["sgl_instruction"]):
+            assert refined.split()[:4] == said.split()[:3] + [color], refined
+        # ... and those words, not the original ones, are what the checkpoint's tokenizer turns into tokens.
+        item = load_benchmark(tiny_benchmark, ["color"]).splits["color"][0]
+        config = policy_config("lerobot", path=str(checkpoint), device="cpu", sgl=True, sgl_base_url=server.url,
+                               sgl_model=MODEL_NAME)
+        env = make_env(cameras=ALL_CAMERAS, image_size=64)
+        obs, _ = env.reset(seed=0, options={"instance": item.instance})
+        policy = make_policy(config, env)
+        policy.reset(Episode.of(env, 0))
+        policy.select_action(obs)
+        env.close()
+    finally:
+        server.close()
+    refined = policy.episode_record()["sgl_instruction"]
+    assert policy.inner.tasks[0] == refined != item.instance.get("instruction")
+    tokens = policy.inner._batch([obs], policy.inner.tasks)["observation.language.tokens"][0].tolist()
+    tokenizer = AutoTokenizer.from_pretrained(backbone)
+    assert tokenizer.convert_tokens_to_ids(refined.split()[3]) in tokens  # the colour word the SGL put in
+    assert tokenizer.unk_token_id not in tokens
