@@ -21,7 +21,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
-from policies.vlm.client import Endpoint, VLMClient
+from policies.vlm.client import Endpoint, VLMClient, default_cache_dir
 from roboview_data.benchmark import format as bio
 from roboview_data.benchmark.card import fairness_stats, write_card
 from roboview_data.benchmark.contact_sheet import context_text, write_contact_sheet
@@ -52,8 +52,8 @@ class ScreenConfig:
     model: str = ""
     # Name of the environment variable holding the API key.
     api_key_env: str = "OPENAI_API_KEY"
-    # Answer cache ("" turns it off) and requests in flight at once across the build's workers.
-    cache_dir: str = ".cache/roboview/vlm"
+    # Answer cache ("" turns it off; default $XDG_CACHE_HOME/roboview/vlm) and requests in flight at once.
+    cache_dir: str = field(default_factory=default_cache_dir)
     max_in_flight: int = 4
 
     @property

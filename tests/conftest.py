@@ -1,10 +1,13 @@
 import os
+import tempfile
 
 # Headless rendering for every test process (and the workers they spawn).
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("SVT_LOG", "1")
+# Caches a test run writes (the VLM answer cache) go to a folder of its own, never the user's ~/.cache.
+os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="roboview-test-cache-")
 
 import pytest  # noqa: E402
 

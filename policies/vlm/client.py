@@ -29,7 +29,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +46,11 @@ class VLMAnswerError(RuntimeError):
     """The model's answer was unusable (not JSON, wrong shape, a refusal) even after one repair request."""
 
 
+def default_cache_dir() -> str:
+    """Where VLM answers are cached unless told otherwise: the XDG cache folder, as Hugging Face's caches."""
+    return str(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "roboview" / "vlm")
+
+
 @dataclass(frozen=True)
 class Endpoint:
     """Where and how to ask: an OpenAI-compatible server and a model name on it."""
@@ -60,8 +65,8 @@ class Endpoint:
     timeout_s: float = 60.0
     max_retries: int = 4
     max_in_flight: int = 4
-    # Answer cache folder ("" turns caching off).
-    cache_dir: str = ".cache/roboview/vlm"
+    # Answer cache folder ("" turns caching off); default $XDG_CACHE_HOME/roboview/vlm (~/.cache/roboview/vlm).
+    cache_dir: str = field(default_factory=default_cache_dir)
 
     def validate(self) -> None:
         if not re.match(r"^https?://", self.base_url):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -14,7 +14,7 @@ from policies.perception import (
     back_project,
     footprint_yaw,
 )
-from policies.vlm.client import Endpoint
+from policies.vlm.client import Endpoint, default_cache_dir
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
 
 # Around the point the VLM gave: the object's points lie within this xy radius (m) and above this
@@ -40,8 +40,8 @@ class VLMConfig(PolicyConfig):
     max_retries: int = 4
     # Requests in flight to this endpoint at once, across every worker process on this machine.
     max_in_flight: int = 4
-    # Answer cache: a rerun asks nothing twice ("" turns it off).
-    cache_dir: str = ".cache/roboview/vlm"
+    # Answer cache: a rerun asks nothing twice ("" turns it off); default $XDG_CACHE_HOME/roboview/vlm.
+    cache_dir: str = field(default_factory=default_cache_dir)
     # Scene camera the agent looks through (RGB-D; the VLM sees the RGB image).
     camera: str = "front"
 
