@@ -3,7 +3,8 @@
     python -m pipelines.publish --path=outputs/benchmark --repo_id=ORG/NAME [--dry_run=true]
 
 Creates the dataset repo if missing, uploads the folder, and tags the upload with the benchmark
-version from `benchmark.json`. `--dry_run=true` lists exactly what would be uploaded and touches
+version from `benchmark.json`. `--env_repo_id=ORG/NAME` also publishes RoboView as a LeRobot EnvHub env
+(`roboview_lerobot/hub/env.py` and a README pointing it at the benchmark repo). `--dry_run=true` lists exactly what would be uploaded and touches
 nothing. Without a token, in offline mode or without network it fails before changing anything.
 """
 
@@ -43,9 +44,13 @@ class PublishConfig:
     lerobot_root: str | None = None
     # ... to this hub repo (ORG/NAME), through lerobot's own push_to_hub.
     lerobot_repo_id: str | None = None
+    # Optionally also publish RoboView as a LeRobot EnvHub env (env.py with make_env, and a README that
+    # points it at the benchmark repo) to this hub repo (ORG/NAME).
+    env_repo_id: str | None = None
 
     def __post_init__(self) -> None:
-        for flag, value in (("repo_id", self.repo_id), ("lerobot_repo_id", self.lerobot_repo_id)):
+        for flag, value in (("repo_id", self.repo_id), ("lerobot_repo_id", self.lerobot_repo_id),
+                            ("env_repo_id", self.env_repo_id)):
             if value is not None and (value.count("/") != 1 or not all(value.split("/"))):
                 raise ValueError(f"--{flag}={value!r} must look like ORG/NAME")
         manifest = Path(self.path) / MANIFEST
@@ -66,10 +71,12 @@ class Plan:
     version: str
     files: list[tuple[str, int]]  # (path in repo, bytes)
     lerobot_files: list[tuple[str, int]]
+    env_files: dict[str, str]  # EnvHub repo: path in repo -> text
 
     @property
     def total_bytes(self) -> int:
-        return sum(size for _, size in self.files + self.lerobot_files)
+        env = sum(len(text.encode()) for text in self.env_files.values())
+        return sum(size for _, size in self.files + self.lerobot_files) + env
 
 
 def _files(root: Path, ignore: list[str]) -> list[tuple[str, int]]:
@@ -86,7 +93,25 @@ def plan(cfg: PublishConfig) -> Plan:
     version = json.loads((root / MANIFEST).read_text())["benchmark_version"]
     ignore = [] if cfg.include_contact_sheet else [CONTACT_SHEET]
     lerobot = _files(Path(cfg.lerobot_root), ["images/*"]) if cfg.lerobot_root else []
-    return Plan(cfg.repo_id, version, _files(root, ignore), lerobot)
+    env = env_hub_files(cfg.env_repo_id, cfg.repo_id, version) if cfg.env_repo_id else {}
+    return Plan(cfg.repo_id, version, _files(root, ignore), lerobot, env)
+
+
+def env_hub_files(env_repo_id: str, benchmark_repo_id: str, version: str) -> dict[str, str]:
+    """The EnvHub repo: RoboView's env.py (make_env) and a README that points it at the benchmark repo."""
+    import roboview_lerobot
+
+    env_py = (Path(roboview_lerobot.__file__).parent / "hub" / "env.py").read_text()
+    readme = (f"---\ntags: [lerobot, envhub, roboview, robot-learning, visual-bias]\n---\n"
+              f"# RoboView-Bias ({version}) as a LeRobot EnvHub environment\n\n"
+              f"Frozen, factor-isolated splits of the RoboView-Bias benchmark (`{benchmark_repo_id}`).\n"
+              "Needs the `roboview` package installed beside lerobot.\n\n"
+              "```python\nimport os\nfrom lerobot.envs.factory import make_env\n\n"
+              f"os.environ[\"ROBOVIEW_BENCHMARK\"] = \"{benchmark_repo_id}\"\n"
+              "os.environ[\"ROBOVIEW_TASK\"] = \"color,camera_pose\"\n"
+              f"envs = make_env(\"{env_repo_id}\", n_envs=4, trust_remote_code=True)\n```\n\n"
+              "Settings: see the docstring of `env.py`.\n")
+    return {"env.py": env_py, "README.md": readme}
 
 
 def _hub_api():
@@ -117,6 +142,13 @@ def publish(cfg: PublishConfig, the_plan: Plan) -> str:
     commit = api.upload_folder(folder_path=cfg.path, repo_id=cfg.repo_id, repo_type="dataset",
                                ignore_patterns=ignore, commit_message=f"RoboView benchmark {the_plan.version}")
     api.create_tag(cfg.repo_id, tag=the_plan.version, repo_type="dataset", exist_ok=True)
+    if cfg.env_repo_id:
+        from huggingface_hub import CommitOperationAdd
+
+        api.create_repo(cfg.env_repo_id, private=cfg.private, exist_ok=True)
+        api.create_commit(cfg.env_repo_id, [CommitOperationAdd(path, text.encode())
+                                            for path, text in the_plan.env_files.items()],
+                          commit_message=f"RoboView EnvHub env for {cfg.repo_id} {the_plan.version}")
     if cfg.lerobot_root:
         from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -134,7 +166,10 @@ def run(cfg: PublishConfig) -> Plan:
             print(f"{size:>12,}  {cfg.repo_id}/{rel}")
         for rel, size in the_plan.lerobot_files:
             print(f"{size:>12,}  {cfg.lerobot_repo_id}/{rel}")
-        print(f"[dry run] {len(the_plan.files) + len(the_plan.lerobot_files)} files, "
+        for rel, text in the_plan.env_files.items():
+            print(f"{len(text.encode()):>12,}  {cfg.env_repo_id}/{rel}")
+        count = len(the_plan.files) + len(the_plan.lerobot_files) + len(the_plan.env_files)
+        print(f"[dry run] {count} files, "
               f"{the_plan.total_bytes:,} bytes; tag {the_plan.version}; nothing uploaded")
         return the_plan
     publish(cfg, the_plan)
