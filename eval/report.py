@@ -29,6 +29,7 @@ import pandas as pd
 
 from eval import provenance, videos
 from eval.agents import agents_markdown, describe_agents
+from eval.context import context_breakdown
 from eval.metrics import (
     METRIC_COLUMNS,
     EpisodesError,
@@ -286,6 +287,24 @@ def _comparisons(metrics: dict[str, Any]) -> list[str]:
                      "p (paired permutation)"], rows), ""]
 
 
+def _context_factors(layouts: dict[str, dict]) -> list[str]:
+    """SR per instruction (and shape, initial position) over that factor's own context subspace."""
+    found = {name: layout.get("context_factors") or {} for name, layout in layouts.items()}
+    if not any(found.values()):
+        return []
+    lines = ["## Success by task context (SR ×100 per value over the factor's own contexts, every visual "
+             "condition; p: GLM likelihood-ratio test of factor + condition against condition)", ""]
+    rows = []
+    for name, factors in found.items():
+        for factor, m in factors.items():
+            values = "; ".join(f"{value}: {pct(v['sr'])} (n={v['n_episodes']})" for value, v in m["per_value"].items())
+            rows.append([name, factor, values, p_fmt(m["p_value"]), m["p_value_method"] or "—"])
+    lines += _table(["policy", "context factor", "SR by value", "p", "p method"], rows)
+    lines += ["", "A policy that ignores language (ACT) should show no instruction effect; a language-conditioned one "
+              "(SmolVLA, π0) that does is sensitive to the wording of one goal.", ""]
+    return lines
+
+
 def _diagnostics(layouts: dict[str, dict]) -> list[str]:
     rows = []
     for name, layout in layouts.items():
@@ -377,7 +396,7 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
     lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _diagnostics(layouts) + _extremes(layouts) + _videos(metrics, layouts)
+              + _context_factors(layouts) + _diagnostics(layouts) + _extremes(layouts) + _videos(metrics, layouts)
               + agents_markdown(metrics.get("agents", {})) + _provenance(metrics.get("sources", [])))
     lines += ["## Plots", ""]
     for name, reason in plots.items():
@@ -393,6 +412,8 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     metrics = compute_all_metrics(episodes, cfg)
     if sources is not None:
         metrics["sources"] = sources
+    for name, layout in policy_layouts(metrics).items():  # success by instruction, shape, initial position
+        layout["context_factors"] = context_breakdown(episodes[episodes["policy"] == name], cfg)
     agents = describe_agents(episodes)
     if agents:
         metrics["agents"] = agents
