@@ -116,7 +116,7 @@ def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: 
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     cmd = [str(Path(sys.executable).parent / "lerobot-eval"), "--env.discover_packages_path=roboview_lerobot",
-           "--env.type=roboview", f"--env.benchmark_path={bench}", f"--env.split={split}", f"--env.limit={episodes}",
+           "--env.type=roboview", f"--env.benchmark_path={bench}", f"--env.task={split}", f"--env.limit={episodes}",
            f"--env.cameras={','.join(checkpoint_cameras(path))}", f"--env.image_size={checkpoint_image_size(path)}",
            f"--policy.path={path}", f"--policy.device={resolve_device('auto')}", f"--eval.n_episodes={episodes}",
            f"--eval.batch_size={batch}", f"--output_dir={out}"]

@@ -18,6 +18,8 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
+from policies.checkpoints import checkpoint_dir
+
 FILE = "provenance.json"
 PACKAGES = ("roboview", "lerobot", "mujoco", "torch", "gymnasium", "datasets", "numpy", "openai")
 SEED_RULE = ("episode_seed = first 8 bytes of SHA-256(f'{context_id}:{repeat}') mod 2**31 (common random numbers: "
@@ -85,9 +87,7 @@ def checkpoint_hash(path: str | Path) -> str:
 def checkpoint_info(path: str | None) -> dict | None:
     if not path:
         return None
-    root = Path(path)
-    if (root / "pretrained_model" / "config.json").is_file():
-        root = root / "pretrained_model"
+    root = checkpoint_dir(path)
     config = root / "config.json"
     return {"path": str(root.resolve()), "sha256": checkpoint_hash(root),
             "config": json.loads(config.read_text()) if config.is_file() else None}

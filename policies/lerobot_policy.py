@@ -19,28 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
+from policies.checkpoints import CheckpointError, checkpoint_dir
 from policies.devices import resolve_device
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
-
-
-class CheckpointError(ValueError):
-    """The checkpoint is missing, unreadable, or does not fit the env's features."""
-
-
-def _checkpoint_dir(path: str | None) -> Path:
-    if not path:
-        raise CheckpointError("a LeRobot policy needs a checkpoint path (a `pretrained_model` folder "
-                              "written by lerobot-train, e.g. outputs/train/checkpoints/last/pretrained_model)")
-    root = Path(path)
-    if (root / "pretrained_model" / "config.json").is_file():
-        root = root / "pretrained_model"
-    if not (root / "config.json").is_file():
-        raise CheckpointError(f"{path} holds no LeRobot checkpoint (config.json missing)")
-    return root
 
 
 @functools.lru_cache(maxsize=8)
@@ -58,7 +43,7 @@ def _read_config(root: Path):
 
 def load_config(path: str | None):
     """(checkpoint folder, a fresh copy of its config); config.json is parsed and checked once per process."""
-    root = _checkpoint_dir(path)
+    root = checkpoint_dir(path)
     return root, copy.deepcopy(_read_config(root))
 
 

@@ -152,3 +152,28 @@ def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_
     tokenizer = AutoTokenizer.from_pretrained(backbone)
     assert tokenizer.convert_tokens_to_ids(refined.split()[3]) in tokens  # the colour word the SGL put in
     assert tokenizer.unk_token_id not in tokens
+
+
+def test_a_checkpoint_is_found_by_hub_id_in_the_hub_cache(smolvla, tiny_benchmark, tmp_path):
+    import shutil
+
+    checkpoint, _ = smolvla
+    cache = tmp_path / "hub"
+    snapshot = cache / "models--org--tiny-smolvla" / "snapshots" / ("ab" * 20)
+    shutil.copytree(checkpoint, snapshot)
+    (cache / "models--org--tiny-smolvla" / "refs").mkdir()
+    (cache / "models--org--tiny-smolvla" / "refs" / "main").write_text("ab" * 20)
+    env = ENV | {"HF_HUB_CACHE": str(cache), "HF_HUB_OFFLINE": "1"}
+    common = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={tiny_benchmark}", "--policy.type=lerobot",
+              "--policy.device=cpu", "--benchmark.splits=color", "--eval.limit=1", "--eval.n_repeats=1",
+              "--eval.max_steps=3", "--eval.num_workers=1"]
+    proc = subprocess.run([*common, "--policy.path=org/tiny-smolvla", f"--output_dir={tmp_path / 'ev'}"],
+                          capture_output=True, text=True, timeout=600, env=env, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert pd.read_parquet(tmp_path / "ev" / "episodes.parquet")["policy"].tolist() == ["lerobot:smolvla"]
+    provenance = json.loads((tmp_path / "ev" / "provenance.json").read_text())[0]
+    assert provenance["checkpoint"]["path"] == str(snapshot.resolve())
+    proc = subprocess.run([*common, "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}"],
+                          capture_output=True, text=True, timeout=600, env=env, cwd=ROOT)
+    assert proc.returncode == 2 and "'org/not-downloaded' is no local folder" in proc.stderr
+    assert "not in the hub cache" in proc.stderr and not (tmp_path / "no").exists()
