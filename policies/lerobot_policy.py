@@ -90,7 +90,7 @@ def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
 # adapter keeps the queue itself and builds (renders) the observation only when a chunk is predicted, which
 # is what lerobot's own `select_action` computes. Other types (diffusion's observation history, temporal
 # ensembling) read every step's observation.
-CHUNKED_TYPES = ("act", "pi0", "pi05", "smolvla")
+CHUNKED_TYPES = ("act", "pi0", "pi05", "smolvla", "xvla")
 
 
 def is_chunked(config) -> bool:

@@ -84,6 +84,49 @@ def write_smolvlm(output_dir: str | Path, extra_words: tuple[str, ...] = ()) -> 
     return out
 
 
+BART_SPECIAL = ("<s>", "<pad>", "</s>", "<unk>", "<mask>", "<image>")
+
+
+def write_bart_tokenizer(output_dir: str | Path) -> Path:
+    """A BART-style word-level tokenizer (XVLA's text encoder is BART) over the same vocabulary."""
+    from tokenizers import Tokenizer, models, pre_tokenizers, processors
+    from transformers import PreTrainedTokenizerFast
+
+    out = Path(output_dir)
+    vocab = {token: i for i, token in enumerate([*BART_SPECIAL, *instruction_words()])}
+    backend = Tokenizer(models.WordLevel(vocab, unk_token="<unk>"))
+    backend.pre_tokenizer = pre_tokenizers.Whitespace()
+    backend.post_processor = processors.TemplateProcessing(single="<s> $A </s>",
+                                                           special_tokens=[("<s>", 0), ("</s>", 2)])
+    PreTrainedTokenizerFast(tokenizer_object=backend, bos_token="<s>", eos_token="</s>", unk_token="<unk>",
+                            pad_token="<pad>", mask_token="<mask>").save_pretrained(out)
+    return out
+
+
+def xvla_train_flags(tokenizer: str | Path, chunk_size: int = 10) -> list[str]:
+    """lerobot-train's --policy.* flags for a tiny XVLA (a 4-stage DaViT of width ≤ 64, a 1-layer BART, a
+    2-layer policy transformer; random weights) on RoboView's 8-D joint actions."""
+    import json
+
+    vocab_size = len(BART_SPECIAL) + len(instruction_words())
+    width = 64  # BART's d_model must equal the vision projection
+    florence = {"vision_config": {"depths": [1, 1, 1, 1], "embed_dim": [16, 32, 48, 64], "num_heads": [1, 2, 2, 4],
+                                  "num_groups": [1, 2, 2, 4], "window_size": 4, "projection_dim": width,
+                                  "drop_path_rate": 0.0, "max_position_embeddings": 16, "max_temporal_embeddings": 4},
+                "text_config": {"model_type": "bart", "vocab_size": vocab_size, "d_model": width, "encoder_layers": 1,
+                                "decoder_layers": 1, "encoder_attention_heads": 2, "decoder_attention_heads": 2,
+                                "encoder_ffn_dim": 128, "decoder_ffn_dim": 128, "max_position_embeddings": 128,
+                                "pad_token_id": 1, "bos_token_id": 0, "eos_token_id": 2},
+                "pad_token_id": 1, "bos_token_id": 0, "eos_token_id": 2,
+                "image_token_id": BART_SPECIAL.index("<image>")}
+    return ["--policy.type=xvla", f"--policy.florence_config={json.dumps(florence)}",
+            f"--policy.tokenizer_name={tokenizer}", "--policy.tokenizer_max_length=24", f"--policy.hidden_size={width}",
+            "--policy.depth=2", "--policy.num_heads=2", "--policy.num_domains=2", "--policy.len_soft_prompts=4",
+            "--policy.dim_time=16", "--policy.max_len_seq=128", "--policy.action_mode=auto",
+            "--policy.max_action_dim=8", "--policy.max_state_dim=8", f"--policy.chunk_size={chunk_size}",
+            f"--policy.n_action_steps={chunk_size}", "--policy.num_denoising_steps=2", "--policy.push_to_hub=false"]
+
+
 def smolvla_train_flags(backbone: str | Path, chunk_size: int = 10) -> list[str]:
     """lerobot-train's --policy.* flags for SmolVLA on the tiny backbone (random weights, no download)."""
     return ["--policy.type=smolvla", f"--policy.vlm_model_name={backbone}", "--policy.load_vlm_weights=false",
