@@ -33,6 +33,8 @@ $(STAMP): pyproject.toml requirements.lock
 	@if [ ! -x $(PY) ]; then \
 	  if [ -z "$(PYTHON)" ]; then echo "RoboView needs Python 3.12 or 3.13 (LeRobot 0.6 requires >= 3.12) and found none:" \
 	    "install one (pyenv install 3.12, or your system's python3.12 package) or pass PYTHON=/path/to/python3.12" >&2; exit 1; fi; \
+	  if ! $(PYTHON) -c '$(PY_OK)' 2>/dev/null; then echo "PYTHON=$(PYTHON) is not Python 3.12 or 3.13, which" \
+	    "RoboView needs (LeRobot 0.6 requires >= 3.12); pass PYTHON=/path/to/python3.12" >&2; exit 1; fi; \
 	  echo "[install] $(VENV) with $(PYTHON)"; $(PYTHON) -m venv $(VENV); fi
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c requirements.lock -e ".[dev]"
