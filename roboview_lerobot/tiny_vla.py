@@ -1,9 +1,10 @@
 """A tiny, randomly initialised VLA backbone written offline, to check a VLA's plumbing on RoboView data.
 
-    python -m roboview_lerobot.tiny_vla --output_dir=outputs/tiny_smolvlm
+    python -m roboview_lerobot.tiny_vla --output_dir=outputs/tiny_smolvlm [--type=smolvla|xvla]
 
 writes a SmolVLM config and processor (no weights: `--policy.load_vlm_weights=false` builds the model
-from the config with random weights) and prints the `lerobot-train` flags that train SmolVLA on it:
+from the config with random weights), or XVLA's tokenizer (its tiny Florence-2 config travels in the flags),
+and prints the `lerobot-train` flags that train the policy on it:
 
     lerobot-train --dataset.repo_id=ID --dataset.root=DIR --policy.type=smolvla \
         --policy.vlm_model_name=outputs/tiny_smolvlm --policy.load_vlm_weights=false \
@@ -21,8 +22,9 @@ Which LeRobot VLA types can be built this way, and why the others cannot: docs/v
 
 from __future__ import annotations
 
-import argparse
 import re
+import shlex
+from dataclasses import dataclass
 from pathlib import Path
 
 # SmolVLM's special tokens, in the roles its processor and SmolVLA's model look them up by.
@@ -81,7 +83,7 @@ def write_smolvlm(output_dir: str | Path, extra_words: tuple[str, ...] = ()) -> 
                            image_size=IMAGE_SIZE, patch_size=16),
         scale_factor=2, image_token_id=vocab[IMAGE_TOKENS["image_token"]])
     config.save_pretrained(out)
-    return out
+    return out.resolve()  # a checkpoint records this path: it must not depend on the working directory
 
 
 BART_SPECIAL = ("<s>", "<pad>", "</s>", "<unk>", "<mask>", "<image>")
@@ -92,7 +94,7 @@ def write_bart_tokenizer(output_dir: str | Path) -> Path:
     from tokenizers import Tokenizer, models, pre_tokenizers, processors
     from transformers import PreTrainedTokenizerFast
 
-    out = Path(output_dir)
+    out = Path(output_dir).resolve()
     vocab = {token: i for i, token in enumerate([*BART_SPECIAL, *instruction_words()])}
     backend = Tokenizer(models.WordLevel(vocab, unk_token="<unk>"))
     backend.pre_tokenizer = pre_tokenizers.Whitespace()
@@ -134,14 +136,37 @@ def smolvla_train_flags(backbone: str | Path, chunk_size: int = 10) -> list[str]
             f"--policy.chunk_size={chunk_size}", f"--policy.n_action_steps={chunk_size}", "--policy.push_to_hub=false"]
 
 
-def main(argv: list[str] | None = None) -> Path:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--output_dir", required=True, help="folder to write the SmolVLM config and processor into")
-    args = parser.parse_args(argv)
-    out = write_smolvlm(args.output_dir)
-    print(f"[tiny_vla] SmolVLM config + processor in {out}; train SmolVLA on it with lerobot-train "
-          + " ".join(smolvla_train_flags(out)))
-    return out
+@dataclass
+class TinyVLAConfig:
+    # Folder to write the backbone files into (SmolVLM config + processor, or XVLA's tokenizer).
+    output_dir: str = "outputs/tiny_vla"
+    # smolvla or xvla.
+    type: str = "smolvla"
+
+    def __post_init__(self) -> None:
+        if self.type not in TYPES:
+            raise ValueError(f"--type={self.type!r} unknown; allowed: {', '.join(TYPES)}")
+
+
+TYPES = ("smolvla", "xvla")
+
+
+def run(cfg: TinyVLAConfig) -> list[str]:
+    """Write the backbone files; returns lerobot-train's --policy.* flags for them."""
+    if cfg.type == "smolvla":
+        return smolvla_train_flags(write_smolvlm(cfg.output_dir))
+    return xvla_train_flags(write_bart_tokenizer(cfg.output_dir))
+
+
+def _summary(cfg: TinyVLAConfig, flags: list[str]) -> None:
+    print(f"[tiny_vla] {cfg.type} backbone files in {Path(cfg.output_dir).resolve()}; train it with lerobot-train "
+          "--dataset.repo_id=ID --dataset.root=DIR " + " ".join(shlex.quote(flag) for flag in flags))
+
+
+def main(args: list[str] | None = None) -> list[str]:
+    from pipelines._cli import cli_main
+
+    return cli_main(TinyVLAConfig, run, _summary, (ValueError,), args)
 
 
 if __name__ == "__main__":

@@ -12,9 +12,13 @@ ENTRY_POINTS = ("collect", "build_benchmark", "publish", "evaluate", "report", "
                 "probe_grounding")
 
 
-@pytest.mark.parametrize("name", ENTRY_POINTS)
-def test_help_documents_the_flags(name):
-    proc = subprocess.run([sys.executable, "-m", f"pipelines.{name}", "--help"], capture_output=True, text=True,
+# The LeRobot side's own commands.
+LEROBOT_SIDE = ("roboview_lerobot.convert", "roboview_lerobot.tiny_vla")
+
+
+@pytest.mark.parametrize("module", [f"pipelines.{name}" for name in ENTRY_POINTS] + list(LEROBOT_SIDE))
+def test_help_documents_the_flags(module):
+    proc = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True,
                           timeout=120, cwd=ROOT, env=os.environ | {"PYTHONPATH": str(ROOT)})
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert "usage:" in proc.stdout and "--" in proc.stdout and "Traceback" not in proc.stderr
