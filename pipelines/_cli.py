@@ -71,8 +71,25 @@ def setup_environment() -> None:
         import av
 
         av.logging.set_level(av.logging.ERROR)
+        _keep_libav_quiet(av)
     except ImportError:
         pass
+
+
+def _keep_libav_quiet(av) -> None:
+    """lerobot's video code calls `av.logging.restore_default_callback()` after every encode, probe and
+    concatenation, which puts libav back at its verbose default: each episode then printed lines such as
+    "[mp4 @ 0x…] Starting second pass: moving the moov atom …". Restoring keeps our error-only level."""
+    restore = av.logging.restore_default_callback
+    if getattr(restore, "keeps_level", False):
+        return
+
+    def restore_keeping_level() -> None:
+        restore()
+        av.logging.set_level(av.logging.ERROR)
+
+    restore_keeping_level.keeps_level = True
+    av.logging.restore_default_callback = restore_keeping_level
 
 
 def cli_main(config_class: type[T], run: Callable[[T], R], summary: Callable[[T, R], None] | None = None,

@@ -188,12 +188,3 @@ def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRo
         frame["task"] = task
         dataset.add_frame(frame)
     dataset.save_episode()
-    quiet_video_logs()
-
-
-def quiet_video_logs() -> None:
-    """libav errors only. lerobot's encoder thread restores libav's default log callback after every episode,
-    which prints each video's informational lines ("Starting second pass: moving the moov atom ...")."""
-    import av
-
-    av.logging.set_level(av.logging.ERROR)
