@@ -1,9 +1,10 @@
 # RoboView — `make demo` and `make test` work on a fresh machine: they install what is missing.
 SHELL := /bin/bash
 # Python 3.12 or 3.13 (LeRobot 0.6 needs >= 3.12): $(PYTHON) if given, else the first that runs of
-# python3.12, python3.13, pyenv's 3.12.x / 3.13.x, python3.
+# python3.12, python3.13, pyenv's 3.12.x / 3.13.x (`pyenv root`, else $PYENV_ROOT or ~/.pyenv), python3.
 PY_OK := import sys; sys.exit(not ((3, 12) <= sys.version_info[:2] < (3, 14)))
-PYTHON ?= $(shell for p in python3.12 python3.13 $$(pyenv root 2>/dev/null)/versions/3.1[23].*/bin/python3 python3; do \
+PYTHON ?= $(shell for p in python3.12 python3.13 $$(pyenv root 2>/dev/null)/versions/3.1[23].*/bin/python3 \
+  $${PYENV_ROOT:-$$HOME/.pyenv}/versions/3.1[23].*/bin/python3 python3; do \
   PYENV_VERSION= "$$p" -c '$(PY_OK)' 2>/dev/null && { echo "$$p"; break; }; done)
 VENV := .venv
 PY := $(VENV)/bin/python
