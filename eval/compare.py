@@ -1,4 +1,4 @@
-"""Two policies on the same benchmark, compared within instances (DESIGN.md, "comparisons").
+"""Two policies on the same benchmark, compared within instances (docs/formats.md, "Metrics": comparisons).
 
 Common random numbers make this a matched design: repeat r of an instance runs with the same seed
 (same jitter, same heading) whatever the policy, so policy A's and policy B's episodes of one

@@ -1,8 +1,8 @@
-"""Bias metrics of paper §5.4 made exact (DESIGN.md, "Metrics"), and the statistics that say
-whether they are more than noise (DESIGN.md, "Statistics beyond the paper").
+"""Bias metrics of paper §5.4 made exact (docs/formats.md, "Metrics"), and the statistics that say
+whether they are more than noise (docs/formats.md, "Metrics").
 
-Everything here is a pure function of an episodes table (one row per episode, DESIGN.md "Episode
-record"). Notation: a *cell* is a value v (or a value pair (a, b) in a factorial split) in a
+Everything here is a pure function of an episodes table (one row per episode, docs/formats.md "Episode
+records"). Notation: a *cell* is a value v (or a value pair (a, b) in a factorial split) in a
 context c; SR(v, c) is the mean success over every episode of the instances in that cell.
 
 The paper's numbers, verbatim:
@@ -346,7 +346,7 @@ def check_episodes(episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLU
     """
     missing = [c for c in required if c not in episodes.columns]
     if missing:
-        raise EpisodesError(f"{source} lacks column(s) {', '.join(missing)} (DESIGN.md, 'Episode record')")
+        raise EpisodesError(f"{source} lacks column(s) {', '.join(missing)} (docs/formats.md, 'Episode records')")
     nulls = [c for c in required if episodes[c].isna().any()]
     if nulls:
         raise EpisodesError(f"{source} has null values in column(s) {', '.join(nulls)}")
@@ -371,7 +371,7 @@ def check_episodes(episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLU
 
 
 def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
-    """metrics.json layout (DESIGN.md) for the episodes of one policy."""
+    """metrics.json layout (docs/formats.md, "Metrics") for the episodes of one policy."""
     check_episodes(episodes)
     policies = episodes["policy"].unique()
     if len(policies) != 1:

@@ -1,6 +1,6 @@
 """Episode tables → metrics.json, report.md and plots (the `pipelines.report` verb's library).
 
-Input is one or several `episodes.parquet` files (DESIGN.md, "Episode record"): one per policy, or
+Input is one or several `episodes.parquet` files (docs/formats.md, "Episode records"): one per policy, or
 one holding several policies. They are validated before any work — missing files, missing or null
 columns, repeated episodes, and files evaluated on different benchmark versions (parquet
 key-value metadata `roboview_benchmark_version`; a file without the key is not compared), and files

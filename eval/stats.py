@@ -1,5 +1,5 @@
 """Statistical tests behind the bias metrics: does success depend on a factor, which values, and
-do two factors interact (DESIGN.md, "Statistics beyond the paper"). Libraries do the statistics:
+do two factors interact (docs/formats.md, "Metrics"). Libraries do the statistics:
 binomial GLMs from statsmodels, Cochran–Mantel–Haenszel from statsmodels, Benjamini–Hochberg and
 the χ² / non-central χ² laws from scipy. This module only arranges tables for them.
 

@@ -3,7 +3,7 @@
     python -m pipelines.report --results=outputs/eval/episodes.parquet --output_dir=outputs/report
 
 `--results` takes one parquet file or several, comma-separated (say one per policy); a file may
-also hold several policies. Metrics follow DESIGN.md "Metrics" (eval.metrics); for several
+also hold several policies. Metrics follow docs/formats.md, "Metrics" (eval.metrics); for several
 policies metrics.json holds {"epsilon", "resampling", "sources", "policies": {name: metrics}}.
 Inputs are checked before any work: missing files or columns, repeated episodes and mixed
 benchmark versions stop the run with a message naming the offender.

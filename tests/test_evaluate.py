@@ -50,7 +50,7 @@ def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
     for split, sr in df.groupby("split")["success"].mean().items():
         assert sr >= 0.95, f"expert SR {sr:.0%} on {split}"
     assert (df["policy"] == "expert").all() and (df["failure_reason"] == "").all()
-    # Episode seeds follow DESIGN.md's derivation.
+    # Episode seeds follow the documented derivation (docs/formats.md, "Identity and seeds").
     from roboview_data.variation.instances import episode_seed
     assert all(episode_seed(c, r) == s for c, r, s in zip(df["context_id"], df["repeat"], df["episode_seed"]))
 
@@ -311,7 +311,7 @@ def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, error
     assert policy.calls == calls  # every retry is a real call
 
 
-# -- issue 12: lazy rendering, batched inference, videos, provenance, lerobot-eval ------------------------------
+# -- lazy rendering, batched inference, videos, provenance, lerobot-eval --------- ------------------------------
 
 
 def test_lazy_observations_are_the_eager_pixels_and_render_only_what_is_read(bench):

@@ -18,7 +18,7 @@ from roboview_data.variation.factors import (
 
 
 def test_factor_names_and_kinds():
-    # The paper's four visual factors, then the `extended` preset's four (DESIGN.md: names and counts fixed).
+    # The paper's four visual factors, then the `extended` preset's four (docs/formats.md, "Factors": names and counts fixed).
     assert visual_factors() == ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture",
                                 "distractors", "object_size")
     assert context_factors() == ("initial_position", "shape", "instruction")

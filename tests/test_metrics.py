@@ -1,4 +1,4 @@
-"""Metrics against small tables computed by hand (DESIGN.md "Metrics"), plus the add-ons' contracts."""
+"""Metrics against small tables computed by hand (docs/formats.md, "Metrics"), plus the add-ons' contracts."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Published benchmark versions stay valid across refactors and new factors (DESIGN.md "Stable ids").
+"""Published benchmark versions stay valid across refactors and new factors (docs/formats.md, "Identity and seeds").
 
 The `paper` preset's instance ids, context ids, seeds and suite hash are pinned, and so is the
 compiled scene each instance produces (camera poses, object color and placement), so a change in how

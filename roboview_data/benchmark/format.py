@@ -36,7 +36,7 @@ MANIFEST = "benchmark.json"
 # read still). 1: the `seed` column hashed instance_id (no longer read: other episode seeds).
 FORMAT_VERSION = 3
 READABLE_FORMATS = (2, 3)
-# Columns that never travel into episode rows (DESIGN.md: everything but fairness and preview does).
+# Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
 NOT_IN_EPISODES = ("fairness", "preview")
 
 _CAMERA = {"name": datasets.Value("string"), "pos": datasets.List(datasets.Value("float64")),

@@ -2,7 +2,7 @@
 
 A task instance fixes the value of every factor. Its id is a hash of its canonical parameters,
 so the same instance gets the same id on any machine and any backend; episode seeds come from
-(context, repeat), shared by every value of a context (DESIGN.md, "Identity, seeds, actions"). A `SuiteConfig` (or a named preset) says which SVGF
+(context, repeat), shared by every value of a context (docs/formats.md, "Identity and seeds"). A `SuiteConfig` (or a named preset) says which SVGF
 variant trees (`roboview_data.variation.svgf`) make up a benchmark; `generate_suite` walks them.
 
     >>> len(generate_suite(load_preset("paper")))
@@ -167,7 +167,7 @@ class TaskInstance:
     @property
     def id_factors(self) -> dict[str, str]:
         """The factor values an id hashes: the paper's seven always, any later factor only off its baseline
-        (so registering a factor changes no existing id; DESIGN.md "Stable ids")."""
+        (so registering a factor changes no existing id; docs/formats.md, "Identity and seeds")."""
         return {name: value for name, value in self.factors
                 if load_factor(name).always_in_id or value != load_factor(name).baseline}
 
@@ -206,7 +206,7 @@ class TaskInstance:
         return episode_seed(self.context_id, 0)
 
     def to_record(self) -> dict[str, Any]:
-        """The instance-record columns that need no simulator (DESIGN.md, "Instance record")."""
+        """The instance-record columns that need no simulator (docs/formats.md, "Benchmark folder")."""
         return {
             "instance_id": self.instance_id,
             "task": self.task,
@@ -320,7 +320,7 @@ PRESETS: dict[str, SuiteConfig] = {
 }
 
 
-# Beyond the paper (DESIGN.md, the `extended` preset): its splits plus one per new visual factor, for
+# Beyond the paper (docs/formats.md, "Factors": the `extended` preset): its splits plus one per new visual factor, for
 # both tasks. pick_place: 11 × (141 + 21 + 9 + 9 + 9 + 8 + 5 + 7) + 147 = 2,446 instances; push over its
 # own 4 × 3 = 12 per-subspace contexts (start, zone, shape, instruction; 3 values each):
 # 12 × 209 + 147 = 2,655; 5,101 in all.
