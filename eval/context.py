@@ -23,9 +23,7 @@ import pandas as pd
 
 from eval import stats
 from eval.metrics import MetricsConfig, _codes, _interval, _lrt_fields, _rng, _Table, _value_order
-from roboview_data.variation.factors import FACTORS, baselines, context_factors
-
-DEFAULT_TASK = "pick_place"
+from roboview_data.variation.factors import DEFAULT_TASK, baselines, context_factors
 
 
 def _subspace(episodes: pd.DataFrame, task: str, factor: str) -> pd.DataFrame:
@@ -72,7 +70,7 @@ def context_breakdown(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig
     out: dict[str, Any] = {}
     for task in tasks:
         for factor in context_factors(str(task)):
-            if factor in FACTORS and factor in episodes:
+            if factor in episodes:
                 found = context_factor_metrics(episodes, str(task), factor, cfg)
                 if found is not None:
                     out[factor] = found

@@ -89,13 +89,17 @@ def write_smolvlm(output_dir: str | Path, extra_words: tuple[str, ...] = ()) -> 
 BART_SPECIAL = ("<s>", "<pad>", "</s>", "<unk>", "<mask>", "<image>")
 
 
+def _bart_vocabulary() -> dict[str, int]:
+    return {token: i for i, token in enumerate([*BART_SPECIAL, *instruction_words()])}
+
+
 def write_bart_tokenizer(output_dir: str | Path) -> Path:
     """A BART-style word-level tokenizer (XVLA's text encoder is BART) over the same vocabulary."""
     from tokenizers import Tokenizer, models, pre_tokenizers, processors
     from transformers import PreTrainedTokenizerFast
 
     out = Path(output_dir).resolve()
-    vocab = {token: i for i, token in enumerate([*BART_SPECIAL, *instruction_words()])}
+    vocab = _bart_vocabulary()
     backend = Tokenizer(models.WordLevel(vocab, unk_token="<unk>"))
     backend.pre_tokenizer = pre_tokenizers.Whitespace()
     backend.post_processor = processors.TemplateProcessing(single="<s> $A </s>",
@@ -110,7 +114,7 @@ def xvla_train_flags(tokenizer: str | Path, chunk_size: int = 10) -> list[str]:
     2-layer policy transformer; random weights) on RoboView's 8-D joint actions."""
     import json
 
-    vocab_size = len(BART_SPECIAL) + len(instruction_words())
+    vocab_size = len(_bart_vocabulary())
     width = 64  # BART's d_model must equal the vision projection
     florence = {"vision_config": {"depths": [1, 1, 1, 1], "embed_dim": [16, 32, 48, 64], "num_heads": [1, 2, 2, 4],
                                   "num_groups": [1, 2, 2, 4], "window_size": 4, "projection_dim": width,
