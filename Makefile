@@ -9,6 +9,7 @@ PYTHON ?= $(shell for p in python3.12 python3.13 $$(pyenv root 2>/dev/null)/vers
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+OPENPI_PACKAGES := openpi-client==0.1.2 openpi-server==0.1.0
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Headless rendering through EGL (Mesa llvmpipe on CPU-only machines).
 export MUJOCO_GL ?= egl
@@ -39,6 +40,9 @@ $(STAMP): pyproject.toml requirements.lock
 	  echo "[install] $(VENV) with $(PYTHON)"; $(PYTHON) -m venv $(VENV); fi
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c requirements.lock -e ".[dev]"
+	@# openpi's client and server packages pin numpy < 2 but run on numpy 2 (their codec is msgpack +
+	@# ndarray bytes): installed without their dependencies, which the line above provides.
+	$(PY) -m pip install -q --no-deps $(OPENPI_PACKAGES)
 	@touch $(STAMP)
 
 demo: install

@@ -92,7 +92,7 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
             ray.init(num_cpus=num_workers, include_dashboard=False, log_to_driver=False,
                      runtime_env={"env_vars": {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}})
     actor_cls = ray.remote(num_cpus=1)(EvalWorker)
-    actors = [actor_cls.remote(spec) for _ in range(num_workers)]
+    actors = [actor_cls.remote(spec, rank) for rank in range(num_workers)]
     queue = chunks(spec, items)[::-1]
     tries: dict = {}
     in_flight: dict = {}
@@ -109,7 +109,7 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
                 results = ray.get(ready[0])
             except RayActorError as exc:
                 _retry(work[0], tries, max_retries, type(exc).__name__)
-                actors[slot] = actor_cls.remote(spec)
+                actors[slot] = actor_cls.remote(spec, slot)
                 queue.append(work)
             else:
                 yield from zip(work, results)

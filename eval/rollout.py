@@ -18,10 +18,12 @@ import numpy as np
 
 from eval.policy_server import RemotePolicy, ServerHandle
 from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy_batch
+from policies.errors import PolicyUnavailable
 from roboview_data.benchmark.format import BenchmarkItem
 from roboview_data.sim.env import IMAGE_KEY
 from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
 from roboview_data.variation.instances import episode_seed
+from roboview_data.workers import set_worker_rank
 
 log = logging.getLogger(__name__)
 
@@ -111,8 +113,10 @@ class _Running:
 class EvalWorker:
     """`envs_per_worker` envs (one renderer each) and one policy batch (one model) for a worker's life."""
 
-    def __init__(self, spec: WorkerSpec) -> None:
+    def __init__(self, spec: WorkerSpec, rank: int | None = None) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
+        if rank is not None:  # Ray actors are told their rank; pool workers take theirs at start
+            set_worker_rank(rank)
         self.spec = spec
         self.envs = [make_env(spec.task, cameras=spec.policy.cameras(), image_size=spec.image_size,
                               max_steps=spec.max_steps, depth=spec.policy.depth, lazy=not spec.eager)
@@ -123,10 +127,13 @@ class EvalWorker:
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 
     def _call_policy(self, fn, *args):
-        """fn(*args), retrying transient errors; any failure becomes PolicyFailed naming the error."""
+        """fn(*args), retrying transient errors; any failure becomes PolicyFailed naming the error, except
+        PolicyUnavailable (the policy's server is down), which stops the run."""
         for attempt in range(POLICY_RETRIES + 1):
             try:
                 return fn(*args)
+            except PolicyUnavailable:
+                raise
             except TRANSIENT_ERRORS as exc:
                 if attempt == POLICY_RETRIES:
                     raise PolicyFailed(f"policy error after {POLICY_RETRIES} retries: "

@@ -26,6 +26,7 @@ from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
+from policies.errors import PolicyUnavailable
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.tasks import DEFAULT_TASK
@@ -212,6 +213,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     if mode:
         todo = [WorkItem(w.item, w.repeat, video=videos.filmed(mode, i)) for i, w in enumerate(todo)]
     entry = provenance.start_entry(bench.version, policy.checkpoint)
+    if policy.served_by() is not None:
+        entry["policy_server"] = policy.served_by()
     provenance.record(Path(cfg.output_dir), entry)
     log.info("%d episodes planned, %d already done, %d to run", len(work), len(work) - len(todo), len(todo))
 
@@ -288,7 +291,7 @@ def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
 
 def main(args: list[str] | None = None) -> EvaluateResult:
     # Builtin and plugin policy types load first, so --policy.type can name any of them.
-    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, EpisodeLost), args,
+    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, EpisodeLost, PolicyUnavailable), args,
                     before_parse=load_policy_types)
 
 

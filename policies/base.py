@@ -168,6 +168,11 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """Weights the policy loads (recorded in run.json as policy_path); None for weightless policies."""
         return None
 
+    def served_by(self) -> dict | None:
+        """For a policy served elsewhere: where, and what its server said about itself on connecting
+        (recorded in provenance.json; no secrets). None for a policy that runs in the worker."""
+        return None
+
     def cameras(self) -> tuple[str, ...]:
         """Cameras the policy observes (the env renders only these)."""
         return DEFAULT_CAMERAS

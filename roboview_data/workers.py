@@ -24,6 +24,18 @@ from typing import Any
 
 POLL_S = 1.0
 _STATE: Any = None
+_RANK = 0
+
+
+def worker_rank() -> int:
+    """This worker's index in its pool (0 … num_workers-1; 0 outside a pool): what a policy spread over
+    several servers uses to pick one (`--policy.url=A,B`: worker i talks to server i mod 2)."""
+    return _RANK
+
+
+def set_worker_rank(rank: int) -> None:
+    global _RANK
+    _RANK = rank
 
 
 def exit_with_parent(poll_s: float = POLL_S) -> None:
@@ -39,9 +51,12 @@ def exit_with_parent(poll_s: float = POLL_S) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def _init(factory: Callable[..., Any], args: tuple) -> None:
+def _init(factory: Callable[..., Any], args: tuple, counter: Any) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
     exit_with_parent()
+    with counter.get_lock():  # ranks in start order: 0 … num_workers-1
+        set_worker_rank(counter.value)
+        counter.value += 1
     global _STATE
     _STATE = factory(*args)
 
@@ -58,8 +73,9 @@ class WorkerPool:
             raise ValueError(f"num_workers={num_workers} must be at least 1")
         self.num_workers = num_workers
         self.method = method
-        self._executor = ProcessPoolExecutor(num_workers, mp_context=mp.get_context("spawn"),
-                                             initializer=_init, initargs=(factory, args))
+        ctx = mp.get_context("spawn")
+        self._executor = ProcessPoolExecutor(num_workers, mp_context=ctx, initializer=_init,
+                                             initargs=(factory, args, ctx.Value("i", 0)))
 
     def submit(self, item: Any) -> Future:
         return self._executor.submit(_call, self.method, item)

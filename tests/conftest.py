@@ -9,6 +9,8 @@ os.environ.setdefault("SVT_LOG", "1")
 # Caches a test run writes (the VLM answer cache) go to a folder of its own, never the user's ~/.cache.
 os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="roboview-test-cache-")
 
+from pathlib import Path  # noqa: E402
+
 import pytest  # noqa: E402
 
 
@@ -30,3 +32,28 @@ def tiny_benchmark(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "tiny"
     build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64))
     return out
+
+
+@pytest.fixture(scope="session")
+def tiny_checkpoint(tmp_path_factory, tiny_benchmark) -> Path:
+    """A 2-step ACT checkpoint (left_top + wrist at 64²) trained by pipelines.train on 2 collected demos."""
+    import subprocess
+    import sys
+
+    from pipelines.collect import CollectConfig, DatasetConfig
+    from pipelines.collect import run as collect
+
+    root = tmp_path_factory.mktemp("ckpt")
+    collect(CollectConfig(DatasetConfig(repo_id="t/demos", root=str(root / "ds"), num_episodes=2, image_size=64,
+                                        cameras=["left_top", "wrist"]), num_workers=1))
+    # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
+    args = [sys.executable, "-m", "pipelines.train", "--dataset.repo_id=t/demos", f"--dataset.root={root / 'ds'}",
+            f"--output_dir={root / 'train'}", "--batch_size=2", "--save_freq=2", "--device=cpu"]
+    # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
+    periodic = [f"--eval_benchmark={tiny_benchmark}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
+    proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "'task_group': 'color'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
+    dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
+    assert "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
+    return root / "train" / "checkpoints" / "last" / "pretrained_model"

@@ -101,27 +101,6 @@ def test_rerun_recording_verifies(bench, tmp_path):
     assert rrd.stat().st_size > 20_000  # frames of two episodes, not an empty shell
 
 
-@pytest.fixture(scope="module")
-def tiny_checkpoint(tmp_path_factory, bench) -> Path:
-    from pipelines.collect import CollectConfig, DatasetConfig
-    from pipelines.collect import run as collect
-
-    root = tmp_path_factory.mktemp("ckpt")
-    collect(CollectConfig(DatasetConfig(repo_id="t/demos", root=str(root / "ds"), num_episodes=2, image_size=64,
-                                        cameras=["left_top", "wrist"]), num_workers=1))
-    # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
-    args = [sys.executable, "-m", "pipelines.train", "--dataset.repo_id=t/demos", f"--dataset.root={root / 'ds'}",
-            f"--output_dir={root / 'train'}", "--batch_size=2", "--save_freq=2", "--device=cpu"]
-    # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
-    periodic = [f"--eval_benchmark={bench}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
-    proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "'task_group': 'color'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
-    dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
-    assert "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
-    return root / "train" / "checkpoints" / "last" / "pretrained_model"
-
-
 def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_path):
     # No image size given: the env renders the checkpoint's own 64² (its cameras: left_top + wrist).
     result = evaluate(bench, tmp_path / "ev", policy="lerobot", path=str(tiny_checkpoint), splits="color",
