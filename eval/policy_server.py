@@ -159,7 +159,7 @@ class PolicyServer:
             self.ids.put(worker)
         self.handle = ServerHandle(self.requests, self.replies, self.ids, envs_per_worker)
         self.process = ctx.Process(target=serve, name="roboview-policy-server", daemon=True,
-                                   args=(config, task, config.cameras(), image_size, num_workers * envs_per_worker,
+                                   args=(config, task, config.observed_cameras(), image_size, num_workers * envs_per_worker,
                                          self.requests, self.replies, num_workers))
         self.process.start()
 

@@ -118,7 +118,7 @@ class EvalWorker:
         if rank is not None:  # Ray actors are told their rank; pool workers take theirs at start
             set_worker_rank(rank)
         self.spec = spec
-        self.envs = [make_env(spec.task, cameras=spec.policy.cameras(), image_size=spec.image_size,
+        self.envs = [make_env(spec.task, cameras=spec.policy.observed_cameras(), image_size=spec.image_size,
                               max_steps=spec.max_steps, depth=spec.policy.depth, lazy=not spec.eager)
                      for _ in range(spec.envs_per_worker)]
         self.batch = RemotePolicy(spec.server) if spec.server is not None else make_policy_batch(spec.policy, self.envs)

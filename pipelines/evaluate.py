@@ -167,7 +167,7 @@ class EvaluateResult:
 
 def resolve_image_size(policy: PolicyConfig, requested: int) -> int:
     """The policy's own image side if it has one (a checkpoint's), else `requested`, else 224."""
-    own = policy.image_size()
+    own = policy.input_image_size()
     if own is not None and requested and requested != own:
         raise ValueError(f"--eval.image_size={requested} but the checkpoint {policy.checkpoint} was trained on {own}×{own} "
                          f"images; drop the flag (the checkpoint's size is used) or pass {own}")

@@ -112,7 +112,7 @@ class Policy(Protocol):
 # demand (by name, never at import time of this module); third-party packages add types through the
 # ENTRY_POINT_GROUP entry points, each naming such a module.
 BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy", "policies.vlm.simple",
-                   "policies.vlm.moka")
+                   "policies.vlm.moka", "policies.openpi", "policies.lerobot_async")
 ENTRY_POINT_GROUP = "roboview.policies"
 DEFAULT_POLICY_TYPE = "expert"
 # The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
@@ -173,11 +173,11 @@ class PolicyConfig(draccus.ChoiceRegistry):
         (recorded in provenance.json; no secrets). None for a policy that runs in the worker."""
         return None
 
-    def cameras(self) -> tuple[str, ...]:
+    def observed_cameras(self) -> tuple[str, ...]:
         """Cameras the policy observes (the env renders only these)."""
         return DEFAULT_CAMERAS
 
-    def image_size(self) -> int | None:
+    def input_image_size(self) -> int | None:
         """Image side the policy was trained on (the env renders exactly that); None: any size works."""
         return None
 
@@ -279,9 +279,14 @@ def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyB
 def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
     """Build `config`'s policy for `env`: from the env only if the type is privileged; wrapped in the
     Semantic Grounding Layer when `config.sgl`."""
-    policy = config.build(env if config.privileged else AgentView.of(env))
+    return build_policy(config, env if config.privileged else AgentView.of(env))
+
+
+def build_policy(config: PolicyConfig, view: AgentView | PickPlaceEnv) -> Policy:
+    """`config`'s policy from an agent's view (a privileged type's from the env), with the SGL when asked."""
+    policy = config.build(view)
     if config.sgl:
         from policies.vlm.sgl import SemanticGroundingLayer
 
-        policy = SemanticGroundingLayer(policy, config.sgl_endpoint(), config.cameras()[0])
+        policy = SemanticGroundingLayer(policy, config.sgl_endpoint(), config.observed_cameras()[0])
     return policy

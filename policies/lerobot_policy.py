@@ -168,12 +168,15 @@ class LeRobotPolicy:
                 self.queues[slot].extend(actions)
         return {slot: self.queues[slot].popleft() for slot in observations}
 
-    def predict_chunks(self, observations: dict[int, dict]) -> dict[int, list[np.ndarray]]:
+    def predict_chunks(self, observations: dict[int, dict],
+                       instructions: dict[int, str] | None = None) -> dict[int, list[np.ndarray]]:
         """One forward pass over `observations` (slot -> observation): each slot's next `n_action_steps`
-        actions, post-processed (what lerobot's `select_action` would pop one at a time)."""
+        actions, post-processed (what lerobot's `select_action` would pop one at a time). Each slot's
+        instruction is its episode's, or the one given (a server's request carries its own)."""
         torch = self._torch
         slots = list(observations)
-        batch = self._batch([observations[s] for s in slots], [self.tasks[s] for s in slots])
+        tasks = [(instructions or {}).get(s, self.tasks[s]) for s in slots]
+        batch = self._batch([observations[s] for s in slots], tasks)
         with torch.inference_mode():
             chunk = self.policy.predict_action_chunk(batch)[:, : self.n_action_steps]
         return {slot: [self._postprocess(chunk[row : row + 1, t]) for t in range(chunk.shape[1])]
@@ -209,10 +212,10 @@ class LeRobotConfig(PolicyConfig):
     def checkpoint(self) -> str | None:
         return self.path
 
-    def cameras(self) -> tuple[str, ...]:
+    def observed_cameras(self) -> tuple[str, ...]:
         return checkpoint_cameras(self.path)
 
-    def image_size(self) -> int | None:
+    def input_image_size(self) -> int | None:
         return checkpoint_image_size(self.path)
 
     def build(self, view: AgentView) -> LeRobotPolicy:

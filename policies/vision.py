@@ -49,7 +49,7 @@ class VisionConfig(PolicyConfig):
             raise ValueError(f"vision policy: unknown camera {self.camera!r}; allowed: {', '.join(ALL_CAMERAS)}")
         super().__post_init__()
 
-    def cameras(self) -> tuple[str, ...]:
+    def observed_cameras(self) -> tuple[str, ...]:
         return (self.camera,)
 
     def build(self, view: AgentView) -> VisionPolicy:

@@ -120,7 +120,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
 def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
     out = tmp_path / "out"
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=oracle", f"--output_dir={out}")
-    assert proc.returncode == 2 and "unknown policy type 'oracle'; allowed: expert, lerobot, random" in proc.stderr
+    assert proc.returncode == 2 and "unknown policy type 'oracle'; allowed: expert, lerobot, lerobot_async, openpi, random" in proc.stderr
     proc = _cli(f"--benchmark.path={bench}", "--benchmark.splits=colour", f"--output_dir={out}")
     assert proc.returncode == 2 and "unknown split(s) ['colour']" in proc.stderr
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tmp_path}", f"--output_dir={out}")

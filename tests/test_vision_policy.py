@@ -63,8 +63,8 @@ def test_registered_with_camera_option():
     assert "vision" in registered_policies()
     config = policy_config("vision")
     assert config.depth
-    assert config.cameras() == ("front",)
-    assert policy_config("vision", camera="left_top").cameras() == ("left_top",)
+    assert config.observed_cameras() == ("front",)
+    assert policy_config("vision", camera="left_top").observed_cameras() == ("left_top",)
     with pytest.raises(ValueError, match="allowed"):
         policy_config("vision", camera="ceiling")
     with pytest.raises(TypeError, match="unexpected keyword argument 'zoom'"):  # unknown option

@@ -57,7 +57,7 @@ class VLMConfig(PolicyConfig):
         return Endpoint(self.base_url, self.model, self.api_key_env, self.timeout_s, self.max_retries,
                         self.max_in_flight, self.cache_dir)
 
-    def cameras(self) -> tuple[str, ...]:
+    def observed_cameras(self) -> tuple[str, ...]:
         return (self.camera,)
 
     def sgl_endpoint(self) -> Endpoint:

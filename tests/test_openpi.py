@@ -1,0 +1,255 @@
+"""openpi's websocket protocol, both ways, against real servers on 127.0.0.1.
+
+RoboView's `openpi` client against openpi-server's own `WebsocketPolicyServer` serving a tiny ACT
+checkpoint (rows equal to in-process evaluation; error frame, wrong chunk shape, a server killed mid-run
+and resumed); openpi-client's own `WebsocketClientPolicy` against `pipelines.serve_policy` (actions equal
+to in-process, requests of several connections batched into one forward pass).
+"""
+
+import json
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from policies.base import Episode, policy_config
+from policies.errors import PolicyUnavailable
+
+COLS = ["instance_id", "repeat", "episode_seed", "success", "steps", "policy", "failure_reason"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_server(checkpoint: Path, port: int, *flags: str) -> subprocess.Popen:
+    """pipelines.serve_policy in its own process; returns once /healthz answers."""
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.serve_policy", "--policy.type=lerobot",
+                             f"--policy.path={checkpoint}", f"--port={port}", "--threads=1", *flags],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        try:
+            if urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=1).read() == b"OK\n":
+                return proc
+        except OSError:
+            time.sleep(0.3)
+        if proc.poll() is not None:
+            raise AssertionError(proc.stdout.read())
+    proc.kill()
+    raise AssertionError("serve_policy did not come up within 120 s")
+
+
+def stop(proc: subprocess.Popen) -> str:
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=60)
+    return out
+
+
+def evaluate(bench: Path, out: Path, policy, splits="color", limit=2, workers=2, max_steps=6) -> None:
+    run(EvaluateConfig(BenchmarkConfig(str(bench), splits), policy,
+                       EvalConfig(n_repeats=1, limit=limit, num_workers=workers, max_steps=max_steps, image_size=0),
+                       str(out)))
+
+
+def rows(out: Path) -> pd.DataFrame:
+    return pd.read_parquet(out / "episodes.parquet").sort_values(["instance_id", "repeat"]).reset_index(drop=True)
+
+
+def client(port: int, **settings):
+    return policy_config("openpi", url=f"ws://127.0.0.1:{port}", cameras="left_top,wrist", image_size=64, **settings)
+
+
+@pytest.fixture(scope="module")
+def openpi_server(tiny_checkpoint):
+    """openpi-server's WebsocketPolicyServer (one request at a time) around the tiny checkpoint."""
+    port = free_port()
+    proc = start_server(tiny_checkpoint, port, "--server=openpi")
+    yield port
+    stop(proc)
+
+
+@pytest.fixture(scope="module")
+def reference(tiny_benchmark, tiny_checkpoint, tmp_path_factory) -> Path:
+    """The same episodes evaluated in-process (2 workers: one torch thread each, as the server's --threads=1)."""
+    out = tmp_path_factory.mktemp("inproc")
+    evaluate(tiny_benchmark, out, policy_config("lerobot", path=str(tiny_checkpoint)), splits="color,camera_pose")
+    return out
+
+
+def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(tiny_benchmark, openpi_server, reference,
+                                                                      tmp_path):
+    evaluate(tiny_benchmark, tmp_path / "served", client(openpi_server), splits="color,camera_pose")
+    served, local = rows(tmp_path / "served"), rows(reference)
+    assert len(served) == 4
+    pd.testing.assert_frame_equal(served[COLS[:-2] + ["failure_reason"]], local[COLS[:-2] + ["failure_reason"]])
+    assert set(served["policy"]) == {"openpi:droid"}
+    entry = json.loads((tmp_path / "served" / "provenance.json").read_text())[-1]
+    meta = entry["policy_server"]["metadata"][f"ws://127.0.0.1:{openpi_server}"]["roboview"]
+    assert entry["policy_server"]["protocol"] == "openpi"
+    assert meta["policy"] == "lerobot:act" and meta["image_size"] == 64 and meta["cameras"] == ["left_top", "wrist"]
+    assert "url" not in json.loads((tmp_path / "served" / "run.json").read_text())["policy_options"]
+
+
+def test_client_actions_equal_the_checkpoint_in_process(tiny_benchmark, tiny_checkpoint, openpi_server):
+    from policies.base import AgentView
+    from policies.lerobot_policy import LeRobotPolicy
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.sim.tasks import make_env
+
+    item = load_benchmark(tiny_benchmark, ["color"]).splits["color"][1]
+    env = make_env(cameras=("left_top", "wrist"), image_size=64)
+    obs, _ = env.reset(seed=3, options={"instance": item.instance})
+    episode = Episode.of(env, 3)
+    remote = client(openpi_server, replan_steps=4).build(AgentView.of(env))
+    local = LeRobotPolicy(str(tiny_checkpoint), "cpu")
+    remote.reset(episode)
+    local.reset(episode)
+    for t in range(8):  # two requests: the client uses 4 actions (replan_steps) of each 10-action chunk
+        if t % 4 == 0:
+            chunk = local.predict_chunks({0: obs})[0]
+        action = remote.select_action(obs)
+        np.testing.assert_allclose(action, chunk[t % 4], rtol=0, atol=1e-5)
+        obs, *_ = env.step(action)
+    assert remote.requests == 2 and len(chunk) == 10
+    remote.close()
+    env.close()
+
+
+def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, openpi_server, tmp_path):
+    # The server expects DROID keys; LIBERO's make it raise: its traceback frame is the episode's reason.
+    evaluate(tiny_benchmark, tmp_path / "libero", client(openpi_server, obs_format="libero"), limit=2)
+    df = rows(tmp_path / "libero")
+    assert len(df) == 2 and not df["success"].any()
+    assert all("server error: ValueError: request has no" in r and "observation/exterior_image_1_left" in r for r in df["failure_reason"])
+    assert df["steps"].tolist() == [0, 0]
+
+    # A server (openpi-server's own) whose policy answers 7-D actions: wrong shape, named.
+    from openpi_server.websocket_policy_server import WebsocketPolicyServer
+
+    class SevenDims:
+        def infer(self, obs):
+            return {"actions": np.zeros((5, 7), np.float32)}
+
+    port = free_port()
+    threading.Thread(target=WebsocketPolicyServer(SevenDims(), "127.0.0.1", port, {"name": "seven"}).serve_forever,
+                     daemon=True).start()
+    for _ in range(50):
+        try:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=1)
+            break
+        except OSError:
+            time.sleep(0.1)
+    evaluate(tiny_benchmark, tmp_path / "seven", client(port), limit=1, workers=1)
+    reason = rows(tmp_path / "seven")["failure_reason"][0]
+    assert "answered actions of shape (5, 7)" in reason and "(H, 8)" in reason
+
+
+def test_server_down_fails_before_any_rollout_naming_the_url():
+    port = free_port()
+    with pytest.raises(ValueError, match=rf"ws://127.0.0.1:{port}.*is it running"):
+        client(port)
+    with pytest.raises(ValueError, match="must start with ws://"):
+        policy_config("openpi", url="http://127.0.0.1:8000")
+    with pytest.raises(ValueError, match="obs_format"):
+        policy_config("openpi", url=f"ws://127.0.0.1:{port}", obs_format="rlds")
+    with pytest.raises(ValueError, match="state slices"):
+        policy_config("openpi", url=f"ws://127.0.0.1:{port}", obs_format="custom", key_map="s=state[3:12]")
+
+
+def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(tiny_benchmark, tiny_checkpoint, reference,
+                                                                   tmp_path):
+    port = free_port()
+    server = start_server(tiny_checkpoint, port)
+    out = tmp_path / "killed"
+    journal = out / "episodes.jsonl"
+    cfg = client(port, reconnects=1, reconnect_backoff_s=0.1)
+    errors = []
+
+    def go():
+        try:
+            evaluate(tiny_benchmark, out, cfg, splits="color,camera_pose", max_steps=6)
+        except Exception as exc:  # noqa: BLE001  (the test reads it)
+            errors.append(exc)
+
+    thread = threading.Thread(target=go)
+    thread.start()
+    deadline = time.time() + 120
+    while time.time() < deadline and (not journal.exists() or not journal.read_text().strip()):
+        time.sleep(0.05)
+    server.kill()  # SIGKILL: no goodbye frame
+    server.wait()
+    thread.join(timeout=120)
+    assert len(errors) == 1 and isinstance(errors[0], PolicyUnavailable), errors
+    assert f"ws://127.0.0.1:{port}" in str(errors[0]) and "rerun" in str(errors[0])
+    done = [json.loads(line) for line in journal.read_text().splitlines()]
+    assert 1 <= len(done) < 4  # what finished is kept; nothing the kill cut short is recorded as a policy failure
+    assert not any("closed the connection" in r["failure_reason"] for r in done)
+
+    server = start_server(tiny_checkpoint, port)  # the same server back: the rerun finishes the rest
+    try:
+        evaluate(tiny_benchmark, out, cfg, splits="color,camera_pose", max_steps=6)
+    finally:
+        stop(server)
+    resumed = rows(out)
+    assert len(resumed) == 4 and not resumed.duplicated(["instance_id", "repeat"]).any()
+    pd.testing.assert_frame_equal(resumed[COLS[:-2] + ["failure_reason"]], rows(reference)[COLS[:-2] + ["failure_reason"]])
+
+
+def test_openpi_client_against_serve_policy_batches_connections(tiny_benchmark, tiny_checkpoint):
+    from openpi_client.websocket_client_policy import WebsocketClientPolicy
+
+    from policies.lerobot_policy import LeRobotPolicy
+    from policies.openpi import wire_format
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.sim.tasks import make_env
+
+    items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:4]
+    env = make_env(cameras=("left_top", "wrist"), image_size=64)
+    fmt = wire_format("droid", ("left_top", "wrist"))
+    local = LeRobotPolicy(str(tiny_checkpoint), "cpu")
+    requests, expected = [], []
+    for seed, item in enumerate(items):
+        obs, _ = env.reset(seed=seed, options={"instance": item.instance})
+        local.reset(Episode.of(env, seed))
+        expected.append(np.stack(local.predict_chunks({0: obs})[0]))
+        requests.append(fmt.encode(obs, env.instruction))
+    env.close()
+
+    port = free_port()
+    server = start_server(tiny_checkpoint, port, "--gather_ms=200")
+    try:
+        clients = [WebsocketClientPolicy("127.0.0.1", port) for _ in range(4)]  # openpi's own client, unchanged
+        assert clients[0].get_server_metadata()["roboview"]["batched"] is True
+        answers = [None] * 4
+        barrier = threading.Barrier(4)
+
+        def ask(i):
+            barrier.wait()
+            answers[i] = clients[i].infer(requests[i])["actions"]
+
+        threads = [threading.Thread(target=ask, args=(i,)) for i in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=60)
+    finally:
+        summary = stop(server)
+    for got, want in zip(answers, expected):
+        assert got.shape == want.shape == (10, 8)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-4)
+    assert not np.allclose(expected[0], expected[1])  # four episodes, four different chunks
+    n_requests, n_passes = map(int, re.search(r"(\d+) requests in (\d+) forward passes", summary).groups())
+    assert n_requests == 4 and n_passes < 4, summary  # several connections in one forward pass
