@@ -179,8 +179,10 @@ class LeRobotPolicy:
         batch = self._batch([observations[s] for s in slots], tasks)
         with torch.inference_mode():
             chunk = self.policy.predict_action_chunk(batch)[:, : self.n_action_steps]
-        return {slot: [self._postprocess(chunk[row : row + 1, t]) for t in range(chunk.shape[1])]
-                for row, slot in enumerate(slots)}
+        # One post-processor call for the whole (slots, steps, action) chunk: unnormalization is elementwise,
+        # so this is bit for bit what post-processing each action alone gives.
+        actions = self.postprocessor(chunk).cpu().numpy().astype(np.float32)
+        return {slot: list(actions[row]) for row, slot in enumerate(slots)}
 
     def _postprocess(self, action) -> np.ndarray:
         return self.postprocessor(action).squeeze(0).cpu().numpy().astype(np.float32)
