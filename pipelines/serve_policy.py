@@ -33,6 +33,7 @@ import asyncio
 import concurrent.futures
 import http
 import logging
+import os
 import signal
 import sys
 import threading
@@ -72,6 +73,9 @@ class ServeConfig:
     gather_ms: float = 5.0
     # roboview (batches across connections) or openpi (openpi-server's WebsocketPolicyServer, one at a time).
     server: str = "roboview"
+    # Name of an environment variable holding an API key: when it is set, connections must send
+    # `Authorization: Api-Key <key>` (openpi's header; `--policy.api_key_env` on the client) or get 401.
+    api_key_env: str = "ROBOVIEW_SERVE_API_KEY"
     # Intra-op threads of a torch policy; 0: torch's default. An evaluation's in-process rows equal the
     # served ones when both use the same count (float reductions depend on it).
     threads: int = 0
@@ -88,6 +92,8 @@ class ServeConfig:
         if self.max_clients < 1 or self.gather_ms < 0 or self.image_size < 0 or self.threads < 0:
             raise ValueError(f"--max_clients={self.max_clients} must be ≥ 1, --gather_ms={self.gather_ms}, "
                              f"--image_size={self.image_size} and --threads={self.threads} ≥ 0")
+        if self.server == "openpi" and os.environ.get(self.api_key_env):
+            raise ValueError(f"--server=openpi does not check API keys; unset {self.api_key_env} or use --server=roboview")
         if self.policy.privileged:
             raise ValueError(f"--policy.type={self.policy.type} reads the simulator's state and cannot be served; "
                              "serve a policy that acts from observations (lerobot, vision, vlm_simple, …)")
@@ -127,8 +133,6 @@ class PolicyService:
     """The policy behind the socket: a batched model (one slot per connection) or one policy per connection."""
 
     def __init__(self, cfg: ServeConfig) -> None:
-        import os
-
         os.environ.setdefault("MUJOCO_GL", "egl")
         from roboview_data.sim.tasks import make_env
 
@@ -193,17 +197,23 @@ class OneRequestPolicy:
         pass
 
 
-def _health(connection, request):
-    if request.path == "/healthz":
-        return connection.respond(http.HTTPStatus.OK, "OK\n")
-    return None
+def _gate(api_key: str | None):
+    """`process_request`: /healthz answers OK; with a key, a connection without it is refused (401)."""
+    def check(connection, request):
+        if request.path == "/healthz":
+            return connection.respond(http.HTTPStatus.OK, "OK\n")
+        if api_key and request.headers.get("Authorization") != f"Api-Key {api_key}":
+            return connection.respond(http.HTTPStatus.UNAUTHORIZED, "missing or wrong API key (Authorization: Api-Key …)\n")
+        return None
+    return check
 
 
 class BatchingServer:
     """openpi's protocol over asyncio websockets; requests of all connections gathered into forward passes."""
 
-    def __init__(self, service: PolicyService, max_clients: int, gather_s: float) -> None:
+    def __init__(self, service: PolicyService, max_clients: int, gather_s: float, api_key: str | None = None) -> None:
         self.service = service
+        self.api_key = api_key
         self.gather_s = gather_s
         self.free = list(range(max_clients))[::-1]
         self.connected = 0
@@ -288,7 +298,7 @@ class BatchingServer:
         self.queue = asyncio.Queue()
         batcher = asyncio.create_task(self._batcher())
         async with serve(self._handler, host, port, compression=None, max_size=None,
-                         process_request=_health) as server:
+                         process_request=_gate(self.api_key)) as server:
             if bound is not None:
                 bound.append(server.sockets[0].getsockname()[1])
             if ready is not None:
@@ -329,8 +339,8 @@ def run(cfg: ServeConfig) -> None:
                 print(f"[serve_policy] {what} at ws://{cfg.host}:{bound[0]}  (Ctrl-C stops)", flush=True)
 
             threading.Thread(target=announce, daemon=True).start()
-            asyncio.run(BatchingServer(service, cfg.max_clients, cfg.gather_ms / 1000).serve(cfg.host, cfg.port, ready,
-                                                                                            bound))
+            server = BatchingServer(service, cfg.max_clients, cfg.gather_ms / 1000, os.environ.get(cfg.api_key_env))
+            asyncio.run(server.serve(cfg.host, cfg.port, ready, bound))
     except KeyboardInterrupt:
         pass
     except OSError as exc:

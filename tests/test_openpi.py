@@ -7,6 +7,7 @@ to in-process, requests of several connections batched into one forward pass).
 """
 
 import json
+import os
 import re
 import signal
 import socket
@@ -157,6 +158,79 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
     assert "answered actions of shape (5, 7)" in reason and "(H, 8)" in reason
 
 
+def test_every_layout_carries_the_observation_there_and_back(env):
+    from policies.openpi import wire_format
+    from roboview_data.sim.env import IMAGE_KEY, STATE_KEY
+
+    obs, _ = env.reset(seed=5)
+    cams = ("left_top", "wrist")
+    custom = "img=camera:left_top,wrist_chw=camera_chw:wrist,q=state[0:7],g=state[7:8],text=instruction"
+    for name, fmt in [(f, wire_format(f, cams)) for f in ("droid", "libero", "aloha")] + \
+            [("custom", wire_format("custom", cams, custom))]:
+        request = fmt.encode(obs, "pick up the red cube")
+        back, instruction = fmt.decode(request, env.image_size)
+        assert instruction == "pick up the red cube", name
+        np.testing.assert_array_equal(back[STATE_KEY], obs[STATE_KEY])
+        for cam in cams:
+            np.testing.assert_array_equal(back[IMAGE_KEY.format(cam)], obs[IMAGE_KEY.format(cam)])
+    droid = wire_format("droid", cams).encode(obs, "x")
+    assert droid["observation/joint_position"].shape == (7,) and droid["observation/gripper_position"].shape == (1,)
+    assert droid["observation/exterior_image_1_left"].shape == (env.image_size, env.image_size, 3)
+    aloha = wire_format("aloha", cams).encode(obs, "x")
+    assert set(aloha["images"]) == {"cam_high", "cam_left_wrist"} and aloha["images"]["cam_high"].shape[0] == 3
+    with pytest.raises(ValueError, match="unset"):  # a layout that leaves the gripper out cannot be decoded
+        wire_format("custom", cams, "img=camera:left_top,q=state[0:7],p=instruction").decode(
+            {"img": droid["observation/exterior_image_1_left"], "q": np.zeros(7), "p": "x"}, env.image_size)
+
+
+def _thread_server(policy, metadata=None) -> int:
+    from openpi_server.websocket_policy_server import WebsocketPolicyServer
+
+    port = free_port()
+    threading.Thread(target=WebsocketPolicyServer(policy, "127.0.0.1", port, metadata or {}).serve_forever,
+                     daemon=True).start()
+    for _ in range(100):
+        try:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=1)
+            return port
+        except OSError:
+            time.sleep(0.05)
+    raise AssertionError("openpi-server did not start")
+
+
+def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_over_urls(tiny_benchmark, env, tmp_path):
+    from policies.base import AgentView
+
+    class Velocity:  # openpi-server's policy interface: a chunk of 3 joint velocities (rad/s) + gripper 0.7
+        def __init__(self):
+            self.prompts = []
+
+        def infer(self, obs):
+            self.prompts.append(obs["prompt"])
+            chunk = np.zeros((3, 8), np.float32)
+            chunk[:, 0], chunk[:, 7] = 0.5, 0.7
+            return {"actions": chunk}
+
+    servers = [Velocity(), Velocity()]
+    ports = [_thread_server(s) for s in servers]
+    cfg = policy_config("openpi", url=",".join(f"ws://127.0.0.1:{p}" for p in ports), cameras="left_top,wrist",
+                        image_size=env.image_size, action_space="joint_velocity", gripper="binary")
+    obs, _ = env.reset(seed=2)
+    policy = cfg.build(AgentView.of(env))
+    policy.reset(Episode.of(env, 2))
+    action = policy.select_action(obs)
+    expected = obs["observation.state"][:7].copy()
+    expected[0] += 0.5 / env.fps  # one control period at 0.5 rad/s
+    np.testing.assert_allclose(action[:7], expected, rtol=0, atol=1e-6)
+    assert action[7] == 1.0
+    policy.close()
+    # Two workers, two URLs: worker i talks to server i (mod 2), so both served episodes.
+    served = [len(s.prompts) for s in servers]
+    evaluate(tiny_benchmark, tmp_path / "two", cfg, limit=4, workers=2, max_steps=3)
+    assert all(len(s.prompts) > n for s, n in zip(servers, served)), [len(s.prompts) for s in servers]
+    assert len(rows(tmp_path / "two")) == 4
+
+
 def test_server_down_fails_before_any_rollout_naming_the_url():
     port = free_port()
     with pytest.raises(ValueError, match=rf"ws://127.0.0.1:{port}.*is it running"):
@@ -229,9 +303,16 @@ def test_openpi_client_against_serve_policy_batches_connections(tiny_benchmark, 
     env.close()
 
     port = free_port()
-    server = start_server(tiny_checkpoint, port, "--gather_ms=200")
+    os.environ["ROBOVIEW_TEST_KEY"] = "s3cret"
     try:
-        clients = [WebsocketClientPolicy("127.0.0.1", port) for _ in range(4)]  # openpi's own client, unchanged
+        server = start_server(tiny_checkpoint, port, "--gather_ms=200", "--api_key_env=ROBOVIEW_TEST_KEY")
+    finally:
+        del os.environ["ROBOVIEW_TEST_KEY"]
+    try:
+        with pytest.raises(ValueError, match="401"):  # no key: refused before any rollout
+            client(port)
+        # openpi's own client, unchanged, with the key in openpi's Authorization header
+        clients = [WebsocketClientPolicy("127.0.0.1", port, api_key="s3cret") for _ in range(4)]
         assert clients[0].get_server_metadata()["roboview"]["batched"] is True
         answers = [None] * 4
         barrier = threading.Barrier(4)
