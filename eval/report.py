@@ -367,7 +367,19 @@ def _provenance(sources: list[dict[str, Any]]) -> list[str]:
                       f"{(ckpt.get('path', '') + ' sha256 ' + ckpt.get('sha256', '')[:16] + '…') if ckpt else '—'}",
                       f"  - machine: {machine['cpu']} × {machine['cpu_count']}, GPU {machine.get('gpu') or 'none'}; "
                       f"seeds: {entry['seed_rule']}"]
+            if entry.get("policy_server"):
+                lines.append(f"  - policy served elsewhere (its randomness is the server's, not the episode seeds'): "
+                             f"{_served(entry['policy_server'])}")
     return lines + [""] if len(lines) > 2 else []
+
+
+def _served(server: dict) -> str:
+    """One line for a served policy's provenance: protocol, where, and what the server said about itself."""
+    where = server.get("urls") or server.get("servers") or server.get("server") or "?"
+    where = ", ".join(where) if isinstance(where, list) else str(where)
+    said = {url: meta.get("roboview", meta) if isinstance(meta, dict) else meta
+            for url, meta in (server.get("metadata") or {}).items()}
+    return f"{server.get('protocol', '?')} at {where}" + (f"; server metadata {json.dumps(said)}" if said else "")
 
 
 def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[str, list[dict]]]]:
