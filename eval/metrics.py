@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import stats
+from eval import isolation, stats
 from roboview_data.variation.factors import FACTORS
 
 log = logging.getLogger(__name__)
@@ -377,15 +377,18 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     if len(policies) != 1:
         raise ValueError(f"compute_metrics takes one policy, got {sorted(map(str, policies))}; "
                          "use compute_all_metrics")
+    # The isolation certificate first: blocks in which more than the factor changed leave the tests.
+    certificate = isolation.verify(episodes)
+    episodes = isolation.drop_violations(episodes, certificate)
     episodes = episodes.assign(success=episodes["success"].astype(np.int64))
     splits: dict[str, Any] = {}
     interactions: dict[str, Any] = {}
     for split, rows in episodes.groupby("split", sort=False):
         n_factors = len(str(rows["factor"].iloc[0]).split("|"))
         if n_factors == 1:
-            splits[str(split)] = split_metrics(rows, cfg)
+            splits[str(split)] = split_metrics(rows, cfg) | {"isolation": certificate[str(split)]}
         elif n_factors == 2:
-            interactions[str(split)] = interaction_metrics(rows, cfg)
+            interactions[str(split)] = interaction_metrics(rows, cfg) | {"isolation": certificate[str(split)]}
         else:
             log.warning("split %s crosses %d factors; IEC is pairwise, so it is left out", split, n_factors)
     average: dict[str, float | None] = {"sr": None, "cv": None, "cv_excess": None}
@@ -407,9 +410,12 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
         return compute_metrics(episodes, cfg)
     from eval.compare import compare_policies  # compare builds on this module
 
+    # Paired comparisons see only the blocks each policy's certificate verified.
+    certified = pd.concat([isolation.drop_violations(rows, isolation.verify(rows))
+                           for _, rows in episodes.groupby("policy", sort=False)])
     return {"epsilon": cfg.epsilon, "resampling": _resampling(cfg),
             "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
-            "comparisons": compare_policies(episodes, cfg)}
+            "comparisons": compare_policies(certified, cfg)}
 
 
 def _resampling(cfg: MetricsConfig) -> dict[str, int]:

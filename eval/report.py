@@ -322,6 +322,31 @@ def _diagnostics(layouts: dict[str, dict]) -> list[str]:
             "the color, camera_euler and dist_scale splits.", *control, ""]
 
 
+def _isolation(layouts: dict[str, dict]) -> list[str]:
+    """Per split: how many (context, repeat) blocks were verified to differ only in the factor (eval/isolation.py)."""
+    rows, violations = [], []
+    for name, layout in layouts.items():
+        for split, m in {**layout["splits"], **layout.get("interactions", {})}.items():
+            cert = m.get("isolation")
+            if cert is None:
+                continue
+            if not cert["recorded"]:
+                rows.append([name, split, str(cert["blocks"]), "not recorded", "—"])
+                continue
+            bad = cert["violations"]
+            rows.append([name, split, str(cert["blocks"]), f"{cert['verified']} / {cert['blocks']}",
+                         "none" if not bad else f"{len(bad)} (left out of the tests)"])
+            violations += [f"- {name}, {split}: context {v['context_id']} repeat {v['repeat']} — "
+                           f"{', '.join(v['components'])} differ across {', '.join(v['values'][:6])}"
+                           f"{' …' if len(v['values']) > 6 else ''}" for v in bad[:20]]
+    if not rows:
+        return []
+    return ["## Isolation certificate", "",
+            "Every value of one (context, repeat) must share the instruction, the initial robot state and object pose, "
+            "the episode seed, every other factor's value and the calibration of the cameras the factor does not move.",
+            "", *_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows), *violations, ""]
+
+
 def _extremes(layouts: dict[str, dict]) -> list[str]:
     lines = ["## Values furthest from their context mean (signed deviation ×100; SR ×100)", ""]
     for name, layout in layouts.items():
@@ -408,7 +433,7 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
     lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _context_factors(layouts) + _diagnostics(layouts) + _extremes(layouts) + _videos(metrics, layouts)
+              + _context_factors(layouts) + _diagnostics(layouts) + _isolation(layouts) + _extremes(layouts) + _videos(metrics, layouts)
               + agents_markdown(metrics.get("agents", {})) + _provenance(metrics.get("sources", [])))
     lines += ["## Plots", ""]
     for name, reason in plots.items():

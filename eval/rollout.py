@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from eval import isolation
 from eval.policy_server import RemotePolicy, ServerHandle
 from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy_batch
 from policies.errors import PolicyUnavailable
@@ -108,6 +109,8 @@ class _Running:
     success: bool = False
     info: dict = field(default_factory=dict)
     error: str = ""
+    # The isolation certificate's hashes (eval/isolation.py), taken right after the reset.
+    isolation: str = ""
 
 
 class EvalWorker:
@@ -180,7 +183,7 @@ class EvalWorker:
         start = time.perf_counter()
         obs, _ = env.reset(seed=seed, options={"instance": instance})
         ep = _Running(index, work, seed, start, obs, {c: [] for c in env.cameras} if self.spec.record_media else {},
-                      {c: [] for c in env.cameras} if work.video else {})
+                      {c: [] for c in env.cameras} if work.video else {}, isolation=isolation.record(env, seed))
         try:
             self._call_policy(self.batch.reset, slot, Episode.of(env, seed))
         except PolicyFailed as exc:
@@ -225,7 +228,8 @@ class EvalWorker:
                                         or f"{load_task(self.spec.task).timeout_reason} within {env.max_steps} steps")
         row = {**record, "repeat": ep.work.repeat, "episode_seed": ep.seed, "success": bool(ep.success),
                "steps": env.steps, "duration_s": time.perf_counter() - ep.start,
-               "policy": self.spec.policy.name or self.batch.name, "failure_reason": reason}
+               "policy": self.spec.policy.name or self.batch.name, "failure_reason": reason,
+               "isolation": ep.isolation}
         # A policy's own columns (VLM usage, the refined instruction, ...).
         row |= {k: v for k, v in self.batch.episode_record(slot).items() if k not in row}
         result = EpisodeResult(row)

@@ -69,6 +69,10 @@ class Factor:
     # The paper's seven factors are always in an instance's canonical JSON (its id); a factor added
     # later is there only when set away from its baseline, so every published id stays the same.
     always_in_id: bool = False
+    # What this factor's values may change besides the factor itself, among what the isolation certificate
+    # checks stays fixed across the values of one (context, repeat) (eval/isolation.py COMPONENTS): the
+    # cameras it moves (`camera:front`), `object_height` (a scaled object rests at its own half-height).
+    alters: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in FACTOR_KINDS:

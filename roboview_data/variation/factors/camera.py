@@ -137,6 +137,9 @@ class PullBack(_CameraApplier):
                 self.scene.set_camera(apply_distance(self._current(name), k))
 
 
+# The cameras these factors move: what the isolation certificate lets differ across their values.
+MOVED = tuple(f"camera:{name}" for name in PERTURBED_CAMERAS)
+
 CAMERA_POSE = register_factor(Factor(
     name="camera_pose",
     kind="visual",
@@ -147,6 +150,7 @@ CAMERA_POSE = register_factor(Factor(
     title="Camera Pose",
     bind=OrbitalPose,
     always_in_id=True,
+    alters=MOVED,
 ))
 CAMERA_EULER = register_factor(Factor(
     name="camera_euler",
@@ -157,6 +161,7 @@ CAMERA_EULER = register_factor(Factor(
     title="Camera Euler",
     bind=EulerTurn,
     always_in_id=True,
+    alters=MOVED,
 ))
 DIST_SCALE = register_factor(Factor(
     name="dist_scale",
@@ -167,4 +172,5 @@ DIST_SCALE = register_factor(Factor(
     title="Dist Scale",
     bind=PullBack,
     always_in_id=True,
+    alters=MOVED,
 ))

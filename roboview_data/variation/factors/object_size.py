@@ -67,5 +67,5 @@ class ObjectScale:
 OBJECT_SIZE = register_factor(Factor(
     name="object_size", kind="visual", values=VALUES, baseline="1.0", title="Object size",
     doc="Uniform scale of the object (0.7–1.3); its mass stays 60 g.",
-    bind=ObjectScale, extend_spec=add_meshes,
+    bind=ObjectScale, extend_spec=add_meshes, alters=("object_height",),
 ))
