@@ -62,6 +62,8 @@ from roboview_data.variation.factors import FACTORS
 log = logging.getLogger(__name__)
 
 EPSILON = 1e-6
+# Exceedances that stop a sequential Monte Carlo p-value (Besag–Clifford): its relative error is ≈ 1/√h.
+SEQUENTIAL_H = 20
 Z95 = 1.959963984540054  # standard normal 97.5 % quantile
 # Columns the metrics read; the rest of the episode record is carried along untouched.
 METRIC_COLUMNS = ("policy", "split", "factor", "value", "context_id", "instance_id", "repeat", "success")
@@ -80,12 +82,18 @@ class MetricsConfig:
     n_glm: int = 200
     # Seed of the permutation and bootstrap generators (one stream per split and purpose).
     seed: int = 0
+    # Most within-block permutations behind p_value_cv: beyond the first n_perm, more are drawn (n_perm at a
+    # time) while fewer than SEQUENTIAL_H reach the observed CV (Besag–Clifford), so a strong bias gets a
+    # p-value down to 1 / (max_perm + 1) instead of 1 / (n_perm + 1).
+    max_perm: int = 20_000
 
     def __post_init__(self) -> None:
         if not self.epsilon > 0:
             raise ValueError(f"epsilon={self.epsilon} must be > 0 (it keeps CV finite at SR = 0)")
         if self.n_perm < 1 or self.n_glm < 1:
             raise ValueError(f"n_perm={self.n_perm} and n_glm={self.n_glm} must be ≥ 1")
+        if self.max_perm < self.n_perm:
+            raise ValueError(f"max_perm={self.max_perm} must be ≥ n_perm={self.n_perm}")
         if self.seed < 0:
             raise ValueError(f"seed={self.seed} must be ≥ 0")
 
@@ -205,8 +213,8 @@ def _interval(successes: int, n: int) -> list[float] | None:
 
 def _lrt_fields(test: stats.LRT | None) -> dict[str, Any]:
     if test is None:
-        return {"p_value": None, "p_value_method": None, "lrt": None}
-    return {"p_value": test.p_value, "p_value_method": test.method,
+        return {"p_value": None, "p_value_method": None, "p_value_at_floor": None, "lrt": None}
+    return {"p_value": test.p_value, "p_value_method": test.method, "p_value_at_floor": test.at_floor,
             "lrt": {"statistic": test.statistic, "df": test.df}}
 
 
@@ -252,19 +260,22 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
                            "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
                            "sr": k / n, "sr_ci95": _interval(k, n), "cv": None, "cv_null": None,
                            "cv_excess": None, "cv_excess_ci95": None, **_lrt_fields(None), "p_value_cv": None,
-                           "per_value": per_value}
+                           "p_value_cv_draws": None, "p_value_cv_at_floor": None, "per_value": per_value}
     if k == 0:
         return out
 
     def statistic(sr: np.ndarray) -> np.ndarray:
         return conditional_cv(sr, ctx, cfg.epsilon).mean(axis=-1)
 
-    permuted = table.permuted_k(["context_id"], cfg.n_perm, _rng(cfg, split, "perm"))
+    rng = _rng(cfg, split, "perm")
+    permuted = table.permuted_k(["context_id"], cfg.n_perm, rng)
     null = statistic(permuted / table.n)
     out["cv"] = float(statistic(sr_cell))
     out["cv_null"] = float(null.mean())
     out["cv_excess"] = excess(out["cv"], out["cv_null"])
-    out["p_value_cv"] = stats.permutation_p(out["cv"], null)
+    mc = stats.sequential_p(out["cv"], null, lambda b: statistic(table.permuted_k(["context_id"], b, rng) / table.n),
+                            SEQUENTIAL_H, cfg.max_perm)
+    out |= {"p_value_cv": mc.p_value, "p_value_cv_draws": mc.draws, "p_value_cv_at_floor": mc.at_floor}
     value_codes = table.codes([factor])
     out |= _lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
     return out

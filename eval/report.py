@@ -125,8 +125,13 @@ def pct_ci(ci: Sequence[float] | None) -> str:
     return "" if ci is None else f" [{pct(ci[0])}, {pct(ci[1])}]"
 
 
-def p_fmt(p: float | None) -> str:
-    return "N/A" if p is None else f"{p:.4f}"
+def p_fmt(p: float | None, at_floor: bool | None = False) -> str:
+    """A p-value as printed: 4 decimals, scientific below 1e-4, and "≤ x" where a Monte Carlo floor binds
+    (no draw reached the statistic: the true p may be smaller)."""
+    if p is None:
+        return "N/A"
+    text = f"{p:.4f}" if p >= 1e-4 else f"{p:.1e}"
+    return f"≤ {text}" if at_floor else text
 
 
 def _row(cells: Sequence[str]) -> str:
@@ -200,7 +205,7 @@ def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list
         for s in splits:
             m = layout["splits"].get(s)
             row += ["—"] * 4 if m is None else [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]),
-                                                pct(m["cv_excess"]), p_fmt(m["p_value"])]
+                                                pct(m["cv_excess"]), p_fmt(m["p_value"], m.get("p_value_at_floor"))]
         if task is None:
             row += [pct(layout["average"]["sr"]), pct(layout["average"]["cv"]), pct(layout["average"]["cv_excess"])]
         else:
@@ -310,7 +315,9 @@ def _diagnostics(layouts: dict[str, dict]) -> list[str]:
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():
             rows.append([name, split, str(m["n_instances"]), str(m["n_episodes"]), str(m["n_contexts"]),
-                         str(m["n_contexts_all_failed"]), m["p_value_method"] or "—", p_fmt(m["p_value_cv"])])
+                         str(m["n_contexts_all_failed"]), m["p_value_method"] or "—",
+                         p_fmt(m["p_value_cv"], m.get("p_value_cv_at_floor"))
+                         + (f" ({m['p_value_cv_draws']} draws)" if m.get("p_value_cv_draws") else "")])
     control = [f"- {name}: baseline instance agrees across splits in {pct(c['agreement'])} % of {c['n_pairs']} "
                f"(context, repeat) pairs; baseline SR by split: "
                + ", ".join(f"{s} {pct(v)}" for s, v in c["sr_by_split"].items())

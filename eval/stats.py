@@ -28,6 +28,7 @@ from threadpoolctl import threadpool_limits
 SPARSE_EXPECTED = 5.0  # Cochran: expected counts below this make χ² approximations doubtful
 SPARSE_FRACTION = 0.2  # ... in more than this fraction of the cells
 _PERM_TOLERANCE = 1e-9  # float noise when a permuted table reproduces the observed statistic
+MAX_BATCH = 20_000  # null draws held at once by a sequential p-value
 
 
 def design_matrix(codes: Sequence[np.ndarray]) -> np.ndarray:
@@ -86,6 +87,8 @@ class LRT:
     df: int
     p_value: float
     method: str  # "asymptotic" (χ²), "permutation" or "parametric_bootstrap"
+    # Calibrated by draws none of which reached the statistic: p is the floor 1 / (draws + 1).
+    at_floor: bool = False
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")  # hundreds of small refits: threads only contend
@@ -116,12 +119,53 @@ def factor_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarr
     null = np.array([max(0.0, 2.0 * (binomial_llf(kp[keep], n[keep], full, start)[0]
                                      - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]))
                      for kp in permuted_k])
-    return LRT(observed, df, permutation_p(observed, null), "permutation")
+    return LRT(observed, df, permutation_p(observed, null), "permutation", not _reaches(observed, null).any())
+
+
+def _reaches(observed: float, null: np.ndarray) -> np.ndarray:
+    return null >= observed - _PERM_TOLERANCE * max(1.0, abs(observed))
 
 
 def permutation_p(observed: float, null: np.ndarray) -> float:
     """(1 + #{null ≥ observed}) / (1 + B): never 0, exact for exchangeable draws."""
-    return float((1 + np.sum(null >= observed - _PERM_TOLERANCE * max(1.0, abs(observed)))) / (1 + len(null)))
+    return float((1 + np.sum(_reaches(observed, null))) / (1 + len(null)))
+
+
+@dataclass(frozen=True)
+class MonteCarloP:
+    """A Monte Carlo p-value and what it rests on. `at_floor`: no draw reached the observed statistic, so
+    the true p may be smaller than `p_value` = 1 / (draws + 1); report it as "≤ p_value"."""
+
+    p_value: float
+    draws: int
+    exceedances: int
+
+    @property
+    def at_floor(self) -> bool:
+        return self.exceedances == 0
+
+
+def sequential_p(observed: float, first: np.ndarray, more, h: int = 20, max_draws: int = 100_000) -> MonteCarloP:
+    """Besag & Clifford's (1991) sequential Monte Carlo p-value.
+
+    Null statistics are drawn a batch at a time (`first`, then `more(size)`, each batch as large as all before
+    it, at most MAX_BATCH, until `max_draws`) and
+    sampling stops at the draw L that brings the h-th one reaching `observed`: p = h / L. If `max_draws` come
+    first with s < h reaching it, p = (s + 1) / (max_draws + 1), the fixed-B p-value. Both are valid
+    p-values; a weak effect stops after a few draws, a strong one draws up to `max_draws`, so the floor
+    1 / (max_draws + 1) binds only where the evidence is that strong."""
+    seen = exceed = 0
+    batch = first
+    while True:
+        hits = np.cumsum(_reaches(observed, batch))
+        if exceed + (hits[-1] if len(hits) else 0) >= h:
+            at = int(np.searchsorted(hits, h - exceed)) + 1  # draws of this batch up to the h-th exceedance
+            return MonteCarloP(h / (seen + at), seen + at, h)
+        seen += len(batch)
+        exceed += int(hits[-1]) if len(hits) else 0
+        if seen >= max_draws or more is None:
+            return MonteCarloP((exceed + 1) / (seen + 1), seen, exceed)
+        batch = more(min(max(len(first), seen), MAX_BATCH, max_draws - seen))  # doubling, memory-bounded
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")
@@ -150,7 +194,8 @@ def interaction_lrt(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray, 
     if not is_sparse(n[keep], p_add):
         return LRT(observed, int(df), float(stats.chi2.sf(observed, df)), "asymptotic"), draws
     null = np.array([lrt_statistic(d[keep], n[keep], full, additive) for d in draws])
-    return LRT(observed, int(df), permutation_p(observed, null), "parametric_bootstrap"), draws
+    return LRT(observed, int(df), permutation_p(observed, null), "parametric_bootstrap",
+               not _reaches(observed, null).any()), draws
 
 
 @dataclass(frozen=True)

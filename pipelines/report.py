@@ -34,6 +34,9 @@ class ReportConfig:
     n_glm: int = 200
     # Seed of the bootstrap and permutation generators.
     seed: int = 0
+    # Most permutations behind p_value_cv: more than n_perm are drawn while fewer than 20 reach the observed
+    # CV (Besag–Clifford sequential p-value), so a strong bias resolves down to 1 / (max_perm + 1).
+    max_perm: int = 20_000
     # Draw the PNG plots (false: metrics.json and report.md only).
     plots: bool = True
 
@@ -58,7 +61,7 @@ class ReportConfig:
     @property
     def metrics_config(self) -> MetricsConfig:
         try:
-            return MetricsConfig(self.epsilon, self.n_perm, self.n_glm, self.seed)
+            return MetricsConfig(self.epsilon, self.n_perm, self.n_glm, self.seed, self.max_perm)
         except ValueError as exc:
             raise ValueError(f"--{exc}") from None
 

@@ -21,7 +21,7 @@ from eval.metrics import (
 )
 
 EPS = 1e-6
-FAST = MetricsConfig(n_perm=200, n_glm=50)
+FAST = MetricsConfig(n_perm=200, n_glm=50, max_perm=200)
 
 
 def episodes(cells: dict[tuple[str, str], list[int]], split: str = "color", factor: str = "color",
@@ -220,7 +220,7 @@ def test_paper_sized_split():
     rng = np.random.default_rng(0)
     p = rng.random(1551)
     table = episodes({(f"v{i % 141}", f"c{i // 141}"): list(rng.random(5) < p[i]) for i in range(1551)})
-    m = split_metrics(table, MetricsConfig(n_glm=20))  # 1,000 permutations, 20 GLM refits
+    m = split_metrics(table, MetricsConfig(n_glm=20, max_perm=1000))  # 1,000 permutations, 20 GLM refits
     # Success varies per cell (value × context), so both tests see it; the GLM's resolution is 1/21.
     assert m["n_instances"] == 1551 and m["p_value_cv"] < 0.01
     assert m["p_value"] == pytest.approx(1 / 21) and m["p_value_method"] == "permutation"

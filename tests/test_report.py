@@ -132,7 +132,7 @@ def _numbers(obj) -> set[str]:
         return set()
     if isinstance(obj, int):
         return {str(obj)}
-    return {f"{100 * obj:.2f}", f"{obj:.4f}"}
+    return {f"{100 * obj:.2f}", f"{obj:.4f}", f"{obj:.1e}"}
 
 
 def test_every_number_in_report_tables_comes_from_metrics(report):
@@ -143,7 +143,7 @@ def test_every_number_in_report_tables_comes_from_metrics(report):
             if line.startswith("| ") and not line.startswith("| ---") and i > 0 and lines[i - 1].startswith("| ")
             and not (i + 1 < len(lines) and lines[i + 1].startswith("| ---"))]
     cells = [cell for line in body for cell in line.split(" | ")[1:]]
-    found = [n for cell in cells for n in re.findall(r"-?\d+\.\d+|-?\d+", cell)]
+    found = [n for cell in cells for n in re.findall(r"-?\d+\.\d+e[+-]\d+|-?\d+\.\d+|-?\d+", cell)]
     assert found and set(found) <= allowed
 
 

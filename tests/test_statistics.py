@@ -17,7 +17,7 @@ from eval.simulate import simulate_additive_factorial, simulate_split
 from eval.stats import lrt_power, repeats_needed
 from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
 
-SIM = MetricsConfig(n_perm=100, n_glm=40)
+SIM = MetricsConfig(n_perm=100, n_glm=40, max_perm=100)  # fixed-B: what these simulations study
 
 
 def run_many(n_sims: int, seed: int, **design) -> pd.DataFrame:
@@ -148,3 +148,42 @@ def test_paired_comparison_of_two_policies():
     assert diff["p_sr"] == pytest.approx(chi2.sf(39**2 / 40, 1))
     # Swapping whole instances puts all 8 of v0's on one side with probability 2/256: p can reach it.
     assert diff["delta_cv_excess"] > 0.3 and diff["p_cv_excess"] < 0.05
+
+
+def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
+    from scipy import stats as sps
+
+    from eval.stats import sequential_p
+
+    rng = np.random.default_rng(7)
+
+    def p_of(observed, max_draws=100_000):
+        return sequential_p(observed, rng.normal(size=1000), lambda b: rng.normal(size=b), 20, max_draws)
+
+    # Known truth 1: the observed statistic drawn from the null itself -> P(p ≤ α) ≤ α.
+    ps = np.array([p_of(x).p_value for x in rng.normal(size=3000)])
+    for alpha in (0.01, 0.05, 0.2):
+        assert np.mean(ps <= alpha) <= alpha + 3 * math.sqrt(alpha * (1 - alpha) / len(ps))
+    assert within_binomial(float(np.mean(ps <= 0.5)), 0.5, len(ps))  # not conservative either
+    # Known truth 2: a statistic whose exact p is 1e-3 is resolved (h = 20: relative error ≈ 22 %), beyond
+    # the fixed 1,000-draw floor and after about h / p draws, not the maximum.
+    estimates = [p_of(sps.norm.isf(1e-3)) for _ in range(20)]
+    assert 5e-4 < np.median([e.p_value for e in estimates]) < 2e-3
+    assert all(10_000 < e.draws < 100_000 and not e.at_floor for e in estimates)
+    # Beyond what any draw reaches: the floor 1 / (max_draws + 1), flagged.
+    extreme = p_of(10.0, max_draws=50_000)
+    assert extreme.at_floor and extreme.draws == 50_000 and extreme.p_value == pytest.approx(1 / 50_001)
+
+
+def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_binds():
+    from eval.report import p_fmt
+
+    frame, _ = simulate_split(np.random.default_rng(3), 9, 4, 5, 2.0, 0.7)
+    m = split_metrics(frame)  # default: up to 20,000 permutations
+    assert m["p_value_cv"] < 1e-4 and m["p_value_cv_draws"] == 20_000 and m["p_value_cv_at_floor"]
+    assert p_fmt(m["p_value_cv"], m["p_value_cv_at_floor"]) == "≤ 5.0e-05"
+    assert m["p_value_method"] == "permutation" and m["p_value_at_floor"]  # the GLM calibration's floor (200 draws)
+    assert p_fmt(m["p_value"], m["p_value_at_floor"]) == "≤ 0.0050"
+    null, _ = simulate_split(np.random.default_rng(4), 9, 4, 5, 0.0, 0.7)
+    quiet = split_metrics(null)
+    assert quiet["p_value_cv_draws"] < 1000 and not quiet["p_value_cv_at_floor"]  # stops early when p is large
