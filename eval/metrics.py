@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import isolation, stats
+from eval import isolation, ranking, stats
 from roboview_data.variation.factors import FACTORS
 
 log = logging.getLogger(__name__)
@@ -424,9 +424,13 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     # Paired comparisons see only the blocks each policy's certificate verified.
     certified = pd.concat([isolation.drop_violations(rows, isolation.verify(rows))
                            for _, rows in episodes.groupby("policy", sort=False)])
-    return {"epsilon": cfg.epsilon, "resampling": _resampling(cfg),
-            "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
-            "comparisons": compare_policies(certified, cfg)}
+    out = {"epsilon": cfg.epsilon, "resampling": _resampling(cfg),
+           "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
+           "comparisons": compare_policies(certified, cfg)}
+    ranked = ranking.rankings(out, certified)
+    if ranked is not None:  # three or more policies
+        out["rankings"] = ranked
+    return out
 
 
 def _resampling(cfg: MetricsConfig) -> dict[str, int]:

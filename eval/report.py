@@ -292,6 +292,25 @@ def _comparisons(metrics: dict[str, Any]) -> list[str]:
                      "p (paired permutation)"], rows), ""]
 
 
+def _rankings(metrics: dict[str, Any]) -> list[str]:
+    """Per split and overall: policies best first with their significance groups and possible ranks."""
+    ranked = metrics.get("rankings")
+    if not ranked:
+        return []
+    lines = ["## Rankings", "",
+             "Best first. Policies sharing a letter are not significantly different (paired tests, Holm-adjusted "
+             f"over the pairs, α = {ranked['alpha']}); ranks: the range the tests leave possible.", ""]
+    rows = []
+    for split, entry in [*ranked["splits"].items(), ("overall", ranked["overall"])]:
+        for metric, table in entry.items():
+            label = {"sr": "SR", "cv_excess": "cv_excess", "cv_excess_mean": "mean cv_excess (no overall test)"}[metric]
+            rows.append([split, label, ", ".join(
+                f"{r['policy']} {pct(r['value'])} ({r['group']}; {r['rank_range'][0]}"
+                + (f"–{r['rank_range'][1]}" if r['rank_range'][1] != r['rank_range'][0] else "") + ")"
+                for r in table)])
+    return lines + _table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows) + [""]
+
+
 def _context_factors(layouts: dict[str, dict]) -> list[str]:
     """SR per instruction (and shape, initial position) over that factor's own context subspace."""
     found = {name: layout.get("context_factors") or {} for name, layout in layouts.items()}
@@ -440,8 +459,9 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
     lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _context_factors(layouts) + _diagnostics(layouts) + _isolation(layouts) + _extremes(layouts) + _videos(metrics, layouts)
-              + agents_markdown(metrics.get("agents", {})) + _provenance(metrics.get("sources", [])))
+              + _rankings(metrics) + _context_factors(layouts) + _diagnostics(layouts) + _isolation(layouts)
+              + _extremes(layouts) + _videos(metrics, layouts) + agents_markdown(metrics.get("agents", {}))
+              + _provenance(metrics.get("sources", [])))
     lines += ["## Plots", ""]
     for name, reason in plots.items():
         lines.append(f"![{name}]({name})" if reason is None else f"- {name} skipped: {reason}")
