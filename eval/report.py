@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from eval import provenance, videos
+from eval.adaptive import read_record
 from eval.agents import agents_markdown, describe_agents
 from eval.context import context_breakdown
 from eval.metrics import (
@@ -81,7 +82,8 @@ def load_results(paths: Sequence[str | Path],
     missing = [str(p) for p in paths if not p.is_file()]
     if missing:
         raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
-    sources = [{"path": str(p), VERSION_KEY: read_version(p), "provenance": provenance.read(p.parent)} for p in paths]
+    sources = [{"path": str(p), VERSION_KEY: read_version(p), "provenance": provenance.read(p.parent),
+                **({"adaptive": rec} if (rec := read_record(p.parent)) else {})} for p in paths]
     tables = []
     for path in paths:
         try:
@@ -107,6 +109,8 @@ def load_results(paths: Sequence[str | Path],
             frame["video"] = frame["video"].map(
                 lambda v, root=path.parent.resolve(): ",".join(str(root / p) for p in v.split(",")) if isinstance(v, str) and v else None)
         frames.append(frame)
+        source = sources[len(frames) - 1]
+        source["policies"] = sorted(map(str, frame["policy"].unique()))
     episodes = pd.concat(frames, ignore_index=True)
     dup = episodes.duplicated(["policy", "instance_id", "repeat"])
     if dup.any():
@@ -348,6 +352,27 @@ def _diagnostics(layouts: dict[str, dict]) -> list[str]:
             "the color, camera_euler and dist_scale splits.", *control, ""]
 
 
+def _adaptive(layouts: dict[str, dict]) -> list[str]:
+    """Splits evaluated adaptively: rounds, episodes and why each stopped."""
+    rows = [[name, split, str(a["rounds"]), str(a["episodes"]), a["stopped"],
+             "—" if a["lrt"] is None else f"{a['lrt']:.2f}",
+             "—" if a["efficacy_boundary"] is None else f"{a['efficacy_boundary']:.2f}",
+             "—" if a["futility_boundary"] is None else f"{a['futility_boundary']:.2f}"]
+            for name, layout in layouts.items() for split, m in layout["splits"].items() if (a := m.get("adaptive"))]
+    if not rows:
+        return []
+    design = next(m["adaptive"]["design"] for layout in layouts.values() for m in layout["splits"].values()
+                  if m.get("adaptive"))
+    return ["## Adaptive sampling", "",
+            f"Repeats ran in rounds; from round {design['min_rounds']} on, after each round, a group-sequential LRT decided "
+            f"(α = {design['alpha']} over every look, futility against a bias of logit SD τ = {design['tau']} at power "
+            f"{design['power']}, at most {design['max_repeats']} rounds; docs/adaptive.md). The sampling was adaptive: "
+            "the fixed-sample statistics in the tables above treat the episodes run as a fixed sample, and their "
+            "p-values are approximate; the stop below is the sequential test's decision.", "",
+            *_table(["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound", "futility bound"],
+                    rows), ""]
+
+
 def _isolation(layouts: dict[str, dict]) -> list[str]:
     """Per split: how many (context, repeat) blocks were verified to differ only in the factor (eval/isolation.py)."""
     rows, violations = [], []
@@ -459,7 +484,8 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
     lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _rankings(metrics) + _context_factors(layouts) + _diagnostics(layouts) + _isolation(layouts)
+              + _rankings(metrics) + _context_factors(layouts) + _adaptive(layouts) + _diagnostics(layouts)
+              + _isolation(layouts)
               + _extremes(layouts) + _videos(metrics, layouts) + agents_markdown(metrics.get("agents", {}))
               + _provenance(metrics.get("sources", [])))
     lines += ["## Plots", ""]
@@ -476,6 +502,12 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     metrics = compute_all_metrics(episodes, cfg)
     if sources is not None:
         metrics["sources"] = sources
+        for source in sources:  # adaptive runs: when and why each split stopped
+            if source.get("adaptive") and len(source.get("policies", [])) == 1:
+                layout = policy_layouts(metrics).get(source["policies"][0], {})
+                for split, record in source["adaptive"]["splits"].items():
+                    if split in layout.get("splits", {}):
+                        layout["splits"][split]["adaptive"] = record | {"design": source["adaptive"]["design"]}
     for name, layout in policy_layouts(metrics).items():  # success by instruction, shape, initial position
         layout["context_factors"] = context_breakdown(episodes[episodes["policy"] == name], cfg)
     agents = describe_agents(episodes)

@@ -101,6 +101,15 @@ class EvalConfig:
     # Camera image side (pixels); 0: the policy's own (a checkpoint's input size), else 224.
     # A size that disagrees with the checkpoint's fails before any rollout.
     image_size: int = 0
+    # Adaptive evaluation (docs/adaptive.md): repeats run in rounds over every instance of a split; from the
+    # second round on, a group-sequential likelihood-ratio test stops the split for "bias" (type-I error
+    # ≤ alpha over every look), for "no_bias" (a bias of logit SD tau would have shown, at the target power)
+    # or at max_repeats. Two-factor splits run their fixed repeats.
+    adaptive: bool = False
+    max_repeats: int = 10
+    alpha: float = 0.05
+    tau: float = 0.3
+    power: float = 0.8
 
     def __post_init__(self) -> None:
         if self.image_size < 0:
@@ -120,6 +129,14 @@ class EvalConfig:
             raise ValueError(f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}")
         self.split_repeat_table  # parses split_repeats now, so a typo fails before any work
         self.video_mode  # parses videos now
+        if self.adaptive:
+            self.design  # validates alpha, tau, power, max_repeats
+
+    @property
+    def design(self):
+        from eval.adaptive import Design
+
+        return Design(alpha=self.alpha, tau=self.tau, power=self.power, max_repeats=self.max_repeats)
 
     @property
     def video_mode(self) -> str | int:
@@ -195,28 +212,29 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
                          f"checkpoint: act, pi0, pi05, smolvla); {policy.type!r} has none: drop the flag")
     if cfg.eval.policy_server and cfg.eval.backend != "local":
         raise ValueError("--eval.policy_server=true runs with --eval.backend=local only")
-    repeats = {split: cfg.eval.repeats_for(split) for split in bench.splits}
+    adaptive = {split for split, items in bench.splits.items()
+                if cfg.eval.adaptive and items and "|" not in items[0].record["factor"]}
+    repeats = {split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
+               for split in bench.splits}
     tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
     image_size = resolve_image_size(policy, cfg.eval.image_size)
     run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
                 "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
                 "policy_options": policy.options(), "n_repeats": repeats,
-                "max_steps": cfg.eval.max_steps, "image_size": image_size}
+                "max_steps": cfg.eval.max_steps, "image_size": image_size,
+                **({"adaptive": {"alpha": cfg.eval.alpha, "tau": cfg.eval.tau, "power": cfg.eval.power,
+                                 "max_repeats": cfg.eval.max_repeats}} if cfg.eval.adaptive else {})}
     with flag_errors("--output_dir"):
         store = EpisodeStore(Path(cfg.output_dir), run_info)
-    work = []
-    for split, items in bench.splits.items():
-        chosen = select_items(items, cfg.eval.contexts, cfg.eval.limit)
-        work += [WorkItem(item, r) for item in chosen for r in range(repeats[split])]
-    todo = [w for w in work if not store.done(w.key)]
+    chosen = {split: select_items(items, cfg.eval.contexts, cfg.eval.limit) for split, items in bench.splits.items()}
+    work = [WorkItem(item, r) for split, items in chosen.items() for item in items for r in range(repeats[split])]
+    done = sum(store.done(w.key) for w in work)
     mode = cfg.eval.video_mode
-    if mode:
-        todo = [WorkItem(w.item, w.repeat, video=videos.filmed(mode, i)) for i, w in enumerate(todo)]
     entry = provenance.start_entry(bench.version, policy.checkpoint)
     if policy.served_by() is not None:
         entry["policy_server"] = policy.served_by()
     provenance.record(Path(cfg.output_dir), entry)
-    log.info("%d episodes planned, %d already done, %d to run", len(work), len(work) - len(todo), len(todo))
+    log.info("%d episodes planned%s, %d already done", len(work), " at most (adaptive)" if adaptive else "", done)
 
     rerun = None
     if cfg.eval.rerun:
@@ -226,7 +244,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
     threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
 
-    def streams():
+    def streams(todo: list[WorkItem]):
         # One pool per task (each worker holds one task's env and the policy), tasks one after another.
         for task in tasks or [DEFAULT_TASK]:
             spec = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None,
@@ -245,43 +263,87 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
             finally:
                 inner.close()
 
-    stream = streams()
-
     per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     for row in store.rows.values():
         per_split[row["split"]][0] += row["success"]
         per_split[row["split"]][1] += 1
-    bar = tqdm(total=len(work), initial=len(work) - len(todo), desc=f"eval {policy.type}", unit="ep",
-               dynamic_ncols=True)
+    bar = tqdm(total=len(work), initial=done, desc=f"eval {policy.type}", unit="ep", dynamic_ncols=True)
     t0 = time.perf_counter()
-    new = 0
+    counts = {"new": 0, "started": 0}
+
+    def execute(todo: list[WorkItem]) -> None:
+        """Run `todo`, journalling each row as it finishes (videos for the episodes `--eval.videos` films)."""
+        if mode:
+            todo = [WorkItem(w.item, w.repeat, video=videos.filmed(mode, counts["started"] + i))
+                    for i, w in enumerate(todo)]
+        counts["started"] += len(todo)
+        stream = streams(todo)
+        try:
+            for _, result in stream:
+                if result.video:  # written before the row is journalled: a listed video exists
+                    paths = [videos.relative_path(result.row, cam) for cam in result.video]
+                    for path, frames in zip(paths, result.video.values()):
+                        videos.write_mp4(Path(cfg.output_dir) / path, frames, VIDEO_FPS)
+                    result.row["video"] = ",".join(paths)
+                store.add(result.row)
+                if rerun is not None:
+                    rerun.log_episode(result)
+                stats = per_split[result.row["split"]]
+                stats[0] += result.row["success"]
+                stats[1] += 1
+                counts["new"] += 1
+                bar.update(1)
+                bar.set_postfix({s: f"{k / n:.0%}" for s, (k, n) in per_split.items()})
+        finally:
+            stream.close()
+
     try:
-        for _, result in stream:
-            if result.video:  # written before the row is journalled: a listed video exists
-                paths = [videos.relative_path(result.row, cam) for cam in result.video]
-                for path, frames in zip(paths, result.video.values()):
-                    videos.write_mp4(Path(cfg.output_dir) / path, frames, VIDEO_FPS)
-                result.row["video"] = ",".join(paths)
-            store.add(result.row)
-            if rerun is not None:
-                rerun.log_episode(result)
-            stats = per_split[result.row["split"]]
-            stats[0] += result.row["success"]
-            stats[1] += 1
-            new += 1
-            bar.update(1)
-            bar.set_postfix({s: f"{k / n:.0%}" for s, (k, n) in per_split.items()})
+        if adaptive:
+            run_rounds(cfg, chosen, repeats, adaptive, store, execute, bar)
+        else:
+            execute([w for w in work if not store.done(w.key)])
     finally:
-        stream.close()
         bar.close()
         store.close()
         if rerun is not None:
             rerun.close()
-        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": new})
+        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": counts["new"]})
     total = len(store.rows)
     successes = sum(r["success"] for r in store.rows.values())
-    return EvaluateResult(Path(cfg.output_dir), total, new, successes / total if total else float("nan"),
+    return EvaluateResult(Path(cfg.output_dir), total, counts["new"], successes / total if total else float("nan"),
                           time.perf_counter() - t0)
+
+
+def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, int], adaptive: set[str],
+               store: EpisodeStore, execute, bar) -> None:
+    """Adaptive evaluation: round r runs repeat r of every instance of the splits still running (and of the
+    fixed splits); before each round the splits' test decides who stops. A rerun recomputes the same
+    decisions from the rows already written, so it resumes mid-split where it stopped."""
+    from eval.adaptive import decide_split, write_record
+
+    design = cfg.eval.design
+    out = Path(cfg.output_dir)
+    active = set(adaptive)
+    records: dict[str, dict] = {}
+    for r in range(design.max_repeats + 1):
+        for split in sorted(active):
+            rows = [store.rows[(item.record["instance_id"], rep)] for item in chosen[split] for rep in range(r)]
+            decision = decide_split(rows, r, design)
+            if decision.stopped:
+                records[split] = decision.record(len(rows))
+                active.discard(split)
+                bar.total -= len(chosen[split]) * (design.max_repeats - r)
+                bar.refresh()
+                log.info("split %s: stopped after %d round(s): %s (LRT %s)", split, r, decision.stopped,
+                         "—" if decision.statistic is None else f"{decision.statistic:.1f}")
+                write_record(out, design, records)
+        if r == design.max_repeats:
+            break
+        execute([WorkItem(item, r) for split, items in chosen.items() for item in items
+                 if (split in active or (split not in adaptive and r < repeats[split]))
+                 and not store.done((item.record["instance_id"], r))])
+    execute([WorkItem(item, rep) for split, items in chosen.items() if split not in adaptive for item in items
+             for rep in range(design.max_repeats, repeats[split]) if not store.done((item.record["instance_id"], rep))])
 
 
 def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:

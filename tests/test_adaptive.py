@@ -1,0 +1,72 @@
+"""Adaptive evaluation: the group-sequential test keeps α over every look, saves episodes against the fixed
+design of equal power (simulation with known truth), and runs end to end with resume."""
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.adaptive import Design, decide, simulate
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from policies.base import policy_config
+
+
+def within(rate: float, level: float, n: int) -> bool:
+    return rate <= level + 3 * math.sqrt(level * (1 - level) / n)
+
+
+def test_type_one_error_stays_at_alpha_when_looking_after_every_round():
+    # 9 values × 4 contexts: sparse cells, where a χ²-calibrated look would reject 12 % of null splits.
+    result = simulate(9, 4, 0.7, 0.0, Design(alpha=0.05, tau=0.6, max_repeats=6), 150, seed=2)
+    assert within(result["rejection_rate"], 0.05, 150), result
+    assert result["stopped_no_bias"] > 0.5  # under no bias most splits stop early for futility
+
+
+def test_fewer_episodes_than_the_fixed_design_of_equal_power():
+    from eval.stats import lrt_power
+
+    # The paper's camera_pose shape (21 values × 11 contexts), a bias of logit SD 0.6, SR 0.7.
+    adaptive = simulate(21, 11, 0.7, 0.6, Design(alpha=0.05, tau=0.6, power=0.8, max_repeats=4), 30, seed=4)
+    assert adaptive["rejection_rate"] >= 0.85
+    # The fixed design reaching that power needs ≥ 3 repeats (asymptotic power, which flatters it: 2 give 0.88).
+    target = min(adaptive["rejection_rate"], 0.99)
+    fixed = next(n for n in range(1, 10) if lrt_power(21, 11, n, 0.6, 0.7) >= target)
+    assert fixed >= 3 and adaptive["mean_rounds"] <= 0.85 * fixed, (adaptive, fixed)
+
+
+def test_boundaries_decide_from_the_lrt():
+    design = Design(alpha=0.05, tau=0.6, max_repeats=4)
+    value = np.repeat(np.arange(6), 3)
+    context = np.tile(np.arange(3), 6)
+    strong = np.where(value < 3, 2, 0)  # half the values never succeed, half always: a bias by any test
+    assert decide(strong, np.full(18, 2), value, context, 2, design).stopped == "bias"
+    flat = np.ones(18, int)
+    assert decide(flat * 2, np.full(18, 2), value, context, 2, design).stopped == "no_bias"
+    assert decide(flat, np.full(18, 1), value, context, 1, design).stopped is None  # round 1 only trains
+    with pytest.raises(ValueError, match="alpha"):
+        Design(alpha=1.5)
+
+
+def test_an_adaptive_run_stops_splits_resumes_and_is_reported(tiny_benchmark, tmp_path):
+    from pipelines.report import ReportConfig
+    from pipelines.report import run as report
+
+    cfg = EvaluateConfig(BenchmarkConfig(str(tiny_benchmark), "color,color_x_camera_pose"), policy_config("expert"),
+                         EvalConfig(adaptive=True, max_repeats=4, n_repeats=2, num_workers=2, image_size=64,
+                                    max_steps=60, contexts=1), str(tmp_path / "ev"))
+    first = run(cfg)
+    record = json.loads((tmp_path / "ev" / "adaptive.json").read_text())
+    color = record["splits"]["color"]
+    # The expert succeeds everywhere: nothing depends on the color, futility stops it at the first look.
+    assert color["stopped"] == "no_bias" and color["rounds"] == 2 and color["lrt"] == 0.0
+    rows = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
+    assert rows.groupby("split")["repeat"].max().to_dict() == {"color": 1, "color_x_camera_pose": 1}
+    assert first.new_episodes == len(rows) == color["episodes"] + (rows["split"] == "color_x_camera_pose").sum()
+    assert run(cfg).new_episodes == 0  # a rerun recomputes the same decisions: nothing more to run
+    result = report(ReportConfig(results=str(tmp_path / "ev" / "episodes.parquet"), output_dir=str(tmp_path / "rep"),
+                                 n_perm=50, n_glm=10, plots=False))
+    assert result.metrics["splits"]["color"]["adaptive"]["stopped"] == "no_bias"
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "## Adaptive sampling" in text and "The sampling was adaptive" in text
