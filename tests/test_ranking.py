@@ -64,13 +64,13 @@ def test_equal_policies_are_split_no_more_often_than_alpha():
 
     rng = np.random.default_rng(5)
     claimed = 0
-    sims = 400
-    for _ in range(sims):  # four interchangeable policies, 60 paired episodes, SR 0.6
-        outcome = {name: rng.random(60) < 0.6 for name in "abcd"}
+    sims = 200
+    for _ in range(sims):  # three interchangeable policies, 60 paired episodes, SR 0.6
+        outcome = {name: rng.random(60) < 0.6 for name in "abc"}
         p = {frozenset((x, y)): paired_success_test(outcome[x], outcome[y])
-             for i, x in enumerate("abcd") for y in "abcd"[i + 1:]}
+             for i, x in enumerate("abc") for y in "abc"[i + 1:]}
         ranked = rank_table({n: float(o.mean()) for n, o in outcome.items()}, p, True)
-        claimed += any(r["rank_range"] != [1, 4] for r in ranked)
+        claimed += any(r["rank_range"] != [1, 3] for r in ranked)
     assert claimed / sims <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / sims)  # Holm: family-wise error ≤ α
 
 
