@@ -47,6 +47,7 @@ from eval.stats import factor_lrt, informative, is_sparse
 
 STOP_REASONS = ("bias", "no_bias", "max_repeats")
 PATHS = 20_000  # Monte Carlo paths behind each boundary
+PERMUTATION_BATCH = 100  # permuted tables per factor_lrt call in a sparse look
 
 
 @dataclass(frozen=True)
@@ -140,21 +141,25 @@ def permutation_confirms(k: np.ndarray, n: np.ndarray, value: np.ndarray, contex
 
     Under "no bias" the successes of a context are exchangeable across its episodes, so a permuted table
     deals each context's successes among its cells at random (a multivariate hypergeometric draw with the
-    cells' sizes). Draws stop as soon as the answer is settled: once too many permuted tables reach the
-    observed statistic for p ≤ `level` to remain possible, or after `max_draws`.
+    cells' sizes). The permuted tables go through `factor_lrt`'s own permutation calibration, a batch at a
+    time; drawing stops once too many reach the observed statistic for p ≤ `level` to remain possible.
     """
     rng = np.random.default_rng(seed)
     draws = min(max_draws, max(100, int(math.ceil(2 / level))))
     allowed = level * (draws + 1) - 1  # exceedances that still leave (1 + e) / (1 + draws) ≤ level
     members = [np.flatnonzero(context == c) for c in range(int(context.max() + 1))]
     totals = [int(k[m].sum()) for m in members]
-    exceed = 0
-    for _ in range(draws):
-        kp = np.empty_like(k)
+    exceed = seen = 0
+    while seen < draws:
+        batch = min(PERMUTATION_BATCH, draws - seen)
+        permuted = np.empty((batch, len(k)))
         for m, total in zip(members, totals):
-            kp[m] = rng.multivariate_hypergeometric(n[m].astype(np.int64), total)
-        test = factor_lrt(kp.astype(float), n.astype(float), value, context, None)
-        exceed += test is not None and test.statistic >= observed - 1e-9 * max(1.0, observed)
+            permuted[:, m] = rng.multivariate_hypergeometric(n[m].astype(np.int64), total, size=batch)
+        test = factor_lrt(k.astype(float), n.astype(float), value, context, permuted)
+        if test is None or test.method != "permutation":  # not sparse after all: its χ² p is the answer
+            return test is not None and test.p_value <= level
+        exceed += round(test.p_value * (batch + 1)) - 1  # p = (1 + exceedances) / (1 + batch)
+        seen += batch
         if exceed > allowed:
             return False
     return True
