@@ -105,11 +105,7 @@ def serve(config: PolicyConfig, task: str, cameras: tuple[str, ...], image_size:
           requests: mp.Queue, replies: list, num_workers: int) -> None:
     """The server process: build the batched policy once, then answer requests until ("stop",)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from roboview_data.sim.tasks import make_env
-
-    env = make_env(task, cameras=cameras, image_size=image_size)
-    policy = config.build_batched(AgentView.of(env), slots)
-    env.close()
+    policy = config.build_batched(AgentView.of_task(task, cameras, image_size), slots)
     if policy is None or not hasattr(policy, "predict_chunks"):
         raise SystemExit(f"policy type {config.type!r} cannot be served (no batched chunk prediction)")
     while True:

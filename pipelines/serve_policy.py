@@ -134,8 +134,6 @@ class PolicyService:
 
     def __init__(self, cfg: ServeConfig) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
-        from roboview_data.sim.tasks import make_env
-
         self.config = cfg.policy
         own = cfg.policy.input_image_size()
         if own is not None and cfg.image_size and cfg.image_size != own:
@@ -143,9 +141,7 @@ class PolicyService:
         self.image_size = own or cfg.image_size or 224
         cameras = cfg.policy.observed_cameras()
         self.format = wire_format(cfg.obs_format, cameras, cfg.key_map, cfg.policy.depth)
-        env = make_env(cfg.task, cameras=cameras, image_size=self.image_size, depth=cfg.policy.depth)
-        self.view = AgentView.of(env)
-        env.close()
+        self.view = AgentView.of_task(cfg.task, cameras, self.image_size, cfg.policy.depth)
         self.batched = cfg.policy.build_batched(self.view, cfg.max_clients) if cfg.policy.batchable() else None
         if self.batched is not None and not hasattr(self.batched, "predict_chunks"):
             self.batched = None

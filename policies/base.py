@@ -74,6 +74,18 @@ class AgentView:
         return cls(env.instance.task, env.cameras, env.image_size, env.depth, env.fps, env.action_space,
                    env.observation_space)
 
+    @classmethod
+    def of_task(cls, task: str, cameras: tuple[str, ...], image_size: int, depth: bool = False) -> AgentView:
+        """The view of `task`'s env with these cameras, for a policy built away from any worker's env (a
+        policy server): the env is made for its interface and closed again."""
+        from roboview_data.sim.tasks import make_env
+
+        env = make_env(task, cameras=cameras, image_size=image_size, depth=depth)
+        try:
+            return cls.of(env)
+        finally:
+            env.close()
+
     def kinematic_model(self) -> mujoco.MjModel:
         """The robot and static scene compiled at defaults (for inverse kinematics); no episode's state.
 
