@@ -21,11 +21,12 @@ DEMO_DIR ?= outputs/demo
 
 install: sysdeps $(STAMP)
 
-# System packages: ffmpeg (LeRobot's video decoding needs it) and Mesa EGL for off-screen rendering.
+# System packages: ffmpeg (LeRobot's video decoding needs it), Mesa EGL for off-screen rendering and
+# Chromium (the tests load report.html in it, headless).
 sysdeps:
-	@if ! command -v ffmpeg >/dev/null || ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
-	  echo "[install] apt-get install ffmpeg libegl1 libgl1-mesa-dri"; \
-	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq ffmpeg libegl1 libgl1-mesa-dri >/dev/null; \
+	@if ! command -v ffmpeg >/dev/null || ! command -v chromium >/dev/null || ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
+	  echo "[install] apt-get install ffmpeg libegl1 libgl1-mesa-dri chromium"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq ffmpeg libegl1 libgl1-mesa-dri chromium >/dev/null; \
 	fi
 
 $(STAMP): pyproject.toml requirements.lock

@@ -1,4 +1,4 @@
-"""Episode tables → metrics.json, report.md and plots (the `pipelines.report` verb's library).
+"""Episode tables → metrics.json, report.md, report.html and plots (the `pipelines.report` verb's library).
 
 Input is one or several `episodes.parquet` files (docs/formats.md, "Episode records"): one per policy, or
 one holding several policies. They are validated before any work — missing files, missing or null
@@ -31,6 +31,8 @@ from eval import provenance, videos
 from eval.adaptive import read_record
 from eval.agents import agents_markdown, describe_agents
 from eval.context import context_breakdown
+from eval.report_format import ALPHA, VERSION_KEY, p_fmt, pct, pct_ci, split_order, split_title
+from eval.report_html import HTML_FILE, render_html
 from eval.metrics import (
     METRIC_COLUMNS,
     EpisodesError,
@@ -40,22 +42,15 @@ from eval.metrics import (
     policy_layouts,
 )
 from eval.results import ResultsError, read_episodes, read_version
-from roboview_data.variation.factors import FACTORS, visual_factors
+from roboview_data.variation.factors import visual_factors
 from roboview_data.variation.instances import split_task
 
 log = logging.getLogger(__name__)
 
-VERSION_KEY = "roboview_benchmark_version"
 REQUIRED_COLUMNS = (*METRIC_COLUMNS, "repeat")
 METRICS_FILE = "metrics.json"
 REPORT_FILE = "report.md"
-def _title(split: str) -> str:
-    """A split's column title: its factor's own title (factor registry), else the split name."""
-    return FACTORS[split].title if split in FACTORS else split
-
-
 _N_EXTREMES = 3  # values listed at each end of the per-value deviation ranking
-ALPHA = 0.05  # level at which the report calls a difference significant
 
 
 @dataclass(frozen=True)
@@ -120,35 +115,12 @@ def load_results(paths: Sequence[str | Path],
     return episodes, sources
 
 
-def pct(x: float | None) -> str:
-    """A ratio ×100 with two decimals, the paper's table convention; N/A for null."""
-    return "N/A" if x is None else f"{100 * x:.2f}"
-
-
-def pct_ci(ci: Sequence[float] | None) -> str:
-    return "" if ci is None else f" [{pct(ci[0])}, {pct(ci[1])}]"
-
-
-def p_fmt(p: float | None, at_floor: bool | None = False) -> str:
-    """A p-value as printed: 4 decimals, scientific below 1e-4, and "≤ x" where a Monte Carlo floor binds
-    (no draw reached the statistic: the true p may be smaller)."""
-    if p is None:
-        return "N/A"
-    text = f"{p:.4f}" if p >= 1e-4 else f"{p:.1e}"
-    return f"≤ {text}" if at_floor else text
-
-
 def _row(cells: Sequence[str]) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return [_row(header), _row(["---"] * len(header)), *(_row(r) for r in rows), ""]
-
-
-def _split_order(layouts: dict[str, dict], key: str) -> list[str]:
-    present = {s for layout in layouts.values() for s in layout[key]}
-    return [s for s in visual_factors() if s in present] + sorted(present - set(visual_factors()))
 
 
 def _significant_pairs(metrics: dict[str, Any], split: str) -> dict[frozenset[str], float | None]:
@@ -190,7 +162,7 @@ def _average(layout: dict, splits: list[str], key: str) -> float | None:
 
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
     """Table 1, one per task (the pick_place table keeps the paper's title)."""
-    all_splits = _split_order(layouts, "splits")
+    all_splits = split_order(layouts, "splits")
     tasks = list(dict.fromkeys(split_task(s)[0] for s in all_splits))
     lines: list[str] = []
     for task in tasks:
@@ -201,7 +173,7 @@ def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
 
 
 def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str], task: str | None) -> list[str]:
-    header = ["Policy", *(f"{_title(split_task(s)[1])} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
+    header = ["Policy", *(f"{split_title(split_task(s)[1])} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
               "Average SR", "Average CV", "Average cv_excess"]
     rows = []
     for name, layout in layouts.items():
@@ -235,7 +207,7 @@ def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list
 
 def _table2(layouts: dict[str, dict]) -> list[str]:
     lines: list[str] = []
-    for split in _split_order(layouts, "interactions"):
+    for split in split_order(layouts, "interactions"):
         have = {n: lay["interactions"][split] for n, lay in layouts.items() if split in lay["interactions"]}
         a, b = next(iter(have.values()))["factors"]
         header = ["Policy", "SR", f"CV({a})", f"p({a})", f"CV({b})", f"p({b})", f"IEC({a}; {b})",
@@ -473,6 +445,16 @@ def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[s
     return index
 
 
+def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
+    """report.md's sections in order, each a list of Markdown lines (empty when it has nothing to say)."""
+    layouts = policy_layouts(metrics)
+    return {"table1": _table1(metrics, layouts), "directions": _directions(layouts), "interactions": _table2(layouts),
+            "comparisons": _comparisons(metrics), "rankings": _rankings(metrics),
+            "context": _context_factors(layouts), "adaptive": _adaptive(layouts), "diagnostics": _diagnostics(layouts),
+            "isolation": _isolation(layouts), "extremes": _extremes(layouts), "videos": _videos(metrics, layouts),
+            "agents": agents_markdown(metrics.get("agents", {})), "provenance": _provenance(metrics.get("sources", []))}
+
+
 def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> str:
     """report.md from a metrics dict (every number printed is read from it) and plot outcomes."""
     layouts = policy_layouts(metrics)
@@ -483,11 +465,8 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
     for source in metrics.get("sources", []):
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
-    lines += (_table1(metrics, layouts) + _directions(layouts) + _table2(layouts) + _comparisons(metrics)
-              + _rankings(metrics) + _context_factors(layouts) + _adaptive(layouts) + _diagnostics(layouts)
-              + _isolation(layouts)
-              + _extremes(layouts) + _videos(metrics, layouts) + agents_markdown(metrics.get("agents", {}))
-              + _provenance(metrics.get("sources", [])))
+    for section in markdown_sections(metrics).values():
+        lines += section
     lines += ["## Plots", ""]
     for name, reason in plots.items():
         lines.append(f"![{name}]({name})" if reason is None else f"- {name} skipped: {reason}")
@@ -525,6 +504,7 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
 
         outcome = make_plots(policy_layouts(metrics), out)
     (out / REPORT_FILE).write_text(render_markdown(metrics, outcome))
-    log.info("wrote %s, %s and %d plot(s) to %s", METRICS_FILE, REPORT_FILE,
+    (out / HTML_FILE).write_text(render_html(metrics, outcome, out, markdown_sections(metrics)))
+    log.info("wrote %s, %s, %s and %d plot(s) to %s", METRICS_FILE, REPORT_FILE, HTML_FILE,
              sum(r is None for r in outcome.values()), out)
     return ReportResult(out, metrics, outcome)

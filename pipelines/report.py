@@ -1,4 +1,4 @@
-"""Turn evaluation episodes into metrics.json, report.md and plots.
+"""Turn evaluation episodes into metrics.json, report.md, report.html and plots.
 
     python -m pipelines.report --results=outputs/eval/episodes.parquet --output_dir=outputs/report
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from eval.metrics import EPSILON, EpisodesError, MetricsConfig
-from eval.report import REPORT_FILE, ReportResult, load_results, write_report
+from eval.report import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
 from pipelines._cli import cli_main
 
 
@@ -24,7 +24,7 @@ class ReportConfig:
     # Episode table(s) written by pipelines.evaluate: one path or several, comma-separated; NAME=PATH
     # names the file's policy in the report (e.g. act_ref=A.parquet,act_campose=B.parquet).
     results: str = ""
-    # Folder that receives metrics.json, report.md and the PNG plots (created when missing).
+    # Folder that receives metrics.json, report.md, report.html (one self-contained page) and the PNG plots.
     output_dir: str = "outputs/report"
     # ε added to the mean in the CV and IEC denominators.
     epsilon: float = EPSILON
@@ -73,7 +73,7 @@ def run(cfg: ReportConfig) -> ReportResult:
 
 def _summary(cfg: ReportConfig, result: ReportResult) -> None:
     skipped = [name for name, reason in result.plots.items() if reason is not None]
-    print(f"[report] {result.output_dir / REPORT_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
+    print(f"[report] {result.output_dir / REPORT_FILE} and {HTML_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
           + (f", skipped {', '.join(skipped)}" if skipped else ""))
 
 

@@ -66,7 +66,7 @@ def test_files_and_plots_are_written(report):
     drawn = {name for name, (split, _, _) in PLOTS.items() if split in present}
     assert len(drawn) == 10 and {n for n, reason in report.plots.items() if reason is None} == drawn
     assert all("no policy has the" in report.plots[n] for n in set(PLOTS) - drawn)
-    assert {p.name for p in out.iterdir()} == {"metrics.json", "report.md", *drawn}
+    assert {p.name for p in out.iterdir()} == {"metrics.json", "report.md", "report.html", *drawn}
     for name in drawn:
         with Image.open(out / name) as image:
             image.verify()
@@ -185,7 +185,7 @@ def test_cli_without_plots(tmp_path, capsys):
     path = write(make_episodes("expert", 0, splits=("dist_scale",)), tmp_path / "e.parquet", version=None)
     result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--n_glm=20",
                    "--n_perm=20"])
-    assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.md"]
+    assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.html", "report.md"]
     assert result.metrics["sources"][0][VERSION_KEY] is None
     assert "[report]" in capsys.readouterr().out
 

@@ -1,0 +1,46 @@
+"""How the reports print numbers and order splits (shared by report.md and report.html)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from roboview_data.variation.factors import FACTORS, visual_factors
+from roboview_data.variation.instances import split_task
+
+VERSION_KEY = "roboview_benchmark_version"  # a results file's benchmark version, as sources record it
+ALPHA = 0.05  # level at which the report calls a difference significant
+
+
+def pct(x: float | None) -> str:
+    """A ratio ×100 with two decimals, the paper's table convention; N/A for null."""
+    return "N/A" if x is None else f"{100 * x:.2f}"
+
+
+def pct_ci(ci: Sequence[float] | None) -> str:
+    return "" if ci is None else f" [{pct(ci[0])}, {pct(ci[1])}]"
+
+
+def p_fmt(p: float | None, at_floor: bool | None = False) -> str:
+    """A p-value as printed: 4 decimals, scientific below 1e-4, and "≤ x" where a Monte Carlo floor binds
+    (no draw reached the statistic: the true p may be smaller)."""
+    if p is None:
+        return "N/A"
+    text = f"{p:.4f}" if p >= 1e-4 else f"{p:.1e}"
+    return f"≤ {text}" if at_floor else text
+
+
+def split_title(split: str) -> str:
+    """A split's title: its factor's own title (factor registry), else the split name."""
+    return FACTORS[split].title if split in FACTORS else split
+
+
+def split_order(layouts: dict[str, dict], key: str) -> list[str]:
+    """Splits present in any policy's `key` section: the registry's visual factors first, in its order."""
+    present = {s for layout in layouts.values() for s in layout[key]}
+    return [s for s in visual_factors() if s in present] + sorted(present - set(visual_factors()))
+
+
+def task_order(splits: Sequence[str]) -> list[str]:
+    """Splits grouped by task (the default task first), each task's in the factor registry's order."""
+    return sorted(splits, key=lambda s: (split_task(s)[0] != "pick_place", split_task(s)[0],
+                                         (*visual_factors(), split_task(s)[1]).index(split_task(s)[1])))

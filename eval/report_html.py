@@ -1,0 +1,204 @@
+"""report.html: the report as one self-contained page (the figures inline, no script, no external file but the
+episode videos it links).
+
+Every number on the page is read from the same metrics dict as report.md. Table 1, twenty columns wide in
+Markdown, becomes one block per split: its policies in rows, the split's figures under them, and the filmed
+episodes of each value linked. The other sections (directions, interactions, comparisons, rankings, adaptive
+sampling, the isolation certificate, provenance) are report.md's own, rendered by markdown-it.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from markdown_it import MarkdownIt
+
+from eval import report_format as fmt
+from eval.metrics import policy_layouts
+from roboview_data.variation.instances import DEFAULT_TASK, split_task
+
+HTML_FILE = "report.html"
+
+_CSS = """
+body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;color:#1d1d1f;margin:0;background:#f6f6f4}
+main{max-width:1120px;margin:0 auto;padding:24px 28px 64px;background:#fff}
+h1{font-size:26px;margin:0 0 4px}h2{font-size:20px;margin:32px 0 8px;border-bottom:1px solid #ddd;padding-bottom:4px}
+h3{font-size:17px;margin:0 0 6px}
+nav a{margin-right:14px;font-size:14px}
+table{border-collapse:collapse;margin:8px 0 12px;font-size:14px}
+th,td{border:1px solid #d8d8d8;padding:4px 8px;text-align:left;vertical-align:top}
+th{background:#f0f0ee}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.split{border:1px solid #d8d8d8;border-radius:6px;padding:14px 16px;margin:16px 0}
+.verdict-bias{color:#b00020;font-weight:600}.verdict-none{color:#3a6b35}
+.figures img{max-width:100%;height:auto;display:block;margin:10px 0;border:1px solid #eee}
+.note{color:#555;font-size:13px}
+code{background:#f2f2f2;padding:0 3px;border-radius:3px}
+"""
+
+
+def _e(text: Any) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]], numeric: Sequence[int] = ()) -> str:
+    """An HTML table; cells are HTML already (escape before), columns in `numeric` right-aligned."""
+    head = "".join(f"<th>{_e(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td{' class=num' if j in numeric else ''}>{c}</td>" for j, c in enumerate(row))
+                   + "</tr>" for row in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _image(path: Path, alt: str) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
+    """split (task-qualified, as in metrics.json) → the figures drawn for it, in drawing order."""
+    drawn = [name for name, reason in plots.items() if reason is None]
+    if not drawn:
+        return {}
+    from eval.report_plots import PLOTS  # matplotlib is loaded already when figures were drawn
+
+    found: dict[str, list[str]] = {}
+    for name in drawn:
+        for base, (split, _, _) in PLOTS.items():
+            if name == base or name.endswith(f"_{base}"):
+                task = name[: -len(base) - 1]
+                found.setdefault(f"{task}_{split}" if task else split, []).append(name)
+                break
+    return found
+
+
+def _verdict(m: dict[str, Any]) -> str:
+    p = m["p_value"]
+    if p is None:
+        return '<span class="note">not testable</span>'
+    if p < fmt.ALPHA:
+        return f'<span class="verdict-bias">bias (p {_e(fmt.p_fmt(p, m.get("p_value_at_floor")))})</span>'
+    return '<span class="verdict-none">within noise</span>'
+
+
+def _values_line(m: dict[str, Any]) -> str:
+    sig = [(v, s) for v, s in m["per_value"].items()
+           if s["q_value"] is not None and s["q_value"] < fmt.ALPHA and s["odds_ratio"] is not None]
+    low = sorted((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] < 1)
+    high = sorted(((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] > 1), reverse=True)
+    text = (lambda items: ", ".join(f"<code>{_e(v)}</code> (OR {o:.2g}, SR {fmt.pct(m['per_value'][v]['sr'])})"
+                                    for o, v in items) or "none")
+    return f"below the rest: {text(low)}; above the rest: {text(high)}"
+
+
+def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], figures: list[str],
+                 out: Path) -> str:
+    task, factor = split_task(split)
+    title = fmt.split_title(factor)
+    rows, notes = [], []
+    for name, layout in layouts.items():
+        m = layout["splits"].get(split)
+        if m is None:
+            continue
+        rows.append([_e(name), _e(fmt.pct(m["sr"]) + fmt.pct_ci(m["sr_ci95"])), _e(fmt.pct(m["cv"])),
+                     _e(fmt.pct(m["cv_null"])), _e(fmt.pct(m["cv_excess"])),
+                     _e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor"))),
+                     _e(fmt.p_fmt(m["p_value_cv"], m.get("p_value_cv_at_floor"))), str(m["n_episodes"]), _verdict(m)])
+        notes.append(f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}</li>")
+    parts = [f'<section class="split" id="split-{_e(split)}"><h3>{_e(title)}'
+             + (f' <span class="note">task {_e(task)}</span>' if task != DEFAULT_TASK else "") + "</h3>",
+             _table(["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p (GLM LRT)", "p (CV permutation)",
+                     "episodes", "verdict"], rows, numeric=(2, 3, 4, 5, 6, 7)),
+             f"<ul>{''.join(notes)}</ul>"]
+    parts += _videos(metrics, layouts, split)
+    if figures:
+        parts.append('<div class="figures">' + "".join(_image(out / f, f) for f in figures) + "</div>")
+    return "\n".join(parts) + "</section>"
+
+
+def _stop_line(m: dict[str, Any]) -> str:
+    a = m.get("adaptive")
+    return "" if not a else f"; adaptive: stopped <b>{_e(a['stopped'])}</b> after {a['rounds']} round(s), {a['episodes']} episodes"
+
+
+def _isolation_line(m: dict[str, Any]) -> str:
+    cert = m.get("isolation")
+    if not cert or not cert["recorded"]:
+        return ""
+    bad = len(cert["violations"])
+    return (f"; isolation: {cert['verified']} / {cert['blocks']} blocks verified"
+            + (f', <span class="verdict-bias">{bad} violation(s) left out</span>' if bad else ""))
+
+
+def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> list[str]:
+    """The filmed episodes of this split, per policy and value (links relative to the report folder)."""
+    rows = []
+    for name, splits in (metrics.get("videos") or {}).items():
+        per_value = layouts.get(name, {}).get("splits", {}).get(split, {}).get("per_value", {})
+        for value, episodes in splits.get(split, {}).items():
+            links = " ".join(f'<a href="{_e(path)}">{_e(e["label"])} {_e(camera)}</a>'
+                             for e in episodes for camera, path in zip(e["cameras"], e["paths"]))
+            rows.append([_e(name), f"<code>{_e(value)}</code>", _e(fmt.pct(per_value.get(value, {}).get("sr"))), links])
+    if not rows:
+        return []
+    return ["<details><summary>Episode videos (✗ failed)</summary>",
+            _table(["Policy", "Value", "SR", "Videos (instance, repeat, camera)"], rows, numeric=(2,)), "</details>"]
+
+
+def _summary(layouts: dict[str, dict]) -> str:
+    rows = []
+    for name, layout in layouts.items():
+        splits = layout["splits"]
+        biased = [s for s, m in splits.items() if m["p_value"] is not None and m["p_value"] < fmt.ALPHA]
+        avg = layout.get("average") or {}
+        rows.append([_e(name), _e(fmt.pct(avg.get("sr"))), _e(fmt.pct(avg.get("cv"))), _e(fmt.pct(avg.get("cv_excess"))),
+                     f"{len(biased)} / {len(splits)}", _e(", ".join(biased) or "none")])
+    return _table(["Policy", "Average SR", "Average CV", "Average cv_excess", "Splits with bias (p < 0.05)",
+                   "Which"], rows, numeric=(1, 2, 3, 4))
+
+
+def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path,
+                sections_md: dict[str, list[str]]) -> str:
+    """The page for a metrics dict (every number is read from it) and report.md's sections (`sections_md`,
+    eval.report.markdown_sections); figures are read from `out` and inlined."""
+    layouts = policy_layouts(metrics)
+    settings = metrics["resampling"]
+    figures = _figure_splits(plots)
+    md_render = MarkdownIt("commonmark", {"html": False}).enable("table")
+    splits = fmt.task_order(fmt.split_order(layouts, "splits"))
+    sections: list[tuple[str, str, str]] = []  # (anchor, title, HTML)
+    sections.append(("summary", "Summary", _summary(layouts)
+                     + "<p class=note>SR: successes / episodes, Wilson 95 % interval. CV: the paper's Bias Coefficient; "
+                       "noise floor: the CV the table shows when the value does not matter; cv_excess: the bias beyond "
+                       "binomial noise (rank on it, not on CV). p: likelihood-ratio test of a binomial GLM value + context "
+                       "against context. All ×100 but p.</p>"))
+    sections.append(("splits", "Splits", "\n".join(_split_block(s, layouts, metrics, figures.get(s, []), out)
+                                                   for s in splits)))
+    titles = {"interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",
+              "context": "Success by task context", "adaptive": "Adaptive sampling", "isolation": "Isolation certificate",
+              "diagnostics": "Sample sizes and calibration", "agents": "VLM agents", "provenance": "Provenance"}
+    for anchor, title in titles.items():
+        lines = sections_md.get(anchor)
+        if not lines:
+            continue
+        body = md_render.render("\n".join(lines))
+        if anchor == "interactions":
+            body += "".join('<div class="figures">' + "".join(_image(out / f, f) for f in names) + "</div>"
+                            for split, names in figures.items() if split not in splits)
+        sections.append((anchor, title, body))
+    skipped = [f"{name}: {reason}" for name, reason in plots.items() if reason is not None]
+    if skipped:
+        sections.append(("skipped", "Figures not drawn", "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in skipped) + "</ul>"))
+    nav = "".join(f'<a href="#{a}">{_e(t)}</a>' for a, t, _ in sections)
+    sources = "".join(f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(fmt.VERSION_KEY) or 'not recorded')})</li>"
+                      for s in metrics.get("sources", []))
+    head = (f"<h1>RoboView-Bias report</h1><p>Policies: {_e(', '.join(layouts))}. ε = {metrics['epsilon']:g}; "
+            f"{settings['n_perm']} permutations for CV floors, {settings['n_glm']} GLM calibration draws, "
+            f"seed {settings['seed']}.</p>" + (f"<ul>{sources}</ul>" if sources else "") + f"<nav>{nav}</nav>")
+    body = "".join(f'<section id="{a}">' + (f"<h2>{_e(t)}</h2>" if a in ("summary", "splits", "skipped") else "")
+                   + html_ + "</section>" for a, t, html_ in sections)
+    return (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '
+            f'content="width=device-width,initial-scale=1"><title>RoboView-Bias report — {_e(", ".join(layouts))}</title>'
+            f"<style>{_CSS}</style></head>\n<body><main>{head}{body}</main></body></html>\n")
