@@ -1,6 +1,7 @@
 """Adaptive against fixed-n evaluation on simulated splits with a known bias: episodes to a decision.
 
     python -m benchmarks.adaptive --output=outputs/bench/adaptive.json [--sims=100]
+    python -m benchmarks.adaptive --results=outputs/eval/act_ref_adaptive --output=outputs/bench/adaptive_real.json
 
 For each design (values × contexts at SR 0.7, the paper's camera_euler / camera_pose shapes and a small
 one) and true bias τ ∈ {0, 0.3, 0.6} (logit SD), `eval.adaptive.simulate` runs the group-sequential
@@ -8,16 +9,22 @@ design (α = 0.05, futility against τ = 0.6 at power 0.8, at most `max_repeats`
 tables with the real test. The fixed-n reference is the smallest number of repeats whose LRT power at
 τ = 0.6 (`eval.stats.lrt_power`, asymptotic; sparse tables fall short of it, so it favours the fixed
 design) reaches the adaptive design's simulated power at τ = 0.6. `saving` = 1 − adaptive episodes / fixed.
+
+With `--results=DIR` (a folder written by `pipelines.evaluate --eval.adaptive=true`) it reads that run instead:
+per split, the episodes the adaptive run spent and why it stopped, against the fixed-n design that reaches the
+run's power at its τ with the split's shape and observed success rate (`lrt_power`).
 """
 
 from __future__ import annotations
 
 import json
 import time
+
+import pandas as pd
 from dataclasses import dataclass
 from pathlib import Path
 
-from eval.adaptive import Design, simulate
+from eval.adaptive import Design, read_record, simulate
 from eval.stats import lrt_power
 from pipelines._cli import cli_main
 
@@ -30,13 +37,46 @@ class AdaptiveBenchConfig:
     output: str = "outputs/bench/adaptive.json"
     # Simulated splits per design and τ.
     sims: int = 100
+    # A results folder of an adaptive evaluation: compare that run with fixed-n instead of simulating.
+    results: str = ""
 
     def __post_init__(self) -> None:
         if self.sims < 10:
             raise ValueError(f"--sims={self.sims} must be ≥ 10")
+        if self.results and read_record(Path(self.results)) is None:
+            raise ValueError(f"--results={self.results} holds no adaptive.json: run pipelines.evaluate with "
+                             "--eval.adaptive=true into it first")
+
+
+def real_run(results: Path) -> dict:
+    """Per split of an adaptive run: episodes spent and the stop, against fixed-n at the design's power and τ."""
+    record = read_record(results)
+    design = record["design"]
+    episodes = pd.read_parquet(results / "episodes.parquet")
+    splits = {}
+    for split, stop in record["splits"].items():
+        rows = episodes[episodes["split"] == split]
+        n_values, n_contexts, sr = rows["value"].nunique(), rows["context_id"].nunique(), float(rows["success"].mean())
+        fixed = next((n for n in range(1, 41) if lrt_power(n_values, n_contexts, n, design["tau"], min(max(sr, 0.02), 0.98),
+                                                            design["alpha"]) >= design["power"]), 40)
+        fixed_episodes = fixed * n_values * n_contexts
+        splits[split] = {**stop, "values": n_values, "contexts": n_contexts, "sr": round(sr, 4),
+                         "fixed_repeats_equal_power": fixed, "fixed_episodes": fixed_episodes,
+                         "saving": round(1 - stop["episodes"] / fixed_episodes, 3)}
+        print(f"[adaptive] {split} ({n_values}×{n_contexts}, SR {sr:.2f}): stopped {stop['stopped']} after "
+              f"{stop['rounds']} round(s), {stop['episodes']} episodes vs fixed {fixed_episodes} ({fixed} repeats)",
+              flush=True)
+    total = sum(s["episodes"] for s in splits.values()), sum(s["fixed_episodes"] for s in splits.values())
+    return {"results": str(results), "design": design, "splits": splits, "episodes": total[0],
+            "fixed_episodes": total[1], "saving": round(1 - total[0] / total[1], 3)}
 
 
 def run(cfg: AdaptiveBenchConfig) -> dict:
+    if cfg.results:
+        out = real_run(Path(cfg.results))
+        Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
+        Path(cfg.output).write_text(json.dumps(out, indent=2))
+        return out
     results = []
     for n_values, n_contexts, max_repeats in DESIGNS:
         design = Design(alpha=0.05, tau=0.6, power=0.8, max_repeats=max_repeats)
