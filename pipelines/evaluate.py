@@ -21,7 +21,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eval import provenance, videos
-from eval.backends import BACKENDS, EpisodeLost, run_local, run_ray
+from eval.backends import BACKENDS, ClusterLost, EpisodeLost, run_local, run_ray
 from eval.results import EpisodeStore, ResultsError
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
@@ -244,6 +244,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
     threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
 
+    cluster: dict[str, dict] = {}  # Ray: per task, where the episodes ran (provenance)
+
     def streams(todo: list[WorkItem]):
         # One pool per task (each worker holds one task's env and the policy), tasks one after another.
         for task in tasks or [DEFAULT_TASK]:
@@ -255,7 +257,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
             if not items:
                 continue
             if cfg.eval.backend == "ray":
-                inner = run_ray(spec, items, cfg.eval.num_workers, cfg.eval.ray_address or None)
+                inner = run_ray(spec, items, cfg.eval.num_workers, cfg.eval.ray_address or None,
+                                stats=cluster.setdefault(task, {}))
             else:
                 inner = run_local(spec, items, cfg.eval.num_workers)
             try:
@@ -307,7 +310,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         store.close()
         if rerun is not None:
             rerun.close()
-        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": counts["new"]})
+        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": counts["new"]}
+                          | ({"ray": _merge_cluster(cluster)} if cluster else {}))
     total = len(store.rows)
     successes = sum(r["success"] for r in store.rows.values())
     return EvaluateResult(Path(cfg.output_dir), total, counts["new"], successes / total if total else float("nan"),
@@ -346,6 +350,17 @@ def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, 
              for rep in range(design.max_repeats, repeats[split]) if not store.done((item.record["instance_id"], rep))])
 
 
+def _merge_cluster(per_task: dict[str, dict]) -> dict:
+    """The Ray run's record: cluster address, episodes per node id, actors lost (summed over tasks)."""
+    nodes: dict[str, int] = {}
+    for stats in per_task.values():
+        for node, n in stats.get("nodes", {}).items():
+            nodes[node] = nodes.get(node, 0) + n
+    first = next(iter(per_task.values()))
+    return {"address": first.get("address"), "nodes": nodes,
+            "lost_actors": sum(s.get("lost_actors", 0) for s in per_task.values())}
+
+
 def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     print(f"[evaluate] {result.episodes} episodes in {result.output_dir / 'episodes.parquet'} "
           f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h)")
@@ -353,7 +368,7 @@ def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
 
 def main(args: list[str] | None = None) -> EvaluateResult:
     # Builtin and plugin policy types load first, so --policy.type can name any of them.
-    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, EpisodeLost, PolicyUnavailable), args,
+    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, EpisodeLost, ClusterLost, PolicyUnavailable), args,
                     before_parse=load_policy_types)
 
 
