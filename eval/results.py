@@ -16,8 +16,10 @@ dropped), deduplicated by (instance_id, repeat), and finished pairs are skipped.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -84,6 +86,16 @@ class EpisodeStore:
             tmp.write_text("".join(json.dumps(r) + "\n" for r in self.rows.values()))
             tmp.replace(journal)
 
+    def add_many(self, rows: list[dict]) -> int:
+        """Journal several rows with one flush to disk (merging folders); returns how many were new."""
+        new = [r for r in rows if (r["instance_id"], r["repeat"]) not in self.rows]
+        for row in new:
+            self.rows[(row["instance_id"], row["repeat"])] = row
+            self._journal.write(json.dumps(row) + "\n")
+        self._journal.flush()
+        os.fsync(self._journal.fileno())
+        return len(new)
+
     def done(self, key: tuple[str, int]) -> bool:
         return key in self.rows
 
@@ -135,3 +147,90 @@ def read_episodes(path: str | Path) -> pd.DataFrame:
             f"this version reads format {RESULTS_FORMAT} only (seeds shared per context and repeat, the "
             "pairing its statistics rely on). Re-run pipelines.evaluate into a new output folder")
     return pd.read_parquet(path)
+
+
+def shard_of(instance_id: str, n: int) -> int:
+    """The shard (of n) an instance belongs to: SHA-256 of its id modulo n, the same on every machine."""
+    return int.from_bytes(hashlib.sha256(instance_id.encode()).digest()[:8], "big") % n
+
+
+def read_journal(folder: Path) -> list[dict]:
+    """The rows of a results folder's journal (a torn last line dropped; later duplicates of a key dropped)."""
+    rows: dict[tuple[str, int], dict] = {}
+    path = Path(folder) / JOURNAL
+    for line in path.read_text().splitlines() if path.is_file() else []:
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        rows.setdefault((row["instance_id"], row["repeat"]), row)
+    return list(rows.values())
+
+
+def merge_folders(folders: list[Path], out: Path, partial: bool = False) -> tuple[EpisodeStore, dict[str, int]]:
+    """Join the results folders of one sharded run (`--eval.shard=i/N`) into `out`.
+
+    Refused, before anything is written: folders of different runs (benchmark version, policy, its options,
+    repeats, image size...), shards of different N, a shard given twice, missing shards (unless `partial`), and
+    any episode found in two folders. Videos are copied; provenance entries are kept, each with its shard.
+    Returns the store (closed) and episodes per input folder.
+    """
+    if len(folders) < 2:
+        raise ResultsError(f"merging needs two results folders or more, got {len(folders)}")
+    infos = []
+    for folder in folders:
+        run_file = Path(folder) / RUN_FILE
+        if not run_file.is_file():
+            raise ResultsError(f"{folder} holds no RoboView evaluation ({RUN_FILE} missing)")
+        infos.append(json.loads(run_file.read_text()))
+    base = {k: v for k, v in infos[0].items() if k != "shard"}
+    for folder, info in zip(folders[1:], infos[1:]):
+        diffs = [f"{k}: {base.get(k)!r} in {folders[0]} vs {info.get(k)!r}" for k in sorted(set(base) | set(info) - {"shard"})
+                 if k != "shard" and base.get(k) != info.get(k)]
+        if diffs:
+            raise ResultsError(f"{folder} is not a shard of the same run as {folders[0]}: {'; '.join(diffs)}")
+    shards = [info.get("shard") for info in infos]
+    if any(s is None for s in shards):
+        raise ResultsError("only shards of one run merge (folders written with --eval.shard=i/N); "
+                           f"{folders[shards.index(None)]} was not sharded")
+    counts = {int(s.split("/")[1]) for s in shards}
+    if len(counts) > 1:
+        raise ResultsError(f"the folders are shards of different counts: {', '.join(sorted(set(shards)))}")
+    n = counts.pop()
+    seen: dict[str, Path] = {}
+    for folder, shard in zip(folders, shards):
+        if shard in seen:
+            raise ResultsError(f"shard {shard} is given twice: {seen[shard]} and {folder}")
+        seen[shard] = folder
+    missing = [f"{i}/{n}" for i in range(n) if f"{i}/{n}" not in seen]
+    if missing and not partial:
+        raise ResultsError(f"shard(s) {', '.join(missing)} missing: give every shard of the run, or pass "
+                           "--partial=true to merge what there is")
+    owner: dict[tuple[str, int], Path] = {}
+    per_folder: dict[str, list[dict]] = {}
+    for folder in folders:
+        rows = read_journal(folder)
+        for row in rows:
+            key = (row["instance_id"], row["repeat"])
+            if key in owner:
+                raise ResultsError(f"episode {key[0]} repeat {key[1]} is in both {owner[key]} and {folder}: "
+                                   "these folders overlap; merge shards of one run only")
+            owner[key] = folder
+        per_folder[str(folder)] = rows
+    if any(Path(out).resolve() == Path(f).resolve() for f in folders):
+        raise ResultsError(f"--output_dir={out} is one of the folders being merged; choose a new folder")
+    store = EpisodeStore(Path(out), {**base, "merged_shards": f"{len(seen)}/{n}"})
+    entries = []
+    for folder, shard in zip(folders, shards):
+        for row in per_folder[str(folder)]:
+            for rel in (row.get("video") or "").split(","):
+                if rel and (Path(folder) / rel).is_file() and not (Path(out) / rel).is_file():
+                    (Path(out) / rel).parent.mkdir(parents=True, exist_ok=True)
+                    shutil.copy2(Path(folder) / rel, Path(out) / rel)
+        store.add_many(per_folder[str(folder)])
+        provenance_file = Path(folder) / "provenance.json"
+        if provenance_file.is_file():
+            entries += [{**entry, "shard": shard} for entry in json.loads(provenance_file.read_text())]
+    (Path(out) / "provenance.json").write_text(json.dumps(entries, indent=2))
+    store.close()
+    return store, {k: len(v) for k, v in per_folder.items()}

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from eval import provenance, videos
 from eval.backends import BACKENDS, ClusterLost, EpisodeLost, run_local, run_ray
-from eval.results import EpisodeStore, ResultsError
+from eval.results import EpisodeStore, ResultsError, shard_of
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
@@ -92,8 +92,11 @@ class EvalConfig:
     eager_render: bool = False
     # local (process pool, spawn) or ray.
     backend: str = "local"
-    # Address of an existing Ray cluster; empty starts a local one.
+    # Address of an existing Ray cluster (host:port of its head); empty starts a local one.
     ray_address: str = ""
+    # i/N: run only shard i of N (0 ≤ i < N): the instances whose id hashes to i, every repeat of each, so N
+    # machines or CI jobs each run one deterministic slice; `python -m pipelines.merge` joins their folders.
+    shard: str = ""
     # Write a Rerun recording of every episode to this .rrd file.
     rerun: str = ""
     # Control steps before an episode counts as a failure.
@@ -128,9 +131,23 @@ class EvalConfig:
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}")
         self.split_repeat_table  # parses split_repeats now, so a typo fails before any work
+        self.shard_index  # parses shard now
+        if self.shard and self.adaptive:
+            raise ValueError(f"--eval.shard={self.shard} with --eval.adaptive=true: an adaptive split decides on all of "
+                             "its instances at once, so it cannot be sharded; drop one of the two")
         self.video_mode  # parses videos now
         if self.adaptive:
             self.design  # validates alpha, tau, power, max_repeats
+
+    @property
+    def shard_index(self) -> tuple[int, int] | None:
+        """(i, N) of --eval.shard=i/N; None when not sharded."""
+        if not self.shard:
+            return None
+        i, sep, n = self.shard.partition("/")
+        if not (sep and i.strip().isdigit() and n.strip().isdigit() and 0 <= int(i) < int(n)):
+            raise ValueError(f"--eval.shard={self.shard!r} must be i/N with 0 ≤ i < N, e.g. 0/4 (the first of four)")
+        return int(i), int(n)
 
     @property
     def design(self):
@@ -223,10 +240,14 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
                 "policy_options": policy.options(), "n_repeats": repeats,
                 "max_steps": cfg.eval.max_steps, "image_size": image_size,
                 **({"adaptive": {"alpha": cfg.eval.alpha, "tau": cfg.eval.tau, "power": cfg.eval.power,
-                                 "max_repeats": cfg.eval.max_repeats}} if cfg.eval.adaptive else {})}
+                                 "max_repeats": cfg.eval.max_repeats}} if cfg.eval.adaptive else {}),
+                **({"shard": cfg.eval.shard} if cfg.eval.shard else {})}
     with flag_errors("--output_dir"):
         store = EpisodeStore(Path(cfg.output_dir), run_info)
     chosen = {split: select_items(items, cfg.eval.contexts, cfg.eval.limit) for split, items in bench.splits.items()}
+    if cfg.eval.shard_index is not None:
+        chosen = {split: [i for i in items if shard_of(i.record["instance_id"], cfg.eval.shard_index[1])
+                          == cfg.eval.shard_index[0]] for split, items in chosen.items()}
     work = [WorkItem(item, r) for split, items in chosen.items() for item in items for r in range(repeats[split])]
     done = sum(store.done(w.key) for w in work)
     mode = cfg.eval.video_mode
