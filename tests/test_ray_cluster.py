@@ -9,24 +9,19 @@ message and a fresh cluster resumes the same results folder.
 from __future__ import annotations
 
 import json
-import os
-import secrets
 import shutil
-import signal
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pandas as pd
-import psutil
 import pytest
 
+from benchmarks.cluster import RAY, LocalCluster
 from tests.test_evaluate import evaluate, rows
 
 ROOT = Path(__file__).parents[1]
-RAY = Path(sys.executable).parent / "ray"
 pytestmark = pytest.mark.skipif(not RAY.exists(), reason="Ray's `ray` command is not installed next to this Python")
 
 SPLITS, LIMIT, REPEATS = "color,camera_pose,camera_euler,dist_scale", 3, 2  # 24 episodes
@@ -34,62 +29,14 @@ ARGS = ["--policy.type=expert", f"--benchmark.splits={SPLITS}", f"--eval.limit={
         f"--eval.n_repeats={REPEATS}", "--eval.image_size=64", "--eval.num_workers=2", "--eval.backend=ray"]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+class Cluster(LocalCluster):
+    """LocalCluster, skipping the test with the reason where Ray cannot start the nodes here."""
 
-
-class Cluster:
-    """A head node and worker nodes started with Ray's own CLI, token-authenticated, on 127.0.0.1."""
-
-    def __init__(self, tmp: Path, workers: int = 1, cpus: int = 1) -> None:
-        token = tmp / f"ray_token_{secrets.token_hex(4)}"
-        token.write_text(secrets.token_hex(32))
-        self.env = os.environ | {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN_PATH": str(token), "PYTHONPATH": str(ROOT),
-                                 "RAY_USAGE_STATS_ENABLED": "0", "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
-        self.port = _free_port()
-        self.address = f"127.0.0.1:{self.port}"
-        self.head = self._start(["--head", f"--port={self.port}", "--include-dashboard=false", f"--num-cpus={cpus}",
-                                 f"--node-manager-port={_free_port()}", f"--object-manager-port={_free_port()}"])
-        self.workers = [self._start([f"--address={self.address}", f"--num-cpus={cpus}"]) for _ in range(workers)]
-        self.wait_for_nodes(1 + workers)
-
-    def _start(self, args: list[str]) -> subprocess.Popen:
-        return subprocess.Popen([str(RAY), "start", "--block", "--node-ip-address=127.0.0.1", *args], env=self.env,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-
-    def alive_nodes(self) -> int:
-        code = ("import ray; ray.init(address=%r, log_to_driver=False); "
-                "print(sum(n['Alive'] for n in ray.nodes()))" % self.address)
-        proc = subprocess.run([sys.executable, "-c", code], env=self.env, capture_output=True, text=True, timeout=120)
-        return int(proc.stdout.strip().splitlines()[-1]) if proc.returncode == 0 and proc.stdout.strip() else 0
-
-    def wait_for_nodes(self, n: int, timeout: float = 120) -> None:
-        deadline = time.time() + timeout
-        while self.alive_nodes() < n:
-            if time.time() > deadline:
-                self.close()
-                pytest.skip(f"Ray could not start {n} nodes on this machine within {timeout:.0f} s")
-            time.sleep(1)
-
-    @staticmethod
-    def kill(proc: subprocess.Popen) -> None:
-        """End a node as a lost machine ends: `ray start` and every process under it (raylet, workers) at once."""
+    def __init__(self, tmp: Path, workers: int = 1) -> None:
         try:
-            tree = [psutil.Process(proc.pid), *psutil.Process(proc.pid).children(recursive=True)]
-        except psutil.NoSuchProcess:
-            tree = []
-        for p in tree:
-            try:
-                p.send_signal(signal.SIGKILL)
-            except psutil.NoSuchProcess:
-                pass
-        proc.wait(30)
-
-    def close(self) -> None:
-        for proc in [*self.workers, self.head]:
-            self.kill(proc)
+            super().__init__(workers=workers, cpus=1, scratch=tmp)
+        except TimeoutError as exc:
+            pytest.skip(str(exc))
 
 
 @pytest.fixture(scope="module")
