@@ -9,7 +9,8 @@ Crash safety: a line-per-episode journal plus an atomically refreshed parquet.
 
 Each finished episode is appended to `episodes.jsonl` and flushed to disk before anything else
 happens, so a killed run loses at most the episodes still in flight. `episodes.parquet` is
-rewritten from the journal (write to a temp file, then rename) every few seconds and at the end,
+rewritten from the journal (write to a temp file, then rename) every few seconds (less often once rewriting
+takes long: never more than a tenth of the time) and at the end,
 so readers always see a complete file. On resume the journal is read back (a torn last line is
 dropped), deduplicated by (instance_id, repeat), and finished pairs are skipped.
 """
@@ -48,6 +49,7 @@ class EpisodeStore:
         self.flush_every_s = flush_every_s
         self.rows: dict[tuple[str, int], dict] = {}
         self._last_flush = 0.0
+        self._write_s = 0.0  # how long the last parquet rewrite took
         self._check_and_load()
         self._journal = (out / JOURNAL).open("a")
 
@@ -107,10 +109,13 @@ class EpisodeStore:
         self._journal.write(json.dumps(row) + "\n")
         self._journal.flush()
         os.fsync(self._journal.fileno())
-        if time.monotonic() - self._last_flush > self.flush_every_s:
+        # The parquet is rewritten whole (≈ 2 s per 100,000 rows): at most every flush_every_s, and never more
+        # than a tenth of the time, so large runs are not slowed by their own table.
+        if time.monotonic() - self._last_flush > max(self.flush_every_s, 10 * self._write_s):
             self.write_parquet()
 
     def write_parquet(self) -> Path:
+        start = time.monotonic()
         rows = sorted(self.rows.values(), key=lambda r: (r["split"], r["instance_id"], r["repeat"]))
         # Every row gets every column (a policy's own columns may be missing from some rows, e.g.
         # those journalled before a resume); pyarrow would take the first row's keys only.
@@ -124,6 +129,7 @@ class EpisodeStore:
         pq.write_table(table, tmp)
         tmp.replace(path)
         self._last_flush = time.monotonic()
+        self._write_s = self._last_flush - start
         return path
 
     def close(self) -> None:
