@@ -155,11 +155,18 @@ def run(cfg: ClusterBenchConfig) -> dict:
         return (pd.read_parquet(scratch / name / "episodes.parquet").drop(columns=["duration_s"])
                 .sort_values(["instance_id", "repeat"]).reset_index(drop=True))
 
+    def same(a, b) -> bool:
+        try:
+            pd.testing.assert_frame_equal(a, b)
+            return True
+        except AssertionError:
+            return False
+
     reference = table("local")
     for name, layout in layouts.items():
         layout["episodes_per_hour"] = round(3600 * cfg.episodes / layout["seconds"])
         layout["over_local"] = round(layouts["local"]["seconds"] / layout["seconds"], 3)
-        layout["rows_equal_local"] = bool(table(name).equals(reference))
+        layout["rows_equal_local"] = same(table(name), reference)
         print(f"[cluster] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_local']}× local), "
               f"rows equal: {layout['rows_equal_local']}", flush=True)
     out = {"policy": checkpoint or "expert", "benchmark": bench, "split": cfg.split, "episodes": cfg.episodes,

@@ -71,6 +71,16 @@ def _evaluate(cfg: GpuBenchConfig, bench: str, out: Path, flags: list[str]) -> d
             "successes": int(rows["success"].sum()), "command": " ".join(cmd), "_rows": rows}
 
 
+def _same(a, b) -> bool:
+    import pandas as pd
+
+    try:
+        pd.testing.assert_frame_equal(a, b)
+        return True
+    except AssertionError:
+        return False
+
+
 def run(cfg: GpuBenchConfig) -> dict:
     import torch
 
@@ -125,7 +135,7 @@ def run(cfg: GpuBenchConfig) -> dict:
     for name, layout in layouts.items():
         rows = layout.pop("_rows")
         layout["over_cpu"] = round(layout["episodes_per_hour"] / layouts["cpu"]["episodes_per_hour"], 3)
-        layout["rows_equal_cpu"] = bool(rows.equals(reference))
+        layout["rows_equal_cpu"] = _same(rows, reference)
         print(f"[gpu] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_cpu']}× cpu), "
               f"{layout['successes']}/{cfg.episodes} successes", flush=True)
     out = {"device": torch.cuda.get_device_name(0), "cores": cores, "checkpoint": cfg.checkpoint, "benchmark": bench,
