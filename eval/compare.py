@@ -1,4 +1,4 @@
-"""Two policies on the same benchmark, compared within instances (docs/formats.md, "Metrics": comparisons).
+"""Two policies on the same benchmark, compared within instances (docs/statistics.md, "metrics.json keys": comparisons).
 
 Common random numbers make this a matched design: repeat r of an instance runs with the same seed
 (same jitter, same heading) whatever the policy, so policy A's and policy B's episodes of one
@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from eval.metrics import MetricsConfig, _codes, _group_sum, conditional_cv, excess
+from eval.tables import MetricsConfig, codes, conditional_cv, excess, group_sum
 from eval.stats import paired_success_test
 
 N_INNER = 100  # permutations behind each swap's noise floor
@@ -46,7 +46,7 @@ class _Paired:
         n_cell = np.bincount(self.cell) * n_rep
         if not success.any():
             return None
-        cv = conditional_cv(_group_sum(success.sum(axis=1), self.cell) / n_cell, self.context, self.epsilon).mean()
+        cv = conditional_cv(group_sum(success.sum(axis=1), self.cell) / n_cell, self.context, self.epsilon).mean()
         rng = np.random.default_rng(seed)
         inst_ctx = self.context[self.cell]
         perm_k = np.zeros((N_INNER, len(self.cell)))
@@ -54,7 +54,7 @@ class _Paired:
             idx = np.flatnonzero(inst_ctx == c)
             block = np.broadcast_to(success[idx], (N_INNER, *success[idx].shape))
             perm_k[:, idx] = rng.permuted(block, axis=1).sum(axis=2)  # shuffle instances within (c, r)
-        null = conditional_cv(_group_sum(perm_k, self.cell) / n_cell, self.context, self.epsilon).mean(axis=-1)
+        null = conditional_cv(group_sum(perm_k, self.cell) / n_cell, self.context, self.epsilon).mean(axis=-1)
         return excess(float(cv), float(null.mean()))
 
 
@@ -67,8 +67,8 @@ def _paired(rows: pd.DataFrame, name_a: str, name_b: str, epsilon: float) -> _Pa
     n_rep = int(counts.min())
     wide = wide.groupby(level="instance_id").head(n_rep)  # the same number of pairs per instance
     inst = rows.drop_duplicates("instance_id").set_index("instance_id").loc[counts.index, ["value", "context_id"]]
-    cell = _codes(inst, ["value", "context_id"])
-    context = _codes(inst.assign(cell=cell).groupby("cell").first(), ["context_id"])
+    cell = codes(inst, ["value", "context_id"])
+    context = codes(inst.assign(cell=cell).groupby("cell").first(), ["context_id"])
     shape = (len(counts), n_rep)
     return _Paired(wide[name_a].to_numpy(bool).reshape(shape), wide[name_b].to_numpy(bool).reshape(shape),
                    cell, context, epsilon)

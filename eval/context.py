@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 
 from eval import stats
-from eval.metrics import MetricsConfig, _codes, _interval, _lrt_fields, _rng, _Table, _value_order
+from eval.metrics import _interval, _lrt_fields, _rng, _Table, _value_order
+from eval.tables import MetricsConfig, codes
 from roboview_data.variation.factors import DEFAULT_TASK, baselines, context_factors
 
 
@@ -49,7 +50,7 @@ def context_factor_metrics(episodes: pd.DataFrame, task: str, factor: str,
     eps = rows[[factor, "split", "value", "repeat", "success"]].astype({factor: str, "value": str}).copy()
     eps["success"] = eps["success"].astype(np.int64)
     keys = [factor, "split", "value"]
-    eps["cell"] = _codes(eps, keys)
+    eps["cell"] = codes(eps, keys)
     cells = eps.groupby("cell", sort=True).agg(n=("success", "size"), k=("success", "sum"),
                                                **{key: (key, "first") for key in keys}).reset_index(drop=True)
     table = _Table((factor,), cells, eps.reset_index(drop=True))

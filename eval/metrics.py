@@ -1,47 +1,15 @@
-"""Bias metrics of paper §5.4 made exact (docs/formats.md, "Metrics"), and the statistics that say
-whether they are more than noise (docs/formats.md, "Metrics").
+"""Bias metrics of paper §5.4 made exact, and the statistics that say whether they are more than noise.
 
-Everything here is a pure function of an episodes table (one row per episode, docs/formats.md "Episode
-records"). Notation: a *cell* is a value v (or a value pair (a, b) in a factorial split) in a
-context c; SR(v, c) is the mean success over every episode of the instances in that cell.
+Every key computed here is defined once, in docs/statistics.md ("metrics.json keys"); the episode columns it
+reads are docs/formats.md's "Episode records". Everything is a pure function of an episodes table. Notation: a
+*cell* is a value v (or a value pair (a, b) in a factorial split) in a context c; SR(v, c) is the mean success
+over every episode of the instances in that cell.
 
-The paper's numbers, verbatim:
-
-- Average Success Rate `sr`: mean success over the split's episodes (weighted by episodes, not
-  averaged over instances as the paper's tables are).
-- Conditional CV (CCV): CV(V | c) = σ_v SR(v, c) / (μ_v SR(v, c) + ε), σ population (ddof = 0).
-  A context where everything failed has CV = 0 / (0 + ε) = 0 (counted in `n_contexts_all_failed`).
-- Bias Coefficient `cv`: mean over contexts c of CV(V | c); null when every episode failed.
-- Factorial split over (A, B): CV(A | b, c) over a; `cv[A]` = mean over (b, c);
-  IEC(A; B) = mean over c of σ_b CV(A|b,c) / (μ_b CV(A|b,c) + ε), keyed "A|B"; same for B.
-
-Why more is needed: with n repeats a policy with *no* bias and success p shows CV ≈ √((1−p)/(n p))
-from binomial noise alone. So:
-
-- `cv_null`: mean CV over permutations of value labels within blocks (context, repeat) — the noise
-  floor of this very table. Episodes of one (c, r) share their seed (common random numbers), so
-  under "the value does not matter" their labels are exchangeable: the permutation is exact for
-  independent episodes and for CRN-coupled ones alike.
-- `cv_excess` = √max(0, cv² − cv_null²): bias beyond noise (variances of independent noise add).
-- `cv_excess_ci95`: null. No interval for it has yet passed the coverage simulation the contract
-  requires (README, "Statistics"); the earlier bootstrap interval around `cv` was centred on the
-  noise-inflated estimate and never validated, so it is gone rather than renamed.
-- `p_value`: likelihood-ratio test of a binomial GLM `value + context` against `context`
-  (statsmodels), χ² reference, or the same permutations as reference when the table is sparse
-  (`eval.stats`). `p_value_cv`: the permutation test with `cv` itself as statistic.
-- `per_value[v]`: `odds_ratio` of v against the other values with its 95 % interval (Mantel–
-  Haenszel, stratified by block (context, repeat)) and the exact conditional p-value of the same
-  hypothesis (`eval.stats.exact_stratified_p`); `q_value`: Benjamini–Hochberg over the split's values.
-- Factorial splits: `p_value[f]` (GLM LRT of f within the other factor × context), `cv_null`,
-  `cv_excess`, `p_value_cv` per factor; `p_interaction` (LRT of A×B against A + B); `iec_null`
-  (IEC of tables drawn from the fitted additive GLM: a parametric bootstrap), `iec_excess`
-  (√max(0, iec² − iec_null²)) and `p_iec` (share of additive draws with an IEC at least as large).
-
-Output layout (`compute_metrics`): DESIGN's metrics.json for one policy, plus `policy`,
-`resampling` (n_perm, n_glm, seed) and `average` (mean SR, CV and cv_excess over the single-factor
-splits present). `compute_all_metrics` returns that dict for a single policy and {"epsilon",
-"resampling", "policies": {name: dict}} (+ "comparisons", `eval.compare`) for several;
-`policy_layouts` reads either shape back.
+Output (`compute_metrics`, one policy): `epsilon`, `policy`, `resampling` (n_perm, n_glm, seed), `control`,
+`splits`, `interactions` and `average` (mean SR, CV and cv_excess over the single-factor splits present).
+`compute_all_metrics` returns that dict for a single policy and {"epsilon", "resampling", "policies": {name:
+dict}, "comparisons" (`eval.compare`), "rankings" (three policies or more)} for several; `policy_layouts`
+reads either shape back.
 """
 
 from __future__ import annotations
@@ -57,87 +25,24 @@ import numpy as np
 import pandas as pd
 
 from eval import isolation, ranking, stats
+from eval.compare import baseline_retest, compare_policies
+from eval.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
+    EPSILON,
+    SEQUENTIAL_H,
+    Z95,
+    MetricsConfig,
+    codes,
+    conditional_cv,
+    excess,
+    group_sum,
+    wilson_interval,
+)
 from roboview_data.variation.factors import FACTORS
 
 log = logging.getLogger(__name__)
 
-EPSILON = 1e-6
-# Exceedances that stop a sequential Monte Carlo p-value (Besag–Clifford): its relative error is ≈ 1/√h.
-SEQUENTIAL_H = 20
-Z95 = 1.959963984540054  # standard normal 97.5 % quantile
 # Columns the metrics read; the rest of the episode record is carried along untouched.
 METRIC_COLUMNS = ("policy", "split", "factor", "value", "context_id", "instance_id", "repeat", "success")
-
-
-@dataclass(frozen=True)
-class MetricsConfig:
-    """How metrics are computed; the same config and table always give the same numbers."""
-
-    # ε in the CV and IEC denominators (DESIGN default 1e-6).
-    epsilon: float = EPSILON
-    # Within-block permutations behind cv_null and p_value_cv.
-    n_perm: int = 1000
-    # Draws behind GLM calibration: permutations for a sparse p_value, additive-model tables for
-    # iec_null and a sparse p_interaction (each draw refits a GLM, so fewer than n_perm).
-    n_glm: int = 200
-    # Seed of the permutation and bootstrap generators (one stream per split and purpose).
-    seed: int = 0
-    # Most within-block permutations behind p_value_cv: beyond the first n_perm, more are drawn (n_perm at a
-    # time) while fewer than SEQUENTIAL_H reach the observed CV (Besag–Clifford), so a strong bias gets a
-    # p-value down to 1 / (max_perm + 1) instead of 1 / (n_perm + 1).
-    max_perm: int = 20_000
-
-    def __post_init__(self) -> None:
-        if not self.epsilon > 0:
-            raise ValueError(f"epsilon={self.epsilon} must be > 0 (it keeps CV finite at SR = 0)")
-        if self.n_perm < 1 or self.n_glm < 1:
-            raise ValueError(f"n_perm={self.n_perm} and n_glm={self.n_glm} must be ≥ 1")
-        if self.max_perm < self.n_perm:
-            raise ValueError(f"max_perm={self.max_perm} must be ≥ n_perm={self.n_perm}")
-        if self.seed < 0:
-            raise ValueError(f"seed={self.seed} must be ≥ 0")
-
-
-def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float] | None:
-    """Wilson score interval for successes/n (None when n = 0); 8/10 → (0.490, 0.943)."""
-    if n <= 0:
-        return None
-    p = successes / n
-    denom = 1 + z * z / n
-    center = (p + z * z / (2 * n)) / denom
-    half = z / denom * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    # At 0/n and n/n the bound is exactly 0 or 1; the formula only reaches it up to float noise.
-    lo = 0.0 if successes == 0 else max(0.0, center - half)
-    hi = 1.0 if successes == n else min(1.0, center + half)
-    return lo, hi
-
-
-def conditional_cv(sr: np.ndarray, groups: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
-    """σ / (μ + ε) of `sr` within each group (the paper's CCV), vectorized over leading axes.
-
-    `sr` has shape (..., n_items); `groups` gives each item's group code 0..G-1 (every code
-    present). Returns shape (..., G). Used for CV(V|c) and, one level up, for IEC.
-    """
-    counts = np.bincount(groups)
-    mean = _group_sum(sr, groups) / counts
-    var = _group_sum((sr - mean[..., groups]) ** 2, groups) / counts
-    return np.sqrt(var) / (mean + epsilon)
-
-
-def _group_sum(x: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """Sum of x's last axis within each group code (reduceat over a stable sort)."""
-    order = np.argsort(groups, kind="stable")
-    starts = np.searchsorted(groups[order], np.arange(groups.max() + 1))
-    return np.add.reduceat(x[..., order], starts, axis=-1)
-
-
-def _codes(frame: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
-    return frame.groupby(list(columns), sort=True).ngroup().to_numpy()
-
-
-def excess(observed: float, null: float) -> float:
-    """√max(0, observed² − null²): the part of a dispersion not explained by the null's noise."""
-    return math.sqrt(max(0.0, observed * observed - null * null))
 
 
 @dataclass(frozen=True)
@@ -161,7 +66,7 @@ class _Table:
         return self.k / self.n
 
     def codes(self, columns: Sequence[str]) -> np.ndarray:
-        return _codes(self.cells, columns)
+        return codes(self.cells, columns)
 
     def permuted_k(self, within: Sequence[str], n_perm: int, rng: np.random.Generator) -> np.ndarray:
         """(n_perm, n_cells) success counts with episodes' cell labels shuffled within blocks.
@@ -170,7 +75,7 @@ class _Table:
         episode of a block is exchangeable (the same seed, the same context, any value).
         """
         eps = self.episodes
-        blocks = _codes(eps, [*within, "repeat"])
+        blocks = codes(eps, [*within, "repeat"])
         success = eps["success"].to_numpy().astype(np.int8)
         shuffled = np.empty((n_perm, len(eps)), dtype=np.int8)
         order = np.argsort(blocks, kind="stable")
@@ -178,7 +83,7 @@ class _Table:
         for lo, hi in zip(bounds[:-1], bounds[1:]):
             idx = order[lo:hi]
             shuffled[:, idx] = rng.permuted(np.tile(success[idx], (n_perm, 1)), axis=1)
-        return _group_sum(shuffled.astype(np.int64), eps["cell"].to_numpy())
+        return group_sum(shuffled.astype(np.int64), eps["cell"].to_numpy())
 
 
 def _table(episodes: pd.DataFrame, factors: tuple[str, ...]) -> _Table:
@@ -188,7 +93,7 @@ def _table(episodes: pd.DataFrame, factors: tuple[str, ...]) -> _Table:
     for i, name in enumerate(factors):
         eps[name] = parts.str[i]
     keys = [*factors, "context_id"]
-    eps["cell"] = _codes(eps, keys)
+    eps["cell"] = codes(eps, keys)
     cells = eps.groupby("cell", sort=True).agg(
         n=("success", "size"), k=("success", "sum"), **{key: (key, "first") for key in keys})
     return _Table(factors, cells.reset_index(drop=True), eps.reset_index(drop=True))
@@ -243,7 +148,7 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     ctx = table.codes(["context_id"])
     sr_cell = table.sr
     ctx_k = np.bincount(ctx, weights=table.k)
-    dev = sr_cell - (_group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
+    dev = sr_cell - (group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
     tests = _per_value_tests(table, factor) if k else {}
     grouped = table.cells.assign(dev=dev).groupby(factor)
     per_value: dict[str, dict[str, Any]] = {}
@@ -286,7 +191,7 @@ def _factorial_statistics(table: _Table, epsilon: float) -> tuple[Callable, dict
     a, b = table.factors
     by = {a: table.codes([b, "context_id"]), b: table.codes([a, "context_id"])}
     # Context of each (b, c) / (a, c) group, to average CV(A|b,c) over b within c for IEC.
-    group_ctx = {f: _codes(table.cells.assign(g=by[f]).groupby("g").first(), ["context_id"]) for f in (a, b)}
+    group_ctx = {f: codes(table.cells.assign(g=by[f]).groupby("g").first(), ["context_id"]) for f in (a, b)}
 
     def statistics(sr: np.ndarray) -> dict[str, np.ndarray]:
         res: dict[str, np.ndarray] = {}
@@ -406,8 +311,6 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     for key in average:
         values = [s[key] for s in splits.values()]
         average[key] = float(np.mean(values)) if values and None not in values else None
-    from eval.compare import baseline_retest  # compare builds on this module
-
     return {"epsilon": cfg.epsilon, "policy": str(policies[0]), "resampling": _resampling(cfg),
             "control": baseline_retest(episodes),
             "splits": splits, "interactions": interactions, "average": average}
@@ -419,8 +322,6 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     names = sorted(map(str, episodes["policy"].unique()))
     if len(names) == 1:
         return compute_metrics(episodes, cfg)
-    from eval.compare import compare_policies  # compare builds on this module
-
     # Paired comparisons see only the blocks each policy's certificate verified.
     certified = pd.concat([isolation.drop_violations(rows, isolation.verify(rows))
                            for _, rows in episodes.groupby("policy", sort=False)])

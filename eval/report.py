@@ -8,7 +8,7 @@ of another results format (`roboview_results_format`: seeds of the old per-insta
 report never silently mixes incomparable runs.
 
 metrics.json is `eval.metrics.compute_all_metrics` plus `sources` (path and benchmark version of
-each file): for one policy DESIGN's layout, for several {"epsilon", "resampling", "sources",
+each file): for one policy the layout of docs/formats.md, for several {"epsilon", "resampling", "sources",
 "policies": {name: layout}, "comparisons": [...]}. report.md prints only numbers read from that dict —
 SR, CV, cv_excess and IEC ×100 as in the paper's Tables 1 and 2, p-values as they are — so the two
 files cannot disagree.

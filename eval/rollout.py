@@ -18,7 +18,8 @@ import numpy as np
 
 from eval import isolation
 from eval.policy_server import RemotePolicy, ServerHandle
-from policies.base import Episode, PolicyConfig, TransientPolicyError, make_policy_batch
+from policies.base import Episode, PolicyConfig, TransientPolicyError
+from policies.factory import make_policy_batch
 from policies.errors import PolicyUnavailable
 from roboview_data.benchmark.format import BenchmarkItem
 from roboview_data.sim.env import IMAGE_KEY

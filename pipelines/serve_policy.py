@@ -44,7 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipelines._cli import cli_main
-from policies.base import AgentView, PolicyConfig, build_policy, default_policy_config, load_policy_types
+from policies.base import AgentView, PolicyConfig, default_policy_config, load_policy_types
+from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
 from roboview_data.sim.tasks import DEFAULT_TASK, TASKS
 

@@ -276,29 +276,3 @@ class PolicyBatch:
             close = getattr(policy, "close", None)
             if close is not None:
                 close()
-
-
-def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyBatch:
-    """The policies for `envs` run in lockstep: one batched policy when the type builds one (and no SGL
-    wraps it), else one policy per env (`make_policy`)."""
-    if len(envs) > 1 and not config.privileged and not config.sgl:
-        native = config.build_batched(AgentView.of(envs[0]), len(envs))
-        if native is not None:
-            return PolicyBatch([native], batched=True)
-    return PolicyBatch([make_policy(config, env) for env in envs], batched=False)
-
-
-def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
-    """Build `config`'s policy for `env`: from the env only if the type is privileged; wrapped in the
-    Semantic Grounding Layer when `config.sgl`."""
-    return build_policy(config, env if config.privileged else AgentView.of(env))
-
-
-def build_policy(config: PolicyConfig, view: AgentView | PickPlaceEnv) -> Policy:
-    """`config`'s policy from an agent's view (a privileged type's from the env), with the SGL when asked."""
-    policy = config.build(view)
-    if config.sgl:
-        from policies.vlm.sgl import SemanticGroundingLayer
-
-        policy = SemanticGroundingLayer(policy, config.sgl_endpoint(), config.observed_cameras()[0])
-    return policy

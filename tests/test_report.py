@@ -24,7 +24,7 @@ FAST = {"n_glm": 20, "n_perm": 50}
 
 
 def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None, repeats: int = 3) -> pd.DataFrame:
-    """Every DESIGN episode column for the tiny suite's instances; outcomes seeded per policy."""
+    """Every episode column (docs/formats.md) for the tiny suite's instances; outcomes seeded per policy."""
     rng = np.random.default_rng(seed)
     rows = []
     for instance in generate_suite(load_preset("tiny")):

@@ -6,7 +6,8 @@ Privileged state (object pose, box center) is read here only to grade what the p
 import numpy as np
 import pytest
 
-from policies.base import Episode, make_policy, policy_config, registered_policies
+from policies.base import Episode, policy_config, registered_policies
+from policies.factory import make_policy
 from policies.perception import PerceptionError, perceive
 from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
 from roboview_data.sim.scene import BOX_CENTER

@@ -158,7 +158,8 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
 def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_benchmark, tmp_path):
     from transformers import AutoTokenizer
 
-    from policies.base import Episode, make_policy
+    from policies.base import Episode
+    from policies.factory import make_policy
     from policies.vlm.standin import MODEL_NAME, ClassicCVModel
     from roboview_data.benchmark.format import load_benchmark
     from roboview_data.sim.tasks import make_env
