@@ -16,7 +16,7 @@ Writes one JSON file with:
   openpi-server's server holding the same checkpoint (both with torch's default threads: all cores);
   `batching_speedup` is the ratio.
 
-The checkpoint: `--checkpoint`, else `outputs/train_act96/checkpoints/last/pretrained_model` (the README's
+The checkpoint: `--checkpoint`, else `outputs/train_act96/checkpoints/last/pretrained_model` (the
 reference ACT). The benchmark: `--benchmark`, else the `tiny` preset built here.
 """
 
@@ -46,7 +46,7 @@ ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_rea
 class ServingConfig:
     # JSON file to write.
     output: str = "outputs/bench/serving.json"
-    # LeRobot checkpoint (a chunked one: act, pi0, pi05, smolvla); default: the README's reference ACT.
+    # LeRobot checkpoint (a chunked one: act, pi0, pi05, smolvla); default: the reference ACT (docs/results/act_ref.md).
     checkpoint: str = REFERENCE_CHECKPOINT
     # Benchmark folder; empty: build the tiny preset in a scratch folder.
     benchmark: str = ""

@@ -21,7 +21,7 @@ do not leak between phases):
   vision agent and for the checkpoint.
 
 The checkpoint: `--checkpoint`, else `outputs/train_act96/checkpoints/last/pretrained_model` when present
-(the README's reference ACT), else a 2-step ACT trained here (it fails every episode, so its episodes run
+(the reference ACT, docs/results/act_ref.md), else a 2-step ACT trained here (it fails every episode, so its episodes run
 the full 120 steps: a worst case, not a result). `--quick=true` (smaller counts) finishes in under 10
 minutes on 2 cores.
 """

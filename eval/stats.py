@@ -281,7 +281,7 @@ def lrt_power(n_values: int, n_contexts: int, repeats: int, tau: float, sr: floa
     λ = n · |C| · Σ_v w_v (β_v − β̄_w)², w_v = p_v (1 − p_v) (the Fisher information per episode,
     β̄_w the w-weighted mean); the power is averaged over `draws` seeded draws of the effects,
     because power is not linear in λ. Asymptotic: sparse tables, permutation-calibrated, fall short
-    of it by up to ≈ 0.1 (README, "Planning repeats").
+    of it by up to ≈ 0.1 (docs/statistics.md).
     """
     df = n_values - 1
     if df < 1:

@@ -77,12 +77,12 @@ class EvalConfig:
     # Worker processes (local) or actors (ray).
     num_workers: int = 2
     # Envs per worker, stepped in lockstep: the policy is called once per step on their batch of
-    # observations (one model copy per worker, batched forward passes for checkpoints; see the README's
-    # GPU layout). 1: one env per worker.
+    # observations (one model copy per worker, batched forward passes for checkpoints; see docs/evaluation.md,
+    # "Fast evaluation"). 1: one env per worker.
     envs_per_worker: int = 1
     # One policy server process holds the only model copy and answers every worker's envs in one batched
     # forward pass per chunk (the GPU layout: many CPU render workers, one GPU model; local backend,
-    # chunked checkpoints). See eval/policy_server.py and the README.
+    # chunked checkpoints). See eval/policy_server.py and docs/evaluation.md.
     policy_server: bool = False
     # Episode videos (MP4 per observed camera, linked from the report): N (the first N episodes run),
     # failures, all; empty: none. A video episode renders every camera at every step.

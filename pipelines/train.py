@@ -9,7 +9,7 @@ the backbone too, batch 16) and *no* pretrained backbone (the default downloads 
 which fails offline). Images are used at the size they were collected (`--dataset.image_size` of
 collect): ACT has no resize step, and evaluation renders the checkpoint's own size. Checkpoints
 land in OUTPUT/checkpoints/<step>/pretrained_model every `--save_freq` steps; rerunning the same
-command resumes from the last one (lerobot's `--resume`). Measured step time: README, "Training".
+command resumes from the last one (lerobot's `--resume`). Measured step time: docs/results/act_ref.md.
 """
 
 from __future__ import annotations

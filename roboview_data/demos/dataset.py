@@ -56,7 +56,7 @@ class CollectionSignature:
 
 
 def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
-    """LeRobot features: one video per camera, 8-d state and 8-d action (see README, "Action")."""
+    """LeRobot features: one video per camera, 8-d state and 8-d action (docs/benchmark.md, "The task and its interfaces")."""
     features = {
         IMAGE_KEY.format(cam): {"dtype": "video", "shape": (image_size, image_size, 3),
                                 "names": ["height", "width", "channels"]}
