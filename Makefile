@@ -17,7 +17,7 @@ export PYOPENGL_PLATFORM ?= egl
 export HF_HUB_OFFLINE ?= 1
 DEMO_DIR ?= outputs/demo
 
-.PHONY: install sysdeps demo test bench clean-demo
+.PHONY: install sysdeps demo test test-fast bench clean-demo
 
 install: sysdeps $(STAMP)
 
@@ -60,10 +60,15 @@ demo: install
 	@echo "Evaluation:     $(DEMO_DIR)/eval/vision/episodes.parquet (Rerun: .venv/bin/rerun $(DEMO_DIR)/eval/vision.rrd)"
 	@echo "Report:         $(DEMO_DIR)/report/report.md (+ metrics.json and PNG plots)"
 
+# The whole suite, with its 30 slowest tests listed at the end; test-fast: the tests that take seconds (statistics,
+# formats, factor registry, imports), no rendering, training or servers.
 test: install
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=30
 
-# The throughput harness (README "Numbers"): one JSON with every rate, side by side with lerobot-eval.
+test-fast: install
+	$(PY) -m pytest -q -m "not slow" --durations=10
+
+# The throughput harness (docs/performance.md): one JSON with every rate, side by side with lerobot-eval.
 # BENCH_ARGS=--quick=true for the under-10-minute version; --checkpoint=DIR for another checkpoint.
 BENCH_ARGS ?=
 bench: install

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from eval.metrics import EPSILON, MetricsConfig, policy_layouts
+from eval.metrics import MetricsConfig, policy_layouts
 from eval.report import REPORT_FILE, write_report
 from eval.stats import lrt_power
 from pipelines._cli import cli_main
@@ -75,12 +75,9 @@ class AuditConfig:
     output_dir: str = "outputs/audit"
     # Bias size (logit SD of the value effects) the power line is computed for, as pipelines.plan.
     tau: float = 0.3
-    # Permutations behind the noise floor (and the first batch of the sequential p_value_cv), GLM
-    # calibration draws, seed, most permutations for p_value_cv.
-    n_perm: int = 1000
-    n_glm: int = 200
-    seed: int = 0
-    max_perm: int = 20_000
+    # How the statistics are computed, as pipelines.report: --metrics.n_perm, --metrics.n_glm, --metrics.max_perm,
+    # --metrics.seed, --metrics.epsilon (docs/statistics.md).
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
 
     def __post_init__(self) -> None:
         if not self.results:
@@ -95,7 +92,6 @@ class AuditConfig:
             raise ValueError(f"missing {', '.join(missing)}: name the columns of {self.results} that hold them")
         if not self.tau > 0:
             raise ValueError(f"--tau={self.tau} must be > 0 (a logit SD, e.g. 0.3)")
-        MetricsConfig(EPSILON, self.n_perm, self.n_glm, self.seed, self.max_perm)
 
 
 def read_table(path: str) -> pd.DataFrame:
@@ -165,7 +161,7 @@ def power_lines(episodes: pd.DataFrame, tau: float) -> dict[str, dict[str, dict]
 
 def run(cfg: AuditConfig):
     episodes = to_episodes(read_table(cfg.results), cfg)
-    metrics_cfg = MetricsConfig(EPSILON, cfg.n_perm, cfg.n_glm, cfg.seed, cfg.max_perm)
+    metrics_cfg = cfg.metrics
     source = {"path": str(cfg.results), "roboview_benchmark_version": None, "provenance": [],
               "mapping": {k: v for k, v in vars(cfg.map).items() if v}}
     result = write_report(episodes, cfg.output_dir, metrics_cfg, sources=[source], plots=False)

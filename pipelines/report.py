@@ -11,10 +11,10 @@ benchmark versions stop the run with a message naming the offender.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.metrics import EPSILON, EpisodesError, MetricsConfig
+from eval.metrics import EpisodesError, MetricsConfig
 from eval.report import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
 from pipelines._cli import cli_main
 
@@ -26,24 +26,15 @@ class ReportConfig:
     results: str = ""
     # Folder that receives metrics.json, report.md, report.html (one self-contained page) and the PNG plots.
     output_dir: str = "outputs/report"
-    # ε added to the mean in the CV and IEC denominators.
-    epsilon: float = EPSILON
-    # Within-(context, repeat) permutations behind cv_null and p_value_cv.
-    n_perm: int = 1000
-    # GLM calibration draws: permutations for sparse p_value, additive-model tables for iec_null.
-    n_glm: int = 200
-    # Seed of the bootstrap and permutation generators.
-    seed: int = 0
-    # Most permutations behind p_value_cv: more than n_perm are drawn while fewer than 20 reach the observed
-    # CV (Besag–Clifford sequential p-value), so a strong bias resolves down to 1 / (max_perm + 1).
-    max_perm: int = 20_000
+    # How the statistics are computed: --metrics.n_perm, --metrics.n_glm, --metrics.max_perm, --metrics.seed,
+    # --metrics.epsilon (docs/statistics.md).
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
     # Draw the PNG plots (false: metrics.json and report.md only).
     plots: bool = True
 
     def __post_init__(self) -> None:
         if not self.result_paths:
             raise ValueError("--results is required: the episodes.parquet file(s) of pipelines.evaluate")
-        self.metrics_config  # validates epsilon, n_perm, n_glm and seed with their own messages
 
     @property
     def result_entries(self) -> list[tuple[str | None, Path]]:
@@ -58,17 +49,10 @@ class ReportConfig:
     def result_paths(self) -> list[Path]:
         return [path for _, path in self.result_entries]
 
-    @property
-    def metrics_config(self) -> MetricsConfig:
-        try:
-            return MetricsConfig(self.epsilon, self.n_perm, self.n_glm, self.seed, self.max_perm)
-        except ValueError as exc:
-            raise ValueError(f"--{exc}") from None
-
 
 def run(cfg: ReportConfig) -> ReportResult:
     episodes, sources = load_results(cfg.result_paths, [name for name, _ in cfg.result_entries])
-    return write_report(episodes, cfg.output_dir, cfg.metrics_config, sources=sources, plots=cfg.plots)
+    return write_report(episodes, cfg.output_dir, cfg.metrics, sources=sources, plots=cfg.plots)
 
 
 def _summary(cfg: ReportConfig, result: ReportResult) -> None:

@@ -13,6 +13,20 @@ from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
+# Test tiers. Slow: a test that uses a rendered environment, the built benchmark or a trained checkpoint, or lives
+# in a module that starts simulations, servers, clusters or a browser. `make test-fast` runs the rest.
+SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_checkpoint", "bench"}
+FAST_MODULES = {"test_adaptive", "test_audit", "test_colors", "test_context_stats", "test_factors", "test_imports",
+                "test_isolation", "test_metrics", "test_ranking", "test_report", "test_statistics",
+                "test_stable_ids", "test_svgf"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        module = item.module.__name__.rpartition(".")[2]
+        if module not in FAST_MODULES or SLOW_FIXTURES & set(item.fixturenames):
+            item.add_marker(pytest.mark.slow)
+
 
 @pytest.fixture(scope="session")
 def env():

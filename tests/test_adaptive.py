@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from eval.adaptive import Design, decide, simulate
+from eval.tables import MetricsConfig
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import policy_config
 
@@ -66,7 +67,7 @@ def test_an_adaptive_run_stops_splits_resumes_and_is_reported(tiny_benchmark, tm
     assert first.new_episodes == len(rows) == color["episodes"] + (rows["split"] == "color_x_camera_pose").sum()
     assert run(cfg).new_episodes == 0  # a rerun recomputes the same decisions: nothing more to run
     result = report(ReportConfig(results=str(tmp_path / "ev" / "episodes.parquet"), output_dir=str(tmp_path / "rep"),
-                                 n_perm=50, n_glm=10, plots=False))
+                                 metrics=MetricsConfig(n_perm=50, n_glm=10), plots=False))
     assert result.metrics["splits"]["color"]["adaptive"]["stopped"] == "no_bias"
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "## Adaptive sampling" in text and "The sampling was adaptive" in text

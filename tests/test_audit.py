@@ -10,7 +10,7 @@ from eval.metrics import MetricsConfig, compute_metrics
 from eval.simulate import simulate_split
 from pipelines.audit import main
 
-FAST = ["--n_perm=300", "--n_glm=40", "--max_perm=300"]
+FAST = ["--metrics.n_perm=300", "--metrics.n_glm=40", "--metrics.max_perm=300"]
 
 
 @pytest.fixture(scope="module")

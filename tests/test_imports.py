@@ -90,3 +90,14 @@ def test_the_cycle_finder_finds_a_cycle():
     assert "eval.tables" in graph["eval.compare"] and "policies.vlm.sgl" in graph["policies.factory"]
     assert "eval.metrics" not in graph["eval.compare"] and "policies.vlm.sgl" not in graph["policies.base"]
     assert "eval.adaptive" in graph["pipelines.evaluate"]  # imported inside a method
+
+
+def test_importing_the_package_registers_the_gym_ids():
+    import subprocess
+    import sys
+
+    code = ("import gymnasium, roboview_data; from roboview_data.sim.tasks import TASKS; "
+            "print(sorted(t.gym_id for t in TASKS.values() if t.gym_id in gymnasium.registry))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-800:]
+    assert proc.stdout.strip() == "['RoboView/PickPlace-v0', 'RoboView/Push-v0']"

@@ -13,14 +13,14 @@ import pyarrow.parquet as pq
 import pytest
 from PIL import Image
 
-from eval.metrics import EpisodesError, policy_layouts
+from eval.metrics import EpisodesError, MetricsConfig, policy_layouts
 from eval.report import VERSION_KEY, load_results
 from eval.report_plots import PLOTS
 from eval.results import FORMAT_KEY
 from pipelines.report import ReportConfig, main, run
 from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
 
-FAST = {"n_glm": 20, "n_perm": 50}
+FAST = {"metrics": MetricsConfig(n_glm=20, n_perm=50)}
 
 
 def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None, repeats: int = 3) -> pd.DataFrame:
@@ -174,7 +174,7 @@ def test_bad_inputs_name_the_offender(tmp_path, capsys):
         main([f"--results={tmp_path / 'nowhere.parquet'}", f"--output_dir={tmp_path / 'rep'}"])
     assert "nowhere.parquet" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main([f"--results={good}", "--n_glm=0"])
+        main([f"--results={good}", "--metrics.n_glm=0"])
     assert "n_glm=0" in capsys.readouterr().err
     old = write(make_episodes("expert", 0, splits=("color",)), tmp_path / "old.parquet", results_format=b"1")
     with pytest.raises(EpisodesError, match="results format 1.*seeds hashed instance_id"):
@@ -183,8 +183,8 @@ def test_bad_inputs_name_the_offender(tmp_path, capsys):
 
 def test_cli_without_plots(tmp_path, capsys):
     path = write(make_episodes("expert", 0, splits=("dist_scale",)), tmp_path / "e.parquet", version=None)
-    result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--n_glm=20",
-                   "--n_perm=20"])
+    result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--metrics.n_glm=20",
+                   "--metrics.n_perm=20"])
     assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.html", "report.md"]
     assert result.metrics["sources"][0][VERSION_KEY] is None
     assert "[report]" in capsys.readouterr().out
@@ -193,7 +193,7 @@ def test_cli_without_plots(tmp_path, capsys):
 def test_named_results_make_one_file_two_policies(tmp_path):
     good = write(make_episodes("lerobot:act", 0, splits=("color",)), tmp_path / "good.parquet")
     main([f"--results=ref={good},again={good}", f"--output_dir={tmp_path / 'rep'}", "--plots=false",
-          "--n_perm=50", "--n_glm=20"])
+          "--metrics.n_perm=50", "--metrics.n_glm=20"])
     metrics = json.loads((tmp_path / "rep" / "metrics.json").read_text())
     assert sorted(metrics["policies"]) == ["again", "ref"]
     pair = metrics["comparisons"][0]

@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from eval.metrics import MetricsConfig
 from eval.results import ResultsError, shard_of
 from pipelines.evaluate import EvalConfig
 from pipelines.merge import MergeConfig
@@ -53,7 +54,7 @@ def test_shards_partition_the_work_and_merge_to_the_whole_run(shards, tmp_path):
     assert sorted(e["shard"] for e in entries) == ["0/3", "1/3", "2/3"]
     # The merged folder reports like any results folder.
     out = report(ReportConfig(results=str(tmp_path / "merged" / "episodes.parquet"), output_dir=str(tmp_path / "rep"),
-                              n_perm=20, n_glm=20, plots=False))
+                              metrics=MetricsConfig(n_perm=20, n_glm=20), plots=False))
     assert out.metrics["splits"]["color"]["n_episodes"] == len(rows(shards / "whole").query("split == 'color'"))
 
 
