@@ -1,7 +1,7 @@
 """Going distributed on one machine: the same episodes on the local backend, on a one-node Ray cluster and on
 a two-node Ray cluster with the same cores in total (each node a separate raylet started by `ray start`).
 
-    python -m benchmarks.cluster --output=outputs/bench/cluster.json [--checkpoint=CKPT] [--benchmark=DIR]
+    python -m benchmarks.cluster --output=outputs/bench/cluster.json [--checkpoint=CKPT] [--benchmark.path=DIR]
 
 Writes episodes/hour per layout, each Ray layout's rate over the local backend's (`over_local`), where the
 episodes ran (episodes per node) and whether the rows equal the local backend's. The policy: `--checkpoint`
@@ -20,12 +20,12 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import psutil
 
-from pipelines._cli import cli_main
+from pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
 RAY = Path(sys.executable).parent / "ray"
@@ -101,7 +101,7 @@ class ClusterBenchConfig:
     # JSON file to write.
     output: str = "outputs/bench/cluster.json"
     # Benchmark folder (default: the `paper` build at outputs/benchmark_paper, else the tiny preset built here).
-    benchmark: str = ""
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # LeRobot checkpoint to evaluate (default: the reference ACT when present, else the scripted expert).
     checkpoint: str = ""
     # Split and number of its instances evaluated (one repeat each) per layout.
@@ -130,7 +130,7 @@ def run(cfg: ClusterBenchConfig) -> dict:
     import pandas as pd
 
     scratch = Path(tempfile.mkdtemp(prefix="roboview-cluster-bench-"))
-    bench = cfg.benchmark or ("outputs/benchmark_paper" if Path("outputs/benchmark_paper").is_dir() else "")
+    bench = cfg.benchmark.path or ("outputs/benchmark_paper" if Path("outputs/benchmark_paper").is_dir() else "")
     if not bench:
         from pipelines.build_benchmark import BuildConfig
         from pipelines.build_benchmark import run as build

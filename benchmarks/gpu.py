@@ -1,6 +1,6 @@
 """The GPU layouts on a machine with an NVIDIA GPU: where the model sits and what each layout delivers.
 
-    python -m benchmarks.gpu --output=outputs/bench/gpu.json [--checkpoint=CKPT] [--benchmark=DIR] [--episodes=200]
+    python -m benchmarks.gpu --output=outputs/bench/gpu.json [--checkpoint=CKPT] [--benchmark.path=DIR] [--episodes=200]
 
 The same episodes (first `--episodes` instances of `--split`, one repeat) under four layouts, C = the cores:
 
@@ -24,11 +24,11 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from benchmarks.serving import REFERENCE_CHECKPOINT, free_port, stop
-from pipelines._cli import cli_main
+from pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
 
@@ -40,7 +40,7 @@ class GpuBenchConfig:
     # LeRobot checkpoint (default: the reference ACT).
     checkpoint: str = REFERENCE_CHECKPOINT
     # Benchmark folder (default: the tiny preset built here).
-    benchmark: str = ""
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # Split and number of its instances evaluated (one repeat each) per layout.
     split: str = "color"
     episodes: int = 200
@@ -89,7 +89,7 @@ def run(cfg: GpuBenchConfig) -> dict:
                            "(the CPU figures are make bench's)")
     cores = os.cpu_count() or 2
     scratch = Path(tempfile.mkdtemp(prefix="roboview-gpu-bench-"))
-    bench = cfg.benchmark
+    bench = cfg.benchmark.path
     if not bench:
         from pipelines.build_benchmark import BuildConfig
         from pipelines.build_benchmark import run as build

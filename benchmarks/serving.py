@@ -1,6 +1,6 @@
 """Served policies on loopback: what going over a socket costs, and what batching across connections buys.
 
-    python -m benchmarks.serving --output=outputs/bench/serving.json [--checkpoint=CKPT] [--benchmark=DIR]
+    python -m benchmarks.serving --output=outputs/bench/serving.json [--checkpoint=CKPT] [--benchmark.path=DIR]
 
 Writes one JSON file with:
 
@@ -17,7 +17,7 @@ Writes one JSON file with:
   `batching_speedup` is the ratio.
 
 The checkpoint: `--checkpoint`, else `outputs/train_act96/checkpoints/last/pretrained_model` (the
-reference ACT). The benchmark: `--benchmark`, else the `tiny` preset built here.
+reference ACT). The benchmark: `--benchmark.path`, else the `tiny` preset built here.
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ import tempfile
 import threading
 import time
 import urllib.request
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipelines._cli import cli_main
+from pipelines._cli import BenchmarkPath, cli_main
 
 REFERENCE_CHECKPOINT = "outputs/train_act96/checkpoints/last/pretrained_model"
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,7 +49,7 @@ class ServingConfig:
     # LeRobot checkpoint (a chunked one: act, pi0, pi05, smolvla); default: the reference ACT (docs/results/act_ref.md).
     checkpoint: str = REFERENCE_CHECKPOINT
     # Benchmark folder; empty: build the tiny preset in a scratch folder.
-    benchmark: str = ""
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # Split and number of its instances evaluated on every path (one repeat each).
     split: str = "color"
     episodes: int = 48
@@ -203,9 +203,9 @@ def run(cfg: ServingConfig) -> dict:
 
     load_policy_types()
     scratch = Path(tempfile.mkdtemp(prefix="roboview_serving_"))
-    entry = start_entry(cfg.benchmark or "tiny (built here)", cfg.checkpoint)
+    entry = start_entry(cfg.benchmark.path or "tiny (built here)", cfg.checkpoint)
     try:
-        bench = cfg.benchmark
+        bench = cfg.benchmark.path
         if not bench:
             from pipelines.build_benchmark import BuildConfig
             from pipelines.build_benchmark import run as build

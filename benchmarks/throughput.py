@@ -28,7 +28,6 @@ minutes on 2 cores.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import resource
@@ -38,20 +37,15 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from dataclasses import dataclass, field
 from pathlib import Path
+
+from pipelines._cli import BenchmarkPath, cli_main
 
 REFERENCE_CHECKPOINT = Path("outputs/train_act96/checkpoints/last/pretrained_model")
 # (quick, full) sizes.
 SIZES = {"render_frames": (100, 300), "collect_episodes": (6, 20), "vision_repeats": (2, 6),
          "learned_episodes": (8, 24), "breakdown_episodes": (6, 20)}
-
-
-def _bool(text: str) -> bool:
-    if text.lower() in ("true", "1", "yes"):
-        return True
-    if text.lower() in ("false", "0", "no"):
-        return False
-    raise argparse.ArgumentTypeError(f"{text!r} is not a boolean; allowed: true, false")
 
 
 def _child(*args: str) -> dict:
@@ -286,54 +280,86 @@ def run_all(quick: bool, output: Path, checkpoint: str, benchmark: str) -> dict:
         shutil.rmtree(scratch, ignore_errors=True)
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", type=_bool, default=False, help="smaller counts (under 10 minutes on 2 cores)")
-    parser.add_argument("--output", default="outputs/bench/throughput.json", help="the JSON file to write")
-    parser.add_argument("--checkpoint", default="", help="LeRobot checkpoint for the learned / lerobot-eval rows")
-    parser.add_argument("--benchmark", default="", help="benchmark folder (default: build the tiny preset here)")
-    # Internal: one phase in this process.
-    for flag in ("phase", "bench", "policy", "path", "splits", "scratch"):
-        parser.add_argument(f"--{flag}", default="", help=argparse.SUPPRESS)
-    for flag in ("frames", "episodes", "limit", "repeats", "workers", "envs", "batch"):
-        parser.add_argument(f"--{flag}", type=int, default=0, help=argparse.SUPPRESS)
-    parser.add_argument("--eager", type=_bool, default=False, help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.phase:
-        os.environ.setdefault("MUJOCO_GL", "egl")
-        scratch = Path(args.scratch)
-        if args.phase == "build":
-            from pipelines.build_benchmark import BuildConfig
-            from pipelines.build_benchmark import run as build
+@dataclass
+class ThroughputConfig:
+    # Smaller counts (under 10 minutes on 2 cores).
+    quick: bool = False
+    # The JSON file to write.
+    output: str = "outputs/bench/throughput.json"
+    # LeRobot checkpoint (a `pretrained_model` folder) for the learned and lerobot-eval rows; default: the
+    # reference ACT when present, else a 2-step ACT trained here.
+    checkpoint: str = ""
+    # Benchmark folder (default: the tiny preset built here).
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
 
-            build(BuildConfig(output_dir=args.scratch, preset="tiny", num_workers=2))
-            result: dict = {"built": args.scratch}
-        elif args.phase == "render":
-            result = phase_render(args.frames)
-        elif args.phase == "collect":
-            result = phase_collect(args.episodes, scratch)
-        elif args.phase == "eval":
-            result = phase_eval(args.bench, args.policy, args.path, args.splits, args.limit, args.repeats,
-                                args.workers, args.envs, args.eager, scratch)
-        elif args.phase == "lerobot_eval":
-            result = phase_lerobot_eval(args.bench, args.path, args.splits, args.episodes, args.batch, scratch)
-        elif args.phase == "breakdown":
-            result = phase_breakdown(args.bench, args.policy, args.path, args.splits, args.episodes, scratch)
-        else:
-            parser.error(f"unknown --phase={args.phase!r}")
-        print(json.dumps(result))
-        return
-    if args.checkpoint and not (Path(args.checkpoint) / "config.json").is_file():
-        parser.error(f"--checkpoint={args.checkpoint}: no config.json there (give a `pretrained_model` folder)")
-    from roboview_data.benchmark.format import MANIFEST
+    def __post_init__(self) -> None:
+        from roboview_data.benchmark.format import MANIFEST
 
-    if args.benchmark and not (Path(args.benchmark) / MANIFEST).is_file():
-        parser.error(f"--benchmark={args.benchmark}: not a benchmark folder ({MANIFEST} missing)")
-    results = run_all(args.quick, Path(args.output), args.checkpoint, args.benchmark)
+        if self.checkpoint and not (Path(self.checkpoint) / "config.json").is_file():
+            raise ValueError(f"--checkpoint={self.checkpoint}: no config.json there (give a `pretrained_model` folder)")
+        if self.benchmark.path and not (Path(self.benchmark.path) / MANIFEST).is_file():
+            raise ValueError(f"--benchmark.path={self.benchmark.path}: not a benchmark folder ({MANIFEST} missing)")
+
+
+@dataclass
+class PhaseConfig:
+    """One phase of the harness, run in its own process by `_child` (not a user-facing command)."""
+
+    phase: str = ""
+    bench: str = ""
+    policy: str = ""
+    path: str = ""
+    splits: str = ""
+    scratch: str = ""
+    frames: int = 0
+    episodes: int = 0
+    limit: int = 0
+    repeats: int = 0
+    workers: int = 0
+    envs: int = 0
+    batch: int = 0
+    eager: bool = False
+
+
+def run_phase(args: PhaseConfig) -> dict:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    scratch = Path(args.scratch)
+    if args.phase == "build":
+        from pipelines.build_benchmark import BuildConfig
+        from pipelines.build_benchmark import run as build
+
+        build(BuildConfig(output_dir=args.scratch, preset="tiny", num_workers=2))
+        return {"built": args.scratch}
+    if args.phase == "render":
+        return phase_render(args.frames)
+    if args.phase == "collect":
+        return phase_collect(args.episodes, scratch)
+    if args.phase == "eval":
+        return phase_eval(args.bench, args.policy, args.path, args.splits, args.limit, args.repeats,
+                          args.workers, args.envs, args.eager, scratch)
+    if args.phase == "lerobot_eval":
+        return phase_lerobot_eval(args.bench, args.path, args.splits, args.episodes, args.batch, scratch)
+    if args.phase == "breakdown":
+        return phase_breakdown(args.bench, args.policy, args.path, args.splits, args.episodes, scratch)
+    raise ValueError(f"unknown --phase={args.phase!r}")
+
+
+def run(cfg: ThroughputConfig) -> dict:
+    results = run_all(cfg.quick, Path(cfg.output), cfg.checkpoint, cfg.benchmark.path)
     keys = ("render_ratio", "collect_demos_per_hour", "eval_episodes_per_hour", "speedup_2_workers",
             "peak_rss_mb_per_worker", "learned_eval_episodes_per_hour", "vs_lerobot_eval", "vs_lerobot_eval_successes")
     print(json.dumps({k: results[k] for k in keys}, indent=2))
-    print(f"[throughput] {args.output} ({results['harness_wall_s']:.0f} s)")
+    print(f"[throughput] {cfg.output} ({results['harness_wall_s']:.0f} s)")
+    return results
+
+
+def main(argv: list[str] | None = None) -> dict:
+    argv = sys.argv[1:] if argv is None else argv
+    if any(a.startswith("--phase=") for a in argv):  # a child process of the harness: print its JSON result
+        result = cli_main(PhaseConfig, run_phase, args=argv)
+        print(json.dumps(result))
+        return result
+    return cli_main(ThroughputConfig, run, args=argv)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ import logging
 import os
 import sys
 import typing
+from dataclasses import dataclass
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -19,6 +20,14 @@ R = TypeVar("R")
 # the headless defaults must be in place as soon as this module is (it is imported first).
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+
+@dataclass
+class BenchmarkPath:
+    """`--benchmark.path`: the one spelling of a benchmark folder across RoboView's commands."""
+
+    # Benchmark folder written by pipelines.build_benchmark.
+    path: str = ""
 
 
 def _root_cause(exc: BaseException) -> BaseException:

@@ -1,7 +1,7 @@
 """How many repeats does each split need? Power of the GLM likelihood-ratio test, before any rollout.
 
     python -m pipelines.plan --preset=paper --tau=0.3 --sr=0.7
-    python -m pipelines.plan --benchmark_path=outputs/benchmark --tau=0.5 --power=0.9
+    python -m pipelines.plan --benchmark.path=outputs/benchmark --tau=0.5 --power=0.9
 
 A policy "has a bias of logit SD τ" when the log-odds of success move by value with standard
 deviation τ (τ = 0.3: a value at +1 SD succeeds at 76 % where one at −1 SD succeeds at 64 %, around
@@ -15,18 +15,18 @@ with `--eval.split_repeats=split=N,...`.
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from eval.stats import lrt_power, repeats_needed
-from pipelines._cli import cli_main
+from pipelines._cli import BenchmarkPath, cli_main
 
 
 @dataclass
 class PlanConfig:
-    # Suite preset to plan for (paper, paper_dedupe, tiny), used when benchmark_path is empty.
+    # Suite preset to plan for (paper, paper_dedupe, tiny), used when --benchmark.path is empty.
     preset: str = "paper"
-    # A built benchmark folder to plan for instead of a preset.
-    benchmark_path: str = ""
+    # A built benchmark folder to plan for instead of a preset (--benchmark.path).
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # Bias to detect: standard deviation of the value effects on the logit scale.
     tau: float = 0.3
     # Expected success rate of the policy (the test has most power near 0.5).
@@ -56,10 +56,10 @@ class SplitPlan:
 
 def _layouts(cfg: PlanConfig) -> list[tuple[str, str, int, int]]:
     """(split, factor, |V|, strata) for every tested factor of every split."""
-    if cfg.benchmark_path:
+    if cfg.benchmark.path:
         from roboview_data.benchmark.format import load_benchmark
 
-        items = {s: [i.instance for i in v] for s, v in load_benchmark(cfg.benchmark_path).splits.items()}
+        items = {s: [i.instance for i in v] for s, v in load_benchmark(cfg.benchmark.path).splits.items()}
     else:
         from roboview_data.variation.instances import generate_suite, load_preset
 

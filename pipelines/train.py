@@ -21,7 +21,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipelines._cli import cli_main
+from pipelines._cli import BenchmarkPath, cli_main
 from policies.devices import DEVICES, resolve_device
 from roboview_data.cli_errors import flag_errors
 
@@ -54,8 +54,8 @@ class TrainConfig:
     n_action_steps: int = 10
     # Periodic evaluation while training, through lerobot-train's own eval loop on a frozen RoboView split
     # (`--env.type=roboview`, the lerobot-eval plugin): a benchmark folder, its split, episodes per eval and
-    # how often (steps); empty benchmark: no periodic evaluation. Results land in OUT/eval/.
-    eval_benchmark: str = ""
+    # how often (steps); no --benchmark.path: no periodic evaluation. Results land in OUT/eval/.
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     eval_split: str = "color"
     eval_episodes: int = 10
     eval_freq: int = 1000
@@ -77,22 +77,22 @@ class TrainConfig:
         cameras = [k for k in json.loads(info.read_text())["features"] if k.startswith("observation.images.")]
         if not cameras:
             raise ValueError(f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one")
-        if self.eval_benchmark:
+        if self.benchmark.path:
             from roboview_data.benchmark.format import load_benchmark
 
-            with flag_errors("--eval_benchmark"):
-                load_benchmark(self.eval_benchmark, [self.eval_split])  # an unknown folder or split fails now
+            with flag_errors("--benchmark.path"):
+                load_benchmark(self.benchmark.path, [self.eval_split])  # an unknown folder or split fails now
 
     def eval_flags(self) -> list[str]:
         """lerobot-train's flags for periodic evals on the RoboView split (the dataset's cameras and size)."""
-        if not self.eval_benchmark:
+        if not self.benchmark.path:
             return []
         features = json.loads((Path(self.dataset.root) / "meta" / "info.json").read_text())["features"]
         images = {k.removeprefix("observation.images."): v["shape"] for k, v in features.items()
                   if k.startswith("observation.images.")}
         side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
         return ["--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
-                f"--env.benchmark_path={self.eval_benchmark}", f"--env.task={self.eval_split}",
+                f"--env.benchmark_path={self.benchmark.path}", f"--env.task={self.eval_split}",
                 f"--env.limit={self.eval_episodes}", f"--env.cameras={','.join(images)}", f"--env.image_size={side}",
                 f"--env_eval_freq={self.eval_freq}", f"--eval.n_episodes={self.eval_episodes}",
                 f"--eval.batch_size={min(self.eval_episodes, 8)}"]

@@ -12,9 +12,9 @@ no step counts or failure reasons, so those columns say so.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from eval.results import EpisodeStore
@@ -65,24 +65,54 @@ def convert(eval_info: Path, benchmark_path: str, output_dir: Path, n_repeats: i
     return Path(output_dir) / "episodes.parquet"
 
 
+_ENV_DEFAULTS = {f.name: f.default for f in dataclasses.fields(RoboViewEnv)}
+
+
+@dataclass
+class ConvertEnvConfig:
+    """The `--env.*` flags given to lerobot-eval (the plugin config's own defaults, so both tools agree)."""
+
+    # Benchmark folder, as given to lerobot-eval.
+    benchmark_path: str = ""
+    # Repeats per instance, contexts and instances kept, lerobot's first reset seed: as given to lerobot-eval.
+    n_repeats: int = _ENV_DEFAULTS["n_repeats"]
+    contexts: int = _ENV_DEFAULTS["contexts"]
+    limit: int = _ENV_DEFAULTS["limit"]
+    start_seed: int = _ENV_DEFAULTS["start_seed"]
+    # Control steps per episode and camera image side, as given to lerobot-eval.
+    max_steps: int = _ENV_DEFAULTS["max_steps"]
+    image_size: int = _ENV_DEFAULTS["image_size"]
+
+
+@dataclass
+class ConvertConfig:
+    # lerobot-eval's OUT/eval_info.json.
+    eval_info: str = ""
+    # RoboView results folder to write.
+    output_dir: str = ""
+    # The results' policy column.
+    policy_name: str = "lerobot-eval"
+    env: ConvertEnvConfig = field(default_factory=ConvertEnvConfig)
+
+    def __post_init__(self) -> None:
+        if not self.eval_info or not Path(self.eval_info).is_file():
+            raise ValueError(f"--eval_info={self.eval_info!r}: no such file (lerobot-eval writes OUT/eval_info.json)")
+        if not self.output_dir:
+            raise ValueError("--output_dir is required: the RoboView results folder to write")
+        if not self.env.benchmark_path:
+            raise ValueError("--env.benchmark_path is required: the benchmark folder given to lerobot-eval")
+
+
+def run(cfg: ConvertConfig) -> Path:
+    e = cfg.env
+    return convert(Path(cfg.eval_info), e.benchmark_path, Path(cfg.output_dir), e.n_repeats, e.contexts, e.limit,
+                   e.start_seed, cfg.policy_name, e.max_steps, e.image_size)
+
+
 def main(argv: list[str] | None = None) -> Path:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--eval_info", required=True, help="lerobot-eval's OUT/eval_info.json")
-    parser.add_argument("--output_dir", required=True, help="RoboView results folder to write")
-    parser.add_argument("--policy_name", default="lerobot-eval", help="the results' policy column")
-    parser.add_argument("--env.benchmark_path", dest="benchmark_path", required=True, help="as given to lerobot-eval")
-    # The plugin config's own defaults, so both tools agree on an omitted flag.
-    defaults = {f.name: f.default for f in dataclasses.fields(RoboViewEnv)}
-    for flag in ("n_repeats", "contexts", "limit", "start_seed", "max_steps", "image_size"):
-        parser.add_argument(f"--env.{flag}", dest=flag, default=defaults[flag], type=int,
-                            help=f"as given to lerobot-eval (default {defaults[flag]})")
-    args = parser.parse_args(argv)
-    if not Path(args.eval_info).is_file():
-        parser.error(f"--eval_info={args.eval_info}: no such file (lerobot-eval writes OUT/eval_info.json)")
-    path = convert(Path(args.eval_info), args.benchmark_path, Path(args.output_dir), args.n_repeats,
-                   args.contexts, args.limit, args.start_seed, args.policy_name, args.max_steps, args.image_size)
-    print(f"[convert] {path}")
-    return path
+    from pipelines._cli import cli_main
+
+    return cli_main(ConvertConfig, run, lambda cfg, path: print(f"[convert] {path}"), args=argv)
 
 
 if __name__ == "__main__":

@@ -64,7 +64,7 @@ def tiny_checkpoint(tmp_path_factory, tiny_benchmark) -> Path:
     args = [sys.executable, "-m", "pipelines.train", "--dataset.repo_id=t/demos", f"--dataset.root={root / 'ds'}",
             f"--output_dir={root / 'train'}", "--batch_size=2", "--save_freq=2", "--device=cpu"]
     # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
-    periodic = [f"--eval_benchmark={tiny_benchmark}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
+    periodic = [f"--benchmark.path={tiny_benchmark}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
     proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "'task_group': 'color'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
