@@ -148,13 +148,17 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
                 raise ClusterLost(f"no Ray cluster answers at --eval.ray_address={address} ({exc}); start one "
                                   "(ray start --head) or drop the flag to run a local Ray instance") from None
         else:
-            ray.init(num_cpus=num_workers, include_dashboard=False, log_to_driver=False, runtime_env=env)
+            # "local": a new instance of our own, never a cluster `ray start` left on this machine.
+            ray.init(address="local", num_cpus=num_workers, include_dashboard=False, log_to_driver=False,
+                     runtime_env=env)
     watch = None
     if address and (gcs := _gcs_address(address)):
         watch = _HeadWatch(gcs)
         watch.start()
     stats = stats if stats is not None else {}
-    stats.update(address=address or "local", nodes={}, lost_actors=0)
+    stats.setdefault("nodes", {})  # accumulated over the calls of one run (adaptive rounds call once per round)
+    stats.setdefault("lost_actors", 0)
+    stats["address"] = address or "local"
     actor_cls = ray.remote(num_cpus=1)(EvalWorker).options(scheduling_strategy="SPREAD")
 
     def start(rank: int):

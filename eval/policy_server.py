@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from policies.base import AgentView, Episode, PolicyConfig
+from policies.base import AgentView, ChunkPredictor, Episode, PolicyConfig
 
 log = logging.getLogger(__name__)
 
@@ -106,7 +106,7 @@ def serve(config: PolicyConfig, task: str, cameras: tuple[str, ...], image_size:
     """The server process: build the batched policy once, then answer requests until ("stop",)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     policy = config.build_batched(AgentView.of_task(task, cameras, image_size), slots)
-    if policy is None or not hasattr(policy, "predict_chunks"):
+    if not isinstance(policy, ChunkPredictor):
         raise SystemExit(f"policy type {config.type!r} cannot be served (no batched chunk prediction)")
     while True:
         pending = [requests.get()]

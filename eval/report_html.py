@@ -71,6 +71,9 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
                 task = name[: -len(base) - 1]
                 found.setdefault(f"{task}_{split}" if task else split, []).append(name)
                 break
+        else:  # the forest plot of a factor with no figures of its own: [task_]forest_<split>.png
+            prefix, _, split = name.removesuffix(".png").partition("forest_")
+            found.setdefault(prefix + split, []).append(name)
     return found
 
 

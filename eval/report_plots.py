@@ -361,4 +361,10 @@ def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
                 continue
             draw(view, output_dir / f"{prefix}{name}")
             outcome[f"{prefix}{name}"] = None
+        # A factor without figures of its own (a registered extension) still gets its forest plot.
+        known = {split for split, _, _ in PLOTS.values()}
+        for split in sorted({s for layout in view.values() for s in layout["splits"]} - known):
+            name = f"{prefix}forest_{split}.png"
+            plot_forest(split)(view, output_dir / name)
+            outcome[name] = None
     return outcome

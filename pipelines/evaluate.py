@@ -208,7 +208,26 @@ def resolve_image_size(policy: PolicyConfig, requested: int) -> int:
     return own or requested or DEFAULT_IMAGE_SIZE
 
 
-def run(cfg: EvaluateConfig) -> EvaluateResult:
+@dataclass
+class Plan:
+    """What a run evaluates: the instances per split (after --benchmark.values, --eval.contexts / limit and
+    --eval.shard), repeats per split, the adaptive splits, tasks and the image size."""
+
+    version: str
+    chosen: dict[str, list]
+    repeats: dict[str, int]
+    adaptive: set[str]
+    tasks: list[str]
+    image_size: int
+
+    @property
+    def work(self) -> list[WorkItem]:
+        return [WorkItem(item, r) for split, items in self.chosen.items() for item in items
+                for r in range(self.repeats[split])]
+
+
+def plan(cfg: EvaluateConfig) -> Plan:
+    """Load the benchmark and check every flag against it: anything wrong fails here, before any rollout."""
     with flag_errors("--benchmark.path"):
         bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
     policy = cfg.policy
@@ -231,55 +250,66 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         raise ValueError("--eval.policy_server=true runs with --eval.backend=local only")
     adaptive = {split for split, items in bench.splits.items()
                 if cfg.eval.adaptive and items and "|" not in items[0].record["factor"]}
-    repeats = {split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
-               for split in bench.splits}
-    tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
-    image_size = resolve_image_size(policy, cfg.eval.image_size)
-    run_info = {"benchmark_version": bench.version, "values": cfg.benchmark.value_list,
-                "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
-                "policy_options": policy.options(), "n_repeats": repeats,
-                "max_steps": cfg.eval.max_steps, "image_size": image_size,
-                **({"adaptive": {"alpha": cfg.eval.alpha, "tau": cfg.eval.tau, "power": cfg.eval.power,
-                                 "max_repeats": cfg.eval.max_repeats}} if cfg.eval.adaptive else {}),
-                **({"shard": cfg.eval.shard} if cfg.eval.shard else {})}
-    with flag_errors("--output_dir"):
-        store = EpisodeStore(Path(cfg.output_dir), run_info)
     chosen = {split: select_items(items, cfg.eval.contexts, cfg.eval.limit) for split, items in bench.splits.items()}
     if cfg.eval.shard_index is not None:
-        chosen = {split: [i for i in items if shard_of(i.record["instance_id"], cfg.eval.shard_index[1])
-                          == cfg.eval.shard_index[0]] for split, items in chosen.items()}
-    work = [WorkItem(item, r) for split, items in chosen.items() for item in items for r in range(repeats[split])]
-    done = sum(store.done(w.key) for w in work)
-    mode = cfg.eval.video_mode
-    entry = provenance.start_entry(bench.version, policy.checkpoint)
-    if policy.served_by() is not None:
-        entry["policy_server"] = policy.served_by()
-    provenance.record(Path(cfg.output_dir), entry)
-    log.info("%d episodes planned%s, %d already done", len(work), " at most (adaptive)" if adaptive else "", done)
+        i, n = cfg.eval.shard_index
+        chosen = {split: [x for x in items if shard_of(x.record["instance_id"], n) == i] for split, items in chosen.items()}
+    return Plan(version=bench.version, chosen=chosen, adaptive=adaptive,
+                repeats={split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
+                         for split in bench.splits},
+                tasks=list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items)),
+                image_size=resolve_image_size(policy, cfg.eval.image_size))
 
-    rerun = None
-    if cfg.eval.rerun:
-        from eval.rerun_log import RerunLogger
 
-        rerun = RerunLogger(Path(cfg.eval.rerun))
-    # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
-    threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
+def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
+    """What run.json records: a rerun into the same folder must ask for exactly this to resume."""
+    policy = cfg.policy
+    return {"benchmark_version": p.version, "values": cfg.benchmark.value_list,
+            "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
+            "policy_options": policy.options(), "n_repeats": p.repeats,
+            "max_steps": cfg.eval.max_steps, "image_size": p.image_size,
+            **({"adaptive": {"alpha": cfg.eval.alpha, "tau": cfg.eval.tau, "power": cfg.eval.power,
+                             "max_repeats": cfg.eval.max_repeats}} if cfg.eval.adaptive else {}),
+            **({"shard": cfg.eval.shard} if cfg.eval.shard else {})}
 
-    cluster: dict[str, dict] = {}  # Ray: per task, where the episodes ran (provenance)
 
-    def streams(todo: list[WorkItem]):
-        # One pool per task (each worker holds one task's env and the policy), tasks one after another.
-        for task in tasks or [DEFAULT_TASK]:
-            spec = WorkerSpec(policy, image_size, cfg.eval.max_steps, record_media=rerun is not None,
-                              torch_threads=threads, task=task, envs_per_worker=cfg.eval.envs_per_worker,
-                              videos_of_failures_only=mode == "failures", eager=cfg.eval.eager_render,
+class Runner:
+    """Runs work items on the chosen backend and journals each row as it finishes: videos, the Rerun recording,
+    the progress bar with success per split, and where a Ray run's episodes ran (`cluster`, for provenance)."""
+
+    def __init__(self, cfg: EvaluateConfig, p: Plan, store: EpisodeStore, total: int) -> None:
+        self.cfg, self.plan, self.store = cfg, p, store
+        self.mode = cfg.eval.video_mode
+        self.rerun = None
+        if cfg.eval.rerun:
+            from eval.rerun_log import RerunLogger
+
+            self.rerun = RerunLogger(Path(cfg.eval.rerun))
+        # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
+        self.threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
+        self.cluster: dict[str, dict] = {}
+        self.per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+        for row in store.rows.values():
+            self.per_split[row["split"]][0] += row["success"]
+            self.per_split[row["split"]][1] += 1
+        done = sum(store.done(w.key) for w in p.work)
+        self.bar = tqdm(total=total, initial=done, desc=f"eval {cfg.policy.type}", unit="ep", dynamic_ncols=True)
+        self.new = self.started = 0
+
+    def streams(self, todo: list[WorkItem]):
+        """One pool per task (each worker holds one task's env and the policy), tasks one after another."""
+        cfg = self.cfg
+        for task in self.plan.tasks or [DEFAULT_TASK]:
+            spec = WorkerSpec(cfg.policy, self.plan.image_size, cfg.eval.max_steps, record_media=self.rerun is not None,
+                              torch_threads=self.threads, task=task, envs_per_worker=cfg.eval.envs_per_worker,
+                              videos_of_failures_only=self.mode == "failures", eager=cfg.eval.eager_render,
                               policy_server=cfg.eval.policy_server)
             items = [w for w in todo if w.item.instance.task == task]
             if not items:
                 continue
             if cfg.eval.backend == "ray":
                 inner = run_ray(spec, items, cfg.eval.num_workers, cfg.eval.ray_address or None,
-                                stats=cluster.setdefault(task, {}))
+                                stats=self.cluster.setdefault(task, {}))
             else:
                 inner = run_local(spec, items, cfg.eval.num_workers)
             try:
@@ -287,55 +317,68 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
             finally:
                 inner.close()
 
-    per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
-    for row in store.rows.values():
-        per_split[row["split"]][0] += row["success"]
-        per_split[row["split"]][1] += 1
-    bar = tqdm(total=len(work), initial=done, desc=f"eval {policy.type}", unit="ep", dynamic_ncols=True)
-    t0 = time.perf_counter()
-    counts = {"new": 0, "started": 0}
-
-    def execute(todo: list[WorkItem]) -> None:
+    def execute(self, todo: list[WorkItem]) -> None:
         """Run `todo`, journalling each row as it finishes (videos for the episodes `--eval.videos` films)."""
-        if mode:
-            todo = [WorkItem(w.item, w.repeat, video=videos.filmed(mode, counts["started"] + i))
+        if self.mode:
+            todo = [WorkItem(w.item, w.repeat, video=videos.filmed(self.mode, self.started + i))
                     for i, w in enumerate(todo)]
-        counts["started"] += len(todo)
-        stream = streams(todo)
+        self.started += len(todo)
+        stream = self.streams(todo)
         try:
             for _, result in stream:
-                if result.video:  # written before the row is journalled: a listed video exists
-                    paths = [videos.relative_path(result.row, cam) for cam in result.video]
-                    for path, frames in zip(paths, result.video.values()):
-                        videos.write_mp4(Path(cfg.output_dir) / path, frames, VIDEO_FPS)
-                    result.row["video"] = ",".join(paths)
-                store.add(result.row)
-                if rerun is not None:
-                    rerun.log_episode(result)
-                stats = per_split[result.row["split"]]
-                stats[0] += result.row["success"]
-                stats[1] += 1
-                counts["new"] += 1
-                bar.update(1)
-                bar.set_postfix({s: f"{k / n:.0%}" for s, (k, n) in per_split.items()})
+                self.record(result)
         finally:
             stream.close()
 
+    def record(self, result) -> None:
+        row = result.row
+        if result.video:  # written before the row is journalled: a listed video exists
+            paths = [videos.relative_path(row, cam) for cam in result.video]
+            for path, frames in zip(paths, result.video.values()):
+                videos.write_mp4(Path(self.cfg.output_dir) / path, frames, VIDEO_FPS)
+            row["video"] = ",".join(paths)
+        self.store.add(row)
+        if self.rerun is not None:
+            self.rerun.log_episode(result)
+        stats = self.per_split[row["split"]]
+        stats[0] += row["success"]
+        stats[1] += 1
+        self.new += 1
+        self.bar.update(1)
+        self.bar.set_postfix({s: f"{k / n:.0%}" for s, (k, n) in self.per_split.items()})
+
+    def close(self) -> None:
+        self.bar.close()
+        self.store.close()
+        if self.rerun is not None:
+            self.rerun.close()
+
+
+def run(cfg: EvaluateConfig) -> EvaluateResult:
+    p = plan(cfg)
+    with flag_errors("--output_dir"):
+        store = EpisodeStore(Path(cfg.output_dir), run_info(cfg, p))
+    work = p.work
+    entry = provenance.start_entry(p.version, cfg.policy.checkpoint)
+    if cfg.policy.served_by() is not None:
+        entry["policy_server"] = cfg.policy.served_by()
+    provenance.record(Path(cfg.output_dir), entry)
+    log.info("%d episodes planned%s, %d already done", len(work), " at most (adaptive)" if p.adaptive else "",
+             sum(store.done(w.key) for w in work))
+    runner = Runner(cfg, p, store, len(work))
+    t0 = time.perf_counter()
     try:
-        if adaptive:
-            run_rounds(cfg, chosen, repeats, adaptive, store, execute, bar)
+        if p.adaptive:
+            run_rounds(cfg, p.chosen, p.repeats, p.adaptive, store, runner.execute, runner.bar)
         else:
-            execute([w for w in work if not store.done(w.key)])
+            runner.execute([w for w in work if not store.done(w.key)])
     finally:
-        bar.close()
-        store.close()
-        if rerun is not None:
-            rerun.close()
-        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": counts["new"]}
-                          | ({"ray": _merge_cluster(cluster)} if cluster else {}))
+        runner.close()
+        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": runner.new}
+                          | ({"ray": _merge_cluster(runner.cluster)} if runner.cluster else {}))
     total = len(store.rows)
     successes = sum(r["success"] for r in store.rows.values())
-    return EvaluateResult(Path(cfg.output_dir), total, counts["new"], successes / total if total else float("nan"),
+    return EvaluateResult(Path(cfg.output_dir), total, runner.new, successes / total if total else float("nan"),
                           time.perf_counter() - t0)
 
 

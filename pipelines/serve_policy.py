@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipelines._cli import cli_main
-from policies.base import AgentView, PolicyConfig, default_policy_config, load_policy_types
+from policies.base import AgentView, ChunkPredictor, PolicyConfig, default_policy_config, load_policy_types
 from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
 from roboview_data.sim.tasks import DEFAULT_TASK, TASKS
@@ -144,7 +144,7 @@ class PolicyService:
         self.format = wire_format(cfg.obs_format, cameras, cfg.key_map, cfg.policy.depth)
         self.view = AgentView.of_task(cfg.task, cameras, self.image_size, cfg.policy.depth)
         self.batched = cfg.policy.build_batched(self.view, cfg.max_clients) if cfg.policy.batchable() else None
-        if self.batched is not None and not hasattr(self.batched, "predict_chunks"):
+        if not isinstance(self.batched, ChunkPredictor):
             self.batched = None
         name = self.batched.name if self.batched is not None else cfg.policy.type
         self.horizon = getattr(self.batched, "n_action_steps", 1) if self.batched is not None else 1

@@ -120,6 +120,21 @@ class Policy(Protocol):
         """
 
 
+@runtime_checkable
+class ChunkPredictor(Protocol):
+    """A policy that predicts action chunks for many slots in one forward pass: what `--eval.policy_server` and
+    `pipelines.serve_policy` batch across workers and connections (`PolicyConfig.build_batched` returns one for
+    chunked LeRobot checkpoints)."""
+
+    name: str
+    # Actions of a chunk that run before the next prediction.
+    n_action_steps: int
+
+    def predict_chunks(self, observations: dict[int, dict],
+                       instructions: dict[int, str] | None = None) -> dict[int, list[np.ndarray]]:
+        """slot → its next `n_action_steps` actions, from one forward pass over every slot's observation."""
+
+
 # Builtin policy types: modules that define and register a PolicyConfig subclass. Imported on
 # demand (by name, never at import time of this module); third-party packages add types through the
 # ENTRY_POINT_GROUP entry points, each naming such a module.

@@ -202,3 +202,18 @@ def test_named_results_make_one_file_two_policies(tmp_path):
                   tmp_path / "mixed.parquet")
     with pytest.raises(EpisodesError, match="holds several policies"):
         load_results([mixed], ["c"])
+
+
+def test_a_factor_without_figures_of_its_own_gets_its_forest_plot(tmp_path):
+    """A registered extension factor (here a renamed color split) is drawn as a forest plot, on the page too."""
+    frame = make_episodes("expert", 0, splits=("color",))
+    frame["split"] = "tint"
+    frame["factor"] = "tint"
+    path = write(frame, tmp_path / "e.parquet")
+    result = run(ReportConfig(results=str(path), output_dir=str(tmp_path / "rep"), **FAST))
+    assert result.plots["forest_tint.png"] is None
+    with Image.open(tmp_path / "rep" / "forest_tint.png") as image:
+        assert image.size[0] > 200
+    page = (tmp_path / "rep" / "report.html").read_text()
+    block = page[page.index('id="split-tint"'):]
+    assert 'alt="forest_tint.png"' in block[:block.index("</section>")]
