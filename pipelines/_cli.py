@@ -58,9 +58,38 @@ def _check_choices(config_class: type, args: list[str]) -> None:
                     fail(f"unknown {f.name} type {name!r}; allowed: {', '.join(known)}")
 
 
+def _list_flags(config_class: type, prefix: str = "") -> set[str]:
+    """The --flags of `config_class` (nested configs included) whose field holds a list or tuple."""
+    found: set[str] = set()
+    hints = typing.get_type_hints(config_class)
+    for f in dataclasses.fields(config_class):
+        kind = hints.get(f.name)
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind) and not issubclass(kind, draccus.ChoiceRegistry):
+            found |= _list_flags(kind, f"{prefix}{f.name}.")
+            continue
+        outer = [typing.get_origin(k) for k in (kind, *typing.get_args(kind))]
+        if list in outer or tuple in outer:
+            found.add(f"--{prefix}{f.name}")
+    return found
+
+
+def comma_lists(config_class: type, args: list[str]) -> list[str]:
+    """Every list flag is written `a,b` on RoboView's command lines, as every string list is; draccus reads
+    lists as `[a,b]`, so `--x=a,b` becomes `--x=[a,b]` (a bracketed value passes unchanged)."""
+    flags = _list_flags(config_class)
+    out = []
+    for arg in args:
+        flag, sep, value = arg.partition("=")
+        if sep and flag in flags and not value.startswith("["):
+            arg = f"{flag}=[{value}]"
+        out.append(arg)
+    return out
+
+
 def parse(config_class: type[T], args: list[str] | None = None) -> T:
     """Parse `args` into `config_class`; validation errors exit with the validator's own message."""
-    _check_choices(config_class, sys.argv[1:] if args is None else args)
+    args = comma_lists(config_class, sys.argv[1:] if args is None else list(args))
+    _check_choices(config_class, args)
     try:
         return draccus.parse(config_class, args=args)
     except (draccus.utils.ParsingError, draccus.utils.DecodingError) as exc:

@@ -5,7 +5,7 @@
 
 Each attempt draws a task context (object position, shape, instruction) at random with every
 visual factor at its baseline, as the paper did for its π0 training demos (add
-`--dataset.randomize='[color,camera_pose]'` for visual domain randomization); only successful
+`--dataset.randomize=color,camera_pose` for visual domain randomization); only successful
 episodes are kept and failures are counted. Rerunning with the same root resumes where a killed
 run stopped. Load the result with `LeRobotDataset(repo_id, root=root)`.
 """

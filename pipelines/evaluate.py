@@ -15,7 +15,7 @@ import logging
 import os
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -27,6 +27,7 @@ from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
 from policies.errors import PolicyUnavailable
+from policies.vlm.sgl import SGLConfig
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.tasks import DEFAULT_TASK
@@ -184,6 +185,8 @@ class EvaluateConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     # Folder for episodes.parquet (and its journal); rerun the same command to resume.
     output_dir: str = "outputs/eval"
+    # The Semantic Grounding Layer around the policy: --sgl.enable=true (docs/vlm.md).
+    sgl: SGLConfig = field(default_factory=SGLConfig)
 
 
 @dataclass(frozen=True)
@@ -355,6 +358,7 @@ class Runner:
 
 
 def run(cfg: EvaluateConfig) -> EvaluateResult:
+    cfg = replace(cfg, policy=cfg.sgl.wrap(cfg.policy))  # the SGL's endpoint is checked here
     p = plan(cfg)
     with flag_errors("--output_dir"):
         store = EpisodeStore(Path(cfg.output_dir), run_info(cfg, p))

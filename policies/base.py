@@ -29,7 +29,6 @@ import mujoco
 import numpy as np
 
 from policies.errors import TransientPolicyError  # noqa: F401  (part of the policy API)
-from policies.vlm.client import Endpoint
 from roboview_data.sim.cameras import CameraPose
 from roboview_data.sim.env import PickPlaceEnv
 from roboview_data.sim.scene import Scene
@@ -159,13 +158,6 @@ class PolicyConfig(draccus.ChoiceRegistry):
     # Name written in the results' `policy` column (e.g. act_ref vs act_campose for two checkpoints);
     # empty: the policy's own name (expert, vision, lerobot:act; "+sgl" appended with the SGL).
     name: str = ""
-    # Wrap the policy in the Semantic Grounding Layer (policies.vlm.sgl): a VLM parses the first
-    # frame and the instruction is refined ("the small object" → "the small red cube") before it acts.
-    sgl: bool = False
-    # The SGL's VLM endpoint (VLM agents default to their own): base URL, model, API-key variable name.
-    sgl_base_url: str = ""
-    sgl_model: str = ""
-    sgl_api_key_env: str = "OPENAI_API_KEY"
 
     # Whether the policy wants depth images too.
     depth: ClassVar[bool] = False
@@ -175,16 +167,11 @@ class PolicyConfig(draccus.ChoiceRegistry):
     doc: ClassVar[str] = ""
 
     def __post_init__(self) -> None:
-        if self.sgl:
-            self.sgl_endpoint().validate()
+        """Subclasses validate their fields here (and call this first)."""
 
     @classmethod
     def default_choice_name(cls) -> str:
         return DEFAULT_POLICY_TYPE
-
-    def sgl_endpoint(self) -> Endpoint:
-        """Where the SGL asks: `--policy.sgl_base_url` / `--policy.sgl_model`."""
-        return Endpoint(self.sgl_base_url, self.sgl_model, self.sgl_api_key_env)
 
     @property
     def type(self) -> str:
@@ -210,7 +197,7 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
     def options(self) -> dict[str, Any]:
         """The type's own settings, recorded in run.json (a resume must match them)."""
-        skip = {"name", "path"} | ({"sgl", "sgl_base_url", "sgl_model", "sgl_api_key_env"} if not self.sgl else set())
+        skip = {"name", "path"}
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
     def build(self, view: AgentView) -> Policy:

@@ -1,19 +1,18 @@
-"""Policies from their configs: one per env, a batch for envs stepped in lockstep, the SGL wrapped around any.
+"""Policies from their configs: one per env, or a batch for envs stepped in lockstep.
 
-Above `policies.base` (the policy API and configs) and `policies.vlm.sgl` (which builds on that API).
+A config wrapped in the SGL (`policies.vlm.sgl.SGLConfig.wrap`) builds grounded policies itself.
 """
 
 from __future__ import annotations
 
 from policies.base import AgentView, Policy, PolicyBatch, PolicyConfig
-from policies.vlm.sgl import SemanticGroundingLayer
 from roboview_data.sim.env import PickPlaceEnv
 
 
 def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyBatch:
-    """The policies for `envs` run in lockstep: one batched policy when the type builds one (and no SGL
+    """The policies for `envs` run in lockstep: one batched policy when the type builds one (a config wrapped in the SGL
     wraps it), else one policy per env (`make_policy`)."""
-    if len(envs) > 1 and not config.privileged and not config.sgl:
+    if len(envs) > 1 and not config.privileged:
         native = config.build_batched(AgentView.of(envs[0]), len(envs))
         if native is not None:
             return PolicyBatch([native], batched=True)
@@ -21,14 +20,10 @@ def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyB
 
 
 def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
-    """Build `config`'s policy for `env`: from the env only if the type is privileged; wrapped in the
-    Semantic Grounding Layer when `config.sgl`."""
+    """Build `config`'s policy for `env`: from the env only if the type is privileged."""
     return build_policy(config, env if config.privileged else AgentView.of(env))
 
 
 def build_policy(config: PolicyConfig, view: AgentView | PickPlaceEnv) -> Policy:
-    """`config`'s policy from an agent's view (a privileged type's from the env), with the SGL when asked."""
-    policy = config.build(view)
-    if config.sgl:
-        policy = SemanticGroundingLayer(policy, config.sgl_endpoint(), config.observed_cameras()[0])
-    return policy
+    """`config`'s policy from an agent's view (a privileged type's from the env)."""
+    return config.build(view)

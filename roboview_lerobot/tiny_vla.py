@@ -8,7 +8,7 @@ and prints the `lerobot-train` flags that train the policy on it:
 
     lerobot-train --dataset.repo_id=ID --dataset.root=DIR --policy.type=smolvla \
         --policy.vlm_model_name=outputs/tiny_smolvlm --policy.load_vlm_weights=false \
-        --policy.resize_imgs_with_padding='[64,64]' --policy.num_vlm_layers=4 ...
+        --policy.resize_imgs_with_padding=64,64 --policy.num_vlm_layers=4 ...
 
 Nothing is downloaded: the tokenizer is a `tokenizers` word-level vocabulary over every word of the
 benchmark's instructions (plus SmolVLM's special image tokens), so the instruction a policy receives

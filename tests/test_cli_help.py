@@ -69,3 +69,15 @@ def test_config_flags_walks_nested_configs():
 def test_every_pipeline_module_is_covered():
     modules = {p.stem for p in (ROOT / "pipelines").glob("*.py") if not p.stem.startswith("_")}
     assert modules == set(ENTRY_POINTS)
+
+
+def test_lists_are_written_comma_separated_everywhere():
+    from pipelines._cli import parse
+    from pipelines.build_benchmark import BuildConfig
+
+    cfg = parse(BuildConfig, ["--factorial_colors=red,blue", "--cartesian=[color,shape]"])
+    assert cfg.factorial_colors == ["red", "blue"] and cfg.cartesian == ["color", "shape"]  # brackets still read
+    proc = subprocess.run([sys.executable, "-m", "pipelines.collect", "--dataset.repo_id=t/x",
+                           "--dataset.root=/nonexistent/roboview-test", "--dataset.cameras=left_top,nope"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode != 0 and "nope" in proc.stderr  # the list was read: its bad entry is named

@@ -15,6 +15,7 @@ import pytest
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
 from pipelines.evaluate import run as evaluate
 from policies.base import policy_config
+from policies.vlm.sgl import SGLConfig
 from roboview_data.sim.cameras import ALL_CAMERAS
 
 ROOT = Path(__file__).parents[1]
@@ -121,10 +122,11 @@ def test_the_instruction_cameras_and_state_reach_the_vla(vla):
     assert all(np.isfinite(a).all() for a in chunk)
 
 
-def _evaluate(bench: Path, out: Path, checkpoint: Path, **policy_fields):
+def _evaluate(bench: Path, out: Path, checkpoint: Path, sgl: SGLConfig | None = None, **policy_fields):
     config = policy_config("lerobot", path=str(checkpoint), device="cpu", **policy_fields)
     return evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
-                                   EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6), str(out)))
+                                   EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6), str(out),
+                                   sgl=sgl or SGLConfig()))
 
 
 def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_benchmark, tmp_path):
@@ -168,8 +170,8 @@ def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_
     checkpoint, backbone = smolvla
     server = ScriptedServer(ClassicCVModel())
     try:
-        _evaluate(tiny_benchmark, tmp_path / "sgl", checkpoint, sgl=True, sgl_base_url=server.url,
-                  sgl_model=MODEL_NAME)
+        sgl = SGLConfig(enable=True, base_url=server.url, model=MODEL_NAME)
+        _evaluate(tiny_benchmark, tmp_path / "sgl", checkpoint, sgl)
         rows = pd.read_parquet(tmp_path / "sgl" / "episodes.parquet")
         assert (rows["policy"] == "lerobot:smolvla+sgl").all() and rows["sgl_ambiguous"].all()
         # "the small object" names the object by its colour in the instruction the checkpoint was reset with.
@@ -177,8 +179,7 @@ def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_
             assert refined.split()[:4] == said.split()[:3] + [color], refined
         # ... and those words, not the original ones, are what the checkpoint's tokenizer turns into tokens.
         item = load_benchmark(tiny_benchmark, ["color"]).splits["color"][0]
-        config = policy_config("lerobot", path=str(checkpoint), device="cpu", sgl=True, sgl_base_url=server.url,
-                               sgl_model=MODEL_NAME)
+        config = sgl.wrap(policy_config("lerobot", path=str(checkpoint), device="cpu"))
         env = make_env(cameras=ALL_CAMERAS, image_size=64)
         obs, _ = env.reset(seed=0, options={"instance": item.instance})
         policy = make_policy(config, env)

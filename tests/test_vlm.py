@@ -17,7 +17,7 @@ from policies.factory import make_policy
 from policies.errors import TransientPolicyError
 from policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
 from policies.vlm.common import check_point
-from policies.vlm.sgl import refine
+from policies.vlm.sgl import SGLConfig, refine
 from policies.vlm.standin import MODEL_NAME, ClassicCVModel
 from roboview_data.sim.tasks import make_env
 from roboview_data.variation.factors import baselines
@@ -244,8 +244,8 @@ def test_agents_succeed_on_red_and_say_why_they_fail_on_gold(standin, rgbd_env, 
 
 
 def test_sgl_records_the_refined_instruction(standin, rgbd_env, tmp_path):
-    config = policy_config("vlm_simple", base_url=standin.url, model=MODEL_NAME, cache_dir=str(tmp_path), sgl=True)
-    policy = make_policy(config, rgbd_env)
+    config = policy_config("vlm_simple", base_url=standin.url, model=MODEL_NAME, cache_dir=str(tmp_path))
+    policy = make_policy(SGLConfig(enable=True).wrap(config), rgbd_env)  # the SGL asks the agent's own endpoint
     assert policy.name == "vlm_simple+sgl"
     success, record = _run(policy, rgbd_env, _instance(color="blue"))
     assert success

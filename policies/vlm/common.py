@@ -60,12 +60,6 @@ class VLMConfig(PolicyConfig):
     def observed_cameras(self) -> tuple[str, ...]:
         return (self.camera,)
 
-    def sgl_endpoint(self) -> Endpoint:
-        # SGL asks the agent's own VLM unless told otherwise.
-        if not self.sgl_base_url and not self.sgl_model:
-            return self.endpoint()
-        return super().sgl_endpoint()
-
     def options(self) -> dict[str, Any]:
         # Where the answers come from matters for a resume; the key's variable name and the cache do not.
         skip = ("api_key_env", "cache_dir", "timeout_s", "max_retries", "max_in_flight")

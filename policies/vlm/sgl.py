@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Episode, Policy
+from policies.base import Episode, Policy, PolicyConfig
 from policies.vlm.client import Endpoint, VLMClient
 from policies.vlm.prompts import SGL_SCENE_PARSE
 from roboview_data.sim.env import IMAGE_KEY
@@ -133,3 +133,64 @@ class SemanticGroundingLayer:
     def close(self) -> None:
         self.inner.close()
 
+
+
+@dataclass
+class SGLConfig:
+    """`--sgl.*`: wrap whatever `--policy` builds in the Semantic Grounding Layer."""
+
+    # Wrap the policy in the SGL: a VLM parses the first frame and the instruction is refined ("the small
+    # object" → "the small red cube") before the policy acts.
+    enable: bool = False
+    # The SGL's VLM endpoint: base URL, model, API-key variable name (a VLM agent's own endpoint when both
+    # base_url and model are empty).
+    base_url: str = ""
+    model: str = ""
+    api_key_env: str = "OPENAI_API_KEY"
+
+    def endpoint(self, policy: PolicyConfig) -> Endpoint:
+        own = getattr(policy, "endpoint", None)
+        if not self.base_url and not self.model and callable(own):
+            return own()
+        return Endpoint(self.base_url, self.model, self.api_key_env)
+
+    def wrap(self, policy: PolicyConfig) -> PolicyConfig:
+        """`policy` itself when the SGL is off, else a config whose policies are wrapped in it (the endpoint is
+        validated now, before any rollout)."""
+        if not self.enable:
+            return policy
+        self.endpoint(policy).validate()
+        return GroundedConfig(policy, self)
+
+
+class GroundedConfig:
+    """A policy config wrapped in the SGL: everything is the inner config's, except that its policies are
+    grounded, it never batches (the SGL grounds each env's episode), and its options record the SGL."""
+
+    def __init__(self, inner: PolicyConfig, sgl: SGLConfig) -> None:
+        self.inner, self.sgl = inner, sgl
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("inner", "sgl") or name.startswith("__"):  # not yet set (unpickling) or a protocol lookup
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    def __getstate__(self) -> dict:  # picklable for spawned workers despite __getattr__
+        return {"inner": self.inner, "sgl": self.sgl}
+
+    def __setstate__(self, state: dict) -> None:
+        self.inner, self.sgl = state["inner"], state["sgl"]
+
+    def batchable(self) -> bool:
+        return False
+
+    def build_batched(self, view, slots: int) -> None:
+        return None
+
+    def options(self) -> dict[str, Any]:
+        return {**self.inner.options(), "sgl": True, "sgl_base_url": self.sgl.base_url, "sgl_model": self.sgl.model,
+                "sgl_api_key_env": self.sgl.api_key_env}
+
+    def build(self, view) -> Policy:
+        return SemanticGroundingLayer(self.inner.build(view), self.sgl.endpoint(self.inner),
+                                      self.inner.observed_cameras()[0])
