@@ -21,12 +21,21 @@ SCRIPTS = {"roboview-collect": "pipelines.collect", "roboview-build": "pipelines
            "roboview-publish": "pipelines.publish", "roboview-train": "pipelines.train"}
 
 
+ASSIGNMENT = re.compile(r"^([A-Za-z_]\w*)=(\"[^\"]*\"|'[^']*'|\S*)$")
+
+
+def _expand(command: str, variables: dict[str, str]) -> str:
+    """The command with the block's shell variables ($E, ${E}) replaced by their values."""
+    return re.sub(r"\$\{?([A-Za-z_]\w*)\}?", lambda m: variables.get(m.group(1), m.group(0)), command)
+
+
 def bash_commands(page: Path) -> list[tuple[int, str]]:
-    """(line, command) of every command in the page's ```bash blocks, backslash continuations joined."""
-    commands, block, start, pending = [], False, 0, ""
+    """(line, command) of every command in the page's ```bash blocks, backslash continuations joined and
+    variables assigned earlier in the block (E="python -m pipelines.evaluate ...") expanded."""
+    commands, block, start, pending, variables = [], False, 0, "", {}
     for number, line in enumerate(page.read_text().splitlines(), 1):
         if line.startswith("```"):
-            block = line.strip() == "```bash"
+            block, variables = line.strip() == "```bash", {}
             continue
         if not block:
             continue
@@ -34,10 +43,30 @@ def bash_commands(page: Path) -> list[tuple[int, str]]:
             start = number
         pending += line.rstrip("\\").rstrip() + " " if line.rstrip().endswith("\\") else line
         if not line.rstrip().endswith("\\"):
-            if pending.strip() and not pending.lstrip().startswith("#"):
-                commands.append((start, pending.strip()))
+            command = " ".join(pending.split())
+            assigned = ASSIGNMENT.match(command.strip())
+            if assigned:
+                variables[assigned.group(1)] = assigned.group(2).strip("\"'")
+            elif command.strip() and not command.lstrip().startswith("#"):
+                commands.append((start, _expand(command.strip(), variables)))
             pending = ""
     return commands
+
+
+def bash_blocks(page: Path) -> list[tuple[int, list[str]]]:
+    """(line, lines) of every ```bash block of the page."""
+    blocks, current, start = [], None, 0
+    for number, line in enumerate(page.read_text().splitlines(), 1):
+        if line.startswith("```"):
+            if current is not None:
+                blocks.append((start, current))
+                current = None
+            elif line.strip() == "```bash":
+                current, start = [], number
+            continue
+        if current is not None:
+            current.append(line)
+    return blocks
 
 
 def _module_of(command: str) -> tuple[str, list[str]] | None:
@@ -91,8 +120,19 @@ def test_every_documented_flag_exists():
 def test_bash_blocks_hold_no_placeholders():
     bad = [f"{page.relative_to(ROOT)}:{line}: {command[:100]}" for page in PAGES
            for line, command in bash_commands(page)
-           if re.search(r"(\.\.\.|…|\s\[--|=\[|<[A-Z_]+>)", command)]
+           if re.search(r"(\.\.\.|…|\s\[--|=\[|<[A-Z_]+>|=[A-Z](\s|,|/|$))", command)]
     assert not bad, "placeholders in bash blocks:\n" + "\n".join(bad)
+
+
+def test_bash_blocks_are_commands():
+    """No block is only comments, and none ends on a comment that stands for commands not written."""
+    bad = []
+    for page in PAGES:
+        for line, lines in bash_blocks(page):
+            text = [entry.strip() for entry in lines if entry.strip()]
+            if not text or text[-1].startswith("#") or all(entry.startswith("#") for entry in text):
+                bad.append(f"{page.relative_to(ROOT)}:{line}")
+    assert not bad, "bash blocks without a command after their comments:\n" + "\n".join(bad)
 
 
 def test_links_resolve():
