@@ -15,13 +15,14 @@ import csv
 import logging
 import shutil
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
 from policies.vlm.client import Endpoint, VLMClient, default_cache_dir
+from roboview_data.benchmark import conformance
 from roboview_data.benchmark import format as bio
 from roboview_data.benchmark.card import fairness_stats, write_card
 from roboview_data.benchmark.contact_sheet import context_text, write_contact_sheet
@@ -188,18 +189,26 @@ def run(cfg: BuildConfig) -> BuildResult:
         for task, rows in _by_task(rejected_rows).items():  # one table per task: their columns differ
             bio.write_split(rows, tmp / "rejected" / f"{_rejected_table(task)}.parquet", rejected=True)
     digest = bio.suite_hash(by_split)
+    content, reference, stack = {}, None, None
+    if gate_rate >= cfg.min_pass_rate:
+        # What was written, as it reads back: the conformance sample, then every cell's checksum.
+        written = {split: bio.read_rows(tmp / "data" / f"{split}.parquet") for split in by_split}
+        stack = conformance.write_reference(tmp, written, cfg.image_size)
+        content = bio.write_checksums(tmp)
+        reference = conformance.reference_hash(tmp)
     manifest = {
         "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
         "suite": {"preset": suite.preset, "union_mode": suite.union_mode, "splits": list(suite.splits),
                   "factorial_colors": list(suite.factorial_colors),
                   "cartesian": [list(c) for c in suite.cartesian],
                   "value_subsets": {k: list(v) for k, v in suite.value_subsets}},
-        "image_size": cfg.image_size, "thresholds": bio.thresholds_dict(cfg.fairness),
+        "image_size": cfg.image_size, "thresholds": asdict(cfg.fairness),
         "candidates": len(records), "gate_pass_rate": gate_rate, "min_pass_rate": cfg.min_pass_rate,
         "splits": bio.split_counts(records, accepted, rejected_by), "rejected": len(rejected_rows),
         **({"rejected_tables": sorted(map(_rejected_table, _by_task(rejected_rows)))} if rejected_rows else {}),
         "decisions": len(decisions), "reviewers": sorted({d.reviewer for d in decisions.values()}),
-        "suite_hash": digest, "benchmark_version": f"{suite.preset}-{digest[:12]}",
+        "suite_hash": digest, "content": content, "stack": stack,
+        "benchmark_version": bio.benchmark_version(suite.preset, content, reference),
         "fairness_stats": fairness_stats(records),
         **({"vlm_screen": screen} if screen is not None else {}),
     }

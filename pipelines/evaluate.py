@@ -6,7 +6,10 @@
 Each (instance, repeat) runs once with seed SHA-256(f"{context_id}:{repeat}") — common random
 numbers: every value of a context runs repeat r with the same seed; episodes stop early on
 success. `--eval.protocol=paper` runs the paper's 5 repeats (10 on the factorial split). Rows go to OUT/episodes.parquet (journalled in OUT/episodes.jsonl as they
-finish). Rerunning the same command resumes: finished pairs are skipped, none is duplicated.
+finish). Rerunning the same command resumes: finished pairs are skipped, none is duplicated. An episode
+that infrastructure ended (a lost policy server, an endpoint outage, a dead worker, a render failure) is
+recorded with status infra_error, counted in no rate, run again after the pass (`--eval.max_infra_retries`)
+and by a rerun, its new row replacing the old.
 """
 
 from __future__ import annotations
@@ -21,8 +24,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eval import provenance, videos
-from eval.backends import BACKENDS, ClusterLost, EpisodeLost, run_local, run_ray
-from eval.results import EpisodeStore, ResultsError, shard_of
+from eval.backends import BACKENDS, ClusterLost, run_local, run_ray
+from eval.results import EpisodeStore, ResultsError, is_counted, shard_of
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, default_policy_config, load_policy_types
@@ -39,6 +42,9 @@ log = logging.getLogger(__name__)
 class BenchmarkConfig:
     # Benchmark folder written by pipelines.build_benchmark.
     path: str = "outputs/benchmark"
+    # Run even when this machine's conformance check says it renders or simulates the benchmark `different`ly
+    # from the machine that built it (pipelines.verify shows the figures); every row is then marked `different`.
+    allow_drift: bool = False
     # Comma-separated splits to evaluate (default: every split of the benchmark).
     splits: str = ""
     # Comma-separated values to keep (the `value` column, e.g. red for the baseline color);
@@ -102,6 +108,11 @@ class EvalConfig:
     rerun: str = ""
     # Control steps before an episode counts as a failure.
     max_steps: int = 120
+    # Episodes ended by infrastructure, not by the policy (a policy server lost mid-episode, an endpoint still
+    # failing after its retries, a worker that died, a render failure) are recorded with status infra_error and
+    # counted in no rate; after the pass they run again, at most this many times (0: not in this run). Rerunning
+    # the same command runs the ones left again.
+    max_infra_retries: int = 2
     # Camera image side (pixels); 0: the policy's own (a checkpoint's input size), else 224.
     # A size that disagrees with the checkpoint's fails before any rollout.
     image_size: int = 0
@@ -123,6 +134,8 @@ class EvalConfig:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
         if self.limit < 0:
             raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")
+        if self.max_infra_retries < 0:
+            raise ValueError(f"--eval.max_infra_retries={self.max_infra_retries} must be ≥ 0 (0 = no re-run in this run)")
         if self.contexts < 0:
             raise ValueError(f"--eval.contexts={self.contexts} must be ≥ 0 (0 = every context)")
         if self.backend not in BACKENDS:
@@ -196,6 +209,8 @@ class EvaluateResult:
     new_episodes: int
     success_rate: float
     elapsed_s: float
+    # Episodes in the results whose row says infrastructure ended them (not in success_rate; a rerun runs them).
+    infra_errors: int = 0
 
     @property
     def episodes_per_hour(self) -> float:
@@ -264,6 +279,28 @@ def plan(cfg: EvaluateConfig) -> Plan:
                 image_size=resolve_image_size(policy, cfg.eval.image_size))
 
 
+def check_conformance(bench: BenchmarkConfig, version: str) -> dict:
+    """The start-of-run conformance check (roboview_data.benchmark.conformance.at_start): `different` stops the
+    run before any episode unless --benchmark.allow_drift=true. Returns what provenance records: the verdict, the
+    measured drift, the stack this machine runs, and how it differs from the stack that built the benchmark."""
+    from roboview_data.benchmark import conformance
+    from roboview_data.benchmark.format import read_manifest
+    from roboview_data.sim import stack
+
+    root = Path(bench.path)
+    report = conformance.at_start(root, version)
+    built_on = read_manifest(root).get("stack")
+    differences = stack.differences(built_on, report.stack)
+    log.info("conformance with the benchmark's stack: %s (%s)%s", report.verdict, stack.summary(report.stack),
+             f"; stack differs: {'; '.join(differences)}" if differences else "")
+    if report.verdict == "different":
+        if not bench.allow_drift:
+            raise conformance.ConformanceError(conformance.refusal(report, root))
+        log.warning("running on a stack whose conformance is `different` (--benchmark.allow_drift=true): every row "
+                    "is marked; these results do not compare with others on this benchmark")
+    return report.record() | {"stack_differences": differences}
+
+
 def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
     """What run.json records: a rerun into the same folder must ask for exactly this to resume."""
     policy = cfg.policy
@@ -282,6 +319,7 @@ class Runner:
 
     def __init__(self, cfg: EvaluateConfig, p: Plan, store: EpisodeStore, total: int) -> None:
         self.cfg, self.plan, self.store = cfg, p, store
+        self.conformance = ""  # the start-of-run conformance verdict, written into every row
         self.mode = cfg.eval.video_mode
         self.rerun = None
         if cfg.eval.rerun:
@@ -292,9 +330,11 @@ class Runner:
         self.threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
         self.cluster: dict[str, dict] = {}
         self.per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
-        for row in store.rows.values():
+        self.policy_name: str | None = None  # the rows' policy name, for the rows of workers that died
+        for row in filter(is_counted, store.rows.values()):
             self.per_split[row["split"]][0] += row["success"]
             self.per_split[row["split"]][1] += 1
+            self.policy_name = row.get("policy") or self.policy_name
         done = sum(store.done(w.key) for w in p.work)
         self.bar = tqdm(total=total, initial=done, desc=f"eval {cfg.policy.type}", unit="ep", dynamic_ncols=True)
         self.new = self.started = 0
@@ -321,11 +361,24 @@ class Runner:
                 inner.close()
 
     def execute(self, todo: list[WorkItem]) -> None:
-        """Run `todo`, journalling each row as it finishes (videos for the episodes `--eval.videos` films)."""
+        """Run `todo`, journalling each row as it finishes (videos for the episodes `--eval.videos` films); then
+        run those that infrastructure ended again, at most `--eval.max_infra_retries` times."""
         if self.mode:
             todo = [WorkItem(w.item, w.repeat, video=videos.filmed(self.mode, self.started + i))
                     for i, w in enumerate(todo)]
         self.started += len(todo)
+        self._pass(todo)
+        retries = self.cfg.eval.max_infra_retries
+        for attempt in range(1, retries + 1):
+            again = [w for w in todo if self.store.infra_error(w.key)]
+            if not again:
+                break
+            reason = self.store.rows[again[0].key]["failure_reason"]
+            log.warning("%d episode(s) ended by infrastructure, not by the policy (e.g. %s); running them again "
+                        "(%d/%d)", len(again), reason, attempt, retries)
+            self._pass(again)
+
+    def _pass(self, todo: list[WorkItem]) -> None:
         stream = self.streams(todo)
         try:
             for _, result in stream:
@@ -335,18 +388,24 @@ class Runner:
 
     def record(self, result) -> None:
         row = result.row
+        if row.get("policy") is None:  # a worker that died running it could not say its name
+            row["policy"] = self.policy_name or self.cfg.policy.name or self.cfg.policy.type
         if result.video:  # written before the row is journalled: a listed video exists
             paths = [videos.relative_path(row, cam) for cam in result.video]
             for path, frames in zip(paths, result.video.values()):
                 videos.write_mp4(Path(self.cfg.output_dir) / path, frames, VIDEO_FPS)
             row["video"] = ",".join(paths)
+        row["conformance"] = self.conformance
         self.store.add(row)
+        self.new += 1
+        if not is_counted(row):  # not done: it runs again, and counts in no rate
+            return
+        self.policy_name = row["policy"]
         if self.rerun is not None:
             self.rerun.log_episode(result)
         stats = self.per_split[row["split"]]
         stats[0] += row["success"]
         stats[1] += 1
-        self.new += 1
         self.bar.update(1)
         self.bar.set_postfix({s: f"{k / n:.0%}" for s, (k, n) in self.per_split.items()})
 
@@ -360,16 +419,21 @@ class Runner:
 def run(cfg: EvaluateConfig) -> EvaluateResult:
     cfg = replace(cfg, policy=cfg.sgl.wrap(cfg.policy))  # the SGL's endpoint is checked here
     p = plan(cfg)
+    conformance = check_conformance(cfg.benchmark, p.version)
     with flag_errors("--output_dir"):
         store = EpisodeStore(Path(cfg.output_dir), run_info(cfg, p))
     work = p.work
     entry = provenance.start_entry(p.version, cfg.policy.checkpoint)
+    entry["benchmark_path"] = str(Path(cfg.benchmark.path).resolve())
+    entry["conformance"] = conformance
+    verdict = conformance["verdict"]
     if cfg.policy.served_by() is not None:
         entry["policy_server"] = cfg.policy.served_by()
     provenance.record(Path(cfg.output_dir), entry)
     log.info("%d episodes planned%s, %d already done", len(work), " at most (adaptive)" if p.adaptive else "",
              sum(store.done(w.key) for w in work))
     runner = Runner(cfg, p, store, len(work))
+    runner.conformance = verdict
     t0 = time.perf_counter()
     try:
         if p.adaptive:
@@ -381,9 +445,10 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": runner.new}
                           | ({"ray": _merge_cluster(runner.cluster)} if runner.cluster else {}))
     total = len(store.rows)
-    successes = sum(r["success"] for r in store.rows.values())
-    return EvaluateResult(Path(cfg.output_dir), total, runner.new, successes / total if total else float("nan"),
-                          time.perf_counter() - t0)
+    kept = [r for r in store.rows.values() if is_counted(r)]
+    successes = sum(r["success"] for r in kept)
+    return EvaluateResult(Path(cfg.output_dir), total, runner.new, successes / len(kept) if kept else float("nan"),
+                          time.perf_counter() - t0, infra_errors=total - len(kept))
 
 
 def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, int], adaptive: set[str],
@@ -399,7 +464,9 @@ def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, 
     records: dict[str, dict] = {}
     for r in range(design.max_repeats + 1):
         for split in sorted(active):
-            rows = [store.rows[(item.record["instance_id"], rep)] for item in chosen[split] for rep in range(r)]
+            # Rows infrastructure ended (still so after their re-runs) enter no decision.
+            rows = [row for item in chosen[split] for rep in range(r)
+                    if (row := store.rows.get((item.record["instance_id"], rep))) is not None and is_counted(row)]
             decision = decide_split(rows, r, design)
             if decision.stopped:
                 records[split] = decision.record(len(rows))
@@ -430,13 +497,18 @@ def _merge_cluster(per_task: dict[str, dict]) -> dict:
 
 
 def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
+    infra = (f"; {result.infra_errors} ended by infrastructure errors (status infra_error), counted in no rate: "
+             "rerun the same command to re-run them" if result.infra_errors else "")
     print(f"[evaluate] {result.episodes} episodes in {result.output_dir / 'episodes.parquet'} "
-          f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h)")
+          f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h{infra})")
 
 
 def main(args: list[str] | None = None) -> EvaluateResult:
     # Builtin and plugin policy types load first, so --policy.type can name any of them.
-    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, EpisodeLost, ClusterLost, PolicyUnavailable), args,
+    from roboview_data.benchmark.conformance import ConformanceError
+
+    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, ClusterLost, PolicyUnavailable,
+                                                    ConformanceError), args,
                     before_parse=load_policy_types)
 
 

@@ -2,14 +2,21 @@
 
 A benchmark is a Hugging Face dataset folder:
 
-    benchmark.json             manifest: format, suite, thresholds, counts, suite hash, version
+    benchmark.json             manifest: format, suite, thresholds, counts, suite hash, content hashes,
+                               the simulation stack that built it, version
+    checksums.json             per table: a SHA-256 per column and a short one per row
     data/<split>.parquet       one row per accepted instance (the instance record + fairness + preview)
     rejected/rejected.parquet  rejected instances, with who rejected them
+    conformance/               the reference sample pipelines.verify re-renders (roboview_data.benchmark.conformance)
     README.md                  the dataset card (roboview_data.benchmark.card)
 
-Everything written is a pure function of the instance records: no timestamps, no machine paths,
-so building twice gives the same bytes. `load_benchmark` reads it back into `TaskInstance`s; every
-row must hash to its stored id.
+Everything written is a pure function of the instance records and the stack that rendered them: no
+timestamps, no machine paths, so building twice on one stack gives the same bytes.
+
+Identity: every cell of every table is hashed (`content_checksums`); a table's hash covers its column and row
+hashes, and the benchmark version derives from every table's hash and the conformance reference. Loading a
+split recomputes its hashes and refuses a table edited after the build, naming the row and the column; each
+row must also rebuild into an instance whose id, value, context and seed are the stored ones.
 """
 
 from __future__ import annotations
@@ -17,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import Counter
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,17 +32,15 @@ import datasets
 import pyarrow.parquet as pq
 
 from roboview_data.variation.factors import FACTORS, factor_names, record_columns
-from roboview_data.variation.instances import (
-    TaskInstance,
-    canonical_json,
-    context_subspaces,
-)
+from roboview_data.variation.instances import TaskInstance, canonical_json
 
 MANIFEST = "benchmark.json"
-# 3: rows store `task` and `context_subspace`. 2: `context_subspace` is recovered by hashing (it is
-# read still). 1: the `seed` column hashed instance_id (no longer read: other episode seeds).
-FORMAT_VERSION = 3
-READABLE_FORMATS = (2, 3)
+CHECKSUMS = "checksums.json"
+# 4: content hashes over every cell, the simulation stack and the conformance reference. 3: rows store `task`
+# and `context_subspace`. 2: `context_subspace` recovered by hashing. 1: the `seed` column hashed instance_id.
+# Formats before 4 carry no content hashes, so an edit would pass: they are not read.
+FORMAT_VERSION = 4
+READABLE_FORMATS = (4,)
 # Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
 NOT_IN_EPISODES = ("fairness", "preview")
 
@@ -94,6 +99,105 @@ def write_split(rows: list[dict], path: Path, rejected: bool = False) -> None:
     ds.to_parquet(str(path))
 
 
+# --- content identity ---------------------------------------------------------------------------------
+
+
+def _plain(value: Any) -> Any:
+    """A cell as JSON values: bytes (a preview's PNG) by their SHA-256."""
+    if isinstance(value, bytes):
+        return {"sha256": hashlib.sha256(value).hexdigest()}
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _cell_digest(value: Any) -> bytes:
+    return hashlib.sha256(json.dumps(_plain(value), sort_keys=True, separators=(",", ":")).encode()).digest()
+
+
+def content_checksums(rows: list[dict], columns: list[str]) -> dict:
+    """Per column a SHA-256 over its cells in row order, per row a short SHA-256 over its cells, and the
+    table's SHA-256 over both (floats hashed exactly, as stored)."""
+    per_column = {c: hashlib.sha256() for c in columns}
+    per_row = []
+    for row in rows:
+        digest = hashlib.sha256()
+        for c in columns:
+            cell = _cell_digest(row[c])
+            per_column[c].update(cell)
+            digest.update(c.encode() + b"\0" + cell)
+        per_row.append(digest.hexdigest()[:16])
+    checksums = {"columns": {c: h.hexdigest() for c, h in per_column.items()}, "rows": per_row}
+    return {"sha256": hashlib.sha256(canonical_json(checksums).encode()).hexdigest(), **checksums}
+
+
+def read_rows(path: Path) -> list[dict]:
+    """A benchmark table's rows, every column, as stored."""
+    return pq.read_table(path).to_pylist()
+
+
+def table_checksums(path: Path) -> dict:
+    """`content_checksums` of a parquet table as stored (what loading recomputes)."""
+    table = pq.read_table(path)
+    return content_checksums(table.to_pylist(), table.column_names)
+
+
+def table_name(root: Path, path: Path) -> str:
+    """A table's name in checksums.json: its path under the benchmark folder without .parquet."""
+    return path.relative_to(root).with_suffix("").as_posix()
+
+
+def write_checksums(root: Path) -> dict[str, str]:
+    """checksums.json for every table under root/data and root/rejected; returns table → SHA-256."""
+    root = Path(root)
+    tables = sorted([*root.glob("data/*.parquet"), *root.glob("rejected/*.parquet")])
+    sums = {table_name(root, path): table_checksums(path) for path in tables}
+    (root / CHECKSUMS).write_text(json.dumps(sums, indent=1, sort_keys=True) + "\n")
+    return {name: entry["sha256"] for name, entry in sums.items()}
+
+
+def benchmark_version(preset: str, content: dict[str, str], conformance: str | None) -> str:
+    """`<preset>-<12 hex>`: SHA-256 over every table's content hash and the conformance reference's."""
+    digest = hashlib.sha256(canonical_json({"content": content, "conformance": conformance}).encode()).hexdigest()
+    return f"{preset}-{digest[:12]}"
+
+
+def _edited(root: Path, table: str, found: dict, stored: dict | None) -> str:
+    """What no longer matches in `table`: columns added, missing or changed, and the rows they changed in."""
+    where = f"benchmark table {table!r} in {root}"
+    if stored is None:
+        return f"{where} is not in {CHECKSUMS}"
+    added = sorted(set(found["columns"]) - set(stored["columns"]))
+    missing = sorted(set(stored["columns"]) - set(found["columns"]))
+    if added or missing:
+        return f"{where} has column(s) {added} added and {missing} removed since it was built"
+    if len(found["rows"]) != len(stored["rows"]):
+        return f"{where} holds {len(found['rows'])} rows; it was built with {len(stored['rows'])}"
+    columns = [c for c in stored["columns"] if found["columns"][c] != stored["columns"][c]]
+    rows = [i for i, (a, b) in enumerate(zip(found["rows"], stored["rows"])) if a != b]
+    if not columns and not rows:
+        return f"{where}: {CHECKSUMS} itself no longer matches the manifest"
+    return (f"{where} was edited after it was built: column(s) {', '.join(map(repr, columns))} of row(s) "
+            f"{', '.join(map(str, rows[:10]))}{' …' if len(rows) > 10 else ''} no longer match their checksums")
+
+
+def verify_table(root: Path, path: Path, manifest: dict) -> list[dict]:
+    """The rows of a benchmark table, after checking every cell against the build's checksums."""
+    root = Path(root)
+    name = table_name(root, path)
+    table = pq.read_table(path)
+    rows = table.to_pylist()
+    found = content_checksums(rows, table.column_names)
+    if found["sha256"] != manifest.get("content", {}).get(name):
+        sums_path = root / CHECKSUMS
+        stored = json.loads(sums_path.read_text()).get(name) if sums_path.is_file() else None
+        raise BenchmarkError(_edited(root, name, found, stored) + "; rebuild it with `python -m pipelines.build_benchmark` "
+                             "or download the published benchmark again")
+    return rows
+
+
 def write_manifest(out: Path, manifest: dict) -> None:
     (out / MANIFEST).write_text(json.dumps({**manifest, "format": FORMAT_VERSION}, indent=2, sort_keys=True) + "\n")
 
@@ -111,10 +215,6 @@ def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[st
     return {split: {k: int(c[k]) for k in keys} for split, c in counts.items()}
 
 
-def thresholds_dict(thresholds) -> dict:
-    return asdict(thresholds)
-
-
 # --- reading ----------------------------------------------------------------------------------
 
 
@@ -129,6 +229,7 @@ class Benchmark:
     path: Path
     version: str
     splits: dict[str, list[BenchmarkItem]]
+    manifest: dict = field(default_factory=dict, compare=False)
 
 
 def read_manifest(root: Path) -> dict:
@@ -144,22 +245,41 @@ def read_manifest(root: Path) -> dict:
                              "rebuild it with `python -m pipelines.build_benchmark`")
     if manifest.get("status") != "ok":
         raise BenchmarkError(f"{root} is a failed build; rebuild it")
+    from roboview_data.benchmark.conformance import reference_hash
+
+    expected = benchmark_version(manifest["suite"]["preset"], manifest.get("content", {}), reference_hash(root))
+    if manifest.get("benchmark_version") != expected:
+        raise BenchmarkError(f"{root}/{MANIFEST} names version {manifest.get('benchmark_version')!r} but its content "
+                             f"hashes and conformance reference give {expected!r}: the manifest or the conformance "
+                             "folder was edited after the build; rebuild it or download it again")
     return manifest
 
 
+# Columns an instance derives from its parameters; a row must carry exactly these values.
+DERIVED = ("value", "context_id", "seed", "task")
+
+
 def instance_from_record(record: dict) -> TaskInstance:
-    """Rebuild the instance; its id must reproduce the stored one (else the row was edited)."""
+    """Rebuild the instance; its id, value, context and seed must reproduce the stored ones (else the row was
+    edited: a `value` that names another color, a `context_id` or `seed` that leaves its context's common random
+    numbers)."""
     task = record.get("task") or "pick_place"
     factors = {name: record[name] for name in factor_names(task) if name in record}
-    varied = tuple(record["factor"].split("|"))
-    # Format 2 rows lack context_subspace: find the one that reproduces the id.
-    subspaces = [record["context_subspace"]] if record.get("context_subspace") else context_subspaces(task)
-    for subspace in subspaces:
-        instance = TaskInstance(record["split"], varied, factors, subspace, task)
-        if instance.instance_id == record["instance_id"]:
-            return instance
-    raise BenchmarkError(f"benchmark row {record['instance_id']} does not hash to its id: the split was "
-                         "modified after it was built; rebuild it with pipelines.build_benchmark")
+    try:
+        instance = TaskInstance(record["split"], tuple(record["factor"].split("|")), factors,
+                                record["context_subspace"], task)
+    except (KeyError, ValueError) as exc:
+        raise BenchmarkError(f"benchmark row {record.get('instance_id')} is not a valid instance ({exc}); "
+                             "rebuild the benchmark with pipelines.build_benchmark") from None
+    if instance.instance_id != record["instance_id"]:
+        raise BenchmarkError(f"benchmark row {record['instance_id']} does not hash to its id: its factor columns "
+                             "were modified after it was built; rebuild it with pipelines.build_benchmark")
+    for column in DERIVED:
+        if column in record and record[column] != getattr(instance, column):
+            raise BenchmarkError(f"benchmark row {record['instance_id']}: column {column!r} holds "
+                                 f"{record[column]!r} but the instance's parameters give {getattr(instance, column)!r}; "
+                                 "the row was edited after it was built: rebuild it with pipelines.build_benchmark")
+    return instance
 
 
 def available_splits(path: str | Path) -> list[str]:
@@ -179,10 +299,10 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
         raise BenchmarkError(f"unknown split(s) {unknown}; the benchmark at {root} has: {', '.join(available)}")
     out: dict[str, list[BenchmarkItem]] = {}
     for split in chosen:
-        file = pq.ParquetFile(root / "data" / f"{split}.parquet")
-        columns = [c for c in file.schema_arrow.names if c not in NOT_IN_EPISODES]
-        out[split] = [BenchmarkItem(instance_from_record(row), row) for row in file.read(columns=columns).to_pylist()]
-    return Benchmark(root, manifest["benchmark_version"], out)
+        rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
+        out[split] = [BenchmarkItem(instance_from_record(row), {k: v for k, v in row.items() if k not in NOT_IN_EPISODES})
+                      for row in rows]
+    return Benchmark(root, manifest["benchmark_version"], out, manifest)
 
 
 def select_items(items: list[BenchmarkItem], contexts: int = 0, limit: int = 0) -> list[BenchmarkItem]:
