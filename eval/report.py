@@ -41,7 +41,7 @@ from eval.metrics import (
     compute_all_metrics,
     policy_layouts,
 )
-from eval.results import ResultsError, read_episodes, read_version
+from eval.results import ResultsError, counted, read_episodes, read_version
 from roboview_data.variation.factors import visual_factors
 from roboview_data.variation.instances import split_task
 
@@ -96,7 +96,7 @@ def load_results(paths: Sequence[str | Path],
     for path, name, frame in zip(paths, names, tables):
         check_episodes(frame, REQUIRED_COLUMNS, source=str(path))
         if name:
-            if frame["policy"].nunique() > 1:
+            if counted(frame)["policy"].nunique() > 1:
                 raise EpisodesError(f"{path} holds several policies ({', '.join(sorted(frame['policy'].unique()))}); "
                                     f"it cannot be renamed {name!r} as a whole")
             frame["policy"] = name
@@ -105,7 +105,7 @@ def load_results(paths: Sequence[str | Path],
                 lambda v, root=path.parent.resolve(): ",".join(str(root / p) for p in v.split(",")) if isinstance(v, str) and v else None)
         frames.append(frame)
         source = sources[len(frames) - 1]
-        source["policies"] = sorted(map(str, frame["policy"].unique()))
+        source["policies"] = sorted(map(str, counted(frame)["policy"].unique()))
     episodes = pd.concat(frames, ignore_index=True)
     dup = episodes.duplicated(["policy", "instance_id", "repeat"])
     if dup.any():
@@ -370,6 +370,27 @@ def _isolation(layouts: dict[str, dict]) -> list[str]:
             "", *_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows), *violations, ""]
 
 
+def _infra_errors(layouts: dict[str, dict]) -> list[str]:
+    """Per split: the episodes infrastructure ended, left out of every number (`n_infra_errors`)."""
+    lines = []
+    for name, layout in layouts.items():
+        listed = 0
+        for split, m in {**layout["splits"], **layout.get("interactions", {})}.items():
+            if m.get("n_infra_errors"):
+                listed += m["n_infra_errors"]
+                lines.append(f"- {name}, {split}: {m['n_infra_errors']} episode(s) ended by infrastructure, not counted")
+        if layout.get("n_infra_errors", 0) > listed:
+            lines.append(f"- {name}: {layout['n_infra_errors'] - listed} more episode(s) ended by infrastructure, not "
+                         "counted, in splits where no episode counts")
+    if not lines:
+        return []
+    return ["## Episodes ended by infrastructure", "",
+            "Episodes ended by infrastructure, not by the policy (a policy server lost mid-episode, an endpoint still "
+            "failing after its retries, a worker that died, a render failure; `status` infra_error, the reason in "
+            "`failure_reason`) are left out of every rate and test. Rerunning the evaluation command into the same "
+            "output folder runs them again.", "", *lines, ""]
+
+
 def _extremes(layouts: dict[str, dict]) -> list[str]:
     lines = ["## Values furthest from their context mean (signed deviation ×100; SR ×100)", ""]
     for name, layout in layouts.items():
@@ -397,6 +418,34 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
                 rows.append([name, split, value, pct(per_value.get(value, {}).get("sr")), links])
     return ["## Episode videos (per value; `--eval.videos`)", "",
             *_table(["policy", "split", "value", "SR", "videos (instance, repeat, camera; ✗ failed)"], rows), ""]
+
+
+def _stacks(sources: list[dict[str, Any]]) -> list[str]:
+    """Per results file: the conformance verdict of each run with its measured drift and stack; then what differs
+    between the stacks the files ran on (their numbers compare only as far as their stacks do)."""
+    from roboview_data.sim import stack
+
+    lines, seen = ["## Simulation stack and conformance", ""], []
+    for source in sources:
+        for entry in source.get("provenance") or []:
+            conf = entry.get("conformance")
+            if not conf:
+                lines.append(f"- `{source['path']}` ({entry['started']}): no conformance check recorded")
+                continue
+            d = conf["drift"]
+            lines.append(f"- `{source['path']}` ({entry['started']}): **{conf['verdict']}** on "
+                         f"{stack.summary(conf.get('stack'))}; {d['images_identical']}/{d['images']} reference images "
+                         f"and {d['physics_identical']}/{d['physics']} rollouts bit-identical, at most "
+                         f"{d['pixel_fraction_max']:.3%} of an image's pixels differ, joints within {d['joint_max']:.1e} rad")
+            if conf.get("stack_differences"):
+                lines.append(f"  - differs from the stack that built the benchmark: {'; '.join(conf['stack_differences'])}")
+            seen.append((source["path"], conf.get("stack"), conf["verdict"]))
+    for path, other, verdict in seen[1:]:
+        differences = stack.differences(seen[0][1], other)
+        if differences or verdict != seen[0][2]:
+            lines.append(f"- **The runs differ**: `{seen[0][0]}` ({seen[0][2]}) vs `{path}` ({verdict}): "
+                         f"{'; '.join(differences) or 'same stack'}")
+    return lines + [""] if len(lines) > 2 else []
 
 
 def _provenance(sources: list[dict[str, Any]]) -> list[str]:
@@ -448,15 +497,19 @@ def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[s
 def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
     """report.md's sections in order, each a list of Markdown lines (empty when it has nothing to say)."""
     layouts = policy_layouts(metrics)
-    return {"table1": _table1(metrics, layouts), "directions": _directions(layouts), "interactions": _table2(layouts),
+    return {"table1": _table1(metrics, layouts), "infra": _infra_errors(layouts), "directions": _directions(layouts),
+            "interactions": _table2(layouts),
             "comparisons": _comparisons(metrics), "rankings": _rankings(metrics),
             "context": _context_factors(layouts), "adaptive": _adaptive(layouts), "diagnostics": _diagnostics(layouts),
             "isolation": _isolation(layouts), "extremes": _extremes(layouts), "videos": _videos(metrics, layouts),
-            "agents": agents_markdown(metrics.get("agents", {})), "provenance": _provenance(metrics.get("sources", []))}
+            "agents": agents_markdown(metrics.get("agents", {})), "stack": _stacks(metrics.get("sources", [])),
+            "provenance": _provenance(metrics.get("sources", []))}
 
 
-def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> str:
-    """report.md from a metrics dict (every number printed is read from it) and plot outcomes."""
+def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None],
+                    sections: dict[str, list[str]] | None = None) -> str:
+    """report.md from a metrics dict (every number printed is read from it), plot outcomes and, when already
+    built, its `markdown_sections`."""
     layouts = policy_layouts(metrics)
     settings = metrics["resampling"]
     lines = ["# RoboView-Bias report", "",
@@ -465,7 +518,7 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None]) -> st
     for source in metrics.get("sources", []):
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")
-    for section in markdown_sections(metrics).values():
+    for section in (sections if sections is not None else markdown_sections(metrics)).values():
         lines += section
     lines += ["## Plots", ""]
     for name, reason in plots.items():
@@ -487,6 +540,7 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
                 for split, record in source["adaptive"]["splits"].items():
                     if split in layout.get("splits", {}):
                         layout["splits"][split]["adaptive"] = record | {"design": source["adaptive"]["design"]}
+    episodes = counted(episodes)  # what infrastructure ended is in no number (metrics counted it)
     for name, layout in policy_layouts(metrics).items():  # success by instruction, shape, initial position
         layout["context_factors"] = context_breakdown(episodes[episodes["policy"] == name], cfg)
     agents = describe_agents(episodes)
@@ -503,8 +557,9 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
         )
 
         outcome = make_plots(policy_layouts(metrics), out)
-    (out / REPORT_FILE).write_text(render_markdown(metrics, outcome))
-    (out / HTML_FILE).write_text(render_html(metrics, outcome, out, markdown_sections(metrics)))
+    sections = markdown_sections(metrics)  # report.md and report.html print the same sections
+    (out / REPORT_FILE).write_text(render_markdown(metrics, outcome, sections))
+    (out / HTML_FILE).write_text(render_html(metrics, outcome, out, sections))
     log.info("wrote %s, %s, %s and %d plot(s) to %s", METRICS_FILE, REPORT_FILE, HTML_FILE,
              sum(r is None for r in outcome.values()), out)
     return ReportResult(out, metrics, outcome)

@@ -109,7 +109,7 @@ def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], 
                      _e(fmt.pct(m["cv_null"])), _e(fmt.pct(m["cv_excess"])),
                      _e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor"))),
                      _e(fmt.p_fmt(m["p_value_cv"], m.get("p_value_cv_at_floor"))), str(m["n_episodes"]), _verdict(m)])
-        notes.append(f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}</li>")
+        notes.append(f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}{_infra_line(m)}</li>")
     parts = [f'<section class="split" id="split-{_e(split)}"><h3>{_e(title)}'
              + (f' <span class="note">task {_e(task)}</span>' if task != DEFAULT_TASK else "") + "</h3>",
              _table(["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p (GLM LRT)", "p (CV permutation)",
@@ -124,6 +124,11 @@ def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], 
 def _stop_line(m: dict[str, Any]) -> str:
     a = m.get("adaptive")
     return "" if not a else f"; adaptive: stopped <b>{_e(a['stopped'])}</b> after {a['rounds']} round(s), {a['episodes']} episodes"
+
+
+def _infra_line(m: dict[str, Any]) -> str:
+    n = m.get("n_infra_errors")
+    return f"; {n} episode(s) ended by infrastructure, not counted" if n else ""
 
 
 def _isolation_line(m: dict[str, Any]) -> str:
@@ -179,9 +184,10 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
                        "against context. All ×100 but p.</p>"))
     sections.append(("splits", "Splits", "\n".join(_split_block(s, layouts, metrics, figures.get(s, []), out)
                                                    for s in splits)))
-    titles = {"interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",
+    titles = {"infra": "Episodes ended by infrastructure", "interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",
               "context": "Success by task context", "adaptive": "Adaptive sampling", "isolation": "Isolation certificate",
-              "diagnostics": "Sample sizes and calibration", "agents": "VLM agents", "provenance": "Provenance"}
+              "diagnostics": "Sample sizes and calibration", "agents": "VLM agents",
+              "stack": "Simulation stack and conformance", "provenance": "Provenance"}
     for anchor, title in titles.items():
         lines = sections_md.get(anchor)
         if not lines:

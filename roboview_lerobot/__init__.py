@@ -23,7 +23,9 @@ same flags for its periodic evals. The same env is offered as a LeRobot EnvHub e
 from __future__ import annotations
 
 import functools
+import logging
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import gymnasium as gym
 from lerobot.configs.types import FeatureType, PolicyFeature
@@ -60,6 +62,9 @@ class RoboViewEnv(EnvConfig):
     max_steps: int = 120
     # Must equal lerobot-eval's --seed (default 1000): episode i is the one reset with seed start_seed + i.
     start_seed: int = 1000
+    # Run even when this machine renders or simulates the benchmark `different`ly from the machine that built it
+    # (the conformance check that runs before the first episode; `python -m pipelines.verify` shows its figures).
+    allow_drift: bool = False
     features: dict[str, PolicyFeature] = field(default_factory=dict)
     features_map: dict[str, str] = field(default_factory=dict)
 
@@ -124,6 +129,20 @@ class RoboViewEnv(EnvConfig):
                 "image_size": self.image_size, "n_repeats": self.n_repeats, "contexts": self.contexts,
                 "limit": self.limit, "max_steps": self.max_steps, "start_seed": self.start_seed, "fps": self.fps}
 
+    def check_conformance(self) -> dict:
+        """pipelines.evaluate's start-of-run check: `different` raises (unless --env.allow_drift=true) before any
+        env is made; the verdict and drift are logged."""
+        from roboview_data.benchmark import conformance
+        from roboview_data.benchmark.format import read_manifest
+
+        root = Path(self.benchmark_path)
+        report = conformance.at_start(root, read_manifest(root)["benchmark_version"])
+        logging.getLogger(__name__).info("RoboView conformance with the benchmark's stack: %s", report.lines()[-1])
+        if report.verdict == "different" and not self.allow_drift:
+            raise conformance.ConformanceError(conformance.refusal(report, root).replace("--benchmark.allow_drift",
+                                                                                           "--env.allow_drift"))
+        return report.record()
+
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
         """{split: {0: VectorEnv of n_envs}}: lerobot-eval runs --eval.n_episodes episodes of each split.
 
@@ -132,6 +151,8 @@ class RoboViewEnv(EnvConfig):
         from lerobot.envs.utils import _LazyAsyncVectorEnv
 
         from roboview_lerobot.env import RoboViewEvalEnv
+
+        self.check_conformance()
 
         envs: dict[str, dict[int, gym.vector.VectorEnv]] = {}
         spaces: tuple = (None, None, None)  # probed from one env of the first split; every split shares them

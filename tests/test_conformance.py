@@ -246,3 +246,15 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
 
     assert "instances" in broken("foreign", other)
     assert broken("missing", lambda rows: [r for r in rows if r["split"] != "dist_scale"]) == ["complete"]
+
+
+def test_the_lerobot_eval_plugin_checks_conformance_before_making_envs(tiny_benchmark, tmp_path, monkeypatch):
+    from roboview_lerobot import RoboViewEnv
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _inject(monkeypatch, _camera)
+    with pytest.raises(conformance.ConformanceError, match="--env.allow_drift=true"):
+        RoboViewEnv(benchmark_path=str(tiny_benchmark), task="dist_scale").create_envs(1)
+    envs = RoboViewEnv(benchmark_path=str(tiny_benchmark), task="dist_scale", allow_drift=True).create_envs(1)
+    assert list(envs) == ["dist_scale"]
+    envs["dist_scale"][0].close()
