@@ -195,7 +195,7 @@ def run(cfg: BuildConfig) -> BuildResult:
         written = {split: bio.read_rows(tmp / "data" / f"{split}.parquet") for split in by_split}
         stack = conformance.write_reference(tmp, written, cfg.image_size)
         content = bio.write_checksums(tmp)
-        reference = conformance.reference_hash(tmp)
+        reference = bio.reference_hash(tmp)
     manifest = {
         "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
         "suite": {"preset": suite.preset, "union_mode": suite.union_mode, "splits": list(suite.splits),

@@ -15,7 +15,7 @@ import pytest
 
 ROOT = Path(__file__).parents[1]
 ENTRY_POINTS = ("collect", "build_benchmark", "publish", "evaluate", "report", "plan", "train", "coverage", "serve_vlm",
-                "probe_grounding", "export_dataset", "serve_policy", "audit", "merge")
+                "probe_grounding", "export_dataset", "serve_policy", "audit", "merge", "verify")
 
 
 # The LeRobot side's own commands.

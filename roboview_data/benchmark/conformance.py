@@ -36,10 +36,11 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
+from roboview_data.benchmark.format import CONFORMANCE as FOLDER
+from roboview_data.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
+
 log = logging.getLogger(__name__)
 
-FOLDER = "conformance"
-REFERENCE = "reference.json"
 FORMAT = 1
 SAMPLE_SIZE = 24       # instances whose reset images are compared
 PHYSICS_SAMPLE = 12    # of those, instances whose expert rollout is compared
@@ -162,8 +163,6 @@ def write_reference(out: Path, by_split: dict[str, list[dict]], image_size: int,
                     tolerances: Tolerances = Tolerances()) -> dict:
     """Store the reference sample of the rows `by_split` (accepted rows, as written) under out/conformance;
     returns the simulation stack that rendered it (roboview_data.sim.stack)."""
-    from roboview_data.benchmark.format import instance_from_record
-
     folder = Path(out) / FOLDER
     folder.mkdir(parents=True, exist_ok=True)
     envs = _Envs(image_size)
@@ -184,17 +183,6 @@ def write_reference(out: Path, by_split: dict[str, list[dict]], image_size: int,
                  "physics": physics}
     (folder / REFERENCE).write_text(json.dumps(reference, indent=2, sort_keys=True) + "\n")
     return envs.stack
-
-
-def reference_hash(root: Path) -> str | None:
-    """SHA-256 over the reference's files (names and bytes, sorted); None when the folder has none."""
-    folder = Path(root) / FOLDER
-    if not (folder / REFERENCE).is_file():
-        return None
-    digest = hashlib.sha256()
-    for path in sorted(folder.iterdir()):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    return digest.hexdigest()
 
 
 # --- checking -------------------------------------------------------------------------------------------
@@ -286,8 +274,6 @@ class Report:
 def read_reference(root: Path) -> dict:
     path = Path(root) / FOLDER / REFERENCE
     if not path.is_file():
-        from roboview_data.benchmark.format import BenchmarkError
-
         raise BenchmarkError(f"{root} holds no conformance reference ({FOLDER}/{REFERENCE} missing); rebuild the "
                              "benchmark with `python -m pipelines.build_benchmark`")
     return json.loads(path.read_text())
@@ -296,8 +282,6 @@ def read_reference(root: Path) -> dict:
 def check(root: Path, tolerances: Tolerances | None = None, envs: _Envs | None = None) -> Report:
     """Re-render and re-simulate the benchmark's reference sample here (its records are in reference.json,
     covered by the benchmark version, which `read_manifest` checks)."""
-    from roboview_data.benchmark.format import instance_from_record
-
     start = time.perf_counter()
     reference = read_reference(root)
     tol = tolerances or Tolerances(**reference["tolerances"])

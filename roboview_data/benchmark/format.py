@@ -36,6 +36,9 @@ from roboview_data.variation.instances import TaskInstance, canonical_json
 
 MANIFEST = "benchmark.json"
 CHECKSUMS = "checksums.json"
+# The conformance reference (roboview_data.benchmark.conformance writes and checks it).
+CONFORMANCE = "conformance"
+REFERENCE = "reference.json"
 # 4: content hashes over every cell, the simulation stack and the conformance reference. 3: rows store `task`
 # and `context_subspace`. 2: `context_subspace` recovered by hashing. 1: the `seed` column hashed instance_id.
 # Formats before 4 carry no content hashes, so an edit would pass: they are not read.
@@ -158,6 +161,17 @@ def write_checksums(root: Path) -> dict[str, str]:
     return {name: entry["sha256"] for name, entry in sums.items()}
 
 
+def reference_hash(root: Path) -> str | None:
+    """SHA-256 over the conformance reference's files (names and bytes, sorted); None when the folder has none."""
+    folder = Path(root) / CONFORMANCE
+    if not (folder / REFERENCE).is_file():
+        return None
+    digest = hashlib.sha256()
+    for path in sorted(folder.iterdir()):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
 def benchmark_version(preset: str, content: dict[str, str], conformance: str | None) -> str:
     """`<preset>-<12 hex>`: SHA-256 over every table's content hash and the conformance reference's."""
     digest = hashlib.sha256(canonical_json({"content": content, "conformance": conformance}).encode()).hexdigest()
@@ -245,8 +259,6 @@ def read_manifest(root: Path) -> dict:
                              "rebuild it with `python -m pipelines.build_benchmark`")
     if manifest.get("status") != "ok":
         raise BenchmarkError(f"{root} is a failed build; rebuild it")
-    from roboview_data.benchmark.conformance import reference_hash
-
     expected = benchmark_version(manifest["suite"]["preset"], manifest.get("content", {}), reference_hash(root))
     if manifest.get("benchmark_version") != expected:
         raise BenchmarkError(f"{root}/{MANIFEST} names version {manifest.get('benchmark_version')!r} but its content "
