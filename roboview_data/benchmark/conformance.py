@@ -95,16 +95,17 @@ def _unpng(data: bytes, n: int) -> list[np.ndarray]:
 
 
 def sample(by_split: dict[str, list[dict]], size: int = SAMPLE_SIZE) -> list[dict]:
-    """A fixed sample of accepted rows: round-robin over the splits, each split's pick spread evenly over its
-    rows in their stored order (so over its values), the first row (the first value of the first context)
-    always in. A pure function of the rows: the builder and every checker take the same sample."""
+    """A fixed sample of accepted rows: round-robin over the splits, each split's picks spread evenly over its
+    rows in their stored order (so over its values and contexts), last row first: a split's first pick is its
+    last context's last value, away from the baseline every split shares. A pure function of the rows: the
+    builder and every checker take the same sample."""
     picks: dict[str, list[dict]] = {}
     splits = sorted(by_split)
     per_split = -(-size // max(1, len(splits)))
     for split in splits:
         rows = by_split[split]
         k = min(per_split, len(rows))
-        idx = sorted({round(i * (len(rows) - 1) / max(1, k - 1)) for i in range(k)}) if k else []
+        idx = sorted({round(i * (len(rows) - 1) / max(1, k - 1)) for i in range(k)}, reverse=True) if k else []
         picks[split] = [rows[i] for i in idx]
     out: list[dict] = []
     while len(out) < size and any(picks.values()):
