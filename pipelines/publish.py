@@ -17,7 +17,8 @@ from fnmatch import fnmatch
 from pathlib import Path
 
 from pipelines._cli import cli_main
-from roboview_data.benchmark.format import MANIFEST
+from roboview_data.benchmark.format import MANIFEST, load_benchmark
+from roboview_data.cli_errors import flag_errors
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,8 @@ class PublishConfig:
                              "run pipelines.build_benchmark first")
         if json.loads(manifest.read_text()).get("status") != "ok":
             raise ValueError(f"--path={self.path} is a failed build (fairness gate); fix and rebuild first")
+        with flag_errors("--path"):  # every cell against the build's checksums: an edited benchmark is not published
+            load_benchmark(self.path)
         if (self.lerobot_root is None) != (self.lerobot_repo_id is None):
             raise ValueError("--lerobot_root and --lerobot_repo_id go together")
         if self.lerobot_root is not None and not (Path(self.lerobot_root) / "meta/info.json").is_file():

@@ -258,3 +258,11 @@ def test_the_lerobot_eval_plugin_checks_conformance_before_making_envs(tiny_benc
     envs = RoboViewEnv(benchmark_path=str(tiny_benchmark), task="dist_scale", allow_drift=True).create_envs(1)
     assert list(envs) == ["dist_scale"]
     envs["dist_scale"][0].close()
+
+
+def test_publish_refuses_an_edited_benchmark(copy):
+    from pipelines.publish import PublishConfig
+
+    _edit_cell(copy / "data" / "dist_scale.parquet", 0, "value", lambda v: "7")
+    with pytest.raises(ValueError, match=r"--path: benchmark table 'data/dist_scale'.*'value' of row\(s\) 0"):
+        PublishConfig(path=str(copy), repo_id="org/bench", dry_run=True)
