@@ -31,7 +31,7 @@ from eval import provenance, videos
 from eval.adaptive import read_record
 from eval.agents import agents_markdown, describe_agents
 from eval.context import context_breakdown
-from eval.report_format import ALPHA, VERSION_KEY, p_fmt, pct, pct_ci, split_order, split_title
+from eval.report_format import ALPHA, VERSION_KEY, bias_status, p_fmt, pct, pct_ci, split_order, split_title
 from eval.report_html import HTML_FILE, render_html
 from eval.metrics import (
     METRIC_COLUMNS,
@@ -158,6 +158,20 @@ def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
 def _average(layout: dict, splits: list[str], key: str) -> float | None:
     values = [layout["splits"][s][key] for s in splits if s in layout["splits"]]
     return float(np.mean(values)) if values and None not in values else None
+
+
+def _summary(layouts: dict[str, dict]) -> list[str]:
+    """Is each policy biased? Per policy its average SR and the splits with a bias, with none detected, and those
+    the test could not judge (and why): a policy that fails everything is not reported unbiased."""
+    rows = []
+    for name, layout in layouts.items():
+        status = {s: bias_status(m) for s, m in layout["splits"].items()}
+        biased = [s for s, (v, _) in status.items() if v == "bias"]
+        rows.append([name, pct(layout["average"]["sr"]), ", ".join(biased) or "none",
+                     ", ".join(s for s, (v, _) in status.items() if v == "no bias detected") or "—",
+                     ", ".join(f"{s} ({why})" for s, (v, why) in status.items() if v == "not testable") or "—"])
+    return ["## Summary", "", *_table(["Policy", "Average SR (×100)", "Splits with bias (p < 0.05)", "No bias detected",
+                                       "Not testable"], rows)]
 
 
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
@@ -497,7 +511,7 @@ def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[s
 def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
     """report.md's sections in order, each a list of Markdown lines (empty when it has nothing to say)."""
     layouts = policy_layouts(metrics)
-    return {"table1": _table1(metrics, layouts), "infra": _infra_errors(layouts), "directions": _directions(layouts),
+    return {"summary": _summary(layouts), "table1": _table1(metrics, layouts), "infra": _infra_errors(layouts), "directions": _directions(layouts),
             "interactions": _table2(layouts),
             "comparisons": _comparisons(metrics), "rankings": _rankings(metrics),
             "context": _context_factors(layouts), "adaptive": _adaptive(layouts), "diagnostics": _diagnostics(layouts),

@@ -29,6 +29,20 @@ def p_fmt(p: float | None, at_floor: bool | None = False) -> str:
     return f"≤ {text}" if at_floor else text
 
 
+def bias_status(m: dict) -> tuple[str, str]:
+    """What a split's test says about its factor: ("bias", ""), ("no bias detected", ""), or ("not testable",
+    why) — every episode failed, every episode succeeded, or too few episodes for the test. "No bias detected"
+    is said only of a split the test could have flagged."""
+    sr, p = m.get("sr"), m.get("p_value")
+    if sr == 0:
+        return "not testable", "every episode failed"
+    if sr == 1:
+        return "not testable", "every episode succeeded"
+    if p is None:
+        return "not testable", "too few episodes for the test"
+    return ("bias", "") if p < ALPHA else ("no bias detected", "")
+
+
 def split_title(split: str) -> str:
     """A split's title: its factor's own title (factor registry), else the split name."""
     return FACTORS[split].title if split in FACTORS else split

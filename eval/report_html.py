@@ -25,18 +25,18 @@ HTML_FILE = "report.html"
 
 _CSS = """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;color:#1d1d1f;margin:0;background:#f6f6f4}
-main{max-width:1120px;margin:0 auto;padding:24px 28px 64px;background:#fff}
+main{max-width:1120px;margin:0 auto;padding:24px 28px 64px;background:#fff;overflow-wrap:anywhere}
 h1{font-size:26px;margin:0 0 4px}h2{font-size:20px;margin:32px 0 8px;border-bottom:1px solid #ddd;padding-bottom:4px}
 h3{font-size:17px;margin:0 0 6px}
 nav a{margin-right:14px;font-size:14px}
-table{border-collapse:collapse;margin:8px 0 12px;font-size:14px}
+table{border-collapse:collapse;margin:8px 0 12px;font-size:14px;max-width:100%}
 th,td{border:1px solid #d8d8d8;padding:4px 8px;text-align:left;vertical-align:top}
 th{background:#f0f0ee}td.num{text-align:right;font-variant-numeric:tabular-nums}
 .split{border:1px solid #d8d8d8;border-radius:6px;padding:14px 16px;margin:16px 0}
 .verdict-bias{color:#b00020;font-weight:600}.verdict-none{color:#3a6b35}
 .figures img{max-width:100%;height:auto;display:block;margin:10px 0;border:1px solid #eee}
 .note{color:#555;font-size:13px}
-code{background:#f2f2f2;padding:0 3px;border-radius:3px}
+code{background:#f2f2f2;padding:0 3px;border-radius:3px;word-break:break-all}
 """
 
 
@@ -78,12 +78,12 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
 
 
 def _verdict(m: dict[str, Any]) -> str:
-    p = m["p_value"]
-    if p is None:
-        return '<span class="note">not testable</span>'
-    if p < fmt.ALPHA:
-        return f'<span class="verdict-bias">bias (p {_e(fmt.p_fmt(p, m.get("p_value_at_floor")))})</span>'
-    return '<span class="verdict-none">within noise</span>'
+    status, why = fmt.bias_status(m)
+    if status == "not testable":
+        return f'<span class="note">not testable: {_e(why)}</span>'
+    if status == "bias":
+        return f'<span class="verdict-bias">bias (p {_e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor")))})</span>'
+    return '<span class="verdict-none">no bias detected</span>'
 
 
 def _values_line(m: dict[str, Any]) -> str:
@@ -107,13 +107,12 @@ def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], 
             continue
         rows.append([_e(name), _e(fmt.pct(m["sr"]) + fmt.pct_ci(m["sr_ci95"])), _e(fmt.pct(m["cv"])),
                      _e(fmt.pct(m["cv_null"])), _e(fmt.pct(m["cv_excess"])),
-                     _e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor"))),
-                     _e(fmt.p_fmt(m["p_value_cv"], m.get("p_value_cv_at_floor"))), str(m["n_episodes"]), _verdict(m)])
+                     _e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor"))), str(m["n_episodes"]), _verdict(m)])
         notes.append(f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}{_infra_line(m)}</li>")
     parts = [f'<section class="split" id="split-{_e(split)}"><h3>{_e(title)}'
              + (f' <span class="note">task {_e(task)}</span>' if task != DEFAULT_TASK else "") + "</h3>",
-             _table(["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p (GLM LRT)", "p (CV permutation)",
-                     "episodes", "verdict"], rows, numeric=(2, 3, 4, 5, 6, 7)),
+             _table(["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes", "verdict"], rows,
+                    numeric=(2, 3, 4, 5, 6)),
              f"<ul>{''.join(notes)}</ul>"]
     parts += _videos(metrics, layouts, split)
     if figures:
@@ -156,15 +155,20 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> li
 
 
 def _summary(layouts: dict[str, dict]) -> str:
+    """Per policy: average SR and cv_excess, then its splits in three lists — bias, no bias detected, and not
+    testable with the reason (a policy that fails everything is not called unbiased)."""
     rows = []
     for name, layout in layouts.items():
-        splits = layout["splits"]
-        biased = [s for s, m in splits.items() if m["p_value"] is not None and m["p_value"] < fmt.ALPHA]
+        status = {s: fmt.bias_status(m) for s, m in layout["splits"].items()}
+        biased = [s for s, (v, _) in status.items() if v == "bias"]
+        clean = [s for s, (v, _) in status.items() if v == "no bias detected"]
+        untestable = [f"{s} ({why})" for s, (v, why) in status.items() if v == "not testable"]
         avg = layout.get("average") or {}
-        rows.append([_e(name), _e(fmt.pct(avg.get("sr"))), _e(fmt.pct(avg.get("cv"))), _e(fmt.pct(avg.get("cv_excess"))),
-                     f"{len(biased)} / {len(splits)}", _e(", ".join(biased) or "none")])
-    return _table(["Policy", "Average SR", "Average CV", "Average cv_excess", "Splits with bias (p < 0.05)",
-                   "Which"], rows, numeric=(1, 2, 3, 4))
+        rows.append([_e(name), _e(fmt.pct(avg.get("sr"))), _e(fmt.pct(avg.get("cv_excess"))),
+                     _e(", ".join(biased) or "none"),
+                     _e(", ".join(clean) or "—"), _e(", ".join(untestable) or "—")])
+    return _table(["Policy", "Average SR", "Average cv_excess", "Splits with bias (p < 0.05)", "No bias detected",
+                   "Not testable"], rows, numeric=(1, 2))
 
 
 def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path,
@@ -181,7 +185,8 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
                      + "<p class=note>SR: successes / episodes, Wilson 95 % interval. CV: the paper's Bias Coefficient; "
                        "noise floor: the CV the table shows when the value does not matter; cv_excess: the bias beyond "
                        "binomial noise (rank on it, not on CV). p: likelihood-ratio test of a binomial GLM value + context "
-                       "against context. All ×100 but p.</p>"))
+                       "against context (the CV permutation p is in metrics.json and the calibration section). A split "
+                       "is not testable when every episode failed or succeeded, or too few ran. All ×100 but p.</p>"))
     sections.append(("splits", "Splits", "\n".join(_split_block(s, layouts, metrics, figures.get(s, []), out)
                                                    for s in splits)))
     titles = {"infra": "Episodes ended by infrastructure", "interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",

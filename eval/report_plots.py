@@ -80,24 +80,40 @@ def category_color(category: str) -> str:
     return COLORS[category].hex if category in COLORS else "#808080"
 
 
-def plot_color_categories(layouts: Layouts, path: Path) -> None:
-    """SR per basic color category (pooled over its colors' episodes), Wilson 95 % error bars."""
-    per = _per_value(layouts, "color")
-    fig, ax = plt.subplots(figsize=(10, 4), layout="constrained")
-    width = 0.8 / len(per)
-    for i, (policy, values) in enumerate(per.items()):
+def category_stats(per: dict[str, dict[str, dict]]) -> dict[str, list[dict]]:
+    """Per basic color category that any policy's episodes cover: per policy (in `per`'s order) its pooled SR and
+    episodes (SR NaN for a policy without episodes there). Categories the benchmark holds no color of are left
+    out, so a chart never shows an absent category as a 0 % bar."""
+    out: dict[str, list[dict]] = {}
+    for category in CATEGORIES:
         stats = []
-        for category in CATEGORIES:
+        for values in per.values():
             members = [s for v, s in values.items() if v in COLORS and COLORS[v].category == category]
             n = sum(s["n_episodes"] for s in members)
             k = sum(round(s["sr"] * s["n_episodes"]) for s in members)
             stats.append({"sr": k / n if n else math.nan, "n_episodes": n})
-        shown = [j for j, s in enumerate(stats) if s["n_episodes"]]
-        ax.bar(np.array(shown) + (i - (len(per) - 1) / 2) * width, [stats[j]["sr"] for j in shown], width,
-               yerr=_wilson_err([stats[j] for j in shown]), capsize=2, label=policy,
-               color=[category_color(CATEGORIES[j]) for j in shown], edgecolor="black", hatch="/" * i)
-    ax.set_xticks(range(len(CATEGORIES)), CATEGORIES)
-    ax.set(ylabel="success rate", ylim=(0, 1.05), title="Success rate by basic color category")
+        if any(s["n_episodes"] for s in stats):
+            out[category] = stats
+    return out
+
+
+def plot_color_categories(layouts: Layouts, path: Path) -> None:
+    """SR per basic color category (pooled over its colors' episodes), Wilson 95 % error bars; only the
+    categories the episodes cover (the title names the absent ones)."""
+    per = _per_value(layouts, "color")
+    table = category_stats(per)
+    names = list(table)
+    fig, ax = plt.subplots(figsize=(10, 4), layout="constrained")
+    width = 0.8 / len(per)
+    for i, policy in enumerate(per):
+        shown = [j for j, c in enumerate(names) if table[c][i]["n_episodes"]]
+        ax.bar(np.array(shown) + (i - (len(per) - 1) / 2) * width, [table[names[j]][i]["sr"] for j in shown], width,
+               yerr=_wilson_err([table[names[j]][i] for j in shown]), capsize=2, label=policy,
+               color=[category_color(names[j]) for j in shown], edgecolor="black", hatch="/" * i)
+    ax.set_xticks(range(len(names)), names)
+    absent = [c for c in CATEGORIES if c not in table]
+    ax.set(ylabel="success rate", ylim=(0, 1.05), title="Success rate by basic color category"
+           + (f"\n(no color of the benchmark is {', '.join(absent)})" if absent else ""))
     if len(per) > 1:  # bars wear their category's color, so the legend shows each policy's hatch
         ax.legend(handles=[Patch(facecolor="white", edgecolor="black", hatch="/" * i, label=p)
                            for i, p in enumerate(per)])

@@ -33,6 +33,8 @@ class Page:
     errors: list[str]  # console errors, uncaught exceptions and failed loads, as Chromium reported them
     images: list[dict]  # {alt, x, y, width, height, natural_width} per <img>, in page coordinates (CSS px)
     screenshot: np.ndarray  # the whole page, H × W × 3 uint8
+    # The page's scroll width and each table's right edge (CSS px): what overflows the window.
+    layout: dict = None  # type: ignore[assignment]
 
 
 class _DevTools:
@@ -86,6 +88,10 @@ _IMAGES_JS = """JSON.stringify(Array.from(document.images).map(i => { const r = 
           natural_width: i.complete ? i.naturalWidth : 0}; }))"""
 
 
+_LAYOUT_JS = """JSON.stringify({page: document.documentElement.scrollWidth,
+  tables: Array.from(document.querySelectorAll('table')).map(t => t.getBoundingClientRect().right + scrollX)})"""
+
+
 def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
     binary = chromium_binary()
     if binary is None:
@@ -114,6 +120,8 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
                 tools.wait_for("Page.loadEventFired", timeout)
                 images = json.loads(tools.call("Runtime.evaluate", session, expression=_IMAGES_JS,
                                                returnByValue=True)["result"]["value"])
+                layout = json.loads(tools.call("Runtime.evaluate", session, expression=_LAYOUT_JS,
+                                               returnByValue=True)["result"]["value"])
                 size = tools.call("Page.getLayoutMetrics", session)["cssContentSize"]
                 shot = tools.call("Page.captureScreenshot", session, timeout, format="png", captureBeyondViewport=True,
                                   clip={"x": 0, "y": 0, "width": width, "height": size["height"], "scale": 1})
@@ -127,4 +135,4 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
             except subprocess.TimeoutExpired:
                 proc.kill()
     pixels = np.asarray(Image.open(io.BytesIO(base64.b64decode(shot["data"]))).convert("RGB"))
-    return Page(errors, images, pixels)
+    return Page(errors, images, pixels, layout)

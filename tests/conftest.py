@@ -17,7 +17,7 @@ import pytest  # noqa: E402
 # in a module that starts simulations, servers, clusters or a browser. `make test-fast` runs the rest.
 SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_checkpoint", "bench"}
 FAST_MODULES = {"test_adaptive", "test_audit", "test_colors", "test_context_stats", "test_factors", "test_imports",
-                "test_isolation", "test_metrics", "test_ranking", "test_report", "test_statistics",
+                "test_isolation", "test_metrics", "test_ranking", "test_report", "test_report_wording", "test_statistics",
                 "test_stable_ids", "test_svgf"}
 
 

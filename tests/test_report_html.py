@@ -9,7 +9,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from eval.report_format import p_fmt, pct, pct_ci
+from eval.report_format import bias_status, p_fmt, pct, pct_ci
 from pipelines.report import ReportConfig, run
 from tests.browser import chromium_binary, load_page
 from tests.test_report import FAST, make_episodes, write
@@ -76,20 +76,25 @@ def test_split_blocks_print_metrics_json(report):
     assert {f"split-{s}" for s in splits} <= set(parser.tables)
     for split in splits:
         header, *rows = parser.tables[f"split-{split}"][0]
-        assert header[:7] == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p (GLM LRT)",
-                              "p (CV permutation)"]
+        assert header == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes", "verdict"]
         assert sorted(r[0] for r in rows) == sorted(policies)
         for row in rows:
             m = policies[row[0]]["splits"][split]
-            assert row[1:8] == [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]), pct(m["cv_null"]),
-                                pct(m["cv_excess"]), p_fmt(m["p_value"], m["p_value_at_floor"]),
-                                p_fmt(m["p_value_cv"], m["p_value_cv_at_floor"]), str(m["n_episodes"])]
-            expected = ("not testable" if m["p_value"] is None else
-                        "bias" if m["p_value"] < 0.05 else "within noise")
-            assert row[8].startswith(expected)
-    # The value-dependent policy is flagged on color and nowhere is the all-failing one called biased.
+            assert row[1:7] == [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]), pct(m["cv_null"]),
+                                pct(m["cv_excess"]), p_fmt(m["p_value"], m["p_value_at_floor"]), str(m["n_episodes"])]
+            expected = ("not testable" if m["p_value"] is None or m["sr"] in (0, 1) else
+                        "bias" if m["p_value"] < 0.05 else "no bias detected")
+            assert row[7].startswith(expected)
+    # The value-dependent policy is flagged on color; the all-failing one is not testable, never "no bias".
     color = {r[0]: r for r in parser.tables["split-color"][0][1:]}
-    assert color["biased"][8].startswith("bias (p") and color["random"][8] == "not testable"
+    assert color["biased"][7].startswith("bias (p") and color["random"][7] == "not testable: every episode failed"
+    summary = {r[0]: r for r in parser.tables["summary"][0][1:]}
+    n = len(policies["random"]["splits"])
+    assert summary["random"][3] == "none" and summary["random"][4] == "—"
+    assert summary["random"][5].count("(every episode failed)") == n
+    flagged = [s for s, m in policies["biased"]["splits"].items() if bias_status(m)[0] == "bias"]
+    assert "color" in flagged
+    assert summary["biased"][3] == ", ".join(flagged)
     # The ranking and the comparisons are on the page, the filmed episodes linked relative to it.
     assert "Rankings" in page and "Policy comparisons" in page
     assert 'href="../videos/0_front.mp4"' in page
@@ -123,6 +128,14 @@ def test_page_loads_in_chromium_and_shows_its_figures(report):
         mask[int(image["y"]):int(image["y"] + image["height"]), int(image["x"]):int(image["x"] + image["width"])] = False
     text = page.screenshot[mask].astype(int)
     assert ((text.max(axis=1) - text.min(axis=1)) > 80).mean() < 0.01
+
+
+@needs_chromium
+def test_the_page_fits_a_1280_px_window(report):
+    result, _ = report
+    page = load_page(result.output_dir / "report.html", width=1280)
+    assert page.layout["page"] <= 1280, page.layout
+    assert page.layout["tables"] and max(page.layout["tables"]) <= 1280, page.layout
 
 
 @needs_chromium

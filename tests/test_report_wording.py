@@ -1,0 +1,38 @@
+"""What the report says when a test could not judge, and what it leaves out when the benchmark holds nothing."""
+
+from __future__ import annotations
+
+import math
+
+from eval.report_format import bias_status
+from eval.report_plots import category_stats
+from pipelines.report import ReportConfig, run
+from tests.test_report import FAST, make_episodes, write
+
+
+def test_bias_status_separates_untestable_from_unbiased():
+    assert bias_status({"sr": 0.0, "p_value": None}) == ("not testable", "every episode failed")
+    assert bias_status({"sr": 1.0, "p_value": 1.0}) == ("not testable", "every episode succeeded")
+    assert bias_status({"sr": 0.5, "p_value": None}) == ("not testable", "too few episodes for the test")
+    assert bias_status({"sr": 0.5, "p_value": 0.01}) == ("bias", "")
+    assert bias_status({"sr": 0.5, "p_value": 0.3}) == ("no bias detected", "")
+
+
+def test_a_policy_that_fails_everything_is_not_called_unbiased(tmp_path):
+    path = write(make_episodes("random", 1).assign(success=False), tmp_path / "random.parquet")
+    result = run(ReportConfig(results=str(path), output_dir=str(tmp_path / "rep"), plots=False, **FAST))
+    text = (result.output_dir / "report.md").read_text()
+    summary = text[text.index("## Summary"):text.index("## Table 1")]
+    row = next(line for line in summary.splitlines() if line.startswith("| random"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    n = len(result.metrics["splits"])
+    assert cells[2] == "none" and cells[3] == "—" and cells[4].count("(every episode failed)") == n
+
+
+def test_absent_color_categories_are_left_out_not_drawn_as_zero():
+    per = {"a": {"red": {"sr": 0.5, "n_episodes": 4}, "gray": {"sr": 0.0, "n_episodes": 2}},
+           "b": {"red": {"sr": 1.0, "n_episodes": 4}}}
+    table = category_stats(per)
+    assert list(table) == ["red", "gray"]  # CATEGORIES order, only those with episodes
+    assert table["red"][0] == {"sr": 0.5, "n_episodes": 4} and table["red"][1] == {"sr": 1.0, "n_episodes": 4}
+    assert table["gray"][0]["sr"] == 0.0 and math.isnan(table["gray"][1]["sr"]) and table["gray"][1]["n_episodes"] == 0
