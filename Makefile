@@ -54,11 +54,11 @@ demo: install
 	  --eval.n_repeats=3 --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
 	  --output_dir=$(DEMO_DIR)/eval/vision
 	$(PY) -m pipelines.report --results=$(DEMO_DIR)/eval/vision/episodes.parquet --output_dir=$(DEMO_DIR)/report
-	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
+	@echo "Report:         $(DEMO_DIR)/report/report.html (open it in a browser; report.md, metrics.json and the plots beside it)"
+	@echo "Evaluation:     $(DEMO_DIR)/eval/vision/episodes.parquet (Rerun: .venv/bin/rerun $(DEMO_DIR)/eval/vision*.rrd)"
 	@echo "Demo benchmark: $(DEMO_DIR)/benchmark (datasets.load_dataset('$(DEMO_DIR)/benchmark', split='color'))"
 	@echo "Contact sheet:  $(DEMO_DIR)/benchmark/contact_sheet/index.html"
-	@echo "Evaluation:     $(DEMO_DIR)/eval/vision/episodes.parquet (Rerun: .venv/bin/rerun $(DEMO_DIR)/eval/vision.rrd)"
-	@echo "Report:         $(DEMO_DIR)/report/report.md (+ metrics.json and PNG plots)"
+	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
 
 # The whole suite, with its 30 slowest tests listed at the end; test-fast: the tests that take seconds (statistics,
 # formats, factor registry, imports), no rendering, training or servers.

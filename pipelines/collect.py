@@ -34,6 +34,7 @@ from roboview_data.demos.dataset import (
     demo_features,
     load_provenance,
     roll_back,
+    write_card,
     write_checkpoint,
 )
 from roboview_data.demos.recorder import DemoCollector, DemoEpisode
@@ -219,6 +220,7 @@ def run(cfg: CollectConfig) -> CollectResult:
             if ep.success and (done or progress.episodes_saved % cfg.checkpoint_every == 0):
                 dataset.finalize()
                 write_checkpoint(root, progress, provenance)
+                write_card(root, cfg.dataset.repo_id, cfg.dataset.task, len(provenance))
                 if done:
                     break
                 dataset = _open_dataset(cfg, create=False)

@@ -80,6 +80,16 @@ def test_lerobot_train_runs_two_steps(reference, tmp_path):
     assert (model_dir / "model.safetensors").stat().st_size > 1_000_000
 
 
+def test_every_collected_dataset_has_a_dataset_card(reference):
+    from huggingface_hub import DatasetCard
+
+    card = DatasetCard.load(reference / "README.md")
+    assert {"LeRobot", "roboview", "pick_place"} <= set(card.data.tags) and card.data.license == "apache-2.0"
+    assert card.data.task_categories == ["robotics"]
+    assert "Episodes: 4 (" in card.text and "front, left_top, right_top, wrist (64 px square)" in card.text
+    assert '"total_episodes": 4' in card.text  # LeRobot's own structure block, from meta/info.json
+
+
 def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
     root = tmp_path / "ds"
     cmd = [sys.executable, "-m", "pipelines.collect", f"--dataset.repo_id={REPO_ID}", f"--dataset.root={root}",

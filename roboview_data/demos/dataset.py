@@ -122,6 +122,33 @@ def _append_only_files(root: Path) -> list[str]:
                   for p in (root / d).rglob("*") if p.is_file())
 
 
+CARD = "README.md"
+
+
+def write_card(root: Path, repo_id: str, task: str, provenance_rows: int) -> Path:
+    """The dataset card (README.md), LeRobot's own template (`create_lerobot_dataset_card`, what its push writes)
+    filled with what RoboView knows: how the demos were made and what they do not vary."""
+    from lerobot.datasets.io_utils import load_info
+    from lerobot.datasets.utils import create_lerobot_dataset_card
+
+    info = json.loads((root / "meta" / "info.json").read_text())
+    cameras = [k.removeprefix(IMAGE_KEY.format("")) for k in info["features"] if k.startswith(IMAGE_KEY.format(""))]
+    description = (
+        f"Scripted expert demonstrations of the RoboView `{task}` task (Franka Panda + Robotiq 2F-85 in MuJoCo), "
+        f"collected with context-only randomization: object position, shape and instruction vary; every visual "
+        f"factor (object color, cameras, lighting, table) stays at its baseline, so a policy trained here can be "
+        f"measured for visual bias on the RoboView-Bias benchmark.\n\n"
+        f"- Episodes: {info['total_episodes']} ({info['total_frames']} frames at {info['fps']} fps)\n"
+        f"- Cameras: {', '.join(cameras)} ({info['features'][IMAGE_KEY.format(cameras[0])]['shape'][0]} px square)\n"
+        f"- `observation.state`: {', '.join(STATE_NAMES)}; `action`: {', '.join(ACTION_NAMES)}\n"
+        f"- Per-episode provenance (instance, context, seed): `{PROVENANCE_FILE.as_posix()}` "
+        f"({provenance_rows} rows)")
+    card = create_lerobot_dataset_card(tags=["roboview", "visual-bias", task], dataset_info=load_info(root),
+                                       license="apache-2.0", repo_id=repo_id, dataset_description=description)
+    card.save(root / CARD)
+    return root / CARD
+
+
 def write_checkpoint(root: Path, progress: Progress, provenance: list[dict]) -> None:
     """Record a consistent state. Call only right after `dataset.finalize()`."""
     snap = root / SNAPSHOT_DIR
