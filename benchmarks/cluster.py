@@ -15,7 +15,6 @@ import json
 import os
 import secrets
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import psutil
 
+from benchmarks.serving import free_port
 from pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
@@ -32,10 +32,15 @@ RAY = Path(sys.executable).parent / "ray"
 REFERENCE_CHECKPOINT = "outputs/train_act96/checkpoints/last/pretrained_model"
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def frames_equal(a, b) -> bool:
+    """Two episode tables with the same rows (pandas' own comparison: NaNs and list cells included)."""
+    import pandas as pd
+
+    try:
+        pd.testing.assert_frame_equal(a, b)
+        return True
+    except AssertionError:
+        return False
 
 
 class LocalCluster:
@@ -155,18 +160,11 @@ def run(cfg: ClusterBenchConfig) -> dict:
         return (pd.read_parquet(scratch / name / "episodes.parquet").drop(columns=["duration_s"])
                 .sort_values(["instance_id", "repeat"]).reset_index(drop=True))
 
-    def same(a, b) -> bool:
-        try:
-            pd.testing.assert_frame_equal(a, b)
-            return True
-        except AssertionError:
-            return False
-
     reference = table("local")
     for name, layout in layouts.items():
         layout["episodes_per_hour"] = round(3600 * cfg.episodes / layout["seconds"])
         layout["over_local"] = round(layouts["local"]["seconds"] / layout["seconds"], 3)
-        layout["rows_equal_local"] = same(table(name), reference)
+        layout["rows_equal_local"] = frames_equal(table(name), reference)
         print(f"[cluster] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_local']}× local), "
               f"rows equal: {layout['rows_equal_local']}", flush=True)
     out = {"policy": checkpoint or "expert", "benchmark": bench, "split": cfg.split, "episodes": cfg.episodes,

@@ -27,6 +27,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks.cluster import frames_equal
 from benchmarks.serving import REFERENCE_CHECKPOINT, free_port, stop
 from pipelines._cli import BenchmarkPath, cli_main
 
@@ -69,16 +70,6 @@ def _evaluate(cfg: GpuBenchConfig, bench: str, out: Path, flags: list[str]) -> d
             .sort_values(["instance_id", "repeat"]).reset_index(drop=True))
     return {"wall_s": round(wall, 1), "episodes_per_hour": round(3600 * len(rows) / wall),
             "successes": int(rows["success"].sum()), "command": " ".join(cmd), "_rows": rows}
-
-
-def _same(a, b) -> bool:
-    import pandas as pd
-
-    try:
-        pd.testing.assert_frame_equal(a, b)
-        return True
-    except AssertionError:
-        return False
 
 
 def run(cfg: GpuBenchConfig) -> dict:
@@ -135,7 +126,7 @@ def run(cfg: GpuBenchConfig) -> dict:
     for name, layout in layouts.items():
         rows = layout.pop("_rows")
         layout["over_cpu"] = round(layout["episodes_per_hour"] / layouts["cpu"]["episodes_per_hour"], 3)
-        layout["rows_equal_cpu"] = _same(rows, reference)
+        layout["rows_equal_cpu"] = frames_equal(rows, reference)
         print(f"[gpu] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_cpu']}× cpu), "
               f"{layout['successes']}/{cfg.episodes} successes", flush=True)
     out = {"device": torch.cuda.get_device_name(0), "cores": cores, "checkpoint": cfg.checkpoint, "benchmark": bench,

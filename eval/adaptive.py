@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scipy.stats import chi2
 
 from eval.stats import factor_lrt, informative, is_sparse
 

@@ -2,7 +2,8 @@
 
 Both keep a bounded number of episodes in flight and yield results as they finish. A worker that
 dies loses only its episode in flight: it is logged, the worker replaced, and the episode retried
-(at most `max_retries` times, then the run stops with an error naming it).
+(at most `max_retries` times; then it is yielded as a row of status `infra_error`, `eval.rollout.lost_row`,
+and the run goes on: the evaluator re-runs such episodes later and on a rerun).
 
 On a Ray cluster the actors spread over the nodes. A node that is lost takes its actors' episodes in flight
 with it: they are retried on the surviving nodes, and an actor is replaced only while the cluster still has a
@@ -23,16 +24,12 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import replace
 
 from eval.policy_server import PolicyServer
-from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem
+from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem, lost_row
 from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
 
 BACKENDS = ("local", "ray")
-
-
-class EpisodeLost(RuntimeError):
-    """An episode's worker died more often than allowed."""
 
 
 class ClusterLost(RuntimeError):
@@ -62,11 +59,24 @@ class _HeadWatch(threading.Thread):
                     return
 
 
-def _retry(work: WorkItem, tries: dict, max_retries: int, why: str) -> None:
+def _retry(work: WorkItem, tries: dict, max_retries: int, why: str) -> bool:
+    """Count one more death of the worker running `work`: True to run it again, False once it has died more than
+    `max_retries` times (the episode is then recorded as ended by infrastructure: `_lost`)."""
     tries[work.key] = tries.get(work.key, 0) + 1
-    log.warning("worker died running %s repeat %d (%s); retry %d/%d", *work.key, why, tries[work.key], max_retries)
     if tries[work.key] > max_retries:
-        raise EpisodeLost(f"episode {work.key[0]} repeat {work.key[1]} lost its worker {tries[work.key]} times")
+        log.error("worker died running %s repeat %d (%s) %d times: recorded as an infrastructure error", *work.key,
+                  why, tries[work.key])
+        return False
+    log.warning("worker died running %s repeat %d (%s); retry %d/%d", *work.key, why, tries[work.key], max_retries)
+    return True
+
+
+def _lost(spec: WorkerSpec, chunk: tuple[WorkItem, ...], tries: dict,
+          why: str) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+    """infra_error rows for the episodes of a chunk whose worker kept dying."""
+    reason = f"infrastructure error: the worker died {tries[chunk[0].key]} times running this episode ({why})"
+    for work in chunk:
+        yield work, EpisodeResult(lost_row(work, reason, spec.policy.name or None))
 
 
 def chunks(spec: WorkerSpec, items: Iterable[WorkItem]) -> list[tuple[WorkItem, ...]]:
@@ -101,8 +111,11 @@ def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
                     except BrokenProcessPool as exc:
                         # A worker died: the pool is gone, so every episode in flight is requeued.
                         broken = True
-                        _retry(work[0], tries, max_retries, str(exc) or "worker process died")
-                        queue.append(work)
+                        why = str(exc) or "worker process died"
+                        if _retry(work[0], tries, max_retries, why):
+                            queue.append(work)
+                        else:
+                            yield from _lost(spec, work, tries, why)
                         continue
                     yield from zip(work, results)
             for work in in_flight.values():
@@ -204,9 +217,11 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
             try:
                 results = ray.get(ready[0])
             except RayActorError as exc:
-                _retry(work[0], tries, max_retries, type(exc).__name__)
                 stats["lost_actors"] += 1
-                queue.append(work)
+                if _retry(work[0], tries, max_retries, type(exc).__name__):
+                    queue.append(work)
+                else:
+                    yield from _lost(spec, work, tries, type(exc).__name__)
                 actors[slot] = start(slot)
                 starting[slot] = time.monotonic()
                 continue

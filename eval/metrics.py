@@ -10,12 +10,15 @@ Output (`compute_metrics`, one policy): `epsilon`, `policy`, `resampling` (n_per
 `compute_all_metrics` returns that dict for a single policy and {"epsilon", "resampling", "policies": {name:
 dict}, "comparisons" (`eval.compare`), "rankings" (three policies or more)} for several; `policy_layouts`
 reads either shape back.
+
+Episodes that infrastructure ended (`status` `infra_error`, docs/evaluation.md "Infrastructure errors") enter
+no number: both functions drop them (`eval.results.counted`) and count them, per split `n_infra_errors` and per
+policy `n_infra_errors` (their total).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -26,6 +29,7 @@ import pandas as pd
 
 from eval import isolation, ranking, stats
 from eval.compare import baseline_retest, compare_policies
+from eval.results import counted, infra_mask
 from eval.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
     EPSILON,
     SEQUENTIAL_H,
@@ -286,9 +290,21 @@ def check_episodes(episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLU
                             "different split, value or context_id; an instance fixes all three")
 
 
+def _counted_episodes(episodes: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
+    """The episodes that count, and split → episodes infrastructure ended (left out)."""
+    infra = episodes.loc[infra_mask(episodes), "split"].astype(str).value_counts()
+    kept = counted(episodes)
+    if kept.empty:
+        raise EpisodesError(f"all {len(episodes)} episode(s) ended by infrastructure (status infra_error), not by "
+                            "the policy: nothing to measure; rerun the evaluation command to run them again")
+    return kept, {str(split): int(n) for split, n in infra.items()}
+
+
 def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
-    """metrics.json layout (docs/formats.md, "Metrics") for the episodes of one policy."""
+    """metrics.json layout (docs/formats.md, "Metrics") for the episodes of one policy (episodes infrastructure
+    ended are left out, and counted per split in `n_infra_errors`)."""
     check_episodes(episodes)
+    episodes, infra = _counted_episodes(episodes)
     policies = episodes["policy"].unique()
     if len(policies) != 1:
         raise ValueError(f"compute_metrics takes one policy, got {sorted(map(str, policies))}; "
@@ -301,10 +317,11 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     interactions: dict[str, Any] = {}
     for split, rows in episodes.groupby("split", sort=False):
         n_factors = len(str(rows["factor"].iloc[0]).split("|"))
+        extra = {"isolation": certificate[str(split)], "n_infra_errors": infra.get(str(split), 0)}
         if n_factors == 1:
-            splits[str(split)] = split_metrics(rows, cfg) | {"isolation": certificate[str(split)]}
+            splits[str(split)] = split_metrics(rows, cfg) | extra
         elif n_factors == 2:
-            interactions[str(split)] = interaction_metrics(rows, cfg) | {"isolation": certificate[str(split)]}
+            interactions[str(split)] = interaction_metrics(rows, cfg) | extra
         else:
             log.warning("split %s crosses %d factors; IEC is pairwise, so it is left out", split, n_factors)
     average: dict[str, float | None] = {"sr": None, "cv": None, "cv_excess": None}
@@ -313,18 +330,21 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
         average[key] = float(np.mean(values)) if values and None not in values else None
     return {"epsilon": cfg.epsilon, "policy": str(policies[0]), "resampling": _resampling(cfg),
             "control": baseline_retest(episodes),
-            "splits": splits, "interactions": interactions, "average": average}
+            "splits": splits, "interactions": interactions, "average": average,
+            "n_infra_errors": sum(infra.values())}
 
 
 def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
-    """One policy: `compute_metrics`. Several: {"epsilon", "resampling", "policies": {name: …}}."""
+    """One policy: `compute_metrics`. Several: {"epsilon", "resampling", "policies": {name: …}}. Episodes that
+    infrastructure ended are left out of every number (and counted)."""
     check_episodes(episodes)
-    names = sorted(map(str, episodes["policy"].unique()))
+    kept, _ = _counted_episodes(episodes)
+    names = sorted(map(str, kept["policy"].unique()))
     if len(names) == 1:
         return compute_metrics(episodes, cfg)
     # Paired comparisons see only the blocks each policy's certificate verified.
     certified = pd.concat([isolation.drop_violations(rows, isolation.verify(rows))
-                           for _, rows in episodes.groupby("policy", sort=False)])
+                           for _, rows in kept.groupby("policy", sort=False)])
     out = {"epsilon": cfg.epsilon, "resampling": _resampling(cfg),
            "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
            "comparisons": compare_policies(certified, cfg)}
@@ -335,7 +355,7 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
 
 
 def _resampling(cfg: MetricsConfig) -> dict[str, int]:
-    return {"n_perm": cfg.n_perm, "n_glm": cfg.n_glm, "seed": cfg.seed}
+    return {"n_perm": cfg.n_perm, "n_glm": cfg.n_glm, "max_perm": cfg.max_perm, "seed": cfg.seed}
 
 
 def policy_layouts(metrics: dict[str, Any]) -> dict[str, dict[str, Any]]:

@@ -102,9 +102,12 @@ def start_entry(benchmark_version: str, checkpoint: str | None, argv: list[str] 
 
 def record(folder: Path, entry: dict) -> None:
     """Append (or, for the same start time, update) `entry` in folder/provenance.json, atomically."""
-    path = folder / FILE
-    entries = read(folder)
-    entries = [e for e in entries if e.get("started") != entry["started"]] + [entry]
+    write(folder, [e for e in read(folder) if e.get("started") != entry["started"]] + [entry])
+
+
+def write(folder: Path, entries: list[dict]) -> None:
+    """folder/provenance.json holds exactly `entries` (written atomically)."""
+    path = Path(folder) / FILE
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(entries, indent=2))
     tmp.replace(path)

@@ -13,6 +13,11 @@ rewritten from the journal (write to a temp file, then rename) every few seconds
 takes long: never more than a tenth of the time) and at the end,
 so readers always see a complete file. On resume the journal is read back (a torn last line is
 dropped), deduplicated by (instance_id, repeat), and finished pairs are skipped.
+
+An episode ended by infrastructure (`status` `infra_error`: a lost policy server, an endpoint outage, a dead
+worker, a render failure) is not finished: it runs again, and its new row replaces the old one (the journal
+appends it; the last line of a pair wins). `counted` keeps the rows every rate and test reads: those whose
+status is not `infra_error` (rows written before the column existed have none, and count).
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from eval import provenance
+
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
 RUN_FILE = "run.json"
@@ -36,6 +43,8 @@ FORMAT_KEY = b"roboview_results_format"
 # 2: episode seeds from (context_id, repeat), shared by every value of a context (common random
 # numbers); 1 (or no key): seeds hashed from instance_id. The two must never be mixed.
 RESULTS_FORMAT = 2
+STATUS = "status"
+INFRA_ERROR = "infra_error"
 
 
 class ResultsError(ValueError):
@@ -77,12 +86,7 @@ class EpisodeStore:
         run_file.write_text(json.dumps(self.run_info, indent=2, sort_keys=True))
         journal = out / JOURNAL
         if journal.is_file():
-            for line in journal.read_text().splitlines():
-                try:
-                    row = json.loads(line)
-                except json.JSONDecodeError:
-                    continue  # a line torn by a kill mid-write; that episode reruns
-                self.rows[(row["instance_id"], row["repeat"])] = row
+            self.rows = {(row["instance_id"], row["repeat"]): row for row in read_journal(out)}
             # Rewrite the journal without torn lines so appends start on a clean line.
             tmp = journal.with_suffix(".tmp")
             tmp.write_text("".join(json.dumps(r) + "\n" for r in self.rows.values()))
@@ -90,7 +94,7 @@ class EpisodeStore:
 
     def add_many(self, rows: list[dict]) -> int:
         """Journal several rows with one flush to disk (merging folders); returns how many were new."""
-        new = [r for r in rows if (r["instance_id"], r["repeat"]) not in self.rows]
+        new = [r for r in rows if not self.done((r["instance_id"], r["repeat"]))]
         for row in new:
             self.rows[(row["instance_id"], row["repeat"])] = row
             self._journal.write(json.dumps(row) + "\n")
@@ -99,11 +103,16 @@ class EpisodeStore:
         return len(new)
 
     def done(self, key: tuple[str, int]) -> bool:
-        return key in self.rows
+        """The pair has a row that counts (one ended by infrastructure is run again)."""
+        return key in self.rows and is_counted(self.rows[key])
+
+    def infra_error(self, key: tuple[str, int]) -> bool:
+        """The pair's row says infrastructure ended it."""
+        return key in self.rows and not is_counted(self.rows[key])
 
     def add(self, row: dict) -> None:
         key = (row["instance_id"], row["repeat"])
-        if key in self.rows:
+        if self.done(key):
             return  # a retried episode that had in fact finished: same seed, same row
         self.rows[key] = row
         self._journal.write(json.dumps(row) + "\n")
@@ -137,6 +146,24 @@ class EpisodeStore:
         self._journal.close()
 
 
+def is_counted(row: dict) -> bool:
+    """Whether an episode row counts in rates and tests: its status is not `infra_error` (none: it counts)."""
+    return row.get(STATUS) != INFRA_ERROR
+
+
+def infra_mask(episodes: pd.DataFrame) -> pd.Series:
+    """True for the rows of an episodes table that infrastructure ended (a table without `status`: none)."""
+    if STATUS not in episodes:
+        return pd.Series(False, index=episodes.index)
+    return (episodes[STATUS] == INFRA_ERROR).fillna(False).astype(bool)
+
+
+def counted(episodes: pd.DataFrame) -> pd.DataFrame:
+    """The rows every rate and test reads: all but those infrastructure ended."""
+    mask = infra_mask(episodes)
+    return episodes if not mask.any() else episodes[~mask]
+
+
 def read_version(path: str | Path) -> str | None:
     """The results file's benchmark version (parquet metadata); None when it records none."""
     raw = (pq.read_schema(path).metadata or {}).get(VERSION_KEY)
@@ -161,7 +188,8 @@ def shard_of(instance_id: str, n: int) -> int:
 
 
 def read_journal(folder: Path) -> list[dict]:
-    """The rows of a results folder's journal (a torn last line dropped; later duplicates of a key dropped)."""
+    """The rows of a results folder's journal, one per (instance_id, repeat); a line torn by a kill mid-write is
+    dropped (that episode reruns)."""
     rows: dict[tuple[str, int], dict] = {}
     path = Path(folder) / JOURNAL
     for line in path.read_text().splitlines() if path.is_file() else []:
@@ -169,7 +197,7 @@ def read_journal(folder: Path) -> list[dict]:
             row = json.loads(line)
         except json.JSONDecodeError:
             continue
-        rows.setdefault((row["instance_id"], row["repeat"]), row)
+        rows[(row["instance_id"], row["repeat"])] = row
     return list(rows.values())
 
 
@@ -234,9 +262,7 @@ def merge_folders(folders: list[Path], out: Path, partial: bool = False) -> tupl
                     (Path(out) / rel).parent.mkdir(parents=True, exist_ok=True)
                     shutil.copy2(Path(folder) / rel, Path(out) / rel)
         store.add_many(per_folder[str(folder)])
-        provenance_file = Path(folder) / "provenance.json"
-        if provenance_file.is_file():
-            entries += [{**entry, "shard": shard} for entry in json.loads(provenance_file.read_text())]
-    (Path(out) / "provenance.json").write_text(json.dumps(entries, indent=2))
+        entries += [{**entry, "shard": shard} for entry in provenance.read(Path(folder))]
+    provenance.write(Path(out), entries)
     store.close()
     return store, {k: len(v) for k, v in per_folder.items()}

@@ -3,6 +3,11 @@
 A worker owns one env (one renderer) and one policy for its whole life. An episode is a pure
 function of (policy, instance, repeat): its seed is `episode_seed(context_id, repeat)` (common random
 numbers: every value of a context shares it), so every backend and machine produces the same row.
+
+Every row has a `status`: `ok` when its outcome is the policy's (a success, or a failure of the policy itself:
+its output, an exception from its own code, the step budget), `infra_error` when infrastructure ended it (an
+`InfraError` such as a policy server lost mid-episode or a `RenderError`, a call still failing with a transient
+error after `POLICY_RETRIES` retries, a worker that died: `lost_row`). Infra rows count in no rate.
 """
 
 from __future__ import annotations
@@ -18,9 +23,10 @@ import numpy as np
 
 from eval import isolation
 from eval.policy_server import RemotePolicy, ServerHandle
+from eval.results import INFRA_ERROR
 from policies.base import Episode, PolicyConfig, TransientPolicyError
 from policies.factory import make_policy_batch
-from policies.errors import PolicyUnavailable
+from policies.errors import InfraError, PolicyUnavailable
 from roboview_data.benchmark.format import BenchmarkItem
 from roboview_data.sim.env import IMAGE_KEY
 from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
@@ -29,15 +35,23 @@ from roboview_data.workers import set_worker_rank
 
 log = logging.getLogger(__name__)
 
-# Policy calls that fail with these are retried (HTTP timeouts, dropped connections, rate limits);
-# any other exception, or the last retry's, ends the episode as a failure with the error as reason.
+# Policy calls that fail with these are retried (HTTP timeouts, dropped connections, rate limits); the last
+# retry's failure ends the episode by infrastructure (an endpoint outage). Any other exception ends it as the
+# policy's failure with the error as reason; an InfraError ends it by infrastructure at once.
 TRANSIENT_ERRORS = (TimeoutError, ConnectionError, TransientPolicyError)
 POLICY_RETRIES = 2
 RETRY_BACKOFF_S = 0.5
+# The `status` column of an episode row (eval.results reads it: `counted`).
+STATUS_OK, STATUS_INFRA = "ok", INFRA_ERROR
 
 
 class PolicyFailed(Exception):
-    """A policy call raised: the episode is over, recorded as a failure with this reason."""
+    """A policy call raised: the episode is over, recorded as a failure with this reason (`infra`: ended by
+    infrastructure, not by the policy)."""
+
+    def __init__(self, reason: str, infra: bool = False) -> None:
+        super().__init__(reason)
+        self.infra = infra
 
 
 @dataclass(frozen=True)
@@ -86,6 +100,17 @@ class EpisodeResult:
     video: dict[str, np.ndarray] | None = None
 
 
+def _infra_cause(exc: BaseException) -> InfraError | None:
+    """The InfraError `exc` was raised from or while handling, if any."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, InfraError):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _jpeg(image: np.ndarray) -> bytes:
     from PIL import Image
 
@@ -110,8 +135,13 @@ class _Running:
     success: bool = False
     info: dict = field(default_factory=dict)
     error: str = ""
+    # The error ended the episode by infrastructure (status infra_error), not by the policy.
+    infra: bool = False
     # The isolation certificate's hashes (eval/isolation.py), taken right after the reset.
     isolation: str = ""
+
+    def fail(self, reason: str, infra: bool) -> None:
+        self.error, self.infra = reason, infra
 
 
 class EvalWorker:
@@ -131,21 +161,27 @@ class EvalWorker:
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 
     def _call_policy(self, fn, *args):
-        """fn(*args), retrying transient errors; any failure becomes PolicyFailed naming the error, except
-        PolicyUnavailable (the policy's server is down), which stops the run."""
+        """fn(*args), retrying transient errors; any failure becomes PolicyFailed naming the error (infra for an
+        InfraError and for transient errors past the retries), except PolicyUnavailable (the policy's server is
+        down), which stops the run."""
         for attempt in range(POLICY_RETRIES + 1):
             try:
                 return fn(*args)
             except PolicyUnavailable:
                 raise
+            except InfraError as exc:
+                raise PolicyFailed(f"infrastructure error: {type(exc).__name__}: {exc}", infra=True) from exc
             except TRANSIENT_ERRORS as exc:
                 if attempt == POLICY_RETRIES:
                     raise PolicyFailed(f"policy error after {POLICY_RETRIES} retries: "
-                                       f"{type(exc).__name__}: {exc}") from exc
+                                       f"{type(exc).__name__}: {exc}", infra=True) from exc
                 log.warning("policy %s raised %s (%s); retry %d/%d", fn.__name__, type(exc).__name__, exc,
                             attempt + 1, POLICY_RETRIES)
                 time.sleep(RETRY_BACKOFF_S * 2**attempt)
             except Exception as exc:
+                cause = _infra_cause(exc)  # a policy that wrapped a render failure in its own error
+                if cause is not None:
+                    raise PolicyFailed(f"infrastructure error: {type(cause).__name__}: {cause}", infra=True) from exc
                 raise PolicyFailed(f"policy error: {type(exc).__name__}: {exc}") from exc
 
     def run(self, work: WorkItem) -> EpisodeResult:
@@ -165,30 +201,44 @@ class EvalWorker:
             for slot in range(len(self.envs)):
                 if slot not in running and queue:
                     running[slot] = self._start(slot, *queue.pop())
+            for slot, ep in running.items():
+                if not ep.error:
+                    self._guarded(ep, self._record, slot, ep)
             acting = {slot: ep for slot, ep in running.items() if not ep.error}
-            for slot, ep in acting.items():
-                self._record(slot, ep)
             actions = self._actions(acting)
             for slot, ep in list(running.items()):
                 if not ep.error:
-                    self._step(slot, ep, actions[slot])
+                    self._guarded(ep, self._step, slot, ep, actions[slot])
                 env = self.envs[slot]
                 if ep.error or ep.success or env.steps >= env.max_steps or ep.info.get("failure_reason"):
                     results[ep.index] = self._finish(slot, running.pop(slot))
         return results  # type: ignore[return-value]
+
+    @staticmethod
+    def _guarded(ep: _Running, fn, *args) -> None:
+        """fn(*args); an InfraError it raises (a camera that failed to render) ends `ep` by infrastructure."""
+        try:
+            fn(*args)
+        except InfraError as exc:
+            ep.fail(f"infrastructure error: {type(exc).__name__}: {exc}", infra=True)
 
     def _start(self, slot: int, index: int, work: WorkItem) -> _Running:
         env = self.envs[slot]
         instance, record = work.item.instance, work.item.record
         seed = episode_seed(record["context_id"], work.repeat)
         start = time.perf_counter()
-        obs, _ = env.reset(seed=seed, options={"instance": instance})
-        ep = _Running(index, work, seed, start, obs, {c: [] for c in env.cameras} if self.spec.record_media else {},
-                      {c: [] for c in env.cameras} if work.video else {}, isolation=isolation.record(env, seed))
+        ep = _Running(index, work, seed, start, {}, {c: [] for c in env.cameras} if self.spec.record_media else {},
+                      {c: [] for c in env.cameras} if work.video else {})
+        try:
+            ep.obs, _ = env.reset(seed=seed, options={"instance": instance})
+        except InfraError as exc:  # an eager env renders in its reset
+            ep.fail(f"infrastructure error: {type(exc).__name__}: {exc}", infra=True)
+            return ep
+        ep.isolation = isolation.record(env, seed)
         try:
             self._call_policy(self.batch.reset, slot, Episode.of(env, seed))
         except PolicyFailed as exc:
-            ep.error = str(exc)
+            ep.fail(str(exc), exc.infra)
         return ep
 
     def _record(self, slot: int, ep: _Running) -> None:
@@ -211,7 +261,7 @@ class EvalWorker:
                 actions |= self._call_policy(self.batch.select_actions, {s: acting[s].obs for s in group})
             except PolicyFailed as exc:
                 for slot in group:
-                    acting[slot].error = str(exc)
+                    acting[slot].fail(str(exc), exc.infra)
         return actions
 
     def _step(self, slot: int, ep: _Running, action) -> None:
@@ -230,15 +280,18 @@ class EvalWorker:
         row = {**record, "repeat": ep.work.repeat, "episode_seed": ep.seed, "success": bool(ep.success),
                "steps": env.steps, "duration_s": time.perf_counter() - ep.start,
                "policy": self.spec.policy.name or self.batch.name, "failure_reason": reason,
-               "isolation": ep.isolation}
+               "isolation": ep.isolation, "status": STATUS_INFRA if ep.infra else STATUS_OK}
         # A policy's own columns (VLM usage, the refined instruction, ...).
         row |= {k: v for k, v in self.batch.episode_record(slot).items() if k not in row}
         result = EpisodeResult(row)
         if self.spec.record_media:
             result.frames, result.ee_path, result.object_path = ep.frames, np.array(ep.ee), np.array(ep.obj)
-        if ep.video and not (self.spec.videos_of_failures_only and ep.success):
-            for cam in ep.video:  # and the last observation: how the episode ended
-                ep.video[cam].append(ep.obs[IMAGE_KEY.format(cam)])
+        if ep.video and not ep.infra and not (self.spec.videos_of_failures_only and ep.success):
+            try:
+                for cam in ep.video:  # and the last observation: how the episode ended
+                    ep.video[cam].append(ep.obs[IMAGE_KEY.format(cam)])
+            except InfraError as exc:  # the outcome stands; the video ends a frame early
+                log.warning("episode %s repeat %d: last video frame not rendered (%s)", *ep.work.key, exc)
             result.video = {cam: np.stack(frames) for cam, frames in ep.video.items() if frames}
         return result
 
@@ -246,3 +299,12 @@ class EvalWorker:
         self.batch.close()
         for env in self.envs:
             env.close()
+
+
+def lost_row(work: WorkItem, reason: str, policy: str | None) -> dict:
+    """The row of an episode whose worker died (no worker is left to say more): status infra_error, `policy`
+    the run's policy name where known (else None: the evaluator fills it in)."""
+    record = work.item.record
+    return {**record, "repeat": work.repeat, "episode_seed": episode_seed(record["context_id"], work.repeat),
+            "success": False, "steps": 0, "duration_s": 0.0, "policy": policy, "failure_reason": reason,
+            "isolation": None, "status": STATUS_INFRA}

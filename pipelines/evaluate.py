@@ -28,7 +28,7 @@ from eval.backends import BACKENDS, ClusterLost, run_local, run_ray
 from eval.results import EpisodeStore, ResultsError, is_counted, shard_of
 from eval.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
-from policies.base import PolicyConfig, default_policy_config, load_policy_types
+from policies.base import PolicyConfig, load_policy_types, missing_policy_type
 from policies.errors import PolicyUnavailable
 from policies.vlm.sgl import SGLConfig
 from roboview_data.benchmark.format import load_benchmark, select_items
@@ -42,14 +42,14 @@ log = logging.getLogger(__name__)
 class BenchmarkConfig:
     # Benchmark folder written by pipelines.build_benchmark.
     path: str = "outputs/benchmark"
+    # Comma-separated splits to evaluate; empty: every split of the benchmark.
+    splits: str = ""
+    # Comma-separated values to keep (the `value` column, e.g. red for the baseline color);
+    # empty: every value.
+    values: str = ""
     # Run even when this machine's conformance check says it renders or simulates the benchmark `different`ly
     # from the machine that built it (pipelines.verify shows the figures); every row is then marked `different`.
     allow_drift: bool = False
-    # Comma-separated splits to evaluate (default: every split of the benchmark).
-    splits: str = ""
-    # Comma-separated values to keep (the `value` column, e.g. red for the baseline color);
-    # default: every value.
-    values: str = ""
 
     @property
     def split_list(self) -> list[str] | None:
@@ -104,7 +104,8 @@ class EvalConfig:
     # i/N: run only shard i of N (0 ≤ i < N): the instances whose id hashes to i, every repeat of each, so N
     # machines or CI jobs each run one deterministic slice; `python -m pipelines.merge` joins their folders.
     shard: str = ""
-    # Write a Rerun recording of every episode to this .rrd file.
+    # Write a Rerun recording of every episode to this .rrd file; when it exists (an earlier run's), the new
+    # episodes go to NAME-2.rrd, NAME-3.rrd, … and the earlier recording is kept.
     rerun: str = ""
     # Control steps before an episode counts as a failure.
     max_steps: int = 120
@@ -121,10 +122,23 @@ class EvalConfig:
     # ≤ alpha over every look), for "no_bias" (a bias of logit SD tau would have shown, at the target power)
     # or at max_repeats. Two-factor splits run their fixed repeats.
     adaptive: bool = False
+    # Adaptive: the most rounds (repeats per instance) a split runs before it stops undecided.
     max_repeats: int = 10
+    # Adaptive: type-I error of the "bias" verdict, spent over every look at the split.
     alpha: float = 0.05
+    # Adaptive: the bias of interest, as the logit SD of the value effects (as in pipelines.plan).
     tau: float = 0.3
+    # Adaptive: power kept against a bias of size tau before a split may stop for "no_bias".
     power: float = 0.8
+
+    # --help lists these fields after the common ones, under these headings.
+    help_groups = {
+        "advanced --eval.* (speed, scale and recovery; docs/evaluation.md, docs/scaling.md)": (
+            "envs_per_worker", "policy_server", "eager_render", "backend", "ray_address", "shard", "rerun",
+            "max_infra_retries"),
+        "adaptive evaluation, --eval.adaptive=true (docs/adaptive.md)": ("adaptive", "max_repeats", "alpha", "tau",
+                                                                          "power"),
+    }
 
     def __post_init__(self) -> None:
         if self.image_size < 0:
@@ -193,13 +207,20 @@ class EvalConfig:
 
 @dataclass
 class EvaluateConfig:
+    # The benchmark to evaluate, and which of its splits and values.
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
-    policy: PolicyConfig = field(default_factory=default_policy_config)
+    # Required: --policy.type=NAME (no default; `expert` is the privileged scripted expert, a ceiling).
+    policy: PolicyConfig = None  # type: ignore[assignment]
+    # How many episodes run, and how.
     eval: EvalConfig = field(default_factory=EvalConfig)
     # Folder for episodes.parquet (and its journal); rerun the same command to resume.
     output_dir: str = "outputs/eval"
     # The Semantic Grounding Layer around the policy: --sgl.enable=true (docs/vlm.md).
     sgl: SGLConfig = field(default_factory=SGLConfig)
+
+    def __post_init__(self) -> None:
+        if self.policy is None:
+            raise ValueError(missing_policy_type())
 
 
 @dataclass(frozen=True)
@@ -440,6 +461,11 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
             run_rounds(cfg, p.chosen, p.repeats, p.adaptive, store, runner.execute, runner.bar)
         else:
             runner.execute([w for w in work if not store.done(w.key)])
+    except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
+        from pipelines._cli import interrupted
+
+        raise interrupted(exc, f"{len(store.rows)} episodes saved in {cfg.output_dir}; "
+                               "rerun the same command to resume")
     finally:
         runner.close()
         provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": runner.new}
@@ -499,8 +525,17 @@ def _merge_cluster(per_task: dict[str, dict]) -> dict:
 def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     infra = (f"; {result.infra_errors} ended by infrastructure errors (status infra_error), counted in no rate: "
              "rerun the same command to re-run them" if result.infra_errors else "")
-    print(f"[evaluate] {result.episodes} episodes in {result.output_dir / 'episodes.parquet'} "
+    policy = cfg.policy.name or cfg.policy.type
+    if cfg.policy.privileged:
+        policy += " (privileged: reads the simulator state; a ceiling, not a policy's result)"
+    print(f"[evaluate] {result.episodes} episodes of {policy} in {result.output_dir / 'episodes.parquet'} "
           f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h{infra})")
+    if cfg.eval.rerun:
+        from eval.rerun_log import recordings
+
+        files = recordings(cfg.eval.rerun)
+        print(f"[evaluate] Rerun recording{'s' if len(files) > 1 else ''} of {cfg.eval.rerun}: "
+              + (f"rerun {' '.join(map(str, files))}" if files else "none yet (no episode was recorded)"))
 
 
 def main(args: list[str] | None = None) -> EvaluateResult:

@@ -1,13 +1,17 @@
-"""Errors a policy raises to tell the evaluator what kind of failure it met."""
+"""Errors a policy (or the simulator) raises to tell the evaluator what kind of failure it met."""
 
 from __future__ import annotations
+
+# Infrastructure failures live on the lowest floor (the simulator raises RenderError); part of the policy API.
+from roboview_data.errors import InfraError, RenderError  # noqa: F401
 
 
 class TransientPolicyError(RuntimeError):
     """A failure worth retrying (an HTTP timeout, a rate limit): raise it from `select_action`/`reset`.
 
-    The evaluator retries such calls a few times (as it does `TimeoutError` and `ConnectionError`);
-    any other exception ends the episode as a failure recording the error as its reason.
+    The evaluator retries such calls a few times (as it does `TimeoutError` and `ConnectionError`); one still
+    failing after that ended its episode by infrastructure (an endpoint outage: `status` `infra_error`, not
+    counted). Any other exception ends the episode as the policy's failure, recording the error as its reason.
     """
 
 
@@ -16,6 +20,6 @@ class PolicyUnavailable(RuntimeError):
     `reset`/`select_action` to stop the run instead of failing episode after episode.
 
     Episodes already finished stay written; the message should name what is down and say that rerunning
-    the same command resumes once it is back. (An error while an episode runs — a server's error frame, a
-    connection closed mid-episode — is that episode's failure: raise anything else.)
+    the same command resumes once it is back. (A server's error frame while an episode runs is that episode's
+    failure: raise anything else; a connection lost mid-episode and reopened is an `InfraError`.)
     """

@@ -47,11 +47,12 @@ A server found shared (a chunk answering another client's observation) stops the
 
 Failures: the server must answer `Ready` when the config is built (before any rollout), else the
 error names HOST:PORT. A connection lost mid-episode is retried up to `--policy.reconnects`
-times (`Ready` + `SendPolicyInstructions`); if that works the episode in flight fails with the reason,
-if not `PolicyUnavailable` stops the run (that episode is not written) and says to rerun the same command
-to resume. A server that answers with no chunk (a restarted server without a policy, an inference
-error: the server logs it and answers empty) gets the policy instructions and the observation once more,
-then the episode fails.
+times (`Ready` + `SendPolicyInstructions`, each attempt on a fresh channel); if that works the episode in
+flight ends with an `InfraError` (recorded as `infra_error`, counted in no rate, and re-run), if not
+`PolicyUnavailable` stops the run (that episode is not written) and says to rerun the same command to resume.
+A server that answers with no chunk (a restarted server without a policy, an inference error: the server
+logs it and answers empty) gets the policy instructions and the observation once more, then the episode
+fails (the policy's failure).
 
 LeRobot's messages are pickles both ways: point the client only at a server you trust.
 """
@@ -71,7 +72,7 @@ from typing import Any
 import numpy as np
 
 from policies.base import DEFAULT_CAMERAS, AgentView, Episode, PolicyConfig
-from policies.errors import PolicyUnavailable
+from policies.errors import InfraError, PolicyUnavailable
 from policies.lerobot_policy import CHUNKED_TYPES, checkpoint_image_size, is_chunked, load_config
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
@@ -229,6 +230,7 @@ class LeRobotAsyncPolicy:
         for attempt in range(attempts):
             if attempt:
                 time.sleep(self.spec.reconnect_backoff_s * 2 ** (attempt - 1))
+                self._drop_channel()
             try:
                 self._load()
                 return
@@ -262,9 +264,10 @@ class LeRobotAsyncPolicy:
                     self.queues[slot].extend(self._chunk(observation, self.tasks[slot]))
                 except _ConnectionLost as exc:
                     self.connected = False
+                    self._drop_channel()
                     self._connect(str(exc))  # PolicyUnavailable (the run stops) if the server stays away
-                    raise RuntimeError(f"lost the LeRobot policy server at {self.spec.address} mid-episode ({exc}); "
-                                       "reconnected, so only this episode is lost") from None
+                    raise InfraError(f"lost the LeRobot policy server at {self.spec.address} mid-episode ({exc}); "
+                                     "reconnected, so only this episode is lost (it runs again)") from None
         return {slot: self.queues[slot].popleft() for slot in observations}
 
     def raw_observation(self, observation: dict, task: str) -> dict[str, Any]:
@@ -321,10 +324,15 @@ class LeRobotAsyncPolicy:
         self.round_trip_s += time.perf_counter() - start
         return [np.asarray(a.get_action().numpy(), dtype=np.float32) for a in actions]
 
-    def close(self) -> None:
+    def _drop_channel(self) -> None:
+        """Close the channel; the next call opens a fresh one (a channel whose server went away would first wait
+        out its own reconnect backoff, seconds after the server is back)."""
         if self._channel is not None:
             self._channel.close()
             self._channel = self._stub = None
+
+    def close(self) -> None:
+        self._drop_channel()
         self.connected = False
 
 
@@ -343,9 +351,12 @@ class LeRobotAsyncConfig(PolicyConfig):
     device: str = "cpu"
     # Actions the server returns per chunk (all of them are played); 0: the checkpoint's n_action_steps.
     actions_per_chunk: int = 0
-    # For a checkpoint not readable here: its policy type (act, pi0, pi05, smolvla), cameras (a,b) and image side.
+    # For a checkpoint not readable here: its policy type (act, pi0, pi05, smolvla); empty: read from the checkpoint.
     policy_type: str = ""
+    # For a checkpoint not readable here: its cameras, comma-separated (e.g. left_top,wrist); empty: read from the
+    # checkpoint.
     cameras: str = ""
+    # For a checkpoint not readable here: its image side (pixels); 0: read from the checkpoint.
     image_size: int = 0
     # Seconds to wait for one chunk (observation sent, inference, actions back).
     timeout_s: float = 60.0
@@ -353,6 +364,7 @@ class LeRobotAsyncConfig(PolicyConfig):
     load_timeout_s: float = 600.0
     # Further attempts to reach a server that went away (reconnect_backoff_s apart, doubling) before the run stops.
     reconnects: int = 3
+    # Seconds before the first reconnection attempt (doubling with each further one).
     reconnect_backoff_s: float = 1.0
 
     doc = "a LeRobot checkpoint served by lerobot.async_inference.policy_server (--policy.server=HOST:PORT)"

@@ -31,9 +31,12 @@ data with those keys. **A served policy's randomness lives on the server**: the 
 reach it, so a stochastic server policy is not reproducible from RoboView's seeds.
 
 Failures: a server that is down fails before any rollout, naming the URL. During a run, an error frame
-or a chunk of the wrong shape fails that episode with the reason; a connection that drops is reopened
-(`--policy.reconnects` times); if the server stays unreachable the run stops with `PolicyUnavailable`
-and rerunning the same command resumes it (no episode is counted against the policy for it).
+or a chunk of the wrong shape fails that episode with the reason (the policy's failure); a connection that
+drops is reopened (`--policy.reconnects` times) and the episode in flight ends with an `InfraError` (recorded
+as `infra_error`, counted in no rate, and re-run: the restarted server holds none of that episode's state); if
+the server stays unreachable the run stops with `PolicyUnavailable` and rerunning the same command resumes it
+(no episode is counted against the policy for it). An answer that does not come within `--policy.timeout_s`
+is retried by the evaluator; one still missing after its retries is an infrastructure error too.
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
-from policies.errors import PolicyUnavailable
+from policies.errors import InfraError, PolicyUnavailable
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.env import ACTION_NAMES, DEPTH_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
 from roboview_data.workers import worker_rank
@@ -359,7 +362,10 @@ class OpenPIPolicy:
             raise TimeoutError(f"openpi server {self.url} did not answer within {self.config.timeout_s:g} s") from exc
         except (ConnectionClosed, OSError) as exc:
             self.conn = None
-            raise ConnectionError(f"openpi server {self.url} closed the connection ({exc})") from exc
+            self.queue.clear()
+            self._connect()  # PolicyUnavailable (the run stops) if the server stays away
+            raise InfraError(f"lost the openpi server {self.url} mid-episode: it closed the connection ({exc}); "
+                             "reconnected, so only this episode is lost (it runs again)") from None
         self.pending_episode = None
         self.requests += 1
         return self._chunk(answer)
@@ -424,11 +430,13 @@ class OpenPIConfig(PolicyConfig):
     gripper: str = "continuous"
     # Name of the environment variable holding the API key (sent as `Authorization: Api-Key …`; never recorded).
     api_key_env: str = "OPENPI_API_KEY"
-    # Seconds to open a connection and receive the metadata frame; seconds to wait for one answer.
+    # Seconds to open a connection and receive the metadata frame.
     open_timeout_s: float = 10.0
+    # Seconds to wait for one answer.
     timeout_s: float = 60.0
     # Further attempts to open a dropped connection (waiting reconnect_backoff_s, doubling) before the run stops.
     reconnects: int = 3
+    # Seconds before the first reconnection attempt (doubling with each further one).
     reconnect_backoff_s: float = 0.5
 
     doc = "a policy served over openpi's websocket protocol (--policy.url=ws://HOST:PORT)"

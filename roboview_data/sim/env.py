@@ -11,6 +11,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from roboview_data.errors import RenderError
 from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS
 from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.scene import (
@@ -156,15 +157,22 @@ class PickPlaceEnv(gym.Env):
         return self._renderer
 
     def render_camera(self, camera: str, depth: bool = False) -> np.ndarray:
-        if depth:
-            if self._depth_renderer is None:
-                self._depth_renderer = self.new_renderer()
-                self._depth_renderer.enable_depth_rendering()
-            renderer = self._depth_renderer
-        else:
-            renderer = self.renderer
-        renderer.update_scene(self.data, camera=self.scene.ids.cameras[camera])
-        return renderer.render()
+        """One camera's image (or depth map) now. A renderer that fails (a lost GL context, out of GPU memory)
+        raises `RenderError`: the evaluator records that episode as ended by infrastructure."""
+        camera_id = self.scene.ids.cameras[camera]  # an unknown camera is the caller's error, not a render failure
+        try:
+            if depth:
+                if self._depth_renderer is None:
+                    self._depth_renderer = self.new_renderer()
+                    self._depth_renderer.enable_depth_rendering()
+                renderer = self._depth_renderer
+            else:
+                renderer = self.renderer
+            renderer.update_scene(self.data, camera=camera_id)
+            return renderer.render()
+        except Exception as exc:
+            raise RenderError(f"rendering camera {camera!r}{' (depth)' if depth else ''} failed: "
+                              f"{type(exc).__name__}: {exc}") from exc
 
     def render(self) -> np.ndarray:
         return self.render_camera(self.cameras[0])
