@@ -27,11 +27,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import provenance, videos
+from eval import inputs, provenance, videos
 from eval.adaptive import read_record
 from eval.agents import agents_markdown, describe_agents
 from eval.context import context_breakdown
-from eval.report_format import ALPHA, VERSION_KEY, bias_status, p_fmt, pct, pct_ci, split_order, split_title
+from eval.report_format import (ALPHA, VERSION_KEY, bias_status, p_fmt, pct, pct_ci, policy_label, resampling_line,
+                                 split_order, split_title)
 from eval.report_html import HTML_FILE, render_html
 from eval.metrics import (
     METRIC_COLUMNS,
@@ -67,16 +68,23 @@ def load_results(paths: Sequence[str | Path],
     """Read and validate episode tables; returns their concatenation and per-file provenance.
 
     `names[i]`, when given, renames the one policy of file i (two checkpoints evaluated under the
-    same default name, say lerobot:act, become two policies). Raises FileNotFoundError naming
-    missing files and EpisodesError for unusable contents.
+    same default name, say lerobot:act, become two policies). A results folder stands for its
+    episodes.parquet. Raises FileNotFoundError naming missing files and EpisodesError, in one line naming
+    the path and what was expected, for anything else: a benchmark folder or table, the journal
+    episodes.jsonl, a CSV, bytes that are not parquet, unusable contents.
     """
     paths = [Path(p) for p in paths]
     names = list(names) if names is not None else [None] * len(paths)
     if not paths:
         raise EpisodesError("no results file given")
-    missing = [str(p) for p in paths if not p.is_file()]
+    missing = [str(p) for p in paths if not p.exists()]
     if missing:
-        raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
+        raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}; expected the episodes.parquet "
+                                "that pipelines.evaluate writes into its --output_dir")
+    try:  # a results folder stands for its episodes.parquet; anything else that is not one is named
+        paths = [inputs.results_file(p) for p in paths]
+    except ValueError as exc:
+        raise EpisodesError(str(exc)) from exc
     sources = [{"path": str(p), VERSION_KEY: read_version(p), "provenance": provenance.read(p.parent),
                 **({"adaptive": rec} if (rec := read_record(p.parent)) else {})} for p in paths]
     tables = []
@@ -160,6 +168,12 @@ def _average(layout: dict, splits: list[str], key: str) -> float | None:
     return float(np.mean(values)) if values and None not in values else None
 
 
+def _privileged_note(layouts: dict[str, dict]) -> list[str]:
+    marked = [name for name in layouts if policy_label(name) != name]
+    return [f"{', '.join(marked)}: the privileged scripted expert; it reads the simulator state (object and box "
+            "poses), which no real policy sees: a ceiling, not a policy to compare with.", ""] if marked else []
+
+
 def _summary(layouts: dict[str, dict]) -> list[str]:
     """Is each policy biased? Per policy its average SR and the splits with a bias, with none detected, and those
     the test could not judge (and why): a policy that fails everything is not reported unbiased."""
@@ -167,11 +181,11 @@ def _summary(layouts: dict[str, dict]) -> list[str]:
     for name, layout in layouts.items():
         status = {s: bias_status(m) for s, m in layout["splits"].items()}
         biased = [s for s, (v, _) in status.items() if v == "bias"]
-        rows.append([name, pct(layout["average"]["sr"]), ", ".join(biased) or "none",
+        rows.append([policy_label(name), pct(layout["average"]["sr"]), ", ".join(biased) or "none",
                      ", ".join(s for s, (v, _) in status.items() if v == "no bias detected") or "—",
                      ", ".join(f"{s} ({why})" for s, (v, why) in status.items() if v == "not testable") or "—"])
     return ["## Summary", "", *_table(["Policy", "Average SR (×100)", "Splits with bias (p < 0.05)", "No bias detected",
-                                       "Not testable"], rows)]
+                                       "Not testable"], rows), *_privileged_note(layouts)]
 
 
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
@@ -527,8 +541,7 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None],
     layouts = policy_layouts(metrics)
     settings = metrics["resampling"]
     lines = ["# RoboView-Bias report", "",
-             f"Policies: {', '.join(layouts)}. ε = {metrics['epsilon']:g}; {settings['n_perm']} permutations "
-             f"for CV floors, {settings['n_glm']} GLM calibration draws, seed {settings['seed']}.", ""]
+             f"Policies: {', '.join(layouts)}. ε = {metrics['epsilon']:g}; {resampling_line(settings)}.", ""]
     for source in metrics.get("sources", []):
         lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
     lines.append("")

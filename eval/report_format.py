@@ -11,6 +11,14 @@ VERSION_KEY = "roboview_benchmark_version"  # a results file's benchmark version
 ALPHA = 0.05  # level at which the report calls a difference significant
 
 
+PRIVILEGED_POLICIES = ("expert",)  # policy names (before any "+sgl") of types that read the simulator state
+
+
+def policy_label(name: str) -> str:
+    """A policy's name as the reports list it: the scripted expert is marked privileged."""
+    return f"{name} (privileged)" if str(name).partition("+")[0] in PRIVILEGED_POLICIES else str(name)
+
+
 def pct(x: float | None) -> str:
     """A ratio ×100 with two decimals, the paper's table convention; N/A for null."""
     return "N/A" if x is None else f"{100 * x:.2f}"
@@ -27,6 +35,13 @@ def p_fmt(p: float | None, at_floor: bool | None = False) -> str:
         return "N/A"
     text = f"{p:.4f}" if p >= 1e-4 else f"{p:.1e}"
     return f"≤ {text}" if at_floor else text
+
+
+def resampling_line(settings: dict) -> str:
+    """The report's one sentence on its resampling, in docs/statistics.md's words."""
+    most = f", up to {settings['max_perm']:,} for a p-value still undecided" if settings.get("max_perm") else ""
+    return (f"noise floor (cv_null) and the CV permutation test: {settings['n_perm']:,} within-block permutations{most}; "
+            f"GLM p-value where cells are sparse: {settings['n_glm']:,} permutation draws; seed {settings['seed']}")
 
 
 def bias_status(m: dict) -> tuple[str, str]:

@@ -164,7 +164,7 @@ def _summary(layouts: dict[str, dict]) -> str:
         clean = [s for s, (v, _) in status.items() if v == "no bias detected"]
         untestable = [f"{s} ({why})" for s, (v, why) in status.items() if v == "not testable"]
         avg = layout.get("average") or {}
-        rows.append([_e(name), _e(fmt.pct(avg.get("sr"))), _e(fmt.pct(avg.get("cv_excess"))),
+        rows.append([_e(fmt.policy_label(name)), _e(fmt.pct(avg.get("sr"))), _e(fmt.pct(avg.get("cv_excess"))),
                      _e(", ".join(biased) or "none"),
                      _e(", ".join(clean) or "—"), _e(", ".join(untestable) or "—")])
     return _table(["Policy", "Average SR", "Average cv_excess", "Splits with bias (p < 0.05)", "No bias detected",
@@ -209,8 +209,7 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
     sources = "".join(f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(fmt.VERSION_KEY) or 'not recorded')})</li>"
                       for s in metrics.get("sources", []))
     head = (f"<h1>RoboView-Bias report</h1><p>Policies: {_e(', '.join(layouts))}. ε = {metrics['epsilon']:g}; "
-            f"{settings['n_perm']} permutations for CV floors, {settings['n_glm']} GLM calibration draws, "
-            f"seed {settings['seed']}.</p>" + (f"<ul>{sources}</ul>" if sources else "") + f"<nav>{nav}</nav>")
+            f"{_e(fmt.resampling_line(settings))}.</p>" + (f"<ul>{sources}</ul>" if sources else "") + f"<nav>{nav}</nav>")
     body = "".join(f'<section id="{a}">' + (f"<h2>{_e(t)}</h2>" if a in ("summary", "splits", "skipped") else "")
                    + html_ + "</section>" for a, t, html_ in sections)
     return (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '

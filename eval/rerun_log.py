@@ -7,10 +7,15 @@ Entity tree:
         instance           factor values and seed (static text)
         outcome            success / failure text event at the episode's last step
     /summary/<split>/sr_by_value   bar chart of success rate per factor value (static)
+
+A recording is never overwritten: the file opens when the first episode is logged (a resumed run with nothing
+left to run writes none), and when `vision.rrd` already exists a run's episodes go to the next free
+`vision-2.rrd`, `vision-3.rrd`, … `recordings(path)` lists them all (`rerun a.rrd b.rrd` opens them together).
 """
 
 from __future__ import annotations
 
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -25,19 +30,54 @@ def _safe(text: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_.=" else "_" for ch in text)
 
 
+def _numbered(path: Path) -> dict[int, Path]:
+    """The recordings of `path` that exist, by number: `path` itself is 1, `stem-N.rrd` is N (N ≥ 2)."""
+    found = {1: path} if path.is_file() else {}
+    pattern = re.compile(re.escape(path.stem) + r"-([0-9]+)" + re.escape(path.suffix))
+    for other in path.parent.glob(f"{path.stem}-*{path.suffix}") if path.parent.is_dir() else ():
+        match = pattern.fullmatch(other.name)
+        if match and int(match[1]) >= 2 and other.is_file():
+            found[int(match[1])] = other
+    return found
+
+
+def recordings(path: str | Path) -> list[Path]:
+    """Every recording written for the `--eval.rerun` path `path`, oldest first (`path`, `stem-2.rrd`, …)."""
+    found = _numbered(Path(path))
+    return [found[n] for n in sorted(found)]
+
+
+def next_recording(path: str | Path) -> Path:
+    """Where a new recording for `path` goes: `path` when none exists yet, else the number after the last."""
+    path = Path(path)
+    found = _numbered(path)
+    return path if not found else path.with_name(f"{path.stem}-{max(found) + 1}{path.suffix}")
+
+
 class RerunLogger:
+    """Records episodes to `path`, or to the next free `stem-N.rrd` when `path` exists; opened at the first
+    episode, so a run that logs none writes no file and an earlier run's recording is never touched."""
+
     def __init__(self, path: Path, application_id: str = "roboview_eval") -> None:
-        self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec = rr.RecordingStream(application_id)
-        self.rec.save(str(path))
+        self.path = path  # the requested path; `written` is the file this run records to (None until it logs)
+        self.application_id = application_id
+        self.rec: rr.RecordingStream | None = None
+        self.written: Path | None = None
         self._outcomes: dict[str, dict[str, list[bool]]] = defaultdict(lambda: defaultdict(list))
+
+    def _open(self) -> rr.RecordingStream:
+        if self.rec is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.written = next_recording(self.path)
+            self.rec = rr.RecordingStream(self.application_id)
+            self.rec.save(str(self.written))
+        return self.rec
 
     def log_episode(self, result: EpisodeResult) -> None:
         row = result.row
         base = (f"episodes/{_safe(row['split'])}/{_safe(row['factor'] + '=' + row['value'])}/"
                 f"{row['instance_id']}/r{row['repeat']}")
-        rec = self.rec
+        rec = self._open()
         facts = "\n".join(f"{name}: {row[name]}" for name in factor_names())
         rec.log(f"{base}/instance", rr.TextDocument(
             f"{facts}\nepisode_seed: {row['episode_seed']}\npolicy: {row['policy']}"), static=True)
@@ -56,6 +96,8 @@ class RerunLogger:
         self._outcomes[row["split"]][row["value"]].append(bool(row["success"]))
 
     def close(self) -> None:
+        if self.rec is None:  # nothing logged: no file written
+            return
         for split, by_value in self._outcomes.items():
             values = sorted(by_value)
             srs = np.array([np.mean(by_value[v]) for v in values])

@@ -82,9 +82,9 @@ class AuditConfig:
     def __post_init__(self) -> None:
         if not self.results:
             raise ValueError("--results is required: a per-episode CSV, parquet or JSON-lines file")
-        if Path(self.results).suffix not in (".csv", ".parquet", ".jsonl", ".json"):
-            raise ValueError(f"--results={self.results}: unknown format {Path(self.results).suffix!r}; "
-                             "allowed: .csv, .parquet, .jsonl")
+        problem = input_problem(Path(self.results))
+        if problem:
+            raise ValueError(problem)
         missing = [f"--map.{k}" for k in ("value", "context", "success") if not getattr(self.map, k)]
         if not self.map.factor and not self.factor_name:
             missing.append("--map.factor (or --factor_name)")
@@ -94,15 +94,51 @@ class AuditConfig:
             raise ValueError(f"--tau={self.tau} must be > 0 (a logit SD, e.g. 0.3)")
 
 
+FORMATS = {".csv": "CSV", ".parquet": "parquet", ".jsonl": "JSON lines", ".json": "JSON lines"}
+EXPECTED = "expected one row per episode in a .csv, .parquet or .jsonl file"
+
+
+def input_problem(path: Path) -> str | None:
+    """Why `path` is not a per-episode file audit reads, in one line naming it and what was expected; None if it
+    may be one (its contents are checked when read)."""
+    from eval.inputs import benchmark_root, is_parquet, is_results_folder
+
+    if not path.exists():
+        return f"--results={path}: no such file; {EXPECTED}"
+    if path.is_dir():
+        if benchmark_root(path) == path:
+            return f"--results={path} is a benchmark folder (its instances), not per-episode results; {EXPECTED}"
+        if is_results_folder(path):
+            return (f"--results={path} is a RoboView results folder: report it with python -m pipelines.report "
+                    f"--results={path / 'episodes.parquet'} (audit reads other benchmarks' per-episode files)")
+        return f"--results={path} is a folder; {EXPECTED}"
+    if path.suffix.lower() not in FORMATS:
+        return f"--results={path}: unknown format {path.suffix!r}; {EXPECTED}"
+    if path.suffix.lower() == ".parquet" and not is_parquet(path):
+        return f"--results={path} is named .parquet but its bytes are not parquet; {EXPECTED}"
+    return None
+
+
 def read_table(path: str) -> pd.DataFrame:
     file = Path(path)
-    if not file.is_file():
-        raise FileNotFoundError(f"--results={path}: no such file")
-    if file.suffix == ".csv":
-        return pd.read_csv(file)
-    if file.suffix == ".parquet":
-        return pd.read_parquet(file)
-    return pd.read_json(file, lines=True)
+    problem = input_problem(file)
+    if problem:
+        raise FileNotFoundError(problem) if not file.exists() else ValueError(problem)
+    kind = FORMATS[file.suffix.lower()]
+    try:
+        if kind == "CSV":
+            table = pd.read_csv(file)
+        elif kind == "parquet":
+            table = pd.read_parquet(file)
+        else:
+            table = pd.read_json(file, lines=True)
+    except Exception as exc:  # pandas' and pyarrow's parse errors, undecodable bytes, an empty file
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"--results={path} could not be read as {kind} ({type(exc).__name__}: {reason}); "
+                         f"{EXPECTED}") from None
+    if table.empty:
+        raise ValueError(f"--results={path} holds no rows; {EXPECTED}")
+    return table
 
 
 def _success(column: pd.Series, name: str) -> np.ndarray:

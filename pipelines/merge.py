@@ -29,11 +29,18 @@ class MergeConfig:
     partial: bool = False
 
     def __post_init__(self) -> None:
+        from eval.inputs import results_folder_problem
+
+        missing = [str(f) for f in self.folders if not f.exists()]
+        if missing:
+            raise ValueError(f"--results names folder(s) that do not exist: {', '.join(missing)}; expected the "
+                             "results folders of one sharded run (pipelines.evaluate --eval.shard=i/N --output_dir)")
+        for folder in self.folders:
+            problem = results_folder_problem(folder)
+            if problem:
+                raise ValueError(f"--results: {problem}")
         if len(self.folders) < 2:
             raise ValueError(f"--results={self.results!r} must name two results folders or more, comma-separated")
-        missing = [str(f) for f in self.folders if not f.is_dir()]
-        if missing:
-            raise ValueError(f"--results names folder(s) that do not exist: {', '.join(missing)}")
 
     @property
     def folders(self) -> list[Path]:

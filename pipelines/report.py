@@ -2,11 +2,12 @@
 
     python -m pipelines.report --results=outputs/eval/episodes.parquet --output_dir=outputs/report
 
-`--results` takes one parquet file or several, comma-separated (say one per policy); a file may
-also hold several policies. Metrics follow docs/formats.md, "Metrics" (eval.metrics); for several
+`--results` takes one parquet file or several, comma-separated (say one per policy); a results folder
+stands for its episodes.parquet, and a file may also hold several policies. Metrics follow docs/formats.md, "Metrics" (eval.metrics); for several
 policies metrics.json holds {"epsilon", "resampling", "sources", "policies": {name: metrics}}.
-Inputs are checked before any work: missing files or columns, repeated episodes and mixed
-benchmark versions stop the run with a message naming the offender.
+Inputs are checked before any work: missing files or columns, repeated episodes, mixed benchmark
+versions, and paths that are not results (the journal episodes.jsonl, a benchmark folder or table, a CSV,
+bytes that are not parquet) stop the run with one line naming the offender and what was expected.
 """
 
 from __future__ import annotations

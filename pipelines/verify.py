@@ -42,12 +42,15 @@ class VerifyConfig:
         if not self.results and not self.benchmark.path:
             raise ValueError("give --benchmark.path=DIR (verify a benchmark on this machine) or --results=DIR "
                              "(verify a results folder against its benchmark)")
-        if self.results and not Path(self.results).is_dir():
-            raise ValueError(f"--results={self.results} is not a folder; give a results folder "
-                             "(pipelines.evaluate's --output_dir)")
-        if self.benchmark.path and not Path(self.benchmark.path).is_dir():
-            raise ValueError(f"--benchmark.path={self.benchmark.path} is not a folder; give a benchmark folder "
-                             "(pipelines.build_benchmark's --output_dir)")
+        from eval.inputs import benchmark_folder_problem, results_folder_problem
+
+        problem = self.results and results_folder_problem(
+            Path(self.results), f" (verify a benchmark with --benchmark.path={self.results})")
+        if problem:
+            raise ValueError(f"--results: {problem}")
+        problem = self.benchmark.path and benchmark_folder_problem(Path(self.benchmark.path))
+        if problem:
+            raise ValueError(f"--benchmark.path: {problem}")
 
 
 @dataclass

@@ -140,7 +140,6 @@ class ChunkPredictor(Protocol):
 BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy", "policies.vlm.simple",
                    "policies.vlm.moka", "policies.openpi", "policies.lerobot_async")
 ENTRY_POINT_GROUP = "roboview.policies"
-DEFAULT_POLICY_TYPE = "expert"
 # The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
 DEFAULT_CAMERAS = ("front",)
 
@@ -171,7 +170,8 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
     @classmethod
     def default_choice_name(cls) -> str:
-        return DEFAULT_POLICY_TYPE
+        """No default type: `--policy.<field>` without `--policy.type` is refused, naming the types."""
+        raise ValueError(missing_policy_type())
 
     @property
     def type(self) -> str:
@@ -228,7 +228,7 @@ def registered_policies() -> tuple[str, ...]:
     return load_policy_types()
 
 
-def policy_config(type_name: str = DEFAULT_POLICY_TYPE, **settings: Any) -> PolicyConfig:
+def policy_config(type_name: str, **settings: Any) -> PolicyConfig:
     """The config of policy type `type_name` with `settings` (what `--policy.type=… --policy.x=…` gives)."""
     known = load_policy_types()
     if type_name not in known:
@@ -236,8 +236,16 @@ def policy_config(type_name: str = DEFAULT_POLICY_TYPE, **settings: Any) -> Poli
     return PolicyConfig.get_choice_class(type_name)(**settings)
 
 
-def default_policy_config() -> PolicyConfig:
-    return policy_config(DEFAULT_POLICY_TYPE)
+def privileged_types() -> tuple[str, ...]:
+    """The policy types built from the env itself (the scripted `expert`): they read the simulator's state."""
+    return tuple(name for name in load_policy_types() if PolicyConfig.get_choice_class(name).privileged)
+
+
+def missing_policy_type() -> str:
+    """The one-line error for a command run without `--policy.type` (there is no default policy)."""
+    notes = [f"; `{name}` is the privileged scripted expert (it reads the simulator state, which no real policy sees)"
+             if name == "expert" else f"; `{name}` is privileged (it reads the simulator state)" for name in privileged_types()]
+    return f"--policy.type is required: one of {', '.join(load_policy_types())}{''.join(notes)}"
 
 
 class PolicyBatch:

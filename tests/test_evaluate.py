@@ -113,6 +113,9 @@ def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
+    """pipelines.evaluate with `args` (the expert unless they name a --policy.type: there is no default)."""
+    if not any(a.startswith("--policy.type=") for a in args):
+        args = ("--policy.type=expert", *args)
     return subprocess.run([sys.executable, "-m", "pipelines.evaluate", *args], capture_output=True, text=True,
                           timeout=300, env=os.environ | {"PYTHONPATH": str(ROOT)})
 
@@ -219,7 +222,7 @@ def _alive(pid: int) -> bool:
 def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
     # A SIGKILLed evaluation used to leave its spawned workers (≈ 640 MB each) idle for good.
     proc = subprocess.Popen([sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}",
-                             "--eval.image_size=64", "--eval.num_workers=2", f"--output_dir={tmp_path / 'ev'}"],
+                             "--policy.type=expert", "--eval.image_size=64", "--eval.num_workers=2", f"--output_dir={tmp_path / 'ev'}"],
                             env=os.environ | {"PYTHONPATH": str(ROOT)}, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     try:
