@@ -48,13 +48,15 @@ log = logging.getLogger(__name__)
 class ScreenConfig:
     """Stage 1b, optional: the paper's VLM fairness screen over every candidate's front image."""
 
-    # OpenAI-compatible endpoint and model (e.g. https://api.openai.com/v1 and gpt-4o); empty model: no screen.
+    # Base URL of the OpenAI-compatible endpoint (e.g. https://api.openai.com/v1).
     base_url: str = "http://127.0.0.1:8000/v1"
+    # Model name on that endpoint (e.g. gpt-4o); empty: no screen.
     model: str = ""
     # Name of the environment variable holding the API key.
     api_key_env: str = "OPENAI_API_KEY"
-    # Answer cache ("" turns it off; default $XDG_CACHE_HOME/roboview/vlm) and requests in flight at once.
+    # Answer cache: a rebuild asks nothing twice ("" turns it off; default $XDG_CACHE_HOME/roboview/vlm).
     cache_dir: str = field(default_factory=default_cache_dir)
+    # Requests in flight to the endpoint at once.
     max_in_flight: int = 4
 
     @property
@@ -66,11 +68,17 @@ class ScreenConfig:
                         cache_dir=self.cache_dir)
 
 
+def presets_help() -> str:
+    """Every registered suite preset with its instance count, as --help lists them (read from the registry, so the
+    list cannot go stale)."""
+    return ", ".join(f"{name} ({len(generate_suite(suite)):,})" for name, suite in PRESETS.items()) + "."
+
+
 @dataclass
 class BuildConfig:
     # Folder to write the Hugging Face dataset into (new, empty, or an earlier build's output).
     output_dir: str = "outputs/benchmark"
-    # Suite preset: paper (2,127 instances), paper_dedupe (1,767) or tiny (45, for demos and tests).
+    # Suite preset (tiny and tiny_extended are for demos and tests); the presets and their instance counts:
     preset: str = "paper"
     # Override the preset's Structured Union mode: per_subspace or dedupe.
     union_mode: str | None = None
@@ -91,6 +99,9 @@ class BuildConfig:
     # Stage 1b: the VLM fairness screen (--vlm_screen.model=gpt-4o --vlm_screen.base_url=...), reported
     # with its agreement with the gate; it rejects nothing itself (see vlm_screen.csv).
     vlm_screen: ScreenConfig = field(default_factory=ScreenConfig)
+
+    # --help appends the registry's presets to the description of --preset.
+    help_details = {"preset": presets_help}
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
@@ -142,13 +153,15 @@ def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:
     args = (cfg.image_size, cfg.fairness, DEFAULT_TASK, screen)
     bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
     records, passed = [], 0
-    with WorkerPool(cfg.num_workers, InstanceRenderer, args, method="record") as pool:
-        for record in pool.imap(instances, lookahead=8 * cfg.num_workers):
-            records.append(record)
-            passed += record["fairness"]["passed"]
-            bar.update(1)
-            bar.set_postfix(passed=f"{passed / len(records):.1%}")
-    bar.close()
+    try:
+        with WorkerPool(cfg.num_workers, InstanceRenderer, args, method="record") as pool:
+            for record in pool.imap(instances, lookahead=8 * cfg.num_workers):
+                records.append(record)
+                passed += record["fairness"]["passed"]
+                bar.update(1)
+                bar.set_postfix(passed=f"{passed / len(records):.1%}")
+    finally:  # also on Ctrl-C: the bar ends its line before the closing message
+        bar.close()
     return records
 
 
@@ -272,7 +285,12 @@ def _summary(cfg: BuildConfig, result: BuildResult) -> None:
 
 
 def main(args: list[str] | None = None) -> BuildResult:
-    return cli_main(BuildConfig, run, _summary, (ValueError, GateFailure), args)
+    return cli_main(BuildConfig, run, _summary, (ValueError, GateFailure), args, on_interrupt=_interrupted)
+
+
+def _interrupted(cfg: BuildConfig) -> str:
+    return (f"nothing written to {cfg.output_dir} (a build writes its folder only at the end, once every instance is "
+            "rendered); rerun the same command to build it")
 
 
 if __name__ == "__main__":

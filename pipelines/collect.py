@@ -22,7 +22,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from pipelines._cli import cli_main
+from pipelines._cli import cli_main, interrupted
 from roboview_data.cli_errors import flag_errors
 from roboview_data.demos.dataset import (
     ROBOT_TYPE,
@@ -202,6 +202,7 @@ def run(cfg: CollectConfig) -> CollectResult:
 
     bar = tqdm(total=target, initial=start_saved, desc="collect", unit="demo", dynamic_ncols=True)
     episodes = _episodes(cfg, progress.next_attempt)
+    checkpointed = progress.episodes_saved  # what a rerun resumes from
     try:
         for ep in episodes:
             progress.next_attempt = ep.attempt + 1
@@ -220,6 +221,7 @@ def run(cfg: CollectConfig) -> CollectResult:
             if ep.success and (done or progress.episodes_saved % cfg.checkpoint_every == 0):
                 dataset.finalize()
                 write_checkpoint(root, progress, provenance)
+                checkpointed = progress.episodes_saved
                 write_card(root, cfg.dataset.repo_id, cfg.dataset.task, len(provenance))
                 if done:
                     break
@@ -229,6 +231,12 @@ def run(cfg: CollectConfig) -> CollectResult:
                     f"{progress.failures} attempts failed (limit --max_failures={cfg.max_failures}); "
                     f"the {progress.episodes_saved} episodes checkpointed so far are kept. "
                     "Check the scene or raise --max_steps / --max_failures.")
+    except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
+        since = progress.episodes_saved - checkpointed
+        lost = (f" (the {since} collected since its last checkpoint are collected again; "
+                f"--checkpoint_every={cfg.checkpoint_every})" if since else "")
+        raise interrupted(exc, f"{checkpointed} demo{'s' * (checkpointed != 1)} saved in {root}{lost}; "
+                               "rerun the same command to resume")
     finally:
         episodes.close()
         bar.close()

@@ -464,7 +464,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
         from pipelines._cli import interrupted
 
-        raise interrupted(exc, f"{len(store.rows)} episodes saved in {cfg.output_dir}; "
+        n = len(store.rows)
+        raise interrupted(exc, f"{n} episode{'s' * (n != 1)} saved in {cfg.output_dir}; "
                                "rerun the same command to resume")
     finally:
         runner.close()

@@ -44,11 +44,13 @@ class ProbeConfig:
     neighbours: int = 5
     # Confidence rise that counts (the paper's threshold).
     margin: float = 0.03
-    # Grounding backend and models, as for --policy.grounding of vlm_moka.
+    # Grounding backend, as --policy.grounding of vlm_moka: classic, owlv2 or grounding_dino.
     grounding: str = "classic"
+    # transformers model id of the owlv2 / grounding_dino detector, as --policy.detector_model of vlm_moka.
     detector_model: str = "google/owlv2-base-patch16-ensemble"
-    # Camera and image size the agent used.
+    # Camera the agent looked through.
     camera: str = "front"
+    # Image side (pixels) the agent saw.
     image_size: int = 224
     # Probe at most this many episodes (0: all).
     limit: int = 0

@@ -39,12 +39,12 @@ import sys
 import threading
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipelines._cli import cli_main
-from policies.base import AgentView, ChunkPredictor, PolicyConfig, default_policy_config, load_policy_types
+from policies.base import AgentView, ChunkPredictor, PolicyConfig, load_policy_types, missing_policy_type
 from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
 from roboview_data.sim.tasks import DEFAULT_TASK, TASKS
@@ -56,13 +56,16 @@ SERVERS = ("roboview", "openpi")
 
 @dataclass
 class ServeConfig:
-    policy: PolicyConfig = field(default_factory=default_policy_config)
+    # Required: --policy.type=NAME (no default).
+    policy: PolicyConfig = None  # type: ignore[assignment]
     # Interface to listen on (0.0.0.0: every interface; 127.0.0.1: this machine only).
     host: str = "127.0.0.1"
     # TCP port (0: any free port, printed at start).
     port: int = 8000
     # Observation layout the clients send: droid, libero, aloha, custom (with --key_map); see policies/openpi.py.
     obs_format: str = "droid"
+    # custom layout: comma-separated wire_key=SOURCE, SOURCE = camera:NAME, camera_chw:NAME, depth:NAME, state,
+    # state[i:j] or instruction (as --policy.key_map of the openpi policy).
     key_map: str = ""
     # The task whose env defines the action and observation spaces the policy is built for.
     task: str = DEFAULT_TASK
@@ -82,6 +85,8 @@ class ServeConfig:
     threads: int = 0
 
     def __post_init__(self) -> None:
+        if self.policy is None:
+            raise ValueError(missing_policy_type())
         if not 0 <= self.port <= 65535:
             raise ValueError(f"--port={self.port} must lie in 0..65535")
         if self.obs_format not in OBS_FORMATS:

@@ -49,15 +49,19 @@ class TrainConfig:
     lr: float = 1e-4
     # auto (CUDA when present), cpu or cuda.
     device: str = "auto"
-    # ACT action chunk length, and how many of its actions run before the next inference.
+    # ACT action chunk length: actions predicted per inference.
     chunk_size: int = 20
+    # Actions of each chunk run before the next inference (at most chunk_size).
     n_action_steps: int = 10
     # Periodic evaluation while training, through lerobot-train's own eval loop on a frozen RoboView split
-    # (`--env.type=roboview`, the lerobot-eval plugin): a benchmark folder, its split, episodes per eval and
-    # how often (steps); no --benchmark.path: no periodic evaluation. Results land in OUT/eval/.
+    # (`--env.type=roboview`, the lerobot-eval plugin); no --benchmark.path: no periodic evaluation. Results
+    # land in OUT/eval/.
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
+    # Periodic evaluation: the benchmark split it runs on.
     eval_split: str = "color"
+    # Periodic evaluation: episodes per evaluation.
     eval_episodes: int = 10
+    # Periodic evaluation: run one every this many optimizer steps.
     eval_freq: int = 1000
     # CPU threads of the trainer's torch (OMP_NUM_THREADS); 0: one fewer than this machine's cores, at least 1.
     # torch's own default (every core) spins threads that fight anything else on the CPU: measured on 2 cores

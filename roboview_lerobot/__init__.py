@@ -47,16 +47,20 @@ class RoboViewEnv(EnvConfig):
 
     # Splits to run, comma-separated (color,camera_pose), or `all`: one task group per split.
     task: str | None = "color"
+    # Control rate (Hz) of the env, as the benchmark's episodes run.
     fps: int = 10
     # Benchmark folder (pipelines.build_benchmark).
     benchmark_path: str = "outputs/benchmark"
-    # The checkpoint's cameras (comma-separated) and square image side: what it was trained on.
+    # The checkpoint's cameras (comma-separated): what it was trained on.
     cameras: str = "left_top,wrist"
+    # The checkpoint's square image side (pixels): what it was trained on.
     image_size: int = 96
     # Episodes of a split: its selected instances × n_repeats, in the order pipelines.evaluate uses
     # (--eval.n_episodes runs that many per split; the count is printed when the envs are made).
     n_repeats: int = 1
+    # Only the first N task contexts of each split, every value of each (as --eval.contexts); 0: all.
     contexts: int = 0
+    # Only the first N instances of each split (as --eval.limit); 0: all.
     limit: int = 0
     # Steps before an episode is cut (lerobot reads it as the env's _max_episode_steps).
     max_steps: int = 120

@@ -74,13 +74,17 @@ class ConvertEnvConfig:
 
     # Benchmark folder, as given to lerobot-eval.
     benchmark_path: str = ""
-    # Repeats per instance, contexts and instances kept, lerobot's first reset seed: as given to lerobot-eval.
+    # Repeats per instance, as given to lerobot-eval.
     n_repeats: int = _ENV_DEFAULTS["n_repeats"]
+    # Task contexts kept per split (0: all), as given to lerobot-eval.
     contexts: int = _ENV_DEFAULTS["contexts"]
+    # Instances kept per split (0: all), as given to lerobot-eval.
     limit: int = _ENV_DEFAULTS["limit"]
+    # lerobot's first reset seed (lerobot-eval's --seed), as given to lerobot-eval.
     start_seed: int = _ENV_DEFAULTS["start_seed"]
-    # Control steps per episode and camera image side, as given to lerobot-eval.
+    # Control steps per episode, as given to lerobot-eval.
     max_steps: int = _ENV_DEFAULTS["max_steps"]
+    # Camera image side (pixels), as given to lerobot-eval.
     image_size: int = _ENV_DEFAULTS["image_size"]
 
 
@@ -92,6 +96,7 @@ class ConvertConfig:
     output_dir: str = ""
     # The results' policy column.
     policy_name: str = "lerobot-eval"
+    # The `--env.*` flags lerobot-eval was given.
     env: ConvertEnvConfig = field(default_factory=ConvertEnvConfig)
 
     def __post_init__(self) -> None:

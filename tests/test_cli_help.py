@@ -32,6 +32,42 @@ def test_help_documents_the_flags(module):
     if config is not None:
         missing = [flag for flag in config_flags(config) if not re.search(rf"{re.escape(flag)}\b", proc.stdout)]
         assert not missing, f"{module} --help lacks {missing}"
+    # Every flag shown has its own description and its default (or says it is required), each flag is shown
+    # once per section, and the flags shown are exactly those the command accepts.
+    shown = help_flags(proc.stdout)
+    assert shown, proc.stdout[:500]
+    undocumented = [flag for flag, text in shown if not re.sub(r"\((default: [^)]*|required)\)$", "", text).strip()]
+    no_default = [flag for flag, text in shown if not re.search(r"\((default: .+|required)\)$", text)]
+    assert not undocumented, f"{module} --help: no description for {undocumented}"
+    assert not no_default, f"{module} --help: no default for {no_default}"
+    assert "Config file for" not in proc.stdout and proc.stdout.count("--config_path") == 1
+    if config is not None:
+        assert {flag for flag, _ in shown} == accepted_flags(config), module
+
+
+def help_flags(text: str) -> list[tuple[str, str]]:
+    """(flag, its description with its default) for every flag line of a --help text (except -h, --help)."""
+    found: list[list[str]] = []
+    for line in text.splitlines():
+        if line.startswith("  -"):  # a flag: its description from column 24 on, or on the lines below
+            found.append([line.split()[0].rstrip(","), line[24:] if line[22:24] == "  " else ""])
+        elif line.startswith(" " * 24) and found:
+            found[-1][1] += " " + line.strip()
+        elif not line.strip() and found:
+            found.append(["", ""])  # a section ends
+    return [(flag, " ".join(text.split())) for flag, text in found if flag and flag != "-h"]
+
+
+def accepted_flags(config: type) -> set[str]:
+    """The flags draccus's parser of `config` accepts (less the per-section config-file ones)."""
+    from draccus.argparsing import ArgumentParser
+
+    from policies.base import load_policy_types
+
+    load_policy_types()  # as a command does before it parses: every --policy.type's flags
+    actions = ArgumentParser(config_class=config).parser._option_string_actions
+    return {name for name, action in actions.items()
+            if name not in ("-h", "--help") and not (action.help or "").startswith("Config file for")}
 
 
 def _config_class(module: str) -> type | None:

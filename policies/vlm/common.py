@@ -37,6 +37,7 @@ class VLMConfig(PolicyConfig):
     api_key_env: str = "OPENAI_API_KEY"
     # Seconds per request; retries of 429 / 5xx / timeouts with exponential backoff.
     timeout_s: float = 60.0
+    # Retries of a request answered 429 / 5xx or timed out, with exponential backoff, before it fails.
     max_retries: int = 4
     # Requests in flight to this endpoint at once, across every worker process on this machine.
     max_in_flight: int = 4

@@ -45,8 +45,9 @@ MIN_OFFSET_PX = 5.0
 class MokaConfig(VLMConfig):
     # Grounding backend: classic (colour-driven, offline), owlv2 or grounding_dino (transformers).
     grounding: str = "classic"
-    # transformers model ids (weights from your Hugging Face cache) for owlv2 / grounding_dino, and SAM.
+    # transformers model id of the owlv2 / grounding_dino detector (weights from your Hugging Face cache).
     detector_model: str = "google/owlv2-base-patch16-ensemble"
+    # transformers model id of SAM, for masks of the detected boxes (e.g. facebook/sam-vit-base); empty: no masks.
     sam_model: str = ""
     # Detection score threshold of the transformers backends.
     detector_threshold: float = 0.1

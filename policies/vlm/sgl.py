@@ -142,10 +142,11 @@ class SGLConfig:
     # Wrap the policy in the SGL: a VLM parses the first frame and the instruction is refined ("the small
     # object" → "the small red cube") before the policy acts.
     enable: bool = False
-    # The SGL's VLM endpoint: base URL, model, API-key variable name (a VLM agent's own endpoint when both
-    # base_url and model are empty).
+    # Base URL of the SGL's VLM endpoint (OpenAI-compatible); with model also empty, a VLM agent's own endpoint.
     base_url: str = ""
+    # Model name on that endpoint; with base_url also empty, a VLM agent's own model.
     model: str = ""
+    # Name of the environment variable holding the endpoint's API key (the key itself never goes in a file).
     api_key_env: str = "OPENAI_API_KEY"
 
     def endpoint(self, policy: PolicyConfig) -> Endpoint:

@@ -1,0 +1,170 @@
+"""What a user sees at the command line: Ctrl-C, a misspelled flag, --help's preset list, other libraries' logs."""
+
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pipelines._cli import cli_main, interrupted
+
+ROOT = Path(__file__).parents[1]
+ENV = os.environ | {"PYTHONPATH": str(ROOT)}
+
+
+def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=timeout,
+                          cwd=ROOT, env=ENV)
+
+
+def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+    from policies.base import policy_config
+
+    out = tmp_path / "ev"
+    flags = [f"--benchmark.path={tiny_benchmark}", "--policy.type=expert", "--benchmark.splits=color",
+             "--eval.limit=6", "--eval.n_repeats=2", "--eval.image_size=64", f"--output_dir={out}"]
+    # Its own process group, signalled as a terminal's Ctrl-C is: the command and its workers all get SIGINT.
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.evaluate", *flags], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, cwd=ROOT, env=ENV)
+    journal = out / "episodes.jsonl"
+    deadline = time.time() + 300
+    while time.time() < deadline and not (journal.exists() and journal.read_text().count("\n") >= 1):
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr[-2000:]
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr[-2000:]
+    saved = len(journal.read_text().splitlines())
+    assert 1 <= saved < 12
+    last = stderr.strip().splitlines()[-1]
+    assert last == (f"interrupted: {saved} episode{'s' * (saved != 1)} saved in {out}; "
+                    "rerun the same command to resume"), stderr[-2000:]
+
+    result = run(EvaluateConfig(BenchmarkConfig(path=str(tiny_benchmark), splits="color"), policy_config("expert"),
+                                EvalConfig(n_repeats=2, limit=6, image_size=64), str(out)))
+    assert result.new_episodes == 12 - saved, journal.read_text()[-3000:]
+    rows = pd.read_parquet(out / "episodes.parquet")
+    assert len(rows) == 12 and not rows.duplicated(["instance_id", "repeat"]).any()
+
+
+def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monkeypatch, capsys):
+    import pipelines.collect as collect
+    from roboview_data.demos.dataset import Progress
+
+    real = collect._episodes
+
+    def three_then_ctrl_c(cfg, first_attempt):
+        episodes = real(cfg, first_attempt)
+        try:
+            for _ in range(3):
+                yield next(episodes)
+            raise KeyboardInterrupt
+        finally:
+            episodes.close()
+
+    monkeypatch.setattr(collect, "_episodes", three_then_ctrl_c)
+    root = tmp_path / "demos"
+    with pytest.raises(SystemExit) as exit_:
+        collect.main([f"--dataset.root={root}", "--dataset.repo_id=t/demos", "--dataset.num_episodes=10",
+                      "--dataset.image_size=64", "--dataset.cameras=wrist", "--num_workers=1", "--checkpoint_every=2"])
+    assert exit_.value.code == 130
+    kept = Progress.load(root).episodes_saved  # what a rerun resumes from
+    assert 0 < kept <= 3
+    message = capsys.readouterr().err.strip().splitlines()[-1]
+    assert message.startswith(f"interrupted: {kept} demo{'s' * (kept != 1)} saved in {root}")
+    assert message.endswith("; rerun the same command to resume")
+
+
+def test_ctrl_c_during_build_says_nothing_was_written(tmp_path, monkeypatch, capsys):
+    import pipelines.build_benchmark as build
+
+    def ctrl_c(cfg, instances):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(build, "_render_all", ctrl_c)
+    out = tmp_path / "bench"
+    with pytest.raises(SystemExit) as exit_:
+        build.main([f"--output_dir={out}", "--preset=tiny"])
+    assert exit_.value.code == 130 and not out.exists()
+    message = capsys.readouterr().err.strip().splitlines()[-1]
+    assert message.startswith(f"interrupted: nothing written to {out}")
+
+
+def test_ctrl_c_elsewhere_says_to_rerun(capsys):
+    from pipelines.plan import PlanConfig
+
+    def run(cfg):
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as exit_:
+        cli_main(PlanConfig, run, args=[])
+    assert exit_.value.code == 130
+    assert capsys.readouterr().err.strip().splitlines()[-1] == "interrupted; rerun the same command"
+
+    def run_saying(cfg):  # the innermost message wins over on_interrupt
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise interrupted(exc, "3 things kept")
+
+    with pytest.raises(SystemExit):
+        cli_main(PlanConfig, run_saying, args=[], on_interrupt=lambda cfg: "unused")
+    assert capsys.readouterr().err.strip() == "interrupted: 3 things kept"
+
+
+@pytest.mark.parametrize("module, wrong, right", [
+    ("pipelines.evaluate", "--eval.n_repeat=3", "--eval.n_repeats"),
+    ("pipelines.collect", "--dataset.num_episode=3", "--dataset.num_episodes"),
+])
+def test_a_misspelled_flag_gets_two_lines_and_the_closest_real_flag(module, wrong, right):
+    proc = _cli(module, "--policy.type=expert" if module.endswith("evaluate") else "--seed=1", wrong)
+    assert proc.returncode == 2 and not proc.stdout
+    lines = proc.stderr.strip().splitlines()
+    assert lines == [f"error: unknown flag {wrong.split('=')[0]}", f"did you mean {right}? (--help lists every flag)"]
+
+
+def test_evaluate_help_puts_the_common_flags_first():
+    from pipelines._cli import format_help
+    from pipelines.evaluate import EvaluateConfig
+    from policies.base import load_policy_types
+
+    load_policy_types()
+    text = format_help(EvaluateConfig)
+    assert text.startswith("usage: ") and text.count("--config_path") == 1 and "Config file" not in text
+    common = [text.index(f"\n  {flag} ") for flag in ("--policy.type", "--benchmark.path", "--eval.n_repeats")]
+    advanced = [text.index(f"\n  {flag} ") for flag in ("--eval.envs_per_worker", "--eval.alpha")]
+    per_type = text.index("\n--policy.type=lerobot:")
+    assert max(common) < min(advanced) and max(advanced) < per_type
+    # With a type named, only that type's own flags are listed.
+    one = format_help(EvaluateConfig, ["--policy.type=lerobot"])
+    assert "\n--policy.type=lerobot:" in one and "--policy.type=openpi:" not in one and "--policy.url" not in one
+
+
+def test_build_help_lists_every_preset_with_its_instance_count():
+    from roboview_data.variation.instances import PRESETS, generate_suite
+
+    proc = _cli("pipelines.build_benchmark", "--help")
+    assert proc.returncode == 0
+    text = " ".join(proc.stdout.split())
+    for name, suite in PRESETS.items():
+        assert f" {name} ({len(generate_suite(suite)):,})" in text, name
+    assert "tiny (57)" in text
+
+
+def test_other_libraries_info_lines_are_silenced_ours_kept(tiny_benchmark):
+    from pipelines._cli import setup_environment
+
+    setup_environment()
+    assert not logging.getLogger("OpenGL.acceleratesupport").isEnabledFor(logging.INFO)
+    assert logging.getLogger("OpenGL.acceleratesupport").isEnabledFor(logging.WARNING)
+    assert logging.getLogger("pipelines.evaluate").isEnabledFor(logging.INFO)
+    # A quick command that imports PyOpenGL after logging is set up.
+    proc = _cli("pipelines.plan", f"--benchmark.path={tiny_benchmark}")
+    assert proc.returncode == 0, proc.stderr[-1500:]
+    assert "OpenGL.acceleratesupport" not in proc.stderr and "OpenGL_accelerate" not in proc.stderr
