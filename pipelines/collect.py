@@ -246,6 +246,9 @@ def run(cfg: CollectConfig) -> CollectResult:
 
 
 def _summary(cfg: CollectConfig, result: CollectResult) -> None:
+    if not result.attempts:
+        print(f"[collect] {result.episodes} episodes in {result.root}: already complete, nothing new to collect")
+        return
     print(f"[collect] {result.episodes} episodes in {result.root} "
           f"({result.new_episodes} new; {result.attempts} attempts, {result.failures} failed, "
           f"expert success {result.success_rate:.1%}; {result.demos_per_hour:.0f} demos/h)")

@@ -523,6 +523,14 @@ def _merge_cluster(per_task: dict[str, dict]) -> dict:
             "lost_actors": sum(s.get("lost_actors", 0) for s in per_task.values())}
 
 
+def _rate_text(result: EvaluateResult) -> str:
+    """"N new, SR x%, R episodes/h"; a rerun with nothing left to run says so instead of printing 0/h or nan."""
+    sr = "SR —" if result.success_rate != result.success_rate else f"SR {result.success_rate:.1%}"
+    if not result.new_episodes:
+        return f"already complete, nothing new to run; {sr}"
+    return f"{result.new_episodes} new, {sr}, {result.episodes_per_hour:.0f} episodes/h"
+
+
 def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     infra = (f"; {result.infra_errors} ended by infrastructure errors (status infra_error), counted in no rate: "
              "rerun the same command to re-run them" if result.infra_errors else "")
@@ -530,7 +538,7 @@ def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     if cfg.policy.privileged:
         policy += " (privileged: reads the simulator state; a ceiling, not a policy's result)"
     print(f"[evaluate] {result.episodes} episodes of {policy} in {result.output_dir / 'episodes.parquet'} "
-          f"({result.new_episodes} new, SR {result.success_rate:.1%}, {result.episodes_per_hour:.0f} episodes/h{infra})")
+          f"({_rate_text(result)}{infra})")
     if cfg.eval.rerun:
         from eval.rerun_log import recordings
 

@@ -36,3 +36,17 @@ def test_absent_color_categories_are_left_out_not_drawn_as_zero():
     assert list(table) == ["red", "gray"]  # CATEGORIES order, only those with episodes
     assert table["red"][0] == {"sr": 0.5, "n_episodes": 4} and table["red"][1] == {"sr": 1.0, "n_episodes": 4}
     assert table["gray"][0]["sr"] == 0.0 and math.isnan(table["gray"][1]["sr"]) and table["gray"][1]["n_episodes"] == 0
+
+
+def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
+    from pathlib import Path
+
+    from pipelines.collect import CollectResult
+    from pipelines.collect import _summary as collect_summary
+    from pipelines.evaluate import EvaluateResult, _rate_text
+
+    assert _rate_text(EvaluateResult(Path("o"), 171, 0, 0.877, 3.0)) == "already complete, nothing new to run; SR 87.7%"
+    assert _rate_text(EvaluateResult(Path("o"), 10, 10, 0.5, 36.0)) == "10 new, SR 50.0%, 1000 episodes/h"
+    collect_summary(None, CollectResult(Path("ds"), 6, 0, 0, 0, 0.1))
+    out = capsys.readouterr().out
+    assert "nan" not in out and "already complete, nothing new to collect" in out
