@@ -8,7 +8,6 @@ model and cores, GPU when torch sees one) and the start and end time (UTC). The 
 
 from __future__ import annotations
 
-import hashlib
 import importlib.metadata
 import json
 import os
@@ -19,6 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from policies.checkpoints import checkpoint_dir
+from roboview_data.files import files_sha256
 
 FILE = "provenance.json"
 PACKAGES = ("roboview", "lerobot", "mujoco", "torch", "gymnasium", "datasets", "numpy", "openai")
@@ -74,14 +74,9 @@ def machine() -> dict:
 def checkpoint_hash(path: str | Path) -> str:
     """SHA-256 over the checkpoint folder's files (relative names and contents, in sorted order)."""
     root = Path(path)
-    digest = hashlib.sha256()
-    files = sorted(p for p in root.rglob("*") if p.is_file()) if root.is_dir() else [root]
-    for file in files:
-        digest.update(str(file.relative_to(root) if root.is_dir() else file.name).encode() + b"\0")
-        with file.open("rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                digest.update(block)
-    return digest.hexdigest()
+    if root.is_dir():
+        return files_sha256(root, sorted(p for p in root.rglob("*") if p.is_file()))
+    return files_sha256(root.parent, [root])
 
 
 def checkpoint_info(path: str | None) -> dict | None:

@@ -172,6 +172,12 @@ def read_version(path: str | Path) -> str | None:
 
 def read_episodes(path: str | Path) -> pd.DataFrame:
     """The episode rows of one results parquet; other results formats raise ResultsError."""
+    check_format(path)
+    return pd.read_parquet(path)
+
+
+def check_format(path: str | Path) -> None:
+    """ResultsError unless the results parquet at `path` is of this version's results format (its footer only)."""
     fmt = (pq.read_schema(path).metadata or {}).get(FORMAT_KEY)
     if fmt != str(RESULTS_FORMAT).encode():
         found = "none (format 1)" if fmt is None else fmt.decode()
@@ -179,7 +185,6 @@ def read_episodes(path: str | Path) -> pd.DataFrame:
             f"{path} was written with results format {found}, whose episode seeds hashed instance_id; "
             f"this version reads format {RESULTS_FORMAT} only (seeds shared per context and repeat, the "
             "pairing its statistics rely on). Re-run pipelines.evaluate into a new output folder")
-    return pd.read_parquet(path)
 
 
 def shard_of(instance_id: str, n: int) -> int:

@@ -100,6 +100,11 @@ class EpisodeResult:
     video: dict[str, np.ndarray] | None = None
 
 
+def _infra_reason(exc: BaseException) -> str:
+    """The failure_reason of an episode that infrastructure ended."""
+    return f"infrastructure error: {type(exc).__name__}: {exc}"
+
+
 def _infra_cause(exc: BaseException) -> InfraError | None:
     """The InfraError `exc` was raised from or while handling, if any."""
     seen: set[int] = set()
@@ -170,7 +175,7 @@ class EvalWorker:
             except PolicyUnavailable:
                 raise
             except InfraError as exc:
-                raise PolicyFailed(f"infrastructure error: {type(exc).__name__}: {exc}", infra=True) from exc
+                raise PolicyFailed(_infra_reason(exc), infra=True) from exc
             except TRANSIENT_ERRORS as exc:
                 if attempt == POLICY_RETRIES:
                     raise PolicyFailed(f"policy error after {POLICY_RETRIES} retries: "
@@ -181,7 +186,7 @@ class EvalWorker:
             except Exception as exc:
                 cause = _infra_cause(exc)  # a policy that wrapped a render failure in its own error
                 if cause is not None:
-                    raise PolicyFailed(f"infrastructure error: {type(cause).__name__}: {cause}", infra=True) from exc
+                    raise PolicyFailed(_infra_reason(cause), infra=True) from exc
                 raise PolicyFailed(f"policy error: {type(exc).__name__}: {exc}") from exc
 
     def run(self, work: WorkItem) -> EpisodeResult:
@@ -220,7 +225,7 @@ class EvalWorker:
         try:
             fn(*args)
         except InfraError as exc:
-            ep.fail(f"infrastructure error: {type(exc).__name__}: {exc}", infra=True)
+            ep.fail(_infra_reason(exc), infra=True)
 
     def _start(self, slot: int, index: int, work: WorkItem) -> _Running:
         env = self.envs[slot]
@@ -232,7 +237,7 @@ class EvalWorker:
         try:
             ep.obs, _ = env.reset(seed=seed, options={"instance": instance})
         except InfraError as exc:  # an eager env renders in its reset
-            ep.fail(f"infrastructure error: {type(exc).__name__}: {exc}", infra=True)
+            ep.fail(_infra_reason(exc), infra=True)
             return ep
         ep.isolation = isolation.record(env, seed)
         try:

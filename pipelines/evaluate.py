@@ -301,25 +301,12 @@ def plan(cfg: EvaluateConfig) -> Plan:
 
 
 def check_conformance(bench: BenchmarkConfig, version: str) -> dict:
-    """The start-of-run conformance check (roboview_data.benchmark.conformance.at_start): `different` stops the
-    run before any episode unless --benchmark.allow_drift=true. Returns what provenance records: the verdict, the
+    """The start-of-run conformance check (roboview_data.benchmark.conformance.gate): `different` stops the run
+    before any episode unless --benchmark.allow_drift=true. Returns what provenance records: the verdict, the
     measured drift, the stack this machine runs, and how it differs from the stack that built the benchmark."""
     from roboview_data.benchmark import conformance
-    from roboview_data.benchmark.format import read_manifest
-    from roboview_data.sim import stack
 
-    root = Path(bench.path)
-    report = conformance.at_start(root, version)
-    built_on = read_manifest(root).get("stack")
-    differences = stack.differences(built_on, report.stack)
-    log.info("conformance with the benchmark's stack: %s (%s)%s", report.verdict, stack.summary(report.stack),
-             f"; stack differs: {'; '.join(differences)}" if differences else "")
-    if report.verdict == "different":
-        if not bench.allow_drift:
-            raise conformance.ConformanceError(conformance.refusal(report, root))
-        log.warning("running on a stack whose conformance is `different` (--benchmark.allow_drift=true): every row "
-                    "is marked; these results do not compare with others on this benchmark")
-    return report.record() | {"stack_differences": differences}
+    return conformance.gate(Path(bench.path), version, bench.allow_drift, "--benchmark.allow_drift").record()
 
 
 def run_info(cfg: EvaluateConfig, p: Plan) -> dict:

@@ -124,12 +124,12 @@ def _benchmark_path(cfg: VerifyConfig, results: Path) -> Path:
 
 def _rows(results: Path) -> tuple[list[dict], dict]:
     """The results' rows (as stored) and run.json; ResultsError for a folder that holds none."""
-    from eval.results import PARQUET, RUN_FILE, ResultsError, read_episodes
+    from eval.results import PARQUET, RUN_FILE, ResultsError, check_format
 
     if not (results / RUN_FILE).is_file() or not (results / PARQUET).is_file():
         raise ResultsError(f"{results} holds no RoboView results ({RUN_FILE} and {PARQUET} expected); give the "
                            "folder pipelines.evaluate wrote (--output_dir)")
-    read_episodes(results / PARQUET)  # refuses other results formats with its own message
+    check_format(results / PARQUET)  # refuses other results formats with its own message
     return pq.read_table(results / PARQUET).to_pylist(), json.loads((results / RUN_FILE).read_text())
 
 

@@ -23,7 +23,6 @@ same flags for its periodic evals. The same env is offered as a LeRobot EnvHub e
 from __future__ import annotations
 
 import functools
-import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -140,12 +139,8 @@ class RoboViewEnv(EnvConfig):
         from roboview_data.benchmark.format import read_manifest
 
         root = Path(self.benchmark_path)
-        report = conformance.at_start(root, read_manifest(root)["benchmark_version"])
-        logging.getLogger(__name__).info("RoboView conformance with the benchmark's stack: %s", report.lines()[-1])
-        if report.verdict == "different" and not self.allow_drift:
-            raise conformance.ConformanceError(conformance.refusal(report, root).replace("--benchmark.allow_drift",
-                                                                                           "--env.allow_drift"))
-        return report.record()
+        return conformance.gate(root, read_manifest(root)["benchmark_version"], self.allow_drift,
+                                "--env.allow_drift").record()
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
         """{split: {0: VectorEnv of n_envs}}: lerobot-eval runs --eval.n_episodes episodes of each split.

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from policies.errors import TransientPolicyError
+from roboview_data.files import cache_dir
 
 STAT_KEYS = ("vlm_requests", "vlm_cache_hits", "vlm_prompt_tokens", "vlm_completion_tokens", "vlm_latency_s")
 REPAIR = ("Your previous reply could not be used: {error}. Reply again with only the JSON value the "
@@ -48,7 +49,7 @@ class VLMAnswerError(RuntimeError):
 
 def default_cache_dir() -> str:
     """Where VLM answers are cached unless told otherwise: the XDG cache folder, as Hugging Face's caches."""
-    return str(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "roboview" / "vlm")
+    return str(cache_dir("vlm"))
 
 
 @dataclass(frozen=True)

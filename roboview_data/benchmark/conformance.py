@@ -37,7 +37,9 @@ from PIL import Image
 from scipy import ndimage
 
 from roboview_data.benchmark.format import CONFORMANCE as FOLDER
+from roboview_data import files
 from roboview_data.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
+from roboview_data.files import files_sha256
 
 log = logging.getLogger(__name__)
 
@@ -115,18 +117,16 @@ def sample(by_split: dict[str, list[dict]], size: int = SAMPLE_SIZE) -> list[dic
     return out
 
 
-def observe(env, instance, steps: int = 0) -> tuple[list[np.ndarray], dict[str, list[float]] | None]:
+def observe(env, expert, instance, steps: int = 0) -> tuple[list[np.ndarray], dict[str, list[float]] | None]:
     """The observed cameras' reset images (down-sampled) of `instance` at its seed, and with `steps` > 0 the
-    state after the task's scripted expert ran that many steps: 7 joints + gripper, object position and
-    orientation."""
+    state after `expert` (the task's scripted expert, bound to `env`) ran that many steps: 7 joints + gripper,
+    object position and orientation."""
     from roboview_data.sim.env import IMAGE_KEY
-    from roboview_data.sim.tasks import load_task
 
     obs, _ = env.reset(seed=instance.seed, options={"instance": instance})
     images = [downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in CAMERAS]
     if not steps:
         return images, None
-    expert = load_task(instance.task).make_expert(env)
     expert.reset()
     for _ in range(steps):
         env.step(expert.select_action(None))
@@ -136,21 +136,23 @@ def observe(env, instance, steps: int = 0) -> tuple[list[np.ndarray], dict[str, 
 
 
 class _Envs:
-    """One env per task (the observed cameras at the benchmark's image size, rendering when read)."""
+    """One env and its scripted expert per task (the observed cameras at the benchmark's image size, rendering
+    when read), made on first use."""
 
     def __init__(self, image_size: int) -> None:
-        self.image_size, self.envs = image_size, {}
+        self.image_size, self.envs, self.experts = image_size, {}, {}
         self.stack: dict | None = None  # the stack, described from the first env before any instance
 
     def __call__(self, task: str):
         from roboview_data.sim import stack
-        from roboview_data.sim.tasks import make_env
+        from roboview_data.sim.tasks import load_task, make_env
 
         if task not in self.envs:
             self.envs[task] = make_env(task, cameras=CAMERAS, image_size=self.image_size, lazy=True)
+            self.experts[task] = load_task(task).make_expert(self.envs[task])
             if self.stack is None:
                 self.stack = stack.describe(self.envs[task])
-        return self.envs[task]
+        return self.envs[task], self.experts[task]
 
     def close(self) -> None:
         for env in self.envs.values():
@@ -172,7 +174,7 @@ def write_reference(out: Path, by_split: dict[str, list[dict]], image_size: int,
         for i, row in enumerate(sample(by_split)):
             instance = instance_from_record(row)
             steps = ROLLOUT_STEPS if i < PHYSICS_SAMPLE else 0
-            images, state = observe(envs(instance.task), instance, steps)
+            images, state = observe(*envs(instance.task), instance, steps)
             (folder / f"{row['instance_id']}.png").write_bytes(_png(images))
             entries.append({k: v for k, v in row.items() if k not in ("fairness", "preview")})
             if state is not None:
@@ -229,8 +231,9 @@ class Report:
     checks: list[dict] = field(default_factory=list)
     seconds: float = 0.0
     tolerances: dict = field(default_factory=dict)
-    # The stack the check ran on (roboview_data.sim.stack).
+    # The stack the check ran on (roboview_data.sim.stack), and how it differs from the one that built the benchmark.
     stack: dict = field(default_factory=dict)
+    stack_differences: list[str] = field(default_factory=list)
 
     @property
     def drift(self) -> dict[str, Any]:
@@ -249,7 +252,8 @@ class Report:
 
     def record(self) -> dict[str, Any]:
         """What provenance and results record: verdict, drift, seconds."""
-        return {"verdict": self.verdict, "drift": self.drift, "seconds": round(self.seconds, 2), "stack": self.stack}
+        return {"verdict": self.verdict, "drift": self.drift, "seconds": round(self.seconds, 2), "stack": self.stack,
+                "stack_differences": self.stack_differences}
 
     def lines(self) -> list[str]:
         """One line per check with its measured figures, then the verdict."""
@@ -294,7 +298,7 @@ def check(root: Path, tolerances: Tolerances | None = None, envs: _Envs | None =
             instance = instance_from_record(entry)
             ref_state = reference["physics"].get(iid)
             steps = reference["rollout_steps"] if ref_state is not None else 0
-            images, state = observe(envs(instance.task), instance, steps)
+            images, state = observe(*envs(instance.task), instance, steps)
             stored = _unpng((Path(root) / FOLDER / f"{iid}.png").read_bytes(), len(reference["cameras"]))
             for camera, ref, new in zip(reference["cameras"], stored, images):
                 checks.append({"check": "image", "instance_id": iid, "split": entry["split"], "value": entry["value"],
@@ -310,16 +314,7 @@ def check(root: Path, tolerances: Tolerances | None = None, envs: _Envs | None =
 def _code_hash() -> str:
     """SHA-256 over RoboView's simulation code (roboview_data): a changed applier can change the pixels."""
     root = Path(__file__).parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
-    return digest.hexdigest()
-
-
-def default_cache_dir() -> Path:
-    import os
-
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "roboview" / "conformance"
+    return files_sha256(root, sorted(root.rglob("*.py")))
 
 
 def at_start(root: Path, version: str, cache_dir: Path | None = None) -> Report:
@@ -332,11 +327,10 @@ def at_start(root: Path, version: str, cache_dir: Path | None = None) -> Report:
     envs(first)
     key = hashlib.sha256(json.dumps({"version": version, "stack": envs.stack, "code": _code_hash()},
                                     sort_keys=True).encode()).hexdigest()[:32]
-    path = Path(cache_dir or default_cache_dir()) / f"{key}.json"
+    path = Path(cache_dir or files.cache_dir("conformance")) / f"{key}.json"
     if path.is_file():
         envs.close()
-        cached = json.loads(path.read_text())
-        return Report(cached["verdict"], cached["checks"], cached["seconds"], cached["tolerances"], cached["stack"])
+        return Report(**json.loads(path.read_text()))
     report = check(root, envs=envs)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -348,7 +342,25 @@ def at_start(root: Path, version: str, cache_dir: Path | None = None) -> Report:
     return report
 
 
-def refusal(report: Report, root: Path) -> str:
+def gate(root: Path, version: str, allow_drift: bool, flag: str) -> Report:
+    """`at_start`, logged; `different` raises ConformanceError (its message names `flag`, the switch that runs
+    anyway) unless `allow_drift`, in which case it warns that every row will be marked."""
+    from roboview_data.benchmark.format import read_manifest
+    from roboview_data.sim import stack
+
+    report = at_start(root, version)
+    report.stack_differences = stack.differences(read_manifest(root).get("stack"), report.stack)
+    log.info("conformance with the benchmark's stack: %s (%s)%s", report.verdict, stack.summary(report.stack),
+             f"; stack differs: {'; '.join(report.stack_differences)}" if report.stack_differences else "")
+    if report.verdict == "different":
+        if not allow_drift:
+            raise ConformanceError(refusal(report, root, flag))
+        log.warning("running on a stack whose conformance is `different` (%s=true): every row is marked; these "
+                    "results do not compare with others on this benchmark", flag)
+    return report
+
+
+def refusal(report: Report, root: Path, flag: str = "--benchmark.allow_drift") -> str:
     """The message that stops an evaluation on a stack whose conformance is `different`."""
     bad = [c for c in report.checks if c["verdict"] == "different"]
     kinds = sorted({c["check"] for c in bad})
@@ -359,5 +371,5 @@ def refusal(report: Report, root: Path) -> str:
             f"differing regions, joints up to {d['joint_max']:.1e} rad, object up to {d['object_error_m_max']:.1e} m). "
             f"Results from this stack would not compare with others on this benchmark. See each check with "
             f"`python -m pipelines.verify --benchmark.path={root}`; run on the stack the benchmark records "
-            f"(benchmark.json, \"stack\"), or pass --benchmark.allow_drift=true to run anyway with every row marked "
+            f"(benchmark.json, \"stack\"), or pass {flag}=true to run anyway with every row marked "
             f"`different`")

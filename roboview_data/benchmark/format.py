@@ -24,13 +24,14 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import datasets
 import pyarrow.parquet as pq
 
+from roboview_data.files import files_sha256
 from roboview_data.variation.factors import FACTORS, factor_names, record_columns
 from roboview_data.variation.instances import TaskInstance, canonical_json
 
@@ -143,8 +144,14 @@ def read_rows(path: Path) -> list[dict]:
 
 def table_checksums(path: Path) -> dict:
     """`content_checksums` of a parquet table as stored (what loading recomputes)."""
+    return _read_checked(path)[1]
+
+
+def _read_checked(path: Path) -> tuple[list[dict], dict]:
+    """A table's rows and their `content_checksums`, from one read."""
     table = pq.read_table(path)
-    return content_checksums(table.to_pylist(), table.column_names)
+    rows = table.to_pylist()
+    return rows, content_checksums(rows, table.column_names)
 
 
 def table_name(root: Path, path: Path) -> str:
@@ -166,10 +173,7 @@ def reference_hash(root: Path) -> str | None:
     folder = Path(root) / CONFORMANCE
     if not (folder / REFERENCE).is_file():
         return None
-    digest = hashlib.sha256()
-    for path in sorted(folder.iterdir()):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    return digest.hexdigest()
+    return files_sha256(folder, sorted(folder.iterdir()))
 
 
 def benchmark_version(preset: str, content: dict[str, str], conformance: str | None) -> str:
@@ -201,9 +205,7 @@ def verify_table(root: Path, path: Path, manifest: dict) -> list[dict]:
     """The rows of a benchmark table, after checking every cell against the build's checksums."""
     root = Path(root)
     name = table_name(root, path)
-    table = pq.read_table(path)
-    rows = table.to_pylist()
-    found = content_checksums(rows, table.column_names)
+    rows, found = _read_checked(path)
     if found["sha256"] != manifest.get("content", {}).get(name):
         sums_path = root / CHECKSUMS
         stored = json.loads(sums_path.read_text()).get(name) if sums_path.is_file() else None
@@ -243,7 +245,6 @@ class Benchmark:
     path: Path
     version: str
     splits: dict[str, list[BenchmarkItem]]
-    manifest: dict = field(default_factory=dict, compare=False)
 
 
 def read_manifest(root: Path) -> dict:
@@ -294,17 +295,17 @@ def instance_from_record(record: dict) -> TaskInstance:
     return instance
 
 
-def available_splits(path: str | Path) -> list[str]:
-    """The splits the benchmark folder at `path` holds, in its manifest's order."""
+def available_splits(path: str | Path, manifest: dict | None = None) -> list[str]:
+    """The splits the benchmark folder at `path` holds, in its manifest's order (`manifest`: already read)."""
     root = Path(path)
-    return [s for s in read_manifest(root)["splits"] if (root / "data" / f"{s}.parquet").is_file()]
+    return [s for s in (manifest or read_manifest(root))["splits"] if (root / "data" / f"{s}.parquet").is_file()]
 
 
 def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchmark:
     """The instances of `splits` (default: all) of the benchmark folder at `path`."""
     root = Path(path)
     manifest = read_manifest(root)
-    available = available_splits(root)
+    available = available_splits(root, manifest)
     chosen = splits or available
     unknown = [s for s in chosen if s not in available]
     if unknown:
@@ -314,7 +315,7 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
         rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
         out[split] = [BenchmarkItem(instance_from_record(row), {k: v for k, v in row.items() if k not in NOT_IN_EPISODES})
                       for row in rows]
-    return Benchmark(root, manifest["benchmark_version"], out, manifest)
+    return Benchmark(root, manifest["benchmark_version"], out)
 
 
 def select_items(items: list[BenchmarkItem], contexts: int = 0, limit: int = 0) -> list[BenchmarkItem]:
