@@ -4,10 +4,10 @@
     python -m benchmarks.adaptive --results=outputs/eval/act_ref_adaptive --output=outputs/bench/adaptive_real.json
 
 For each design (values × contexts at SR 0.7, the paper's camera_euler / camera_pose shapes and a small
-one) and true bias τ ∈ {0, 0.3, 0.6} (logit SD), `eval.adaptive.simulate` runs the group-sequential
+one) and true bias τ ∈ {0, 0.3, 0.6} (logit SD), `eval.statistics.adaptive.simulate` runs the group-sequential
 design (α = 0.05, futility against τ = 0.6 at power 0.8, at most `max_repeats` rounds) on real binomial
 tables with the real test. The fixed-n reference is the smallest number of repeats whose LRT power at
-τ = 0.6 (`eval.stats.lrt_power`, asymptotic; sparse tables fall short of it, so it favours the fixed
+τ = 0.6 (`eval.statistics.significance.lrt_power`, asymptotic; sparse tables fall short of it, so it favours the fixed
 design) reaches the adaptive design's simulated power at τ = 0.6. `saving` = 1 − adaptive episodes / fixed.
 
 With `--results=DIR` (a folder written by `pipelines.evaluate --eval.adaptive=true`) it reads that run instead:
@@ -24,8 +24,8 @@ import pandas as pd
 from dataclasses import dataclass
 from pathlib import Path
 
-from eval.adaptive import Design, read_record, simulate
-from eval.stats import lrt_power
+from eval.statistics.adaptive import Design, read_record, simulate
+from eval.statistics.significance import lrt_power
 from pipelines._cli import cli_main
 
 DESIGNS = ((9, 4, 10), (9, 11, 6), (21, 11, 4))  # values, contexts, max_repeats

@@ -197,7 +197,7 @@ def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
 
 
 def run(cfg: ServingConfig) -> dict:
-    from eval.provenance import now, start_entry
+    from eval.running.provenance import now, start_entry
     from policies.base import load_policy_types, policy_config
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 

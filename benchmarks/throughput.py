@@ -128,8 +128,8 @@ def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: 
 
 def phase_breakdown(bench: str, policy: str, path: str, splits: str, episodes: int, out: Path) -> dict:
     """One worker in this process, timers around rendering, physics, the policy and the results' I/O."""
-    from eval.results import EpisodeStore
-    from eval.rollout import EvalWorker, WorkerSpec, WorkItem
+    from eval.running.results import EpisodeStore
+    from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
     from pipelines.evaluate import resolve_image_size
     from policies.base import policy_config
     from roboview_data.benchmark.format import load_benchmark
@@ -204,7 +204,7 @@ def tiny_checkpoint(scratch: Path) -> str:
 
 
 def run_all(quick: bool, output: Path, checkpoint: str, benchmark: str) -> dict:
-    from eval.provenance import now, start_entry
+    from eval.running.provenance import now, start_entry
     from pipelines._cli import setup_environment
 
     setup_environment()

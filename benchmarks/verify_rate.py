@@ -51,7 +51,7 @@ def _timed(fn):
 
 
 def run(cfg: VerifyBenchConfig) -> dict:
-    from eval.results import EpisodeStore
+    from eval.running.results import EpisodeStore
     from pipelines.verify import VerifyConfig
     from pipelines.verify import run as verify
     from roboview_data.benchmark import conformance

@@ -36,9 +36,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from eval.metrics import MetricsConfig, policy_layouts
-from eval.report import REPORT_FILE, write_report
-from eval.stats import lrt_power
+from eval.statistics.metrics import MetricsConfig, policy_layouts
+from eval.reporting.markdown import REPORT_FILE, write_report
+from eval.statistics.significance import lrt_power
 from pipelines._cli import cli_main
 
 METRICS_FILE = "metrics.json"
@@ -101,7 +101,7 @@ EXPECTED = "expected one row per episode in a .csv, .parquet or .jsonl file"
 def input_problem(path: Path) -> str | None:
     """Why `path` is not a per-episode file audit reads, in one line naming it and what was expected; None if it
     may be one (its contents are checked when read)."""
-    from eval.inputs import benchmark_root, is_parquet, is_results_folder
+    from eval.running.inputs import benchmark_root, is_parquet, is_results_folder
 
     if not path.exists():
         return f"--results={path}: no such file; {EXPECTED}"

@@ -23,10 +23,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from eval import provenance, videos
-from eval.backends import BACKENDS, ClusterLost, run_local, run_ray
-from eval.results import EpisodeStore, ResultsError, is_counted, shard_of
-from eval.rollout import WorkerSpec, WorkItem
+from eval.running import provenance, videos
+from eval.running.backends import BACKENDS, ClusterLost, run_local, run_ray
+from eval.running.results import EpisodeStore, ResultsError, is_counted, shard_of
+from eval.running.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, load_policy_types, missing_policy_type
 from policies.errors import PolicyUnavailable
@@ -89,7 +89,7 @@ class EvalConfig:
     envs_per_worker: int = 1
     # One policy server process holds the only model copy and answers every worker's envs in one batched
     # forward pass per chunk (the GPU layout: many CPU render workers, one GPU model; local backend,
-    # chunked checkpoints). See eval/policy_server.py and docs/evaluation.md.
+    # chunked checkpoints). See eval/running/policy_server.py and docs/evaluation.md.
     policy_server: bool = False
     # Episode videos (MP4 per observed camera, linked from the report): N (the first N episodes run),
     # failures, all; empty: none. A video episode renders every camera at every step.
@@ -179,7 +179,7 @@ class EvalConfig:
 
     @property
     def design(self):
-        from eval.adaptive import Design
+        from eval.statistics.adaptive import Design
 
         return Design(alpha=self.alpha, tau=self.tau, power=self.power, max_repeats=self.max_repeats)
 
@@ -331,7 +331,7 @@ class Runner:
         self.mode = cfg.eval.video_mode
         self.rerun = None
         if cfg.eval.rerun:
-            from eval.rerun_log import RerunLogger
+            from eval.running.rerun_log import RerunLogger
 
             self.rerun = RerunLogger(Path(cfg.eval.rerun))
         # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
@@ -470,7 +470,7 @@ def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, 
     """Adaptive evaluation: round r runs repeat r of every instance of the splits still running (and of the
     fixed splits); before each round the splits' test decides who stops. A rerun recomputes the same
     decisions from the rows already written, so it resumes mid-split where it stopped."""
-    from eval.adaptive import decide_split, write_record
+    from eval.statistics.adaptive import decide_split, write_record
 
     design = cfg.eval.design
     out = Path(cfg.output_dir)
@@ -527,7 +527,7 @@ def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     print(f"[evaluate] {result.episodes} episodes of {policy} in {result.output_dir / 'episodes.parquet'} "
           f"({_rate_text(result)}{infra})")
     if cfg.eval.rerun:
-        from eval.rerun_log import recordings
+        from eval.running.rerun_log import recordings
 
         files = recordings(cfg.eval.rerun)
         print(f"[evaluate] Rerun recording{'s' if len(files) > 1 else ''} of {cfg.eval.rerun}: "

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from eval.results import PARQUET, ResultsError, merge_folders
+from eval.running.results import PARQUET, ResultsError, merge_folders
 from pipelines._cli import cli_main
 
 
@@ -29,7 +29,7 @@ class MergeConfig:
     partial: bool = False
 
     def __post_init__(self) -> None:
-        from eval.inputs import results_folder_problem
+        from eval.running.inputs import results_folder_problem
 
         missing = [str(f) for f in self.folders if not f.exists()]
         if missing:

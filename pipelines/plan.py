@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections import defaultdict
 from dataclasses import dataclass, field
 
-from eval.stats import lrt_power, repeats_needed
+from eval.statistics.significance import lrt_power, repeats_needed
 from pipelines._cli import BenchmarkPath, cli_main
 
 

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from eval.agents import color_words
-from eval.results import read_episodes
+from eval.running.agents import color_words
+from eval.running.results import read_episodes
 from pipelines._cli import BenchmarkPath, cli_main
 from roboview_data.benchmark.format import load_benchmark
 from roboview_data.cli_errors import flag_errors

@@ -3,7 +3,7 @@
     python -m pipelines.report --results=outputs/eval/episodes.parquet --output_dir=outputs/report
 
 `--results` takes one parquet file or several, comma-separated (say one per policy); a results folder
-stands for its episodes.parquet, and a file may also hold several policies. Metrics follow docs/formats.md, "Metrics" (eval.metrics); for several
+stands for its episodes.parquet, and a file may also hold several policies. Metrics follow docs/formats.md, "Metrics" (eval.statistics.metrics); for several
 policies metrics.json holds {"epsilon", "resampling", "sources", "policies": {name: metrics}}.
 Inputs are checked before any work: missing files or columns, repeated episodes, mixed benchmark
 versions, and paths that are not results (the journal episodes.jsonl, a benchmark folder or table, a CSV,
@@ -15,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.metrics import EpisodesError, MetricsConfig
-from eval.report import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
+from eval.statistics.metrics import EpisodesError, MetricsConfig
+from eval.reporting.markdown import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
 from pipelines._cli import cli_main
 
 

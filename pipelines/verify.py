@@ -42,7 +42,7 @@ class VerifyConfig:
         if not self.results and not self.benchmark.path:
             raise ValueError("give --benchmark.path=DIR (verify a benchmark on this machine) or --results=DIR "
                              "(verify a results folder against its benchmark)")
-        from eval.inputs import benchmark_folder_problem, results_folder_problem
+        from eval.running.inputs import benchmark_folder_problem, results_folder_problem
 
         problem = self.results and results_folder_problem(
             Path(self.results), f" (verify a benchmark with --benchmark.path={self.results})")
@@ -111,7 +111,7 @@ def verify_benchmark(root: Path) -> VerifyResult:
 
 
 def _benchmark_path(cfg: VerifyConfig, results: Path) -> Path:
-    from eval import provenance
+    from eval.running import provenance
 
     if cfg.benchmark.path:
         return Path(cfg.benchmark.path)
@@ -124,7 +124,7 @@ def _benchmark_path(cfg: VerifyConfig, results: Path) -> Path:
 
 def _rows(results: Path) -> tuple[list[dict], dict]:
     """The results' rows (as stored) and run.json; ResultsError for a folder that holds none."""
-    from eval.results import PARQUET, RUN_FILE, ResultsError, check_format
+    from eval.running.results import PARQUET, RUN_FILE, ResultsError, check_format
 
     if not (results / RUN_FILE).is_file() or not (results / PARQUET).is_file():
         raise ResultsError(f"{results} holds no RoboView results ({RUN_FILE} and {PARQUET} expected); give the "
@@ -172,8 +172,8 @@ def check_rows(rows: list[dict], bench) -> list[Check]:
 def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
     """Every split the run chose: all its instances (after the run's value filter and shard) × its repeats, or,
     for an adaptive split, the rounds its stopping record says, with the decision its rows give."""
-    from eval.adaptive import Design, decide_split, read_record
-    from eval.results import shard_of
+    from eval.statistics.adaptive import Design, decide_split, read_record
+    from eval.running.results import shard_of
 
     values = set(run.get("values") or [])
     shard = run.get("shard")
@@ -212,8 +212,8 @@ def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
 
 
 def verify_results(cfg: VerifyConfig) -> VerifyResult:
-    from eval import isolation, provenance
-    from eval.results import read_version
+    from eval.running import isolation, provenance
+    from eval.running.results import read_version
     from roboview_data.benchmark.format import BenchmarkError, load_benchmark
 
     start = time.perf_counter()
@@ -276,7 +276,7 @@ def _summary(cfg: VerifyConfig, result: VerifyResult) -> None:
 
 
 def main(args: list[str] | None = None) -> VerifyResult:
-    from eval.results import ResultsError
+    from eval.running.results import ResultsError
 
     return cli_main(VerifyConfig, run, _summary, (ValueError, ResultsError), args)
 

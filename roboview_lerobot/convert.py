@@ -17,7 +17,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.results import EpisodeStore
+from eval.running.results import EpisodeStore
 from roboview_data.variation.instances import episode_seed
 from roboview_lerobot import RoboViewEnv
 from roboview_lerobot.env import episode_plan

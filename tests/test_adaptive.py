@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.adaptive import Design, decide, simulate
-from eval.tables import MetricsConfig
+from eval.statistics.adaptive import Design, decide, simulate
+from eval.statistics.tables import MetricsConfig
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import policy_config
 
@@ -26,7 +26,7 @@ def test_type_one_error_stays_at_alpha_when_looking_after_every_round():
 
 
 def test_fewer_episodes_than_the_fixed_design_of_equal_power():
-    from eval.stats import lrt_power
+    from eval.statistics.significance import lrt_power
 
     # The paper's camera_pose shape (21 values × 11 contexts), a bias of logit SD 0.6, SR 0.7.
     adaptive = simulate(21, 11, 0.7, 0.6, Design(alpha=0.05, tau=0.6, power=0.8, max_repeats=4), 30, seed=4)

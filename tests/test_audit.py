@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.metrics import MetricsConfig, compute_metrics
-from eval.simulate import simulate_split
+from eval.statistics.metrics import MetricsConfig, compute_metrics
+from eval.statistics.simulate import simulate_split
 from pipelines.audit import main
 
 FAST = ["--metrics.n_perm=300", "--metrics.n_glm=40", "--metrics.max_perm=300"]

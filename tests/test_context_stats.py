@@ -1,10 +1,10 @@
-"""Success by task context factor (eval/context.py), validated by simulation against known truth."""
+"""Success by task context factor (eval/statistics/context.py), validated by simulation against known truth."""
 
 import numpy as np
 import pandas as pd
 
-from eval.context import context_breakdown, context_factor_metrics
-from eval.metrics import MetricsConfig
+from eval.statistics.context import context_breakdown, context_factor_metrics
+from eval.statistics.metrics import MetricsConfig
 from roboview_data.variation.factors import FACTORS, baselines
 
 INSTRUCTIONS = FACTORS["instruction"].values

@@ -273,7 +273,7 @@ class _Flaky:
     ([None, None, "nan"], 2, 3, "policy error: action of shape (8,)"),
 ])
 def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, errors, steps, calls, reason):
-    import eval.rollout as rollout
+    import eval.running.rollout as rollout
     from roboview_data.benchmark.format import load_benchmark
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     policy = _Flaky(errors)
@@ -373,7 +373,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     import av
     import mujoco
 
-    from eval.provenance import checkpoint_hash
+    from eval.running.provenance import checkpoint_hash
 
     out = tmp_path / "ev"
     evaluate(bench, out, policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=2, repeats=1, workers=1,
@@ -397,7 +397,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     assert entry["episodes_run"] == 2 and "context_id" in entry["seed_rule"]
     assert entry["roboview_commit"] is None or len(entry["roboview_commit"].split("+")[0]) == 40
     # The report links every video from its per-value table and prints the provenance.
-    from eval.report import load_results, write_report
+    from eval.reporting.markdown import load_results, write_report
 
     episodes, sources = load_results([out / "episodes.parquet"])
     report = write_report(episodes, tmp_path / "report", sources=sources, plots=False).output_dir / "report.md"

@@ -144,7 +144,7 @@ def test_the_gate_judges_a_dim_light_by_contrast_not_by_colour_shift():
 
 
 def test_the_dose_response_trend_recovers_a_known_slope():
-    from eval.report_plots import _trend
+    from eval.reporting.plots import _trend
 
     rng = np.random.default_rng(0)
     x = np.arange(5.0)
@@ -163,7 +163,7 @@ def test_the_dose_response_trend_recovers_a_known_slope():
 def test_reports_draw_the_new_factors(tmp_path):
     import pandas as pd
 
-    from eval.report import write_report
+    from eval.reporting.markdown import write_report
     from roboview_data.variation.instances import split_task
 
     suite = [i for i in generate_suite(load_preset("extended")) if split_task(i.split)[1] in NEW]

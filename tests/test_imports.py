@@ -87,9 +87,9 @@ def test_the_cycle_finder_finds_a_cycle():
     assert cycles({"a": {"b"}, "b": set()}) == []
     # The real graph holds the edges the modules declare, lazy ones included.
     graph = import_graph()
-    assert "eval.tables" in graph["eval.compare"] and "policies.base" in graph["policies.vlm.sgl"]
-    assert "eval.metrics" not in graph["eval.compare"] and "policies.vlm.sgl" not in graph["policies.base"]
-    assert "eval.adaptive" in graph["pipelines.evaluate"]  # imported inside a method
+    assert "eval.statistics.tables" in graph["eval.statistics.compare"] and "policies.base" in graph["policies.vlm.sgl"]
+    assert "eval.statistics.metrics" not in graph["eval.statistics.compare"] and "policies.vlm.sgl" not in graph["policies.base"]
+    assert "eval.statistics.adaptive" in graph["pipelines.evaluate"]  # imported inside a method
 
 
 def test_importing_the_package_registers_the_gym_ids():

@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.metrics import MetricsConfig, compute_all_metrics, policy_layouts
-from eval.results import INFRA_ERROR, EpisodeStore, read_journal
+from eval.statistics.metrics import MetricsConfig, compute_all_metrics, policy_layouts
+from eval.running.results import INFRA_ERROR, EpisodeStore, read_journal
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import PolicyConfig, TransientPolicyError, policy_config
 from policies.errors import InfraError, RenderError
@@ -126,7 +126,7 @@ def _rows(out: Path) -> pd.DataFrame:
 
 
 def test_an_outage_past_the_retries_is_infra_and_a_policy_bug_is_not(tiny_benchmark, monkeypatch):
-    import eval.rollout as rollout
+    import eval.running.rollout as rollout
 
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     config = ScriptedConfig()
@@ -152,7 +152,7 @@ def test_an_outage_past_the_retries_is_infra_and_a_policy_bug_is_not(tiny_benchm
 
 
 def test_a_render_failure_is_an_infra_error(tiny_benchmark):
-    import eval.rollout as rollout
+    import eval.running.rollout as rollout
 
     config = ScriptedConfig()
     config.policy = _Scripted([], look=True)
@@ -180,8 +180,8 @@ def test_a_render_failure_is_an_infra_error(tiny_benchmark):
 
 
 def test_a_worker_that_keeps_dying_becomes_an_infra_row_and_the_run_goes_on(tiny_benchmark):
-    from eval.backends import run_local
-    from eval.rollout import WorkerSpec, WorkItem
+    from eval.running.backends import run_local
+    from eval.running.rollout import WorkerSpec, WorkItem
 
     works = [WorkItem(_item(tiny_benchmark), 0)]
     got = list(run_local(WorkerSpec(DyingConfig(), image_size=32, max_steps=3), works, 1, max_retries=1))
@@ -231,7 +231,7 @@ def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_ro
 
 
 def test_adaptive_decisions_never_see_infra_rows(tiny_benchmark, tmp_path, monkeypatch):
-    import eval.adaptive as adaptive
+    import eval.statistics.adaptive as adaptive
     from pipelines.evaluate import run_rounds
 
     items = [_item(tiny_benchmark, "color", i) for i in range(4)]

@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval import isolation
-from eval.metrics import compute_metrics
-from eval.rollout import EvalWorker, WorkerSpec, WorkItem
+from eval.running import isolation
+from eval.statistics.metrics import compute_metrics
+from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
 from policies.base import policy_config
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.sim.env import PickPlaceEnv
@@ -73,7 +73,7 @@ def test_an_instruction_that_depends_on_the_value_is_flagged_and_left_out(tiny_b
     color = metrics["splits"]["color"]
     assert color["isolation"]["verified"] == 4 and len(color["isolation"]["violations"]) == 4
     assert color["n_episodes"] == len(clean[clean["split"] == "color"])  # only the clean blocks were tested
-    from eval.report import render_markdown
+    from eval.reporting.markdown import render_markdown
 
     text = render_markdown(metrics, {})
     assert "## Isolation certificate" in text and "instruction differ across" in text and "4 / 8" in text

@@ -13,10 +13,10 @@ import pyarrow.parquet as pq
 import pytest
 from PIL import Image
 
-from eval.metrics import EpisodesError, MetricsConfig, policy_layouts
-from eval.report import VERSION_KEY, load_results
-from eval.report_plots import PLOTS
-from eval.results import FORMAT_KEY
+from eval.statistics.metrics import EpisodesError, MetricsConfig, policy_layouts
+from eval.reporting.markdown import VERSION_KEY, load_results
+from eval.reporting.plots import PLOTS
+from eval.running.results import FORMAT_KEY
 from pipelines.report import ReportConfig, main, run
 from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
 

@@ -9,7 +9,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from eval.report_format import bias_status, p_fmt, pct, pct_ci
+from eval.reporting.format import bias_status, p_fmt, pct, pct_ci
 from pipelines.report import ReportConfig, run
 from tests.browser import chromium_binary, load_page
 from tests.test_report import FAST, make_episodes, write

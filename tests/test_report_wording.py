@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
-from eval.report_format import bias_status
-from eval.report_plots import category_stats
+from eval.reporting.format import bias_status
+from eval.reporting.plots import category_stats
 from pipelines.report import ReportConfig, run
 from tests.test_report import FAST, make_episodes, write
 

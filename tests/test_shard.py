@@ -10,8 +10,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from eval.metrics import MetricsConfig
-from eval.results import ResultsError, shard_of
+from eval.statistics.metrics import MetricsConfig
+from eval.running.results import ResultsError, shard_of
 from pipelines.evaluate import EvalConfig
 from pipelines.merge import MergeConfig
 from pipelines.merge import main as merge_main

@@ -1,6 +1,6 @@
 """The statistics validated by simulation against known truth (synthetic tables; no simulator).
 
-Tables come from `eval.simulate` (a policy with logit-SD τ bias; τ = 0 is none). Tolerances are binomial: with N simulated tables a
+Tables come from `eval.statistics.simulate` (a policy with logit-SD τ bias; τ = 0 is none). Tolerances are binomial: with N simulated tables a
 rejection rate at level 0.05 has standard error √(0.05·0.95/N).
 """
 
@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.metrics import MetricsConfig, interaction_metrics, split_metrics
-from eval.simulate import simulate_additive_factorial, simulate_split
-from eval.stats import lrt_power, repeats_needed
+from eval.statistics.metrics import MetricsConfig, interaction_metrics, split_metrics
+from eval.statistics.simulate import simulate_additive_factorial, simulate_split
+from eval.statistics.significance import lrt_power, repeats_needed
 from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
 
 SIM = MetricsConfig(n_perm=100, n_glm=40, max_perm=100)  # fixed-B: what these simulations study
@@ -132,7 +132,7 @@ def test_plan_cli_prints_repeats_per_split(capsys):
 
 
 def test_paired_comparison_of_two_policies():
-    from eval.compare import compare_policies
+    from eval.statistics.compare import compare_policies
 
     table, _ = simulate_split(np.random.default_rng(7), n_values=6, n_contexts=8, repeats=5, tau=0.0, sr=0.99)
     a = table.assign(policy="a", success=True)
@@ -153,7 +153,7 @@ def test_paired_comparison_of_two_policies():
 def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
     from scipy import stats as sps
 
-    from eval.stats import sequential_p
+    from eval.statistics.significance import sequential_p
 
     rng = np.random.default_rng(7)
 
@@ -176,7 +176,7 @@ def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
 
 
 def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_binds():
-    from eval.report import p_fmt
+    from eval.reporting.markdown import p_fmt
 
     frame, _ = simulate_split(np.random.default_rng(3), 9, 4, 5, 2.0, 0.7)
     m = split_metrics(frame)  # default: up to 20,000 permutations

@@ -334,7 +334,7 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
 
 
 def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path):
-    from eval.agents import color_words, describe_agents, head_noun
+    from eval.running.agents import color_words, describe_agents, head_noun
     from pipelines.probe_grounding import BenchmarkPath, ProbeConfig, neighbours
     from pipelines.probe_grounding import run as probe
 

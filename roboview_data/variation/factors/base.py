@@ -70,7 +70,7 @@ class Factor:
     # later is there only when set away from its baseline, so every published id stays the same.
     always_in_id: bool = False
     # What this factor's values may change besides the factor itself, among what the isolation certificate
-    # checks stays fixed across the values of one (context, repeat) (eval/isolation.py COMPONENTS): the
+    # checks stays fixed across the values of one (context, repeat) (eval/running/isolation.py COMPONENTS): the
     # cameras it moves (`camera:front`), `object_height` (a scaled object rests at its own half-height).
     alters: tuple[str, ...] = ()
 

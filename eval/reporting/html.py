@@ -17,8 +17,8 @@ from typing import Any
 
 from markdown_it import MarkdownIt
 
-from eval import report_format as fmt
-from eval.metrics import policy_layouts
+from eval.reporting import format as fmt
+from eval.statistics.metrics import policy_layouts
 from roboview_data.variation.instances import DEFAULT_TASK, split_task
 
 HTML_FILE = "report.html"
@@ -62,7 +62,7 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
     drawn = [name for name, reason in plots.items() if reason is None]
     if not drawn:
         return {}
-    from eval.report_plots import PLOTS  # matplotlib is loaded already when figures were drawn
+    from eval.reporting.plots import PLOTS  # matplotlib is loaded already when figures were drawn
 
     found: dict[str, list[str]] = {}
     for name in drawn:
@@ -174,7 +174,7 @@ def _summary(layouts: dict[str, dict]) -> str:
 def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path,
                 sections_md: dict[str, list[str]]) -> str:
     """The page for a metrics dict (every number is read from it) and report.md's sections (`sections_md`,
-    eval.report.markdown_sections); figures are read from `out` and inlined."""
+    eval.reporting.markdown.markdown_sections); figures are read from `out` and inlined."""
     layouts = policy_layouts(metrics)
     settings = metrics["resampling"]
     figures = _figure_splits(plots)

@@ -8,11 +8,11 @@ over every episode of the instances in that cell.
 Output (`compute_metrics`, one policy): `epsilon`, `policy`, `resampling` (n_perm, n_glm, seed), `control`,
 `splits`, `interactions` and `average` (mean SR, CV and cv_excess over the single-factor splits present).
 `compute_all_metrics` returns that dict for a single policy and {"epsilon", "resampling", "policies": {name:
-dict}, "comparisons" (`eval.compare`), "rankings" (three policies or more)} for several; `policy_layouts`
+dict}, "comparisons" (`eval.statistics.compare`), "rankings" (three policies or more)} for several; `policy_layouts`
 reads either shape back.
 
 Episodes that infrastructure ended (`status` `infra_error`, docs/evaluation.md "Infrastructure errors") enter
-no number: both functions drop them (`eval.results.counted`) and count them, per split `n_infra_errors` and per
+no number: both functions drop them (`eval.running.results.counted`) and count them, per split `n_infra_errors` and per
 policy `n_infra_errors` (their total).
 """
 
@@ -27,10 +27,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import isolation, ranking, stats
-from eval.compare import baseline_retest, compare_policies
-from eval.results import counted, infra_mask
-from eval.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
+from eval.running import isolation
+from eval.statistics import ranking
+from eval.statistics import significance as stats
+from eval.statistics.compare import baseline_retest, compare_policies
+from eval.running.results import counted, infra_mask
+from eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
     EPSILON,
     SEQUENTIAL_H,
     Z95,

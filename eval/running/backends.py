@@ -2,7 +2,7 @@
 
 Both keep a bounded number of episodes in flight and yield results as they finish. A worker that
 dies loses only its episode in flight: it is logged, the worker replaced, and the episode retried
-(at most `max_retries` times; then it is yielded as a row of status `infra_error`, `eval.rollout.lost_row`,
+(at most `max_retries` times; then it is yielded as a row of status `infra_error`, `eval.running.rollout.lost_row`,
 and the run goes on: the evaluator re-runs such episodes later and on a rerun).
 
 On a Ray cluster the actors spread over the nodes. A node that is lost takes its actors' episodes in flight
@@ -23,8 +23,8 @@ from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import replace
 
-from eval.policy_server import PolicyServer
-from eval.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem, lost_row
+from eval.running.policy_server import PolicyServer
+from eval.running.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem, lost_row
 from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)

@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eval import isolation
-from eval.policy_server import RemotePolicy, ServerHandle
-from eval.results import INFRA_ERROR
+from eval.running import isolation
+from eval.running.policy_server import RemotePolicy, ServerHandle
+from eval.running.results import INFRA_ERROR
 from policies.base import Episode, PolicyConfig, TransientPolicyError
 from policies.factory import make_policy_batch
 from policies.errors import InfraError, PolicyUnavailable
@@ -41,7 +41,7 @@ log = logging.getLogger(__name__)
 TRANSIENT_ERRORS = (TimeoutError, ConnectionError, TransientPolicyError)
 POLICY_RETRIES = 2
 RETRY_BACKOFF_S = 0.5
-# The `status` column of an episode row (eval.results reads it: `counted`).
+# The `status` column of an episode row (eval.running.results reads it: `counted`).
 STATUS_OK, STATUS_INFRA = "ok", INFRA_ERROR
 
 
@@ -71,7 +71,7 @@ class WorkerSpec:
     videos_of_failures_only: bool = False
     # Render observations eagerly (every camera, every step) instead of when read: for measurements only.
     eager: bool = False
-    # Serve the policy from one server process shared by every worker (eval.policy_server); the backend
+    # Serve the policy from one server process shared by every worker (eval.running.policy_server); the backend
     # starts the server and fills in `server` for the workers it spawns.
     policy_server: bool = False
     server: ServerHandle | None = None
@@ -142,7 +142,7 @@ class _Running:
     error: str = ""
     # The error ended the episode by infrastructure (status infra_error), not by the policy.
     infra: bool = False
-    # The isolation certificate's hashes (eval/isolation.py), taken right after the reset.
+    # The isolation certificate's hashes (eval/running/isolation.py), taken right after the reset.
     isolation: str = ""
 
     def fail(self, reason: str, infra: bool) -> None:

@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import stats
-from eval.metrics import _interval, _lrt_fields, _rng, _Table, _value_order
-from eval.tables import MetricsConfig, codes
+from eval.statistics import significance as stats
+from eval.statistics.metrics import _interval, _lrt_fields, _rng, _Table, _value_order
+from eval.statistics.tables import MetricsConfig, codes
 from roboview_data.variation.factors import DEFAULT_TASK, baselines, context_factors
 
 

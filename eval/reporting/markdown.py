@@ -7,7 +7,7 @@ key-value metadata `roboview_benchmark_version`; a file without the key is not c
 of another results format (`roboview_results_format`: seeds of the old per-instance rule) — so a
 report never silently mixes incomparable runs.
 
-metrics.json is `eval.metrics.compute_all_metrics` plus `sources` (path and benchmark version of
+metrics.json is `eval.statistics.metrics.compute_all_metrics` plus `sources` (path and benchmark version of
 each file): for one policy the layout of docs/formats.md, for several {"epsilon", "resampling", "sources",
 "policies": {name: layout}, "comparisons": [...]}. report.md prints only numbers read from that dict —
 SR, CV, cv_excess and IEC ×100 as in the paper's Tables 1 and 2, p-values as they are — so the two
@@ -27,14 +27,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval import inputs, provenance, videos
-from eval.adaptive import read_record
-from eval.agents import agents_markdown, describe_agents
-from eval.context import context_breakdown
-from eval.report_format import (ALPHA, VERSION_KEY, bias_status, p_fmt, pct, pct_ci, policy_label, resampling_line,
+from eval.running import inputs, provenance, videos
+from eval.statistics.adaptive import read_record
+from eval.running.agents import agents_markdown, describe_agents
+from eval.statistics.context import context_breakdown
+from eval.reporting.format import (ALPHA, VERSION_KEY, bias_status, p_fmt, pct, pct_ci, policy_label, resampling_line,
                                  split_order, split_title)
-from eval.report_html import HTML_FILE, render_html
-from eval.metrics import (
+from eval.reporting.html import HTML_FILE, render_html
+from eval.statistics.metrics import (
     METRIC_COLUMNS,
     EpisodesError,
     MetricsConfig,
@@ -42,7 +42,7 @@ from eval.metrics import (
     compute_all_metrics,
     policy_layouts,
 )
-from eval.results import ResultsError, counted, read_episodes, read_version
+from eval.running.results import ResultsError, counted, read_episodes, read_version
 from roboview_data.variation.factors import visual_factors
 from roboview_data.variation.instances import split_task
 
@@ -374,7 +374,7 @@ def _adaptive(layouts: dict[str, dict]) -> list[str]:
 
 
 def _isolation(layouts: dict[str, dict]) -> list[str]:
-    """Per split: how many (context, repeat) blocks were verified to differ only in the factor (eval/isolation.py)."""
+    """Per split: how many (context, repeat) blocks were verified to differ only in the factor (eval/running/isolation.py)."""
     rows, violations = [], []
     for name, layout in layouts.items():
         for split, m in {**layout["splits"], **layout.get("interactions", {})}.items():
@@ -579,7 +579,7 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     (out / METRICS_FILE).write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
     outcome: dict[str, str | None] = {}
     if plots:
-        from eval.report_plots import (
+        from eval.reporting.plots import (
             make_plots,  # matplotlib only when plots are asked for
         )
 

@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from eval.tables import MetricsConfig, codes, conditional_cv, excess, group_sum
-from eval.stats import paired_success_test
+from eval.statistics.tables import MetricsConfig, codes, conditional_cv, excess, group_sum
+from eval.statistics.significance import paired_success_test
 
 N_INNER = 100  # permutations behind each swap's noise floor
 N_SWAPS = 200  # swaps behind p_cv_excess

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from eval.results import FORMAT_KEY, JOURNAL, PARQUET, RUN_FILE
+from eval.running.results import FORMAT_KEY, JOURNAL, PARQUET, RUN_FILE
 from roboview_data.benchmark.format import MANIFEST
 
 PARQUET_MAGIC = b"PAR1"
@@ -68,7 +68,7 @@ def results_file(path: str | Path) -> Path:
 
 def results_file_problem(path: Path) -> str | None:
     """Why `path` is not a RoboView results parquet, in one line; None when it is one (or an older results
-    format, which `eval.results.read_episodes` refuses with its own message)."""
+    format, which `eval.running.results.read_episodes` refuses with its own message)."""
     root = benchmark_root(path)
     if not path.exists():
         return f"{path} does not exist; {EXPECTED_FILE}"

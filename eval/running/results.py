@@ -33,7 +33,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from eval import provenance
+from eval.running import provenance
 
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"

@@ -1,7 +1,7 @@
 """Rankings of three or more policies that claim no difference the paired tests do not support.
 
 Per split, policies are ordered by SR (higher first) and by `cv_excess` (lower first). Which pairs differ
-comes from the paired tests of `eval.compare` (McNemar for SR, the swap permutation test for cv_excess),
+comes from the paired tests of `eval.statistics.compare` (McNemar for SR, the swap permutation test for cv_excess),
 Holm-adjusted over the pairs of that split and metric (statsmodels `multipletests`). Two outputs say what
 the order means:
 
@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 from statsmodels.stats.multitest import multipletests
 
-from eval.stats import paired_success_test
+from eval.statistics.significance import paired_success_test
 
 ALPHA = 0.05
 METRICS = {"sr": ("p_sr", True), "cv_excess": ("p_cv_excess", False)}  # metric → (p key, higher is better)

@@ -3,7 +3,7 @@
 A split is a table of cells (value × context); a *round* runs one more repeat of every cell, and after each
 round from `min_rounds` to `max_repeats` (the planned looks) the evaluator asks "does success depend on the
 value?" with the split's own test, the binomial GLM likelihood-ratio test of `value + context` against
-`context` (`eval.stats.factor_lrt`, χ² reference). Looking after every round would inflate the error rate of
+`context` (`eval.statistics.significance.factor_lrt`, χ² reference). Looking after every round would inflate the error rate of
 a fixed-n test; a **group-sequential design** spends it instead (Jennison & Turnbull, *Group Sequential
 Methods*, ch. 15, χ² tests):
 
@@ -23,7 +23,7 @@ Methods*, ch. 15, χ² tests):
 
 The dense-table boundaries (and the futility boundaries) come from the χ² process the LRT follows across
 looks: with df = values − 1, LRT_k ≈ ‖W_k‖² / k for a df-dimensional random walk W with N(0, I) steps under "no bias" and N(μ, I) steps under a bias of
-per-round non-centrality ‖μ‖² = λ (λ drawn from the τ prior as `eval.stats.lrt_power` does). They depend on
+per-round non-centrality ‖μ‖² = λ (λ drawn from the τ prior as `eval.statistics.significance.lrt_power` does). They depend on
 the design (values, contexts, success rate) only through df and λ, and are computed by Monte Carlo.
 
 The looks are planned (every round up to `max_repeats`): the guarantee covers them, not rounds beyond.
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-from eval.stats import factor_lrt, informative, is_sparse
+from eval.statistics.significance import factor_lrt, informative, is_sparse
 
 STOP_REASONS = ("bias", "no_bias", "max_repeats")
 PATHS = 20_000  # Monte Carlo paths behind each boundary

@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from eval.metrics import wilson_interval  # noqa: E402
+from eval.statistics.metrics import wilson_interval  # noqa: E402
 from roboview_data.variation.colors import CATEGORIES, COLORS  # noqa: E402
 from roboview_data.variation.factors import (  # noqa: E402
     DIST_STEP_M,

@@ -1,6 +1,6 @@
 """The statistics' shared vocabulary: the metrics config, binomial intervals and the CV's group arithmetic.
 
-Below both `eval.metrics` (per-split metrics) and `eval.compare` (paired policy comparisons), which build on it.
+Below both `eval.statistics.metrics` (per-split metrics) and `eval.statistics.compare` (paired policy comparisons), which build on it.
 """
 
 from __future__ import annotations

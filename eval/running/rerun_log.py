@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from eval.rollout import EpisodeResult
+from eval.running.rollout import EpisodeResult
 from roboview_data.variation.factors import factor_names
 
 

@@ -1,0 +1,2 @@
+"""Reporting: report.md (`markdown`), report.html (`html`) and the plots, rendered from the metrics
+that `eval.statistics` computes."""
