@@ -67,9 +67,9 @@ class DriftConfig:
 
 def run(cfg: DriftConfig) -> dict:
     from roboview_data.benchmark import conformance
-    from roboview_data.sim.env import PickPlaceEnv
+    from roboview_data.tasks.env import TaskEnv
 
-    reset = PickPlaceEnv.reset
+    reset = TaskEnv.reset
     out = {}
     for name, change in {"none": None, **CHANGES}.items():
         def patched(self, *args, _change=change, **kwargs):
@@ -79,11 +79,11 @@ def run(cfg: DriftConfig) -> dict:
                 mujoco.mj_forward(self.model, self.data)
             return obs
 
-        PickPlaceEnv.reset = patched
+        TaskEnv.reset = patched
         try:
             report = conformance.check(Path(cfg.benchmark.path))
         finally:
-            PickPlaceEnv.reset = reset
+            TaskEnv.reset = reset
         out[name] = {"verdict": report.verdict, **report.drift}
         d = report.drift
         print(f"[conformance_drift] {name:<20} {report.verdict:<10} images identical {d['images_identical']}/{d['images']}, "

@@ -19,11 +19,11 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from roboview_data.sim.cameras import ALL_CAMERAS  # noqa: E402
-from roboview_data.sim.env import PickPlaceEnv  # noqa: E402
-from roboview_data.sim.tasks import make_env  # noqa: E402
+from roboview_data.tasks.env import TaskEnv  # noqa: E402
+from roboview_data.tasks import make_env  # noqa: E402
 
 
-def bare_fps(env: PickPlaceEnv, frames: int) -> float:
+def bare_fps(env: TaskEnv, frames: int) -> float:
     renderer = mujoco.Renderer(env.model, env.image_size, env.image_size)
     cams = [env.scene.ids.cameras[c] for c in ALL_CAMERAS]
     renderer.update_scene(env.data, camera=cams[0])
@@ -37,7 +37,7 @@ def bare_fps(env: PickPlaceEnv, frames: int) -> float:
     return fps
 
 
-def pipeline_fps(env: PickPlaceEnv, frames: int) -> float:
+def pipeline_fps(env: TaskEnv, frames: int) -> float:
     env._observation()
     calls = max(1, frames // len(env.cameras))
     start = time.perf_counter()

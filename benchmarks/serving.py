@@ -166,7 +166,7 @@ def observations_for(cfg: ServingConfig, bench: str, image_size: int, cameras: t
     """Real first observations of the split's instances, in the droid wire layout."""
     from policies.openpi import wire_format
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
 
     items = load_benchmark(bench, [cfg.split]).splits[cfg.split][:16]
     env = make_env(cameras=cameras, image_size=image_size)

@@ -67,7 +67,7 @@ def phase_render(frames: int) -> dict:
     import numpy as np
 
     from benchmarks.render_rate import bare_fps, pipeline_fps
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
 
     env = make_env("pick_place", image_size=224)
     env.reset()

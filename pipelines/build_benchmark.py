@@ -32,13 +32,8 @@ from roboview_data.benchmark.review import adjudicate, read_decisions
 from roboview_data.benchmark.screen import agreement
 from roboview_data.benchmark.screen import write_decisions as write_screen_decisions
 from roboview_data.cli_errors import flag_errors
-from roboview_data.sim.tasks import DEFAULT_TASK
-from roboview_data.variation.instances import (
-    PRESETS,
-    SuiteConfig,
-    generate_suite,
-    load_preset,
-)
+from roboview_data.tasks import DEFAULT_TASK, PRESETS, load_preset
+from roboview_data.variation.instances import SuiteConfig, generate_suite
 from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)

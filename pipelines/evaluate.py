@@ -33,7 +33,7 @@ from policies.errors import PolicyUnavailable
 from policies.vlm.sgl import SGLConfig
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.cli_errors import flag_errors
-from roboview_data.sim.tasks import DEFAULT_TASK
+from roboview_data.tasks import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
 

@@ -61,7 +61,8 @@ def _layouts(cfg: PlanConfig) -> list[tuple[str, str, int, int]]:
 
         items = {s: [i.instance for i in v] for s, v in load_benchmark(cfg.benchmark.path).splits.items()}
     else:
-        from roboview_data.variation.instances import generate_suite, load_preset
+        from roboview_data.tasks import load_preset
+        from roboview_data.variation.instances import generate_suite
 
         items = defaultdict(list)
         for instance in generate_suite(load_preset(cfg.preset)):

@@ -27,8 +27,8 @@ from eval.running.results import read_episodes
 from pipelines._cli import BenchmarkPath, cli_main
 from roboview_data.benchmark.format import load_benchmark
 from roboview_data.cli_errors import flag_errors
-from roboview_data.sim.env import IMAGE_KEY
-from roboview_data.sim.tasks import make_env
+from roboview_data.tasks.env import IMAGE_KEY
+from roboview_data.tasks import make_env
 from roboview_data.variation.colors import COLORS, delta_e_2000
 from roboview_data.variation.instances import episode_seed
 

@@ -47,7 +47,7 @@ from pipelines._cli import cli_main
 from policies.base import AgentView, ChunkPredictor, PolicyConfig, load_policy_types, missing_policy_type
 from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
-from roboview_data.sim.tasks import DEFAULT_TASK, TASKS
+from roboview_data.tasks import DEFAULT_TASK, TASKS
 
 log = logging.getLogger(__name__)
 

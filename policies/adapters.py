@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
-from roboview_data.sim.env import PickPlaceEnv
-from roboview_data.sim.tasks import load_task
+from roboview_data.tasks.env import TaskEnv
+from roboview_data.tasks import load_task
 
 
 class ExpertPolicy:
@@ -21,7 +21,7 @@ class ExpertPolicy:
     name = "expert"
     failure_reason = ""
 
-    def __init__(self, env: PickPlaceEnv) -> None:
+    def __init__(self, env: TaskEnv) -> None:
         self._expert = load_task(env.instance.task).make_expert(env)
 
     def reset(self, episode: Episode) -> None:
@@ -68,7 +68,7 @@ class ExpertConfig(PolicyConfig):
     doc = "privileged scripted expert (upper bound)"
     privileged = True
 
-    def build(self, env: PickPlaceEnv) -> ExpertPolicy:
+    def build(self, env: TaskEnv) -> ExpertPolicy:
         return ExpertPolicy(env)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from policies.errors import TransientPolicyError  # noqa: F401  (part of the policy API)
 from roboview_data.sim.cameras import CameraPose
-from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.tasks.env import TaskEnv
 from roboview_data.sim.scene import Scene
 
 
@@ -38,7 +38,7 @@ from roboview_data.sim.scene import Scene
 class Episode:
     """What an agent is told when an episode starts: what a real robot's operator would tell it."""
 
-    # The task's name (roboview_data.sim.tasks) and its instruction in words.
+    # The task's name (roboview_data.tasks) and its instruction in words.
     task: str
     instruction: str
     # The episode seed (common random numbers: shared by every value of one context and repeat);
@@ -50,7 +50,7 @@ class Episode:
     image_size: int
 
     @classmethod
-    def of(cls, env: PickPlaceEnv, seed: int) -> Episode:
+    def of(cls, env: TaskEnv, seed: int) -> Episode:
         """The episode an env just reset into (reads its instruction and camera calibration only)."""
         return cls(env.instance.task, env.instruction, seed,
                    {c: env.scene.camera_pose(c) for c in env.cameras}, env.image_size)
@@ -69,7 +69,7 @@ class AgentView:
     observation_space: gym.spaces.Dict
 
     @classmethod
-    def of(cls, env: PickPlaceEnv) -> AgentView:
+    def of(cls, env: TaskEnv) -> AgentView:
         return cls(env.instance.task, env.cameras, env.image_size, env.depth, env.fps, env.action_space,
                    env.observation_space)
 
@@ -77,7 +77,7 @@ class AgentView:
     def of_task(cls, task: str, cameras: tuple[str, ...], image_size: int, depth: bool = False) -> AgentView:
         """The view of `task`'s env with these cameras, for a policy built away from any worker's env (a
         policy server): the env is made for its interface and closed again."""
-        from roboview_data.sim.tasks import make_env
+        from roboview_data.tasks import make_env
 
         env = make_env(task, cameras=cameras, image_size=image_size, depth=depth)
         try:

@@ -6,10 +6,10 @@ A config wrapped in the SGL (`policies.vlm.sgl.SGLConfig.wrap`) builds grounded 
 from __future__ import annotations
 
 from policies.base import AgentView, Policy, PolicyBatch, PolicyConfig
-from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.tasks.env import TaskEnv
 
 
-def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyBatch:
+def make_policy_batch(config: PolicyConfig, envs: list[TaskEnv]) -> PolicyBatch:
     """The policies for `envs` run in lockstep: one batched policy when the type builds one (a config wrapped in the SGL
     wraps it), else one policy per env (`make_policy`)."""
     if len(envs) > 1 and not config.privileged:
@@ -19,11 +19,11 @@ def make_policy_batch(config: PolicyConfig, envs: list[PickPlaceEnv]) -> PolicyB
     return PolicyBatch([make_policy(config, env) for env in envs], batched=False)
 
 
-def make_policy(config: PolicyConfig, env: PickPlaceEnv) -> Policy:
+def make_policy(config: PolicyConfig, env: TaskEnv) -> Policy:
     """Build `config`'s policy for `env`: from the env only if the type is privileged."""
     return build_policy(config, env if config.privileged else AgentView.of(env))
 
 
-def build_policy(config: PolicyConfig, view: AgentView | PickPlaceEnv) -> Policy:
+def build_policy(config: PolicyConfig, view: AgentView | TaskEnv) -> Policy:
     """`config`'s policy from an agent's view (a privileged type's from the env)."""
     return config.build(view)

@@ -76,7 +76,7 @@ from policies.errors import InfraError, PolicyUnavailable
 from policies.lerobot_policy import CHUNKED_TYPES, checkpoint_image_size, is_chunked, load_config
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY, STATE_NAMES
 from roboview_data.workers import worker_rank
 
 log = logging.getLogger(__name__)

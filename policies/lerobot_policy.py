@@ -23,7 +23,7 @@ from policies.checkpoints import CheckpointError, checkpoint_dir
 from policies.devices import resolve_device
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
+from roboview_data.tasks.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 

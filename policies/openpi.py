@@ -54,7 +54,7 @@ import numpy as np
 from policies.base import AgentView, Episode, PolicyConfig
 from policies.errors import InfraError, PolicyUnavailable
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import ACTION_NAMES, DEPTH_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.tasks.env import ACTION_NAMES, DEPTH_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
 from roboview_data.workers import worker_rank
 
 log = logging.getLogger(__name__)

@@ -76,8 +76,8 @@ class Perception:
     object_yaw: float
     # Rotational symmetry about z assumed for the grasp: π/2 for square-ish footprints, else π.
     symmetry: float
-    # Center of the box's footprint.
-    box_xy: np.ndarray
+    # Center of the target's footprint (the box, the zone; None for a task without a target).
+    box_xy: np.ndarray | None
     # Pixels of the chosen object blob and of the box, and the object's mean ΔE to the table.
     object_pixels: int
     box_pixels: int
@@ -191,20 +191,28 @@ def locate_object(candidates: np.ndarray, lab: np.ndarray, table_lab: np.ndarray
     return center, yaw, symmetry, int(stats[best, cv2.CC_STAT_AREA]), float(delta_e[labels == best].mean())
 
 
-def perceive(rgb: np.ndarray, depth: np.ndarray, camera: CameraPose, target: str = "box") -> Perception:
-    """Find the small object and the target — the yellow box, or the push task's marked zone — in one
-    RGB-D frame; raise PerceptionError if not. `box_xy` is the target's center."""
+TARGET_MASKS = {"box": lambda rgb: yellow_mask(rgb), "zone": lambda rgb: zone_mask(rgb)}
+
+
+def perceive(rgb: np.ndarray, depth: np.ndarray, camera: CameraPose, target: str | None = "box") -> Perception:
+    """Find the small object and the task's target — the yellow box, the push task's marked zone, or
+    nothing (None) — in one RGB-D frame; raise PerceptionError if not. `box_xy` is the target's center."""
+    if target is not None and target not in TARGET_MASKS:
+        raise ValueError(f"perception knows no target {target!r}; allowed: {', '.join(TARGET_MASKS)} or None")
     if rgb.shape[:2] != depth.shape:
         raise ValueError(f"rgb {rgb.shape} and depth {depth.shape} differ in size")
     scale = rgb.shape[0] * rgb.shape[1] / 224**2
     points = back_project(depth.astype(np.float64), camera)
     lab = to_lab(rgb)
     table_lab = dominant_color(lab)
-    yellow = yellow_mask(rgb) if target == "box" else zone_mask(rgb)
-    try:
-        box_xy, box_pixels = locate_box(yellow, points, max(1, round(MIN_BOX_PIXELS_224 * scale)))
-    except PerceptionError:
-        raise PerceptionError(f"{target} not found") from None
+    if target is None:
+        yellow, box_xy, box_pixels = np.zeros(rgb.shape[:2], bool), None, 0
+    else:
+        yellow = TARGET_MASKS[target](rgb)
+        try:
+            box_xy, box_pixels = locate_box(yellow, points, max(1, round(MIN_BOX_PIXELS_224 * scale)))
+        except PerceptionError:
+            raise PerceptionError(f"{target} not found") from None
     on_table = points[..., 2] > TABLE_SURFACE_MIN_Z
     candidates = on_table & ~table_mask(lab, table_lab) & ~yellow & ~robot_mask(points)
     center, yaw, symmetry, pixels, saliency = locate_object(

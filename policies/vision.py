@@ -2,7 +2,7 @@
 
 At the first observation of an episode it runs classic colour-based perception
 (`policies.perception`) on one scene camera (default `front`; `--policy.camera=left_top` picks
-another), then drives the expert's motion planner (`PickPlacePlanner.plan`) with the
+another), then runs the task's scripted solution (`TaskEnv.plan`, what its expert runs) with the
 *perceived* object position, heading and box center. It never looks again, so whatever the
 camera's view of that one frame gets wrong — a yellow object taken for the box, a grey one lost in
 the table, a far camera leaving a handful of pixels — is exactly what the benchmark measures.
@@ -22,14 +22,14 @@ import numpy as np
 from policies.base import AgentView, Episode, PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
-from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
-from roboview_data.sim.push import push_segments
+from roboview_data.tasks import load_task
 
 log = logging.getLogger(__name__)
 
 DEFAULT_CAMERA = "front"
-# The object's extent along a push, assumed (the policy does not know the shape): a 4 cm solid.
+# The object's extent across the gripper (along a push), assumed (the policy does not know the shape): 4 cm.
 PUSH_REACH_M = 0.04
 
 
@@ -74,7 +74,7 @@ class VisionPolicy:
         self.camera = camera
         self._motion = PickPlacePlanner(view.kinematic_model())
         self._calibration: CameraPose | None = None
-        self._task = "pick_place"
+        self._task = load_task()
         self.perception: Perception | None = None
         self.failure_reason = ""
         self._hold: np.ndarray | None = None
@@ -83,7 +83,7 @@ class VisionPolicy:
     def reset(self, episode: Episode) -> None:
         # Perception waits for the first observation; the episode gives the camera's calibration.
         self._calibration = episode.cameras[self.camera]
-        self._task = episode.task
+        self._task = load_task(episode.task)
         self.perception = None
         self.failure_reason = ""
         self._hold = None
@@ -102,18 +102,16 @@ class VisionPolicy:
         try:
             self.perception = perceive(observation[IMAGE_KEY.format(self.camera)],
                                        observation[DEPTH_KEY.format(self.camera)],
-                                       self._calibration, target="zone" if self._task == "push" else "box")
+                                       self._calibration, target=self._task.target)
         except PerceptionError as err:
             self.failure_reason = err.reason
             self._hold = np.append(arm_q, 0.0).astype(np.float32)
             log.debug("vision policy: %s; holding still", err.reason)
             return
         p = self.perception
-        if self._task == "push":  # slide it onto the perceived zone, as the push expert does
-            segments = push_segments(self._motion, p.object_pos[:2], p.box_xy, reach=PUSH_REACH_M)
-            self._motion.follow(segments, self._motion.pinch_position(arm_q), arm_q)
-        else:
-            self._motion.plan(p.object_pos, p.object_yaw, p.symmetry, box_xy=p.box_xy, arm_qpos=arm_q)
+        # The task's own scripted solution, as its expert runs it, through the perceived poses.
+        self._task.env_class().plan(self._motion, p.object_pos, p.object_yaw, p.symmetry, PUSH_REACH_M, p.box_xy,
+                                    arm_q)
 
     def close(self) -> None:
         pass

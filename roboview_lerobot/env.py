@@ -9,8 +9,8 @@ import gymnasium as gym
 import numpy as np
 
 from roboview_data.benchmark.format import BenchmarkItem, load_benchmark, select_items
-from roboview_data.sim.env import IMAGE_KEY, STATE_KEY
-from roboview_data.sim.tasks import make_env
+from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
+from roboview_data.tasks import make_env
 from roboview_data.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)

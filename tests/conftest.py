@@ -30,7 +30,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def env():
-    from roboview_data.sim.env import PickPlaceEnv
+    from roboview_data.tasks.pick_place import PickPlaceEnv
 
     env = PickPlaceEnv(image_size=96, depth=False)
     yield env

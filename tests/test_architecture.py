@@ -7,8 +7,9 @@ import pytest
 
 from policies.base import AgentView, Episode, PolicyConfig, policy_config
 from policies.factory import make_policy
-from roboview_data.sim.env import IMAGE_KEY, PickPlaceEnv
-from roboview_data.sim.tasks import make_env
+from roboview_data.tasks.env import IMAGE_KEY
+from roboview_data.tasks.pick_place import PickPlaceEnv
+from roboview_data.tasks import make_env
 from roboview_data.variation.factors import (
     Factor,
     baselines,
@@ -16,7 +17,8 @@ from roboview_data.variation.factors import (
     register_factor,
     unregister_factor,
 )
-from roboview_data.variation.instances import SuiteConfig, generate_suite, load_preset
+from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import SuiteConfig, generate_suite
 
 PAPER_FIRST_ID = "1209193fe4df70d1"  # first instance of the `paper` preset (tests/test_stable_ids.py)
 

@@ -18,7 +18,8 @@ from roboview_data.benchmark.fairness import FairnessThresholds
 from roboview_data.benchmark.render import InstanceRenderer
 from roboview_data.sim.cameras import WORKSPACE_CENTER, quat_to_mat
 from roboview_data.variation.factors import parse_dist_scale, parse_euler
-from roboview_data.variation.instances import generate_suite, load_preset
+from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import generate_suite
 
 ROOT = Path(__file__).parents[1]
 

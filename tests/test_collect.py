@@ -215,7 +215,7 @@ def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_action
 
 
 def test_env_shows_the_recorded_visuals(env):
-    from roboview_data.sim.env import baseline_instance
+    from roboview_data.tasks.env import baseline_instance
     from roboview_data.variation.randomization import sample_randomization
 
     visuals = sample_randomization(123, ("color", "camera_pose"))

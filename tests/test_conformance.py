@@ -18,7 +18,7 @@ import pytest
 
 from roboview_data.benchmark import conformance
 from roboview_data.benchmark.format import BenchmarkError, instance_from_record, load_benchmark, read_rows
-from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.tasks.env import TaskEnv
 
 
 @pytest.fixture()
@@ -113,7 +113,7 @@ def test_compare_images_tells_edges_from_regions():
 
 def _inject(monkeypatch, change) -> None:
     """A test hook: `change(env)` applied to the compiled model after every reset (then forwarded)."""
-    reset = PickPlaceEnv.reset
+    reset = TaskEnv.reset
 
     def patched(self, *args, **kwargs):
         out = reset(self, *args, **kwargs)
@@ -121,7 +121,7 @@ def _inject(monkeypatch, change) -> None:
         mujoco.mj_forward(self.model, self.data)
         return out
 
-    monkeypatch.setattr(PickPlaceEnv, "reset", patched)
+    monkeypatch.setattr(TaskEnv, "reset", patched)
 
 
 def _texture(env):
@@ -209,7 +209,8 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
     from pipelines._cli import BenchmarkPath
     from pipelines.verify import VerifyConfig, main
     from pipelines.verify import run as verify
-    from roboview_data.variation.instances import generate_suite, load_preset
+    from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import generate_suite
 
     clean = tmp_path / "clean"
     _evaluate(tiny_benchmark, clean)

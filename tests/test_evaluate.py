@@ -299,7 +299,7 @@ def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, error
 def test_lazy_observations_are_the_eager_pixels_and_render_only_what_is_read(bench):
     from roboview_data.benchmark.format import load_benchmark
     from roboview_data.sim.observation import StaleObservation
-    from roboview_data.sim.tasks import load_task, make_env
+    from roboview_data.tasks import load_task, make_env
 
     item = load_benchmark(bench, ["camera_pose"]).splits["camera_pose"][1]
     lazy, eager = (make_env(cameras=("front", "wrist"), image_size=48, lazy=flag) for flag in (True, False))
@@ -343,7 +343,7 @@ def test_one_checkpoint_batch_equals_separate_calls(bench, tiny_checkpoint):
     from policies.base import Episode
     from policies.lerobot_policy import LeRobotPolicy
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
 
     items = load_benchmark(bench, ["color"]).splits["color"][:2]
     env = make_env(cameras=("left_top", "wrist"), image_size=64)
@@ -442,7 +442,7 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
     from lerobot.envs.utils import preprocess_observation
 
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
     from roboview_data.variation.instances import episode_seed
     from roboview_lerobot import RoboViewEnv
 

@@ -4,8 +4,8 @@ import itertools
 
 import numpy as np
 
-from roboview_data.sim.env import PickPlaceEnv
-from roboview_data.sim.expert import ScriptedExpert
+from roboview_data.tasks.pick_place import PickPlaceEnv
+from roboview_data.tasks import ScriptedExpert
 from roboview_data.variation.factors import FACTORS, baselines
 from roboview_data.variation.instances import TaskInstance
 

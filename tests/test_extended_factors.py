@@ -13,17 +13,13 @@ from roboview_data.benchmark.fairness import (
     FairnessThresholds,
     _violations,
 )
-from roboview_data.sim.env import IMAGE_KEY
-from roboview_data.sim.expert import ScriptedExpert
-from roboview_data.sim.tasks import make_env
+from roboview_data.tasks.env import IMAGE_KEY
+from roboview_data.tasks import ScriptedExpert
+from roboview_data.tasks import make_env
 from roboview_data.variation.factors import FACTORS, baselines
 from roboview_data.variation.factors.distractors import BODIES
-from roboview_data.variation.instances import (
-    TaskInstance,
-    episode_seed,
-    generate_suite,
-    load_preset,
-)
+from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import TaskInstance, episode_seed, generate_suite
 
 NEW = ("lighting", "table_texture", "distractors", "object_size")
 
@@ -97,7 +93,7 @@ def test_distractors_never_touch_the_object_or_the_box():
         suite = [i for i in generate_suite(load_preset("extended")) if i.split == "distractors"]
         ids = env.scene.ids
         distractors = {env.model.geom(f"distractor_{name}").id for name, *_ in BODIES}
-        watched = set(ids.shape_geom.values()) | set(ids.box_geoms)
+        watched = set(ids.shape_geom.values()) | set(env.target_geoms())
         for inst in suite:
             for repeat in range(3):
                 env.reset(seed=episode_seed(inst.context_id, repeat), options={"instance": inst})

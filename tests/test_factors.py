@@ -2,10 +2,10 @@
 
 import pytest
 
+from roboview_data.tasks.pick_place import OBJECT_POSITIONS
 from roboview_data.variation.colors import COLORS
 from roboview_data.variation.factors import (
     FACTORS,
-    OBJECT_POSITIONS,
     baselines,
     context_factors,
     factor_names,

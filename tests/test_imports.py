@@ -96,7 +96,7 @@ def test_importing_the_package_registers_the_gym_ids():
     import subprocess
     import sys
 
-    code = ("import gymnasium, roboview_data; from roboview_data.sim.tasks import TASKS; "
+    code = ("import gymnasium, roboview_data; from roboview_data.tasks import TASKS; "
             "print(sorted(t.gym_id for t in TASKS.values() if t.gym_id in gymnasium.registry))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-800:]

@@ -11,7 +11,7 @@ from eval.statistics.metrics import compute_metrics
 from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
 from policies.base import policy_config
 from roboview_data.benchmark.format import load_benchmark, select_items
-from roboview_data.sim.env import PickPlaceEnv
+from roboview_data.tasks.env import TaskEnv
 
 
 def run_episodes(bench, splits, contexts=2, repeats=2):
@@ -51,14 +51,14 @@ def test_real_episodes_verify_and_camera_factors_may_move_only_their_cameras(cle
 
 
 def test_an_instruction_that_depends_on_the_value_is_flagged_and_left_out(tiny_benchmark, clean, monkeypatch):
-    reset = PickPlaceEnv.reset
+    reset = TaskEnv.reset
 
     def leaky_reset(self, *args, **kwargs):  # the LIBERO-plus bug: the perturbation leaks into the prompt
         out = reset(self, *args, **kwargs)
         self.instruction = f"{self.instruction} ({self.instance.get('color')})"
         return out
 
-    monkeypatch.setattr(PickPlaceEnv, "reset", leaky_reset)
+    monkeypatch.setattr(TaskEnv, "reset", leaky_reset)
     leaky = run_episodes(tiny_benchmark, ["color", "camera_pose"])
     report = isolation.verify(leaky)
     assert report["color"]["verified"] == 0 and len(report["color"]["violations"]) == 4

@@ -102,7 +102,7 @@ def test_served_actions_equal_in_process_actions(tiny_benchmark, tiny_checkpoint
     """Rows of a 2-step checkpoint all fail at max_steps, so compare what the model answers, step by step."""
     from policies.lerobot_policy import LeRobotPolicy
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
 
     config = policy_config("lerobot_async", server=server.address, path=str(tiny_checkpoint))
     items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:2]

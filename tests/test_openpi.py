@@ -112,7 +112,7 @@ def test_client_actions_equal_the_checkpoint_in_process(tiny_benchmark, tiny_che
     from policies.base import AgentView
     from policies.lerobot_policy import LeRobotPolicy
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
 
     item = load_benchmark(tiny_benchmark, ["color"]).splits["color"][1]
     env = make_env(cameras=("left_top", "wrist"), image_size=64)
@@ -164,7 +164,7 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
 
 def test_every_layout_carries_the_observation_there_and_back(env):
     from policies.openpi import wire_format
-    from roboview_data.sim.env import IMAGE_KEY, STATE_KEY
+    from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
 
     obs, _ = env.reset(seed=5)
     cams = ("left_top", "wrist")
@@ -292,7 +292,7 @@ def test_openpi_client_against_serve_policy_batches_connections(tiny_benchmark, 
     from policies.lerobot_policy import LeRobotPolicy
     from policies.openpi import wire_format
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
 
     items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:4]
     env = make_env(cameras=("left_top", "wrist"), image_size=64)

@@ -6,15 +6,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from roboview_data.sim.tasks import load_task, make_env
+from roboview_data.tasks import load_task, make_env
 from roboview_data.variation.factors import baselines, context_factors
-from roboview_data.variation.factors.push_context import PUSH_STARTS, ZONE_OFFSETS
-from roboview_data.variation.instances import (
-    TaskInstance,
-    episode_seed,
-    generate_suite,
-    load_preset,
-)
+from roboview_data.tasks.push import PUSH_STARTS, ZONE_OFFSETS
+from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import TaskInstance, episode_seed, generate_suite
 
 
 def push_instance(**values):

@@ -18,7 +18,8 @@ from eval.reporting.markdown import VERSION_KEY, load_results
 from eval.reporting.plots import PLOTS
 from eval.running.results import FORMAT_KEY
 from pipelines.report import ReportConfig, main, run
-from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
+from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import episode_seed, generate_suite
 
 FAST = {"metrics": MetricsConfig(n_glm=20, n_perm=50)}
 

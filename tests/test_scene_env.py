@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from roboview_data.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
-from roboview_data.sim.env import IMAGE_KEY, STATE_KEY, PickPlaceEnv, baseline_instance
+from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY, baseline_instance
+from roboview_data.tasks.pick_place import PickPlaceEnv
 from roboview_data.variation.colors import COLORS
 from roboview_data.variation.factors import FACTORS, baselines
 from roboview_data.variation.factors.camera import (

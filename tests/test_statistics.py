@@ -15,7 +15,8 @@ import pytest
 from eval.statistics.metrics import MetricsConfig, interaction_metrics, split_metrics
 from eval.statistics.simulate import simulate_additive_factorial, simulate_split
 from eval.statistics.significance import lrt_power, repeats_needed
-from roboview_data.variation.instances import episode_seed, generate_suite, load_preset
+from roboview_data.tasks import load_preset
+from roboview_data.variation.instances import episode_seed, generate_suite
 
 SIM = MetricsConfig(n_perm=100, n_glm=40, max_perm=100)  # fixed-B: what these simulations study
 

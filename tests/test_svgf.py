@@ -13,14 +13,13 @@ from roboview_data.variation.factors import (
     load_factor,
     visual_factors,
 )
+from roboview_data.tasks import PRESETS, load_preset
 from roboview_data.variation.instances import (
     DEFAULT_FACTORIAL_COLORS,
-    PRESETS,
     SuiteConfig,
     TaskInstance,
     episode_seed,
     generate_suite,
-    load_preset,
 )
 from roboview_data.variation.svgf import (
     ContextSampler,

@@ -9,8 +9,9 @@ import pytest
 from policies.base import Episode, policy_config, registered_policies
 from policies.factory import make_policy
 from policies.perception import PerceptionError, perceive
-from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv
-from roboview_data.sim.scene import BOX_CENTER
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY
+from roboview_data.tasks.pick_place import PickPlaceEnv
+from roboview_data.tasks.pick_place import BOX_CENTER
 from roboview_data.variation.factors import baselines
 from roboview_data.variation.instances import TaskInstance, episode_seed
 

@@ -77,7 +77,7 @@ def smolvla(tiny_vlas) -> tuple[Path, Path]:
 
 
 def _observation(instruction: str):
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
     from roboview_data.variation.factors import baselines
     from roboview_data.variation.instances import TaskInstance
 
@@ -164,7 +164,7 @@ def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_
     from policies.factory import make_policy
     from policies.vlm.standin import MODEL_NAME, ClassicCVModel
     from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.tasks import make_env
+    from roboview_data.tasks import make_env
     from tests.vlm_servers import ScriptedServer
 
     checkpoint, backbone = smolvla

@@ -19,7 +19,7 @@ from policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
 from policies.vlm.common import check_point
 from policies.vlm.sgl import SGLConfig, refine
 from policies.vlm.standin import MODEL_NAME, ClassicCVModel
-from roboview_data.sim.tasks import make_env
+from roboview_data.tasks import make_env
 from roboview_data.variation.factors import baselines
 from roboview_data.variation.instances import TaskInstance, episode_seed
 from tests.vlm_servers import ScriptedServer

@@ -28,8 +28,8 @@ from policies.base import Episode, PolicyConfig, TransientPolicyError
 from policies.factory import make_policy_batch
 from policies.errors import InfraError, PolicyUnavailable
 from roboview_data.benchmark.format import BenchmarkItem
-from roboview_data.sim.env import IMAGE_KEY
-from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
+from roboview_data.tasks.env import IMAGE_KEY
+from roboview_data.tasks import DEFAULT_TASK, load_task, make_env
 from roboview_data.variation.instances import episode_seed
 from roboview_data.workers import set_worker_rank
 
@@ -63,7 +63,7 @@ class WorkerSpec:
     record_media: bool = False
     # Intra-op threads of a torch policy in this worker (cores / workers); 0 leaves torch's default.
     torch_threads: int = 0
-    # The task of every instance this worker runs (roboview_data.sim.tasks).
+    # The task of every instance this worker runs (roboview_data.tasks).
     task: str = DEFAULT_TASK
     # Envs stepped in lockstep by this worker, the policy called once per step on their batch.
     envs_per_worker: int = 1

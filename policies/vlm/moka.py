@@ -31,7 +31,7 @@ from policies.vlm.grounding import (
 )
 from policies.vlm.marks import draw_marks
 from policies.vlm.prompts import MOKA_MARKS, MOKA_PLAN
-from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
 
 # Keypoints along each principal axis of a mask, as a fraction of its half-extent, and at least this

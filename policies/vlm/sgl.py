@@ -28,7 +28,7 @@ import numpy as np
 from policies.base import Episode, Policy, PolicyConfig
 from policies.vlm.client import Endpoint, VLMClient
 from policies.vlm.prompts import SGL_SCENE_PARSE
-from roboview_data.sim.env import IMAGE_KEY
+from roboview_data.tasks.env import IMAGE_KEY
 
 PRIORITY = ("color", "state", "size", "position")
 GENERIC_NOUNS = ("object", "thing", "item", "geometry", "solid")

@@ -17,7 +17,7 @@ from policies.base import AgentView, Episode, PolicyConfig
 from policies.vlm.client import VLMClient
 from policies.vlm.common import VLMConfig, check_point, object_from_point, world_point
 from policies.vlm.prompts import SIMPLE_POINTS
-from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
 
 

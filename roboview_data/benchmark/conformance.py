@@ -121,7 +121,7 @@ def observe(env, expert, instance, steps: int = 0) -> tuple[list[np.ndarray], di
     """The observed cameras' reset images (down-sampled) of `instance` at its seed, and with `steps` > 0 the
     state after `expert` (the task's scripted expert, bound to `env`) ran that many steps: 7 joints + gripper,
     object position and orientation."""
-    from roboview_data.sim.env import IMAGE_KEY
+    from roboview_data.tasks.env import IMAGE_KEY
 
     obs, _ = env.reset(seed=instance.seed, options={"instance": instance})
     images = [downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in CAMERAS]
@@ -145,7 +145,7 @@ class _Envs:
 
     def __call__(self, task: str):
         from roboview_data.sim import stack
-        from roboview_data.sim.tasks import load_task, make_env
+        from roboview_data.tasks import load_task, make_env
 
         if task not in self.envs:
             self.envs[task] = make_env(task, cameras=CAMERAS, image_size=self.image_size, lazy=True)

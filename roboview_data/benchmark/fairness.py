@@ -15,8 +15,7 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from roboview_data.sim.env import PickPlaceEnv
-from roboview_data.sim.tasks import load_task
+from roboview_data.tasks.env import TaskEnv
 from roboview_data.variation.colors import delta_e_2000, get_color, srgb_to_lab
 from roboview_data.variation.factors import FACTORS
 
@@ -76,7 +75,7 @@ class FairnessReport:
 class FairnessProbe:
     """Owns one segmentation renderer for an env; measures the env's current state."""
 
-    def __init__(self, env: PickPlaceEnv, cameras: tuple[str, ...] = OBSERVED_CAMERAS) -> None:
+    def __init__(self, env: TaskEnv, cameras: tuple[str, ...] = OBSERVED_CAMERAS) -> None:
         self.env = env
         self.cameras = cameras
         self._seg = env.new_renderer()
@@ -103,10 +102,9 @@ class FairnessProbe:
         """Measure the current scene; `rgb` holds the already rendered RGB frame of each camera."""
         ids = self.env.scene.ids
         obj = ids.shape_geom[self.env.shape]
-        # The task's target: the receiver box (pick_place) or the marked zone (push); the record's
-        # box_* fields measure it.
-        targets = load_task(self.env.task).fairness_targets
-        box = list(ids.box_geoms) if "box" in targets else [self.env.model.geom("zone").id]
+        # The task's target (pick_place's receiver box, push's marked zone); the record's box_* fields
+        # measure it. A task without one has nothing there to hide.
+        box = list(self.env.target_geoms())
         nominal_lab = np.asarray(get_color(self.env.instance.get("color")).lab)
         # Under a non-default light the rendered colour moves away from the nominal one by design: only
         # the object-table contrast (which a light that hides the object still fails) is judged.
@@ -116,7 +114,7 @@ class FairnessProbe:
         for cam in self.cameras:
             seg = self._segment(cam)
             obj_alone = self._segment_alone(cam, [obj]) == obj
-            box_alone = np.isin(self._segment_alone(cam, box), box)
+            box_alone = np.isin(self._segment_alone(cam, box), box) if box else np.zeros_like(obj_alone)
             obj_mask, box_mask = seg == obj, np.isin(seg, box)
             obj_lab = _mean_lab(rgb[cam], obj_mask)
             table_lab = _mean_lab(rgb[cam], seg == ids.table_geom)
@@ -125,9 +123,9 @@ class FairnessProbe:
                 object_visible=_fraction(obj_mask, obj_alone),
                 object_pixels=int(obj_mask.sum()),
                 object_in_frame=_in_frame(obj_alone),
-                box_visible=_fraction(box_mask, box_alone),
+                box_visible=_fraction(box_mask, box_alone) if box else 1.0,
                 box_pixels=int(box_mask.sum()),
-                box_in_frame=_in_frame(box_alone),
+                box_in_frame=_in_frame(box_alone) if box else True,
                 delta_e_nominal=_delta_e(obj_lab, nominal_lab),
                 delta_e_table=_delta_e(obj_lab, table_lab),
             )

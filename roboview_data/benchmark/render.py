@@ -19,8 +19,8 @@ from roboview_data.benchmark.fairness import (
 )
 from roboview_data.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_image
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.sim.env import IMAGE_KEY
-from roboview_data.sim.tasks import DEFAULT_TASK, make_env
+from roboview_data.tasks.env import IMAGE_KEY
+from roboview_data.tasks import DEFAULT_TASK, make_env
 from roboview_data.variation.instances import TaskInstance
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview

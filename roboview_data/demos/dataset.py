@@ -20,7 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from roboview_data.demos.recorder import DemoEpisode
-from roboview_data.sim.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.tasks.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from roboview_data.sim.env import IMAGE_KEY, STATE_KEY
-from roboview_data.sim.tasks import DEFAULT_TASK, load_task, make_env
+from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
+from roboview_data.tasks import DEFAULT_TASK, load_task, make_env
 from roboview_data.variation.factors import context_factors
 from roboview_data.variation.instances import TaskInstance, seed_from_text
 from roboview_data.variation.randomization import Randomization, sample_randomization

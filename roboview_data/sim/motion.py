@@ -1,12 +1,12 @@
 """Pick-and-place motion planner: minimum-jerk Cartesian waypoints + damped-least-squares IK.
 
-`PickPlacePlanner.plan` takes an object pose (center, heading, rotational symmetry) and a box
-center, and lays out the gripper's pinch-point path through fixed waypoints (hover, descend, close,
+`PickPlacePlanner.plan` takes an object pose (center, heading, rotational symmetry) and where to
+release it, and lays out the gripper's pinch-point path through fixed waypoints (hover, descend, close,
 lift, carry, lower, open, retreat), each segment interpolated with a minimum-jerk profile. Each
 `next_action` solves inverse kinematics (position + "pointing down at yaw ψ") on a scratch
 `MjData`, so it emits exactly the env's action: 7 joint targets + gripper command. It never reads
-the simulator's object state: whoever calls `plan` decides where the object is — the privileged
-`ScriptedExpert` (roboview_data.sim.expert) from ground truth, the `vision` policy from perception.
+the simulator's object state: whoever calls `plan` decides where the object is — a task's privileged
+expert (roboview_data.tasks) from ground truth, the `vision` policy from perception.
 """
 
 from __future__ import annotations
@@ -16,12 +16,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from roboview_data.sim.scene import BOX_CENTER, BOX_WALL_HEIGHT, HOME_QPOS, SceneIds
+from roboview_data.sim.scene import HOME_QPOS, SceneIds
 
-# Heights (m) of the pinch point: hover above the object, carry over the box, release.
+# Heights (m) of the pinch point: hover above the object, carry over the target.
 HOVER_Z = 0.12
 CARRY_Z = 0.20
-RELEASE_Z = BOX_WALL_HEIGHT + 0.08
 # The pinch site sits between the fingertips; grasp a little above the object's center.
 GRASP_OFFSET_Z = 0.004
 
@@ -68,11 +67,12 @@ class PickPlacePlanner:
         self._q = HOME_QPOS.copy()
 
     def plan(self, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, arm_qpos: np.ndarray,
-             box_xy: np.ndarray = BOX_CENTER, ee_pos: np.ndarray | None = None) -> None:
+             box_xy: np.ndarray, release_z: float, ee_pos: np.ndarray | None = None) -> None:
         """Plan the pick-and-place for an object at `obj_pos` (its center) with heading `obj_yaw`.
 
         `arm_qpos` is the arm's joint reading now; `ee_pos` the pinch point's position, computed from
-        it when not given. `box_xy` is the box center (perceived, for a non-privileged agent).
+        it when not given. `box_xy` is where to release it (perceived, for a non-privileged agent) and
+        `release_z` the pinch point's height there when the gripper opens.
         `symmetry` is the object's rotational symmetry about z (rad), which bounds the wrist turn.
         """
         q_start = np.asarray(arm_qpos, dtype=float).copy()
@@ -90,7 +90,7 @@ class PickPlacePlanner:
         grasp_z = obj_pos[2] + GRASP_OFFSET_Z
         above = np.array([obj_pos[0], obj_pos[1], HOVER_Z])
         box_above = np.array([box_xy[0], box_xy[1], CARRY_Z])
-        box_release = np.array([box_xy[0], box_xy[1], RELEASE_Z])
+        box_release = np.array([box_xy[0], box_xy[1], release_z])
         segments = [
             Segment(above, grasp_yaw, 12, 0.0),
             Segment(np.array([obj_pos[0], obj_pos[1], grasp_z]), grasp_yaw, 8, 0.0),

@@ -1,7 +1,7 @@
-"""The pick-and-place scene, built once with MjSpec and varied per instance in place.
+"""The world every task shares, built once with MjSpec and varied per instance in place.
 
-Model-level structure (robot, table, receiver box, one body per object shape, cameras) is compiled
-once per process (≈1.3 s with the Panda meshes). Everything an instance varies — object rgba and
+Model-level structure (robot, table, one body per object shape, cameras, plus what the task and the
+visual factors add) is compiled once per env (≈1.3 s with the Panda meshes). Everything an instance varies — object rgba and
 pose, which shape is on the table, camera pos/quat — is written into the compiled `MjModel`/`MjData`
 in place, which costs microseconds (dm_control's initialize_episode_mjcf / initialize_episode split).
 """
@@ -9,6 +9,7 @@ in place, which costs microseconds (dm_control's initialize_episode_mjcf / initi
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from typing import Literal
@@ -38,21 +39,9 @@ ARM_KV = np.array([160.0, 160.0, 120.0, 120.0, 60.0, 60.0, 60.0])
 
 TABLE_RGBA = (0.56, 0.52, 0.47, 1.0)
 FLOOR_RGBA = (0.30, 0.30, 0.32, 1.0)
-BOX_RGBA = (0.98, 0.82, 0.10, 1.0)
-
-# Receiver: open-top hollow box. Center on the table (m), inner half-width, wall height/thickness.
-BOX_CENTER = np.array([0.45, -0.22])
-BOX_INNER_HALF = 0.075
-BOX_WALL_HEIGHT = 0.06
-BOX_WALL_THICK = 0.008
-BOX_FLOOR_THICK = 0.008
 
 # Where shapes not used by the current instance wait: off the table, out of every view.
 PARK_XY = np.array([-3.0, 0.0])
-# The push task's target zone: a flat marked square on the table (visual only, no collision).
-ZONE_HALF = 0.05
-ZONE_RGBA = (0.30, 0.55, 0.95, 1.0)
-ZONE_PARK = np.array([-3.0, -1.5])
 
 OBJECT_MASS = 0.06  # kg
 OBJECT_FRICTION = (1.2, 0.01, 0.0005)
@@ -114,8 +103,18 @@ def _position_servos(spec: mujoco.MjSpec) -> None:
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
 
 
-def build_spec(quality: RenderQuality = "fast") -> mujoco.MjSpec:
-    """The full scene spec: Panda + 2F-85, table, receiver box, four shape bodies, cameras."""
+# Something that adds to the scene spec before it is compiled: a task's target (its receiver box, its
+# marked zone), a visual factor's textures or parked bodies.
+SpecAddition = Callable[[mujoco.MjSpec], None]
+
+
+def build_spec(quality: RenderQuality = "fast", target: SpecAddition | None = None,
+               extras: Sequence[SpecAddition] = ()) -> mujoco.MjSpec:
+    """The full scene spec: Panda + 2F-85, table, four shape bodies, cameras, plus what others add.
+
+    `target` is the task's addition (made before the shapes), `extras` the visual factors' (after
+    them, in order): compiled once, switched in place by each one's setter or applier.
+    """
     spec = mujoco.MjSpec()
     spec.modelname = "roboview_pick_place"
     spec.option.timestep = 0.002
@@ -140,17 +139,11 @@ def build_spec(quality: RenderQuality = "fast") -> mujoco.MjSpec:
     world.add_geom(name="parking", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.3, 0.5, 0.02],
                    pos=[PARK_XY[0], PARK_XY[1], -0.02], rgba=FLOOR_RGBA)
 
-    _add_receiver(world)
+    if target is not None:
+        target(spec)
     _add_shapes(spec, world)
-    world.add_geom(name="zone", type=mujoco.mjtGeom.mjGEOM_BOX, size=[ZONE_HALF, ZONE_HALF, 0.0005],
-                   pos=[ZONE_PARK[0], ZONE_PARK[1], 0.0005], rgba=list(ZONE_RGBA), contype=0, conaffinity=0)
-    # What registered factors need in the model (textures, distractor bodies, mesh variants), in
-    # registration order: compiled once, switched in place by each factor's applier.
-    from roboview_data.variation.factors import FACTORS
-
-    for factor in FACTORS.values():
-        if factor.extend_spec is not None:
-            factor.extend_spec(spec)
+    for extra in extras:
+        extra(spec)
 
     for name, pose in BASE_CAMERAS.items():
         world.add_camera(name=name, pos=list(pose.pos), quat=list(pose.quat), fovy=pose.fovy)
@@ -164,23 +157,6 @@ def build_spec(quality: RenderQuality = "fast") -> mujoco.MjSpec:
     frame = world.add_frame(pos=[0, 0, 0])
     spec.attach(panda, prefix=PANDA_PREFIX, frame=frame)
     return spec
-
-
-def _add_receiver(world: mujoco.MjsBody) -> None:
-    body = world.add_body(name="box", pos=[BOX_CENTER[0], BOX_CENTER[1], 0.0])
-    half_out = BOX_INNER_HALF + BOX_WALL_THICK
-    body.add_geom(name="box_floor", type=mujoco.mjtGeom.mjGEOM_BOX, rgba=BOX_RGBA,
-                  size=[half_out, half_out, BOX_FLOOR_THICK / 2], pos=[0, 0, BOX_FLOOR_THICK / 2])
-    wall_z = BOX_WALL_HEIGHT / 2
-    half_t = BOX_WALL_THICK / 2
-    walls = {
-        "box_wall_px": ([BOX_INNER_HALF + half_t, 0, wall_z], [half_t, half_out, wall_z]),
-        "box_wall_nx": ([-BOX_INNER_HALF - half_t, 0, wall_z], [half_t, half_out, wall_z]),
-        "box_wall_py": ([0, BOX_INNER_HALF + half_t, wall_z], [BOX_INNER_HALF, half_t, wall_z]),
-        "box_wall_ny": ([0, -BOX_INNER_HALF - half_t, wall_z], [BOX_INNER_HALF, half_t, wall_z]),
-    }
-    for name, (pos, size) in walls.items():
-        body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, pos=pos, size=size, rgba=BOX_RGBA)
 
 
 def _add_shapes(spec: mujoco.MjSpec, world: mujoco.MjsBody) -> None:
@@ -209,8 +185,6 @@ class SceneIds:
     pinch_site: int
     pad_geoms: frozenset[int]
     table_geom: int
-    box_body: int
-    box_geoms: tuple[int, ...]
     cameras: dict[str, int]
     shape_body: dict[str, int]
     shape_geom: dict[str, int]
@@ -231,8 +205,6 @@ class SceneIds:
             pinch_site=model.site(PINCH_SITE).id,
             pad_geoms=frozenset(model.geom(g).id for g in PAD_GEOMS),
             table_geom=model.geom("table").id,
-            box_body=model.body("box").id,
-            box_geoms=tuple(i for i in range(model.ngeom) if model.geom_bodyid[i] == model.body("box").id),
             cameras={name: model.camera(name if name != "wrist" else f"{PANDA_PREFIX}wrist").id
                      for name in ALL_CAMERAS},
             shape_body={s: model.body(f"obj_{s}").id for s in SHAPES},
@@ -246,11 +218,12 @@ class SceneIds:
 class Scene:
     """A compiled scene plus in-place setters for everything an instance varies."""
 
-    def __init__(self, quality: RenderQuality = "fast") -> None:
+    def __init__(self, quality: RenderQuality = "fast", target: SpecAddition | None = None,
+                 extras: Sequence[SpecAddition] = ()) -> None:
         if quality not in ("fast", "high"):
             raise ValueError(f"unknown render quality {quality!r}; allowed: 'fast', 'high'")
         self.quality = quality
-        self.spec = build_spec(quality)
+        self.spec = build_spec(quality, target, extras)
         self.model = self.spec.compile()
         self.data = mujoco.MjData(self.model)
         self.ids = SceneIds.lookup(self.model)
@@ -298,16 +271,6 @@ class Scene:
             self.data.qpos[adr + 3:adr + 7] = quat
             dof = self.ids.shape_dof[name]
             self.data.qvel[dof:dof + 6] = 0.0
-
-    def place_box(self, xy: np.ndarray | None) -> None:
-        """The receiver box at `xy` (pick_place: BOX_CENTER), or parked out of every view (None)."""
-        self.model.body_pos[self.ids.box_body][:2] = PARK_XY + [0.0, -3.0] if xy is None else np.asarray(xy, float)
-
-    def place_zone(self, xy: np.ndarray | None) -> None:
-        """The push task's marked zone centered at `xy`, or parked out of every view (None)."""
-        zone = self.model.geom("zone").id
-        target = ZONE_PARK if xy is None else np.asarray(xy, dtype=float)
-        self.model.geom_pos[zone][:2] = target
 
     def reset_robot(self, qpos: np.ndarray = HOME_QPOS) -> None:
         self.data.qpos[self.ids.arm_qpos] = qpos

@@ -5,6 +5,7 @@ so the same instance gets the same id on any machine and any backend; episode se
 (context, repeat), shared by every value of a context (docs/formats.md, "Identity and seeds"). A `SuiteConfig` (or a named preset) says which SVGF
 variant trees (`roboview_data.variation.svgf`) make up a benchmark; `generate_suite` walks them.
 
+    >>> from roboview_data.tasks import load_preset
     >>> len(generate_suite(load_preset("paper")))
     2127
 """
@@ -119,7 +120,7 @@ class TaskInstance:
     factors: tuple[tuple[str, str], ...]
     # Variation subspace of C_Gen the context came from (one of context_subspaces(task)).
     context_subspace: str
-    # The task (roboview_data.sim.tasks); kept out of the id for the paper's pick_place.
+    # The task (roboview_data.tasks); kept out of the id for the paper's pick_place.
     task: str = DEFAULT_TASK
 
     def __post_init__(self) -> None:
@@ -242,7 +243,7 @@ class SuiteConfig:
     # Restrictions of factors to some of their values, as (factor, values) pairs; a small suite
     # for demos and tests without changing the registry.
     value_subsets: tuple[tuple[str, tuple[str, ...]], ...] = ()
-    # Tasks (roboview_data.sim.tasks): every split is built for each, over the task's own contexts.
+    # Tasks (roboview_data.tasks): every split is built for each, over the task's own contexts.
     # Splits of a task other than pick_place are named "<task>_<split>" (push_color, ...).
     tasks: tuple[str, ...] = (DEFAULT_TASK,)
 
@@ -252,7 +253,8 @@ class SuiteConfig:
         object.__setattr__(self, "tasks", tuple(self.tasks))
         if not self.tasks or len(set(self.tasks)) != len(self.tasks) or any(not context_factors(t) for t in self.tasks):
             known = sorted({f.task for f in FACTORS.values() if f.task})
-            raise ValueError(f"tasks {self.tasks!r}: give distinct registered tasks; allowed: {', '.join(known)}")
+            raise ValueError(f"tasks {self.tasks!r}: give distinct registered tasks; allowed: "
+                             f"{', '.join(known) or 'none registered (import roboview_data.tasks first)'}")
         object.__setattr__(self, "factorial_colors", tuple(self.factorial_colors))
         object.__setattr__(self, "cartesian", tuple(tuple(f) for f in self.cartesian))
         subsets = tuple((name, tuple(values)) for name, values in self.value_subsets)
@@ -290,62 +292,6 @@ class SuiteConfig:
     def subsets(self) -> dict[str, tuple[str, ...]]:
         """value_subsets as a dict."""
         return dict(self.value_subsets)
-
-
-PAPER = SuiteConfig()
-PRESETS: dict[str, SuiteConfig] = {
-    # The paper's suite: 11 x (141 + 21 + 9 + 9) + 7 x 21 = 2,127 instances.
-    "paper": PAPER,
-    # Same splits over the set-union C_Gen: 9 x 180 + 147 = 1,767 instances.
-    "paper_dedupe": replace(PAPER, preset="paper_dedupe", union_mode="dedupe"),
-    # Demo/test suite: 3 contexts (G, object left, cylinder) x a few values per visual factor
-    # (8 colors, 3 poses, 3 eulers, 3 distances) + 2 colors x 3 poses = 57 instances. The colors
-    # include the vision agent's known weaknesses (yellows merge with the box, grays with the table)
-    # so the demo's report has a real bias to find.
-    "tiny": replace(
-        PAPER,
-        preset="tiny",
-        union_mode="dedupe",
-        factorial_colors=("red", "white"),
-        value_subsets=(
-            ("color", ("red", "green", "blue", "white", "gold", "yellow", "gray", "dimgray")),
-            ("camera_pose", ("orbit_r0_0", "orbit_r1_3", "orbit_r2_6")),
-            ("camera_euler", ("-6,-6", "0,0", "6,6")),
-            ("dist_scale", ("0", "4", "8")),
-            ("initial_position", ("center", "left")),
-            ("shape", ("cube", "cylinder")),
-            ("instruction", (baselines()["instruction"],)),
-        ),
-    ),
-}
-
-
-# Beyond the paper (docs/formats.md, "Factors": the `extended` preset): its splits plus one per new visual factor, for
-# both tasks. pick_place: 11 × (141 + 21 + 9 + 9 + 9 + 8 + 5 + 7) + 147 = 2,446 instances; push over its
-# own 4 × 3 = 12 per-subspace contexts (start, zone, shape, instruction; 3 values each):
-# 12 × 209 + 147 = 2,655; 5,101 in all.
-EXTENDED_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture", "distractors",
-                   "object_size", FACTORIAL_SPLIT)
-PRESETS["extended"] = replace(PAPER, preset="extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push"))
-
-
-# Demo/test suite over both tasks and every factor: the tiny preset's values, two of each new factor's,
-# two push starts × two zones.
-PRESETS["tiny_extended"] = replace(
-    PRESETS["tiny"], preset="tiny_extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push"),
-    value_subsets=(*PRESETS["tiny"].value_subsets,
-                   ("lighting", ("dim_left", "default", "bright_front")), ("table_texture", ("plain", "checker_dark")),
-                   ("distractors", ("0", "4")), ("object_size", ("0.7", "1.3")),
-                   ("push_start", ("center", "left")), ("zone", ("right", "far")), ("push_shape", ("cube",)),
-                   ("push_instruction", ("push the small object into the marked zone",))))
-
-
-def load_preset(name: str) -> SuiteConfig:
-    """Return the registered suite preset `name`; unknown names raise listing the valid ones."""
-    try:
-        return PRESETS[name]
-    except KeyError:
-        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}") from None
 
 
 def split_name(split: str, task: str) -> str:

@@ -5,6 +5,8 @@ and task context dimensions D, which only diversify the scenarios. Every factor 
 exactly as it is stored in the instance records, so the records, the samplers and the env all
 speak one vocabulary.
 
+Context factors belong to a task and are declared in its module (`roboview_data.tasks`).
+
 To add a visual factor, write one module like `color.py` — a `Factor` with its values, baseline,
 title and an applier that writes a value into the compiled scene — and add it to BUILTIN_MODULES
 (or publish it from your own package under the `roboview.factors` entry-point group, so every
@@ -40,8 +42,6 @@ from roboview_data.variation.factors.base import (
 BUILTIN_MODULES = (
     "roboview_data.variation.factors.color",
     "roboview_data.variation.factors.camera",
-    "roboview_data.variation.factors.context",
-    "roboview_data.variation.factors.push_context",
     # Beyond the paper (the `extended` preset): each one module.
     "roboview_data.variation.factors.lighting",
     "roboview_data.variation.factors.table_texture",
@@ -65,11 +65,10 @@ from roboview_data.variation.factors.camera import (  # noqa: E402  (after regis
     parse_dist_scale,
     parse_euler,
 )
-from roboview_data.variation.factors.context import OBJECT_POSITIONS  # noqa: E402
 
 __all__ = [
     "BUILTIN_MODULES", "CAMERA_POSE_BASELINE", "DEFAULT_TASK", "DIST_STEP_M", "EULER_STEPS_DEG", "FACTORS",
-    "FACTOR_KINDS", "N_ORBIT_POSES_PER_RING", "N_ORBIT_RINGS", "OBJECT_POSITIONS", "Factor", "SceneApplier", "baselines", "context_factors", "factor_names",
+    "FACTOR_KINDS", "N_ORBIT_POSES_PER_RING", "N_ORBIT_RINGS", "Factor", "SceneApplier", "baselines", "context_factors", "factor_names",
     "load_factor", "parse_camera_pose", "parse_dist_scale", "parse_euler", "record_columns", "register_factor",
     "unregister_factor", "visual_factors",
 ]

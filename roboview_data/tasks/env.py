@@ -1,4 +1,13 @@
-"""Gymnasium environment for the RoboView pick-and-place task (id ``RoboView/PickPlace-v0``)."""
+"""The env every task builds on (`TaskEnv`), and the scripted expert that plans a task from ground truth.
+
+`TaskEnv` is the shared world as a gymnasium env: the robot, the cameras, rendering, the visual
+factors applied at every reset, stepping. A task subclasses it (`roboview_data.tasks.pick_place`,
+`roboview_data.tasks.push`) with what is its own: what it adds to the scene (`add_target`), where
+its context puts things (`place_context`), its success test (`is_success`), its target for the
+fairness gate and for perception (`target`, `target_geoms`, `target_xy`) and its scripted solution
+(`plan`), which the privileged `ScriptedExpert` drives from the true object pose and the `vision`
+policy from a perceived one.
+"""
 
 from __future__ import annotations
 
@@ -14,18 +23,18 @@ import numpy as np
 from roboview_data.errors import RenderError
 from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS
 from roboview_data.sim.observation import LazyObservation
+from roboview_data.sim.motion import PickPlacePlanner, yaw_of
 from roboview_data.sim.scene import (
-    BOX_CENTER,
-    BOX_INNER_HALF,
-    BOX_WALL_HEIGHT,
     GRIPPER_DRIVER_CLOSED,
     HOME_QPOS,
+    SHAPES,
     RenderQuality,
     Scene,
 )
-from roboview_data.sim.tasks import DEFAULT_MAX_STEPS, load_task
+from roboview_data.tasks.base import DEFAULT_MAX_STEPS
 from roboview_data.variation.factors import (
-    OBJECT_POSITIONS,
+    DEFAULT_TASK,
+    FACTORS,
     SceneApplier,
     baselines,
     load_factor,
@@ -35,7 +44,6 @@ from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 
-TASK = "pick_place"
 STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
 ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
 IMAGE_KEY = "observation.images.{}"
@@ -51,14 +59,14 @@ UNSTABLE_REASON = "simulation unstable"
 RELEASED_GRIPPER = 0.25
 
 
-def baseline_instance(task: str = TASK) -> TaskInstance:
+def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
     """Every factor at its baseline: the scene the expert demos are rendered in."""
     return TaskInstance(split="baseline", varied=("color",), factors=baselines(task), context_subspace="base",
                         task=task)
 
 
-class PickPlaceEnv(gym.Env):
-    """Franka Panda + Robotiq 2F-85 puts one small object into an open yellow box.
+class TaskEnv(gym.Env):
+    """Franka Panda + Robotiq 2F-85 and one small object on a table, seen by four cameras; a task subclasses it.
 
     **Observations** (keys are the LeRobot dataset's feature keys): ``observation.images.<camera>``
     uint8 H×W×3 for each requested camera (``front``, ``left_top``, ``right_top``, ``wrist``),
@@ -71,22 +79,59 @@ class PickPlaceEnv(gym.Env):
     resets the state on its own), the step truncates the episode with
     ``info["failure_reason"] == "simulation unstable"``.
 
-    **Randomizations** — the instance fixes every factor (object color, shape and named initial
-    position, instruction, camera pose / Euler perturbation / distance). The episode seed adds
-    only a small jitter: object xy ± 1 cm and heading ± 0.35 rad, drawn from a
+    **Randomizations** — the instance fixes every factor (the visual ones: object color, camera
+    pose / Euler perturbation / distance, …; the task's context: where the object starts, its
+    shape, the instruction). The episode seed adds only what the task's `place_context` draws (a
+    small jitter: object xy ± 1 cm and heading ± 0.35 rad for the built-in tasks) from a
     `numpy.random.Generator` seeded by `reset(seed=...)` (default: the instance's seed).
     Training-time domain randomization overrides the instance's visuals through reset options:
     ``object_rgb`` (sRGB in [0, 1]) and ``cameras`` (scene camera name -> `CameraPose`).
 
-    **Success conditions** — the object's center lies inside the box's inner walls and below the
-    rim, it moves slower than 5 cm/s, it touches no part of the robot, and the gripper is open
-    (released). The episode terminates on success and truncates after `max_steps`.
+    **Success conditions** — the task's (`is_success`). The episode terminates on success and
+    truncates after `max_steps`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
-    # The task this env runs (roboview_data.sim.tasks) and the context factor naming its instruction.
-    task = TASK
-    instruction_factor = "instruction"
+    # The task this env runs (its name in roboview_data.tasks) and the context factor naming its instruction.
+    task: str = ""
+    instruction_factor: str = ""
+    # What the task adds for a policy to find besides the object ("box", "zone"; None: nothing). The
+    # fairness gate measures `target_geoms()` under the record's box_* fields; the `vision` policy's
+    # perception looks for it by this name.
+    target: str | None = None
+
+    # -- what a task declares ----------------------------------------------------------------
+    @staticmethod
+    def add_target(spec: mujoco.MjSpec) -> None:
+        """Add the task's own bodies/geoms to the scene spec (made once, before it is compiled)."""
+
+    def bind_target(self) -> None:
+        """Look up, once after compiling, the ids of what `add_target` added."""
+
+    def place_context(self, values: dict[str, str], rng: np.random.Generator) -> None:
+        """Put the object (`self.scene.place_object`) and the target where the instance's context says."""
+        raise NotImplementedError(f"{type(self).__name__} must define place_context")
+
+    def is_success(self) -> bool:
+        raise NotImplementedError(f"{type(self).__name__} must define is_success")
+
+    def target_geoms(self) -> tuple[int, ...]:
+        """Geom ids of the target the fairness gate requires visible (empty: none)."""
+        return ()
+
+    def target_xy(self) -> np.ndarray | None:
+        """Privileged: the target's world xy now (None when the task has no target)."""
+        return None
+
+    @staticmethod
+    def plan(planner: PickPlacePlanner, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, reach: float,
+             target_xy: np.ndarray | None, arm_qpos: np.ndarray, ee_pos: np.ndarray | None = None) -> None:
+        """Lay out the task's scripted solution on `planner` from an object pose and the target's xy.
+
+        `reach` is the object's extent across the gripper (m); `ee_pos` the pinch point now (computed
+        from `arm_qpos` when None). The expert passes the true values, the `vision` policy perceived ones.
+        """
+        raise NotImplementedError("this task has no scripted solution")
 
     def __init__(self, cameras: Sequence[str] = ALL_CAMERAS, image_size: int = 224, fps: int = 10,
                  max_steps: int = DEFAULT_MAX_STEPS, depth: bool = False, quality: RenderQuality = "fast",
@@ -113,13 +158,15 @@ class PickPlaceEnv(gym.Env):
         # whose images no one reads cost physics only; the pixels are those eager rendering gives.
         self.lazy = lazy
         self._generation = 0  # bumped on every reset/step: a lazy observation is readable only at its own
-        self.scene = Scene(quality)
+        extras = [f.extend_spec for f in FACTORS.values() if f.extend_spec is not None]
+        self.scene = Scene(quality, target=type(self).add_target, extras=extras)
         self.model, self.data = self.scene.model, self.scene.data
         self.n_substeps = round(1.0 / (fps * self.model.opt.timestep))
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
         self._open_renderers: list[mujoco.Renderer] = []
         self._appliers: dict[str, SceneApplier] = {}
+        self.bind_target()
         self.instance = baseline_instance(self.task)
         self.instruction = self.instance.get(self.instruction_factor)
         self.steps = 0
@@ -145,7 +192,7 @@ class PickPlaceEnv(gym.Env):
         # GL contexts must be freed before interpreter teardown, not by __del__ during it; the
         # hook is registered after mujoco.egl's own (made with the first context), so it runs first.
         if not self._open_renderers:
-            atexit.register(PickPlaceEnv._close_renderers, self._open_renderers)
+            atexit.register(TaskEnv._close_renderers, self._open_renderers)
         self._open_renderers.append(renderer)
         return renderer
 
@@ -246,13 +293,6 @@ class PickPlaceEnv(gym.Env):
             self._appliers[factor] = load_factor(factor).bind(self.scene)
         return self._appliers[factor]
 
-    def place_context(self, values: dict[str, str], rng: np.random.Generator) -> None:
-        """pick_place: the object at its named position (± 1 cm, ± 0.35 rad); the box stays where it is."""
-        xy = np.asarray(OBJECT_POSITIONS[values["initial_position"]])
-        xy = xy + rng.uniform(-POSITION_JITTER_M, POSITION_JITTER_M, size=2)
-        yaw = rng.uniform(-YAW_JITTER_RAD, YAW_JITTER_RAD)
-        self.scene.place_object(values["shape"], xy, yaw)
-
     @property
     def unstable(self) -> bool:
         """True once MuJoCo reported an unstable simulation (bad accelerations) this episode."""
@@ -286,16 +326,10 @@ class PickPlaceEnv(gym.Env):
                 return True
         return False
 
-    def is_success(self) -> bool:
-        pos, _ = self.object_pose()
-        rel = pos[:2] - BOX_CENTER
-        inside = bool(np.all(np.abs(rel) < BOX_INNER_HALF) and pos[2] < BOX_WALL_HEIGHT + 0.01)
-        if not inside:
-            return False
+    def object_speed(self) -> float:
+        """Privileged: the active object's linear speed (m/s)."""
         dof = self.scene.ids.shape_dof[self.shape]
-        speed = float(np.linalg.norm(self.data.qvel[dof:dof + 3]))
-        released = self.gripper_closure() < RELEASED_GRIPPER
-        return speed < REST_SPEED and released and not self.object_touches_robot()
+        return float(np.linalg.norm(self.data.qvel[dof:dof + 3]))
 
     def _observation(self) -> dict[str, np.ndarray]:
         renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}
@@ -324,9 +358,26 @@ class PickPlaceEnv(gym.Env):
         self._renderer = self._depth_renderer = None
 
 
-def register() -> None:
-    """Register the task's gymnasium id (idempotent; the task registry does it on import)."""
-    load_task(TASK)
 
+class ScriptedExpert:
+    """Privileged: reads the object's true pose and the target's, then follows the task's `plan`.
 
-register()
+    It solves every context at baseline visuals, so a benchmark that biases it is broken.
+    """
+
+    name = "expert"
+
+    def __init__(self, env: TaskEnv) -> None:
+        self.env = env
+        self.planner = PickPlacePlanner(env.model)
+
+    def reset(self) -> None:
+        """Plan from the current (just reset) simulator state."""
+        env = self.env
+        obj_pos, obj_quat = env.object_pose()
+        shape = SHAPES[env.shape]
+        env.plan(self.planner, obj_pos, yaw_of(obj_quat), shape.symmetry, shape.grasp_width, env.target_xy(),
+                 env.data.qpos[env.scene.ids.arm_qpos], ee_pos=env.ee_position())
+
+    def select_action(self, observation: dict | None = None) -> np.ndarray:
+        return self.planner.next_action()
