@@ -54,7 +54,7 @@ def main() -> None:
     args = parser.parse_args()
     results = {}
     for quality in ("fast", "high"):
-        env = make_env("pick_place", image_size=args.size, quality=quality)
+        env = make_env(image_size=args.size, quality=quality)
         env.reset()
         # Interleaved rounds and medians: llvmpipe timings drift with whatever else the machine does.
         rounds = [(bare_fps(env, args.frames), pipeline_fps(env, args.frames)) for _ in range(args.rounds)]

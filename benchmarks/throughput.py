@@ -69,7 +69,7 @@ def phase_render(frames: int) -> dict:
     from benchmarks.render_rate import bare_fps, pipeline_fps
     from roboview_data.tasks import make_env
 
-    env = make_env("pick_place", image_size=224)
+    env = make_env(image_size=224)
     env.reset()
     rounds = [(bare_fps(env, frames), pipeline_fps(env, frames)) for _ in range(3)]  # interleaved: drift-robust
     env.close()

@@ -262,7 +262,7 @@ def _write_offenders(out: Path, records: list[dict]) -> None:
         writer.writerow(["instance_id", "task", "split", "value", "context", "reject_reason"])
         for r in records:
             if not r["fairness"]["passed"]:
-                writer.writerow([r["instance_id"], r.get("task", "pick_place"), r["split"], r["value"], context_text(r),
+                writer.writerow([r["instance_id"], r.get("task", DEFAULT_TASK), r["split"], r["value"], context_text(r),
                                  r["fairness"]["reject_reason"]])
 
 

@@ -39,7 +39,7 @@ from roboview_data.demos.dataset import (
 )
 from roboview_data.demos.recorder import DemoCollector, DemoEpisode
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.tasks import load_task
+from roboview_data.tasks import DEFAULT_TASK, load_task
 from roboview_data.variation.randomization import validate_randomize
 from roboview_data.workers import WorkerPool
 
@@ -71,7 +71,7 @@ class DatasetConfig:
     # meta/roboview/episodes.parquet. Empty: context-only randomization, as in the paper.
     randomize: list[str] = field(default_factory=list)
     # Task the expert demonstrates: pick_place (the paper's) or push (roboview_data.tasks).
-    task: str = "pick_place"
+    task: str = DEFAULT_TASK
 
     def __post_init__(self) -> None:
         if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):

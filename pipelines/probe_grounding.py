@@ -89,7 +89,7 @@ def run(cfg: ProbeConfig) -> dict:
     if cfg.limit:
         rows = rows.head(cfg.limit)
     grounder = MokaConfig(grounding=cfg.grounding, detector_model=cfg.detector_model, model="probe").grounder()
-    env = make_env("pick_place", cameras=(cfg.camera,), image_size=cfg.image_size)
+    env = make_env(cameras=(cfg.camera,), image_size=cfg.image_size)
     cases, per_color = [], {}
     try:
         for _, row in tqdm(rows.iterrows(), total=len(rows), desc="probe", unit="ep"):

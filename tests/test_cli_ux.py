@@ -148,7 +148,7 @@ def test_evaluate_help_puts_the_common_flags_first():
 
 def test_build_help_lists_every_preset_with_its_instance_count():
     from roboview_data.tasks import PRESETS
-from roboview_data.variation.instances import generate_suite
+    from roboview_data.variation.instances import generate_suite
 
     proc = _cli("pipelines.build_benchmark", "--help")
     assert proc.returncode == 0

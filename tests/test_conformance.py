@@ -210,7 +210,7 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
     from pipelines.verify import VerifyConfig, main
     from pipelines.verify import run as verify
     from roboview_data.tasks import load_preset
-from roboview_data.variation.instances import generate_suite
+    from roboview_data.variation.instances import generate_suite
 
     clean = tmp_path / "clean"
     _evaluate(tiny_benchmark, clean)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from roboview_data.tasks import DEFAULT_TASK
 from roboview_data.variation.factors import FACTORS, visual_factors
 from roboview_data.variation.instances import split_task
 
@@ -71,5 +72,5 @@ def split_order(layouts: dict[str, dict], key: str) -> list[str]:
 
 def task_order(splits: Sequence[str]) -> list[str]:
     """Splits grouped by task (the default task first), each task's in the factor registry's order."""
-    return sorted(splits, key=lambda s: (split_task(s)[0] != "pick_place", split_task(s)[0],
+    return sorted(splits, key=lambda s: (split_task(s)[0] != DEFAULT_TASK, split_task(s)[0],
                                          (*visual_factors(), split_task(s)[1]).index(split_task(s)[1])))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from roboview_data.variation.factors import DEFAULT_TASK
 from roboview_data.variation.instances import split_task
 
 
@@ -38,8 +39,8 @@ def write_card(out: Path, manifest: dict) -> None:
     for split in splits:
         by_task.setdefault(split_task(split)[0], []).append(split)
     configs = []
-    for task, names in sorted(by_task.items(), key=lambda kv: kv[0] != "pick_place"):
-        configs += [f"- config_name: {'default' if task == 'pick_place' else task}", "  data_files:"]
+    for task, names in sorted(by_task.items(), key=lambda kv: kv[0] != DEFAULT_TASK):
+        configs += [f"- config_name: {'default' if task == DEFAULT_TASK else task}", "  data_files:"]
         for split in names:
             configs += [f"  - split: {split}", f"    path: data/{split}.parquet"]
     for name in manifest.get("rejected_tables", ["rejected"] if manifest["rejected"] else []):

@@ -40,6 +40,7 @@ from roboview_data.benchmark.format import CONFORMANCE as FOLDER
 from roboview_data import files
 from roboview_data.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
 from roboview_data.files import files_sha256
+from roboview_data.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
 
@@ -323,7 +324,7 @@ def at_start(root: Path, version: str, cache_dir: Path | None = None) -> Report:
     read from the cache, anything else is measured (a few seconds) and cached."""
     reference = read_reference(root)
     envs = _Envs(reference["image_size"])
-    first = reference["instances"][0].get("task") or "pick_place"
+    first = reference["instances"][0].get("task") or DEFAULT_TASK
     envs(first)
     key = hashlib.sha256(json.dumps({"version": version, "stack": envs.stack, "code": _code_hash()},
                                     sort_keys=True).encode()).hexdigest()[:32]

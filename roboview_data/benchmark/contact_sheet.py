@@ -10,7 +10,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from roboview_data.variation.factors import context_factors
+from roboview_data.variation.factors import DEFAULT_TASK, context_factors
 
 PAGE = """<!doctype html>
 <html><head><meta charset="utf-8"><title>RoboView contact sheet</title>
@@ -68,13 +68,13 @@ def _card(record: dict, accepted: bool, rejected_by: str) -> str:
             f'<img loading="lazy" src="previews/{record["instance_id"]}.png" alt="preview">'
             f'<br><code>{record["instance_id"]}</code> {html.escape(record["split"])}: '
             f'{html.escape(record["factor"])} = <b>{html.escape(record["value"])}</b>'
-            f'<br>{html.escape(record.get("task", "pick_place"))}: {html.escape(context_text(record))}'
+            f'<br>{html.escape(record.get("task", DEFAULT_TASK))}: {html.escape(context_text(record))}'
             f'<br>{numbers}{reason}</div>')
 
 
 def context_text(record: dict) -> str:
     """The instance's context values (its task's context factors), e.g. 'center, cube, “put …”'."""
-    names = context_factors(record.get("task") or "pick_place")
+    names = context_factors(record.get("task") or DEFAULT_TASK)
     return ", ".join(f"“{record[n]}”" if n.endswith("instruction") else str(record[n]) for n in names)
 
 

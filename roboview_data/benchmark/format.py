@@ -32,7 +32,7 @@ import datasets
 import pyarrow.parquet as pq
 
 from roboview_data.files import files_sha256
-from roboview_data.variation.factors import FACTORS, factor_names, record_columns
+from roboview_data.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
 from roboview_data.variation.instances import TaskInstance, canonical_json
 
 MANIFEST = "benchmark.json"
@@ -98,7 +98,7 @@ def suite_hash(accepted: dict[str, list[dict]]) -> str:
 
 def write_split(rows: list[dict], path: Path, rejected: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    task = rows[0].get("task", "pick_place")
+    task = rows[0].get("task", DEFAULT_TASK)
     ds = datasets.Dataset.from_list(rows, features=instance_features(task, rejected))
     ds.to_parquet(str(path))
 
@@ -276,7 +276,7 @@ def instance_from_record(record: dict) -> TaskInstance:
     """Rebuild the instance; its id, value, context and seed must reproduce the stored ones (else the row was
     edited: a `value` that names another color, a `context_id` or `seed` that leaves its context's common random
     numbers)."""
-    task = record.get("task") or "pick_place"
+    task = record.get("task") or DEFAULT_TASK
     factors = {name: record[name] for name in factor_names(task) if name in record}
     try:
         instance = TaskInstance(record["split"], tuple(record["factor"].split("|")), factors,

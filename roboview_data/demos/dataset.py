@@ -21,6 +21,7 @@ import pandas as pd
 
 from roboview_data.demos.recorder import DemoEpisode
 from roboview_data.tasks.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +53,7 @@ class CollectionSignature:
     seed: int
     max_steps: int
     randomize: tuple[str, ...] = ()  # collections made before randomization existed had none
-    task: str = "pick_place"  # collections made before the task axis were pick_place
+    task: str = DEFAULT_TASK  # collections made before the task axis were pick_place
 
 
 def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
@@ -23,7 +23,6 @@ from roboview_data.variation.colors import get_color
 from roboview_data.variation.factors import (
     DEFAULT_TASK,
     FACTORS,
-    baselines,
     context_factors,
     factor_names,
     load_factor,
