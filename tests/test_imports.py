@@ -101,3 +101,44 @@ def test_importing_the_package_registers_the_gym_ids():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-800:]
     assert proc.stdout.strip() == "['RoboView/PickPlace-v0', 'RoboView/Push-v0']"
+
+
+# The floors, lowest first: a module imports only from its own floor or those below it.
+FLOORS = (
+    ("roboview_data.errors", "roboview_data.files", "roboview_data.cli_errors", "roboview_data.workers"),
+    ("roboview_data.sim",),
+    ("roboview_data.variation",),
+    ("roboview_data.tasks",),
+    ("roboview_data.benchmark", "roboview_data.demos", "roboview_data"),
+    ("policies",),
+    ("eval.running",),
+    ("eval.statistics",),
+    ("eval.reporting", "eval"),
+    ("roboview_lerobot",),
+    ("pipelines", "benchmarks"),
+)
+
+
+def floor_of(module: str) -> int:
+    """The floor of the longest prefix that names `module` or a package above it."""
+    best, floor = -1, None
+    for level, prefixes in enumerate(FLOORS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best:
+                best, floor = len(prefix), level
+    assert floor is not None, f"{module} is on no floor: add it to FLOORS"
+    return floor
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{module} → {target}" for module, targets in graph.items() for target in targets
+                  if floor_of(target) > floor_of(module))
+
+
+def test_no_module_imports_from_a_higher_floor():
+    found = upward_imports(import_graph())
+    assert not found, "imports from a higher floor: " + "; ".join(found)
+    # The check sees an arrow back down-up: the world importing a task, a factor importing the world is fine.
+    assert upward_imports({"roboview_data.sim.scene": {"roboview_data.variation.factors"}}) == [
+        "roboview_data.sim.scene → roboview_data.variation.factors"]
+    assert upward_imports({"roboview_data.variation.factors.object_size": {"roboview_data.sim.scene"}}) == []
