@@ -476,7 +476,7 @@ def _stacks(sources: list[dict[str, Any]]) -> list[str]:
     return lines + [""] if len(lines) > 2 else []
 
 
-def _provenance(sources: list[dict[str, Any]]) -> list[str]:
+def provenance_section(sources: list[dict[str, Any]]) -> list[str]:
     """What produced each results file: versions, checkpoint hash, command, machine, times."""
     lines = ["## Provenance", ""]
     for source in sources:
@@ -531,7 +531,7 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
             "context": _context_factors(layouts), "adaptive": _adaptive(layouts), "diagnostics": _diagnostics(layouts),
             "isolation": _isolation(layouts), "extremes": _extremes(layouts), "videos": _videos(metrics, layouts),
             "agents": agents_markdown(metrics.get("agents", {})), "stack": _stacks(metrics.get("sources", [])),
-            "provenance": _provenance(metrics.get("sources", []))}
+            "provenance": provenance_section(metrics.get("sources", []))}
 
 
 def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None],
