@@ -73,6 +73,15 @@ def test_files_and_plots_are_written(report):
             assert image.format == "PNG" and image.size[0] > 200
 
 
+def test_forest_plots_follow_the_factor_registry():
+    from roboview_data.variation.factors import visual_factors
+
+    forests = [split for name, (split, key, _) in PLOTS.items() if name == f"forest_{split}.png" and key == "splits"]
+    assert forests == list(visual_factors())
+    assert forests[:8] == ["color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture",
+                           "distractors", "object_size"]
+
+
 def test_metrics_json_holds_both_policies(report):
     metrics = json.loads((report.output_dir / "metrics.json").read_text())
     assert metrics == report.metrics

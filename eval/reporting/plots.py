@@ -31,6 +31,7 @@ from roboview_data.variation.factors import (  # noqa: E402
     parse_camera_pose,
     parse_dist_scale,
     parse_euler,
+    visual_factors,
 )
 from roboview_data.variation.instances import DEFAULT_TASK, split_task  # noqa: E402
 
@@ -334,9 +335,8 @@ PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_table_texture.png": ("table_texture", "splits", plot_table_texture),
     "sr_distractors.png": ("distractors", "splits", plot_distractors),
     "sr_object_size.png": ("object_size", "splits", plot_object_size),
-    **{f"forest_{split}.png": (split, "splits", plot_forest(split))
-       for split in ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture", "distractors",
-                     "object_size")},
+    # One forest plot per visual factor of the registry, in its order (factors registered later get theirs too).
+    **{f"forest_{split}.png": (split, "splits", plot_forest(split)) for split in visual_factors()},
 }
 
 
