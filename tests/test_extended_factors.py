@@ -181,4 +181,4 @@ def test_reports_draw_the_new_factors(tmp_path):
         for file in (name, f"push_{name}"):  # one figure per task
             assert result.plots[file] is None and (tmp_path / file).stat().st_size > 10_000, file
     table1 = (tmp_path / "report.md").read_text()
-    assert "Lighting SR" in table1 and "Distractors SR" in table1
+    assert "| Lighting | sim |" in table1 and "| Distractors | sim |" in table1

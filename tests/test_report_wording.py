@@ -26,7 +26,7 @@ def test_a_policy_that_fails_everything_is_not_called_unbiased(tmp_path):
     row = next(line for line in summary.splitlines() if line.startswith("| random"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     n = len(result.metrics["splits"])
-    assert cells[2] == "none" and cells[3] == "—" and cells[4].count("(every episode failed)") == n
+    assert cells[4] == "none" and cells[5] == "—" and cells[6].count("(every episode failed)") == n
 
 
 def test_absent_color_categories_are_left_out_not_drawn_as_zero():
