@@ -36,8 +36,8 @@ def report(tmp_path_factory):
 
 
 class _Sections(HTMLParser):
-    """Text of every table cell, grouped by the nearest enclosing <section id=…> and table; with `bold`, bold
-    text is wrapped in ** as report.md writes it."""
+    """Text of every table cell, grouped by the nearest enclosing <section id=…> and table; with `bold`,
+    bold text is wrapped in ** as report.md writes it."""
 
     def __init__(self, bold: bool = False) -> None:
         super().__init__()
@@ -143,8 +143,8 @@ def test_report_md_and_html_print_the_same_tables(report):
 
     md_summary = _markdown_tables(markdown, "Summary")
     assert md_summary == parser.tables["summary"][0]
-    assert md_summary[0] == ["Policy", "Average SR", "Average CV", "Average cv_excess", "Splits with bias (p < 0.05)",
-                             "No bias detected", "Not testable"]
+    assert md_summary[0] == ["Policy", "Average SR", "Average CV", "Average cv_excess",
+                             "Splits with bias (p < 0.05)", "No bias detected", "Not testable"]
 
     header, *rows = _markdown_tables(markdown, "Episode videos")
     filmed = {r[0] for r in rows}

@@ -4,8 +4,8 @@ episode videos it links).
 Every number on the page is read from the same metrics dict as report.md, and the tables both print (the
 summary, Table 1, the episode videos) are declared once, in eval.reporting.tables: the same columns, headings
 and cells. Table 1 becomes one block per split: its policies in rows, the split's figures under them, and the
-filmed episodes of each value linked. The other sections (directions, interactions, comparisons, rankings, adaptive
-sampling, the isolation certificate, provenance) are report.md's own, rendered by markdown-it.
+filmed episodes of each value linked. The other sections (directions, interactions, comparisons, rankings,
+adaptive sampling, the isolation certificate, provenance) are report.md's own, rendered by markdown-it.
 """
 
 from __future__ import annotations
@@ -71,12 +71,9 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
 
 
 def _values_line(m: dict[str, Any]) -> str:
-    sig = [(v, s) for v, s in m["per_value"].items()
-           if s["q_value"] is not None and s["q_value"] < fmt.ALPHA and s["odds_ratio"] is not None]
-    low = sorted((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] < 1)
-    high = sorted(((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] > 1), reverse=True)
+    low, high = fmt.directions(m)
     text = (lambda items: ", ".join(f"<code>{_e(v)}</code> (OR {o:.2g}, SR {fmt.pct(m['per_value'][v]['sr'])})"
-                                    for o, v in items) or "none")
+                                    for v, o in items) or "none")
     return f"below the rest: {text(low)}; above the rest: {text(high)}"
 
 
@@ -134,11 +131,12 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
     splits = fmt.task_order(fmt.split_order(layouts, "splits"))
     sections: list[tuple[str, str, str]] = []  # (anchor, title, HTML)
     summary = tables.summary_table(layouts)
-    sections.append(("summary", "Summary", tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>"))
+    sections.append(("summary", "Summary",
+                     tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>"))
     legend = (f"<p class=note>{_e(tables.Table(tables.SPLIT_COLUMNS).legend())} The CV permutation p is in "
               "metrics.json and the calibration section.</p>")
-    sections.append(("splits", "Splits", legend + "\n".join(_split_block(s, layouts, metrics, figures.get(s, []), out)
-                                                            for s in splits)))
+    blocks = [_split_block(s, layouts, metrics, figures.get(s, []), out) for s in splits]
+    sections.append(("splits", "Splits", legend + "\n".join(blocks)))
     titles = {"infra": "Episodes ended by infrastructure", "interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",
               "context": "Success by task context", "adaptive": "Adaptive sampling", "isolation": "Isolation certificate",
               "diagnostics": "Sample sizes and calibration", "agents": "VLM agents",

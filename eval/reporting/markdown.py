@@ -31,8 +31,8 @@ from eval.running import inputs, provenance, videos
 from eval.statistics.adaptive import read_record
 from eval.running.agents import agents_markdown, describe_agents
 from eval.statistics.context import context_breakdown
-from eval.reporting.format import (ALPHA, VERSION_KEY, p_fmt, pct, pct_ci, policy_label, resampling_line, split_order,
-                                   split_title)
+from eval.reporting.format import (ALPHA, VERSION_KEY, directions, p_fmt, pct, pct_ci, policy_label,
+                                   resampling_line, split_order, split_title)
 from eval.reporting.html import HTML_FILE, render_html
 from eval.reporting.tables import (POLICY, SPLIT_COLUMNS, VIDEO_COLUMNS, Table, markdown_table, split_table,
                                    summary_table, to_markdown, video_splits, videos_table)
@@ -126,7 +126,8 @@ def load_results(paths: Sequence[str | Path],
 
 
 def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
-    floor_only = [f"{name}/{split}" for name, layout in layouts.items() for split, m in layout["splits"].items()
+    floor_only = [f"{name}/{split}" for name, layout in layouts.items()
+                  for split, m in layout["splits"].items()
                   if m["cv_null"] is not None and (m["p_value"] is None or m["p_value"] >= ALPHA)]
     return ["CVs indistinguishable from their noise floor (p ≥ 0.05): "
             + (", ".join(floor_only) if floor_only else "none") + ".", ""]
@@ -144,8 +145,8 @@ def _privileged_note(layouts: dict[str, dict]) -> list[str]:
 
 
 def _summary(layouts: dict[str, dict]) -> list[str]:
-    """Is each policy biased? Per policy its averages and the splits with a bias, with none detected, and those
-    the test could not judge (and why): a policy that fails everything is not reported unbiased."""
+    """Is each policy biased? Per policy its averages and the splits with a bias, with none detected, and
+    those the test could not judge (and why): a policy that fails everything is not reported unbiased."""
     table = summary_table(layouts)
     return ["## Summary", "", *to_markdown(table), table.legend(), "", *_privileged_note(layouts)]
 
@@ -174,8 +175,8 @@ def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list
             for name, layout in layouts.items()) + ".", ""]
     title = "## Table 1 — success rate and Bias Coefficient (×100)" + (f", task `{task}`" if task else "")
     return [title, "", *to_markdown(table), Table(SPLIT_COLUMNS).legend(),
-            "SR is weighted by episodes, not averaged over instances as in the paper. No interval is given for "
-            "CV or cv_excess: none has passed the coverage simulation.", "", *averages,
+            "SR is weighted by episodes, not averaged over instances as in the paper. No interval is given "
+            "for CV or cv_excess: none has passed the coverage simulation.", "", *averages,
             *_noise_floor_line(layouts)]
 
 
@@ -221,12 +222,9 @@ def _directions(layouts: dict[str, dict]) -> list[str]:
              "BH q < 0.05)", ""]
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():
-            sig = [(v, s) for v, s in m["per_value"].items() if s["q_value"] is not None and s["q_value"] < ALPHA]
-            low = sorted((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] is not None and s["odds_ratio"] < 1)
-            high = sorted(((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] is not None and s["odds_ratio"] > 1),
-                          reverse=True)
+            low, high = directions(m)
             text = (lambda items: ", ".join(f"{v} (OR {o:.2g}, SR {pct(m['per_value'][v]['sr'])})"
-                                            for o, v in items) or "none")
+                                            for v, o in items) or "none")
             lines.append(f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}")
     return [*lines, ""]
 
@@ -258,7 +256,8 @@ def _rankings(metrics: dict[str, Any]) -> list[str]:
                 f"{r['policy']} {pct(r['value'])} ({r['group']}; {r['rank_range'][0]}"
                 + (f"–{r['rank_range'][1]}" if r['rank_range'][1] != r['rank_range'][0] else "") + ")"
                 for r in table)])
-    return lines + markdown_table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows) + [""]
+    return [*lines, *markdown_table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows),
+            ""]
 
 
 def _context_factors(layouts: dict[str, dict]) -> list[str]:
@@ -315,8 +314,8 @@ def _adaptive(layouts: dict[str, dict]) -> list[str]:
             f"{design['power']}, at most {design['max_repeats']} rounds; docs/adaptive.md). The sampling was adaptive: "
             "the fixed-sample statistics in the tables above treat the episodes run as a fixed sample, and their "
             "p-values are approximate; the stop below is the sequential test's decision.", "",
-            *markdown_table(["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound", "futility bound"],
-                    rows), ""]
+            *markdown_table(["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound",
+                             "futility bound"], rows), ""]
 
 
 def _isolation(layouts: dict[str, dict]) -> list[str]:
@@ -341,7 +340,8 @@ def _isolation(layouts: dict[str, dict]) -> list[str]:
     return ["## Isolation certificate", "",
             "Every value of one (context, repeat) must share the instruction, the initial robot state and object pose, "
             "the episode seed, every other factor's value and the calibration of the cameras the factor does not move.",
-            "", *markdown_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows), *violations, ""]
+            "", *markdown_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows),
+            *violations, ""]
 
 
 def _infra_errors(layouts: dict[str, dict]) -> list[str]:

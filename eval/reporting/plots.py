@@ -335,7 +335,7 @@ PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_table_texture.png": ("table_texture", "splits", plot_table_texture),
     "sr_distractors.png": ("distractors", "splits", plot_distractors),
     "sr_object_size.png": ("object_size", "splits", plot_object_size),
-    # One forest plot per visual factor of the registry, in its order (factors registered later get theirs too).
+    # A forest plot per visual factor of the registry, in its order (one registered later: make_plots).
     **{f"forest_{split}.png": (split, "splits", plot_forest(split)) for split in visual_factors()},
 }
 

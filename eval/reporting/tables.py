@@ -6,7 +6,8 @@ a heading or a number.
 - `SPLIT_COLUMNS`, per policy in one split (`split_table`): report.md's Table 1 (one table per task, a row per
   split and policy) and report.html's block per split.
 - `SUMMARY_COLUMNS`, per policy (`summary_table`): both pages' Summary.
-- `VIDEO_COLUMNS`, per filmed value (`videos_table`): report.md's video table and each block's videos on the page.
+- `VIDEO_COLUMNS`, per filmed value (`videos_table`): report.md's video table and each split block's videos
+  on the page.
 """
 
 from __future__ import annotations
@@ -79,7 +80,8 @@ class Table:
             if table.columns != self.columns:
                 raise ValueError(f"group {name!r} has columns {table.headings}; expected {self.headings}")
         lead = Column(heading, None, str, numeric=False)
-        return Table((lead, *self.columns), [[Cell(name), *row] for name, table in groups for row in table.rows])
+        rows = [[Cell(name), *row] for name, table in groups for row in table.rows]
+        return Table((lead, *self.columns), rows)
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -118,7 +120,8 @@ def _html_cell(cell: Cell) -> str:
 
 
 def to_html(table: Table) -> str:
-    """The table as report.html prints it: each heading's meaning as its tooltip, numeric columns right-aligned."""
+    """The table as report.html prints it: each heading's meaning as its tooltip, numeric columns
+    right-aligned."""
     head = "".join(f'<th title="{_e(c.note)}">{_e(c.heading)}</th>' if c.note else f"<th>{_e(c.heading)}</th>"
                    for c in table.columns)
     body = "".join("<tr>" + "".join(f"<td{' class=num' if col.numeric else ''}>{_html_cell(cell)}</td>"
@@ -126,10 +129,11 @@ def to_html(table: Table) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
-# -- per split: Table 1 and the page's split blocks --------------------------------------------------------------
+# -- per split: Table 1 and the page's split blocks --------------------------------------------------
 
 def verdict(m: dict[str, Any]) -> Cell:
-    """What the split's test says (`bias_status`): bias with its p, no bias detected, or not testable and why."""
+    """What the split's test says (`bias_status`): bias with its p, no bias detected, or not testable and
+    why."""
     status, why = bias_status(m)
     if status == "not testable":
         return Cell(f"not testable: {why}", tone="note")
@@ -149,8 +153,9 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
            "the CV this table shows when the value does not matter (value labels permuted within context and "
            "repeat), ×100"),
     Column("cv_excess", "cv_excess", lambda row: pct(row[1]["cv_excess"]),
-           "√max(0, CV² − noise floor²), the bias beyond binomial noise, ×100: rank policies on it, not on CV; "
-           "bold: the lowest, where it is significantly lower than the next policy's (paired test, p < 0.05)"),
+           "√max(0, CV² − noise floor²), the bias beyond binomial noise, ×100: rank policies on it, not on "
+           "CV; bold: the lowest, where it is significantly lower than the next policy's (paired test, "
+           "p < 0.05)"),
     Column("p", "p_value", lambda row: p_fmt(row[1]["p_value"], row[1].get("p_value_at_floor")),
            "likelihood-ratio test of a binomial GLM value + context against context (permutation-calibrated "
            "where cells are sparse); N/A: no context holds both outcomes"),
@@ -162,7 +167,8 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
 
 
 def _significant_pairs(metrics: dict[str, Any], split: str) -> dict[frozenset[str], float | None]:
-    return {frozenset(c["policies"]): c["p_cv_excess"] for c in metrics.get("comparisons", []) if c["split"] == split}
+    return {frozenset(c["policies"]): c["p_cv_excess"]
+            for c in metrics.get("comparisons", []) if c["split"] == split}
 
 
 def _best(metrics: dict[str, Any], split: str, values: dict[str, float | None]) -> str | None:
@@ -189,7 +195,7 @@ def split_table(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -
     return table
 
 
-# -- per policy: the summary -------------------------------------------------------------------------------------
+# -- per policy: the summary ----------------------------------------------------------------------
 
 def _splits_by_status(layout: dict[str, Any], wanted: str) -> list[str]:
     status = {s: bias_status(m) for s, m in layout["splits"].items()}
@@ -201,10 +207,10 @@ SUMMARY_COLUMNS: tuple[Column, ...] = (
     *(Column(f"Average {label}", key, lambda row, key=key: pct((row[1].get("average") or {}).get(key)),
              f"mean {label} over the policy's single-factor splits, ×100")
       for key, label in (("sr", "SR"), ("cv", "CV"), ("cv_excess", "cv_excess"))),
-    Column("Splits with bias (p < 0.05)", None, lambda row: ", ".join(_splits_by_status(row[1], "bias")) or "none",
-           numeric=False),
-    Column("No bias detected", None, lambda row: ", ".join(_splits_by_status(row[1], "no bias detected")) or "—",
-           numeric=False),
+    Column("Splits with bias (p < 0.05)", None,
+           lambda row: ", ".join(_splits_by_status(row[1], "bias")) or "none", numeric=False),
+    Column("No bias detected", None,
+           lambda row: ", ".join(_splits_by_status(row[1], "no bias detected")) or "—", numeric=False),
     Column("Not testable", None, lambda row: ", ".join(_splits_by_status(row[1], "not testable")) or "—",
            "every episode failed or succeeded, or too few ran: a policy that fails everything is not called "
            "unbiased", numeric=False),
@@ -212,19 +218,20 @@ SUMMARY_COLUMNS: tuple[Column, ...] = (
 
 
 def summary_table(layouts: dict[str, dict]) -> Table:
-    """Per policy: its averages and its splits by what the test says (bias, no bias detected, not testable)."""
+    """Per policy: its averages and its splits by what the test says (bias, no bias detected, not
+    testable)."""
     return Table.of(SUMMARY_COLUMNS, list(layouts.items()))
 
 
-# -- per filmed value: the episode videos ------------------------------------------------------------------------
+# -- per filmed value: the episode videos ------------------------------------------------------------
 
 VIDEO_COLUMNS: tuple[Column, ...] = (
     Column("Policy", "policy", lambda row: row[0], numeric=False),
     Column("Value", "value", lambda row: Cell(row[1], code=True), numeric=False),
     Column("SR", "sr", lambda row: pct(row[2])),
-    Column("Videos (instance, repeat, camera; ✗ failed)", "video",
-           lambda row: Cell("", links=tuple((f"{e['label']} {camera}", path) for e in row[3]
-                                            for camera, path in zip(e["cameras"], e["paths"]))), numeric=False),
+    Column("Videos (instance, repeat, camera; ✗ failed)", "video", lambda row: Cell("", links=tuple(
+        (f"{e['label']} {camera}", path) for e in row[3] for camera, path in zip(e["cameras"], e["paths"]))),
+        numeric=False),
 )
 
 
