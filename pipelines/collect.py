@@ -245,7 +245,8 @@ def run(cfg: CollectConfig) -> CollectResult:
                          time.perf_counter() - t0)
 
 
-def _summary(cfg: CollectConfig, result: CollectResult) -> None:
+def summary(cfg: CollectConfig, result: CollectResult) -> None:
+    """The line the command prints when it ends: demos, where, attempts, the expert's success, the rate."""
     if not result.attempts:
         print(f"[collect] {result.episodes} episodes in {result.root}: already complete, nothing new to collect")
         return
@@ -255,7 +256,7 @@ def _summary(cfg: CollectConfig, result: CollectResult) -> None:
 
 
 def main(args: list[str] | None = None) -> CollectResult:
-    return cli_main(CollectConfig, run, _summary, (DatasetRootError,), args)
+    return cli_main(CollectConfig, run, summary, (DatasetRootError,), args)
 
 
 if __name__ == "__main__":

@@ -510,7 +510,7 @@ def _merge_cluster(per_task: dict[str, dict]) -> dict:
             "lost_actors": sum(s.get("lost_actors", 0) for s in per_task.values())}
 
 
-def _rate_text(result: EvaluateResult) -> str:
+def rate_text(result: EvaluateResult) -> str:
     """"N new, SR x%, R episodes/h"; a rerun with nothing left to run says so instead of printing 0/h or nan."""
     sr = "SR —" if result.success_rate != result.success_rate else f"SR {result.success_rate:.1%}"
     if not result.new_episodes:
@@ -518,14 +518,15 @@ def _rate_text(result: EvaluateResult) -> str:
     return f"{result.new_episodes} new, {sr}, {result.episodes_per_hour:.0f} episodes/h"
 
 
-def _summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
+def summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
+    """The line the command prints when it ends: episodes, where, the rate, infrastructure errors."""
     infra = (f"; {result.infra_errors} ended by infrastructure errors (status infra_error), counted in no rate: "
              "rerun the same command to re-run them" if result.infra_errors else "")
     policy = cfg.policy.name or cfg.policy.type
     if cfg.policy.privileged:
         policy += " (privileged: reads the simulator state; a ceiling, not a policy's result)"
     print(f"[evaluate] {result.episodes} episodes of {policy} in {result.output_dir / 'episodes.parquet'} "
-          f"({_rate_text(result)}{infra})")
+          f"({rate_text(result)}{infra})")
     if cfg.eval.rerun:
         from eval.running.rerun_log import recordings
 
@@ -538,7 +539,7 @@ def main(args: list[str] | None = None) -> EvaluateResult:
     # Builtin and plugin policy types load first, so --policy.type can name any of them.
     from roboview_data.benchmark.conformance import ConformanceError
 
-    return cli_main(EvaluateConfig, run, _summary, (ValueError, ResultsError, ClusterLost, PolicyUnavailable,
+    return cli_main(EvaluateConfig, run, summary, (ValueError, ResultsError, ClusterLost, PolicyUnavailable,
                                                     ConformanceError), args,
                     before_parse=load_policy_types)
 

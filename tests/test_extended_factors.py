@@ -11,7 +11,7 @@ import pytest
 from roboview_data.benchmark.fairness import (
     CameraFairness,
     FairnessThresholds,
-    _violations,
+    violations,
 )
 from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.tasks import ScriptedExpert
@@ -132,15 +132,15 @@ def test_the_expert_solves_every_value(factor):
 def test_the_gate_judges_a_dim_light_by_contrast_not_by_colour_shift():
     t = FairnessThresholds()
     shifted = CameraFairness("front", 1.0, 200, True, 1.0, 900, True, delta_e_nominal=60.0, delta_e_table=20.0)
-    assert any("nominal" in r for r in _violations(shifted, t, 25, True))
-    assert _violations(shifted, t, 25, True, judge_nominal=False) == []  # a dim light is not a failure
+    assert any("nominal" in r for r in violations(shifted, t, 25, True))
+    assert violations(shifted, t, 25, True, judge_nominal=False) == []  # a dim light is not a failure
     hidden = CameraFairness("front", 1.0, 200, True, 1.0, 900, True, delta_e_nominal=60.0, delta_e_table=1.5)
-    assert any("object-table" in r for r in _violations(hidden, t, 25, True, judge_nominal=False))
+    assert any("object-table" in r for r in violations(hidden, t, 25, True, judge_nominal=False))
     assert not FACTORS["lighting"].keeps_nominal_color and FACTORS["table_texture"].keeps_nominal_color
 
 
 def test_the_dose_response_trend_recovers_a_known_slope():
-    from eval.reporting.plots import _trend
+    from eval.statistics.significance import logistic_trend
 
     rng = np.random.default_rng(0)
     x = np.arange(5.0)
@@ -148,12 +148,12 @@ def test_the_dose_response_trend_recovers_a_known_slope():
     for _ in range(200):
         n = np.full(5, 40.0)
         p = 1 / (1 + np.exp(-(1.5 - 0.8 * x)))
-        _, slope, _ = _trend(x, rng.binomial(40, p).astype(float), n)
+        _, slope, _ = logistic_trend(x, rng.binomial(40, p).astype(float), n)
         slopes.append(slope)
     assert abs(np.mean(slopes) + 0.8) < 0.05  # unbiased around the true slope
-    _, slope, pval = _trend(x, np.array([38.0, 30, 20, 10, 4]), np.full(5, 40.0))
+    _, slope, pval = logistic_trend(x, np.array([38.0, 30, 20, 10, 4]), np.full(5, 40.0))
     assert slope < 0 and pval < 1e-6
-    assert _trend(x, np.full(5, 40.0), np.full(5, 40.0)) is None  # no failures: no trend to fit
+    assert logistic_trend(x, np.full(5, 40.0), np.full(5, 40.0)) is None  # no failures: no trend to fit
 
 
 def test_reports_draw_the_new_factors(tmp_path):
@@ -177,4 +177,4 @@ def test_reports_draw_the_new_factors(tmp_path):
         for file in (name, f"push_{name}"):  # one figure per task
             assert result.plots[file] is None and (tmp_path / file).stat().st_size > 10_000, file
     table1 = (tmp_path / "report.md").read_text()
-    assert "Lighting SR" in table1 and "Distractors SR" in table1
+    assert "| Lighting | sim |" in table1 and "| Distractors | sim |" in table1

@@ -1,5 +1,6 @@
 """No import cycles between RoboView's modules, counting imports inside functions too (a lazy import that
-breaks a cycle at run time still ties the two modules together)."""
+breaks a cycle at run time still ties the two modules together); and no module, test or benchmark imports
+another module's private (`_`-prefixed) name: what other modules need is public and documented."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ ROOT = Path(__file__).parents[1]
 PACKAGES = ("eval", "policies", "pipelines", "roboview_data", "roboview_lerobot", "benchmarks")
 
 
-def _modules() -> dict[str, Path]:
+def _modules(packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
     found = {}
-    for package in PACKAGES:
+    for package in packages:
         for path in (ROOT / package).rglob("*.py"):
             parts = path.relative_to(ROOT).with_suffix("").parts
             found[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
@@ -74,6 +75,54 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
         if v not in index:
             visit(v)
     return found
+
+
+def private_imports(name: str, source: str, modules: set[str]) -> list[str]:
+    """`from M import _x` lines of module `name` (its source) where M is another project module: one
+    "module:line: from M import _x" each. A private submodule of the importer's own package (pipelines._cli
+    for pipelines.evaluate) is the package's own and allowed; dunder names are not private."""
+    found = []
+    package = name.rpartition(".")[0]
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        base = node.module or ""
+        if node.level:
+            parts = name.split(".")[: -node.level]
+            base = ".".join(parts + ([base] if base else []))
+        if base not in modules or base == name:
+            continue
+        for alias in node.names:
+            private = alias.name.startswith("_") and not alias.name.startswith("__")
+            own_submodule = f"{base}.{alias.name}" in modules and base == package
+            if private and not own_submodule:
+                found.append(f"{name}:{node.lineno}: from {base} import {alias.name}")
+    return found
+
+
+def test_no_module_imports_another_modules_private_name():
+    modules = _modules((*PACKAGES, "tests"))
+    found = [line for name, path in sorted(modules.items())
+             for line in private_imports(name, path.read_text(), set(modules))]
+    assert not found, "private names imported from another module (make them public): " + "; ".join(found)
+
+
+def test_the_private_import_check_flags_a_private_import():
+    modules = {"eval.statistics.metrics", "eval.statistics.context", "pipelines", "pipelines._cli",
+               "pipelines.evaluate"}
+    old = "from eval.statistics.metrics import _interval, _lrt_fields, compute_metrics, __doc__\n"
+    assert private_imports("eval.statistics.context", old, modules) == [
+        "eval.statistics.context:1: from eval.statistics.metrics import _interval",
+        "eval.statistics.context:1: from eval.statistics.metrics import _lrt_fields"]
+    lazy = "def f():\n    from .metrics import _Table\n"  # relative and inside a function
+    assert private_imports("eval.statistics.context", lazy, modules) == [
+        "eval.statistics.context:2: from eval.statistics.metrics import _Table"]
+    # A package's own private module, and third-party private names, are not the project's modules' privates.
+    fine = ("from pipelines import _cli\nfrom pipelines._cli import main\n"
+            "from lerobot.envs.utils import _Lazy\n")
+    assert private_imports("pipelines.evaluate", fine, modules) == []
+    assert private_imports("eval.statistics.context", "from pipelines import _cli\n", modules) == [
+        "eval.statistics.context:1: from pipelines import _cli"]
 
 
 def test_the_project_has_no_import_cycle():

@@ -197,7 +197,7 @@ def test_a_worker_that_keeps_dying_becomes_an_infra_row_and_the_run_goes_on(tiny
 
 def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_row(tiny_benchmark, tmp_path,
                                                                                   monkeypatch, capsys):
-    from pipelines.evaluate import _summary
+    from pipelines.evaluate import summary
 
     monkeypatch.setitem(PolicyConfig.get_known_choices(), "infra_once", OnceConfig)
     # Re-queued after the pass: the final table holds the re-run row only.
@@ -217,7 +217,7 @@ def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_ro
     first = run(cfg)
     rows = _rows(out)
     assert sorted(rows["status"]) == [INFRA_ERROR, "ok"] and first.infra_errors == 1 and first.episodes == 2
-    _summary(cfg, first)
+    summary(cfg, first)
     line = capsys.readouterr().out
     assert "1 ended by infrastructure errors" in line and "rerun the same command to re-run them" in line
     # The same command again: only the infra one runs, and its row replaces the old one.

@@ -102,9 +102,11 @@ def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(tiny_bench
     assert entry["policy_server"]["protocol"] == "openpi"
     assert meta["policy"] == "lerobot:act" and meta["image_size"] == 64 and meta["cameras"] == ["left_top", "wrist"]
     assert "url" not in json.loads((tmp_path / "served" / "run.json").read_text())["policy_options"]
-    from eval.reporting.markdown import _provenance  # the report says where the policy was served and what the server said
+    # The report says where the policy was served and what the server said.
+    from eval.reporting.markdown import provenance_section
 
-    line = next(x for x in _provenance([{"path": "served", "provenance": [entry]}]) if "served elsewhere" in x)
+    lines = provenance_section([{"path": "served", "provenance": [entry]}])
+    line = next(x for x in lines if "served elsewhere" in x)
     assert f"openpi at ws://127.0.0.1:{openpi_server}" in line and '"policy": "lerobot:act"' in line
 
 

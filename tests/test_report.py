@@ -74,6 +74,16 @@ def test_files_and_plots_are_written(report):
             assert image.format == "PNG" and image.size[0] > 200
 
 
+def test_forest_plots_follow_the_factor_registry():
+    from roboview_data.variation.factors import visual_factors
+
+    forests = [split for name, (split, key, _) in PLOTS.items()
+               if name == f"forest_{split}.png" and key == "splits"]
+    assert forests == list(visual_factors())
+    assert forests[:8] == ["color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture",
+                           "distractors", "object_size"]
+
+
 def test_metrics_json_holds_both_policies(report):
     metrics = json.loads((report.output_dir / "metrics.json").read_text())
     assert metrics == report.metrics
@@ -86,11 +96,21 @@ def test_metrics_json_holds_both_policies(report):
     assert layouts["random"]["interactions"]["color_x_camera_pose"]["iec"]["color|camera_pose"] is None
 
 
+def _section(markdown: str, heading: str) -> str:
+    return markdown.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
+
+
+def _rows(markdown: str, heading: str) -> list[list[str]]:
+    """Cells of every row (header first) of the tables under the heading that starts with `heading`."""
+    lines = _section(markdown, heading).splitlines()
+    rows = [line.strip("|").split(" | ") for line in lines if line.startswith("| ")]
+    return [[c.strip() for c in cells] for cells in rows if cells[0].strip() != "---"]
+
+
 def _table_rows(markdown: str, heading: str) -> dict[str, list[str]]:
     """First column → cells of the table under the heading that starts with `heading`."""
-    section = markdown.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
-    rows = [line.strip("|").split(" | ") for line in section.splitlines() if line.startswith("| ")]
-    return {cells[0].strip(): [c.strip().strip("*") for c in cells[1:]] for cells in rows[1:]}
+    rows = _rows(markdown, heading)
+    return {cells[0]: [c.strip("*") for c in cells[1:]] for cells in rows[1:]}
 
 
 def _pct(x: float | None) -> str:
@@ -104,20 +124,29 @@ def _with_ci(x: float | None, ci: list[float] | None) -> str:
 def test_report_tables_equal_metrics(report):
     markdown = (report.output_dir / "report.md").read_text()
     layouts = policy_layouts(report.metrics)
-    table1 = _table_rows(markdown, "Table 1")
+    header, *table1 = _rows(markdown, "Table 1")
+    assert header == ["Split", "Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes",
+                      "verdict"]
+    table1 = {(row[0], row[1]): [c.strip("*") for c in row[2:]] for row in table1}
+    titles = {"color": "Color", "camera_pose": "Camera Pose", "camera_euler": "Camera Euler",
+              "dist_scale": "Dist Scale"}
+    assert len(table1) == len(titles) * len(layouts)
+    summary = _table_rows(markdown, "Summary")
     table2 = _table_rows(markdown, "Table 2")
     for policy, layout in layouts.items():
-        expected = []
-        for split in ("color", "camera_pose", "camera_euler", "dist_scale"):
+        for split, title in titles.items():
             m = layout["splits"][split]
             p = "N/A" if m["p_value"] is None else f"{m['p_value']:.4f}"
-            expected += [_with_ci(m["sr"], m["sr_ci95"]), _pct(m["cv"]), _pct(m["cv_excess"]), p]
-        expected += [_pct(layout["average"][k]) for k in ("sr", "cv", "cv_excess")]
-        assert table1[policy] == expected
+            expected = [_with_ci(m["sr"], m["sr_ci95"]), _pct(m["cv"]), _pct(m["cv_null"]),
+                        _pct(m["cv_excess"]), p, str(m["n_episodes"])]
+            assert table1[title, policy][:6] == expected
+        label = "expert (privileged)" if policy == "expert" else policy
+        assert summary[label][:3] == [_pct(layout["average"][k]) for k in ("sr", "cv", "cv_excess")]
         f = layout["interactions"]["color_x_camera_pose"]
         assert table2[policy][:2] == [_with_ci(f["sr"], f["sr_ci95"]), _pct(f["cv"]["color"])]
         assert table2[policy][5:7] == [_pct(f["iec"]["color|camera_pose"]), _pct(f["iec_null"]["color|camera_pose"])]
-    assert table1["random"][1] == "N/A"
+    assert table1["Color", "random"][1] == "N/A"
+    assert table1["Color", "random"][6] == "not testable: every episode failed"
     comparisons = _table_rows(markdown, "Policy comparisons")
     color = next(c for c in report.metrics["comparisons"] if c["split"] == "color")
     assert comparisons["color"][:3] == ["random − expert", str(color["n_pairs"]), _pct(color["delta_sr"])]

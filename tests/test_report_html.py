@@ -36,13 +36,15 @@ def report(tmp_path_factory):
 
 
 class _Sections(HTMLParser):
-    """Text of every table cell, grouped by the nearest enclosing <section id=…> and table."""
+    """Text of every table cell, grouped by the nearest enclosing <section id=…> and table; with `bold`,
+    bold text is wrapped in ** as report.md writes it."""
 
-    def __init__(self) -> None:
+    def __init__(self, bold: bool = False) -> None:
         super().__init__()
         self.stack: list[str] = []
         self.tables: dict[str, list[list[list[str]]]] = {}
         self.cell: list[str] | None = None
+        self.bold = bold
 
     def handle_starttag(self, tag, attrs):
         if tag == "section":
@@ -53,6 +55,8 @@ class _Sections(HTMLParser):
             self.tables[self.stack[-1]][-1].append([])
         elif tag in ("td", "th"):
             self.cell = []
+        elif tag == "b" and self.bold and self.cell is not None:
+            self.cell.append("**")
 
     def handle_endtag(self, tag):
         if tag == "section":
@@ -60,6 +64,8 @@ class _Sections(HTMLParser):
         elif tag in ("td", "th") and self.cell is not None:
             self.tables[self.stack[-1]][-1][-1].append("".join(self.cell).strip())
             self.cell = None
+        elif tag == "b" and self.bold and self.cell is not None:
+            self.cell.append("**")
 
     def handle_data(self, data):
         if self.cell is not None:
@@ -90,14 +96,62 @@ def test_split_blocks_print_metrics_json(report):
     assert color["biased"][7].startswith("bias (p") and color["random"][7] == "not testable: every episode failed"
     summary = {r[0]: r for r in parser.tables["summary"][0][1:]}
     n = len(policies["random"]["splits"])
-    assert summary["random"][3] == "none" and summary["random"][4] == "—"
-    assert summary["random"][5].count("(every episode failed)") == n
+    assert summary["random"][4] == "none" and summary["random"][5] == "—"
+    assert summary["random"][6].count("(every episode failed)") == n
     flagged = [s for s, m in policies["biased"]["splits"].items() if bias_status(m)[0] == "bias"]
     assert "color" in flagged
-    assert summary["biased"][3] == ", ".join(flagged)
+    assert summary["biased"][4] == ", ".join(flagged)
     # The ranking and the comparisons are on the page, the filmed episodes linked relative to it.
     assert "Rankings" in page and "Policy comparisons" in page
     assert 'href="../videos/0_front.mp4"' in page
+
+
+def _markdown_tables(markdown: str, heading: str) -> list[list[str]]:
+    """Rows (header first) of the table under the section whose title starts with `heading`; links as their
+    labels, as the page shows them."""
+    section = markdown.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
+    rows = [[re.sub(r"\[([^]]*)\]\([^)]*\)", r"\1", c).strip() for c in line.strip("|").split(" | ")]
+            for line in section.splitlines() if line.startswith("| ")]
+    return [r for r in rows if r[0] != "---"]
+
+
+def test_report_md_and_html_print_the_same_tables(report):
+    """Table 1, the summary and the video tables: the same headings and cells on both pages, bold included;
+    a column one page dropped, renamed or printed differently fails here."""
+    from eval.reporting.format import split_title
+
+    result, page = report
+    markdown = (result.output_dir / "report.md").read_text()
+    parser = _Sections(bold=True)
+    parser.feed(page)
+    policies = result.metrics["policies"]
+    splits = {split_title(s): s for s in next(iter(policies.values()))["splits"]}
+
+    header, *rows = _markdown_tables(markdown, "Table 1")
+    assert header[:2] == ["Split", "Policy"]
+    seen = 0
+    for title, split in splits.items():
+        html_header, *html_rows = parser.tables[f"split-{split}"][0]
+        assert header[1:] == html_header == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p",
+                                             "episodes", "verdict"]
+        md_rows = [r[1:] for r in rows if r[0] == title]
+        assert md_rows == html_rows and len(md_rows) == len(policies)
+        seen += len(md_rows)
+    assert seen == len(rows)
+    # The color split's lowest cv_excess is significantly lower than the next: bold on both pages.
+    assert any(cell.startswith("**") for r in rows for cell in r)
+
+    md_summary = _markdown_tables(markdown, "Summary")
+    assert md_summary == parser.tables["summary"][0]
+    assert md_summary[0] == ["Policy", "Average SR", "Average CV", "Average cv_excess",
+                             "Splits with bias (p < 0.05)", "No bias detected", "Not testable"]
+
+    header, *rows = _markdown_tables(markdown, "Episode videos")
+    filmed = {r[0] for r in rows}
+    assert filmed == {"color"} and len(rows) == 1
+    html_videos = parser.tables["split-color"][1]
+    assert header[1:] == html_videos[0] and [r[1:] for r in rows] == html_videos[1:]
+    assert rows[0][1:4] == ["biased", html_videos[1][1], html_videos[1][2]] and "r0" in rows[0][4]
 
 
 def test_page_is_self_contained(report):

@@ -26,7 +26,7 @@ def test_a_policy_that_fails_everything_is_not_called_unbiased(tmp_path):
     row = next(line for line in summary.splitlines() if line.startswith("| random"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     n = len(result.metrics["splits"])
-    assert cells[2] == "none" and cells[3] == "—" and cells[4].count("(every episode failed)") == n
+    assert cells[4] == "none" and cells[5] == "—" and cells[6].count("(every episode failed)") == n
 
 
 def test_absent_color_categories_are_left_out_not_drawn_as_zero():
@@ -42,11 +42,12 @@ def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
     from pathlib import Path
 
     from pipelines.collect import CollectResult
-    from pipelines.collect import _summary as collect_summary
-    from pipelines.evaluate import EvaluateResult, _rate_text
+    from pipelines.collect import summary as collect_summary
+    from pipelines.evaluate import EvaluateResult, rate_text
 
-    assert _rate_text(EvaluateResult(Path("o"), 171, 0, 0.877, 3.0)) == "already complete, nothing new to run; SR 87.7%"
-    assert _rate_text(EvaluateResult(Path("o"), 10, 10, 0.5, 36.0)) == "10 new, SR 50.0%, 1000 episodes/h"
+    assert (rate_text(EvaluateResult(Path("o"), 171, 0, 0.877, 3.0))
+            == "already complete, nothing new to run; SR 87.7%")
+    assert rate_text(EvaluateResult(Path("o"), 10, 10, 0.5, 36.0)) == "10 new, SR 50.0%, 1000 episodes/h"
     collect_summary(None, CollectResult(Path("ds"), 6, 0, 0, 0, 0.1))
     out = capsys.readouterr().out
     assert "nan" not in out and "already complete, nothing new to collect" in out

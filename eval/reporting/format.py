@@ -59,6 +59,16 @@ def bias_status(m: dict) -> tuple[str, str]:
     return ("bias", "") if p < ALPHA else ("no bias detected", "")
 
 
+def directions(m: dict) -> tuple[list[tuple[str, float]], list[tuple[str, float]]]:
+    """A split's values whose CMH odds ratio against the rest is significant (BH q < ALPHA): those below the
+    rest (OR < 1, lowest first) and those above (OR > 1, highest first), each as (value, odds ratio)."""
+    sig = [(v, s["odds_ratio"]) for v, s in m["per_value"].items()
+           if s["q_value"] is not None and s["q_value"] < ALPHA and s["odds_ratio"] is not None]
+    low = sorted(((o, v) for v, o in sig if o < 1))
+    high = sorted(((o, v) for v, o in sig if o > 1), reverse=True)
+    return [(v, o) for o, v in low], [(v, o) for o, v in high]
+
+
 def split_title(split: str) -> str:
     """A split's title: its factor's own title (factor registry), else the split name."""
     return FACTORS[split].title if split in FACTORS else split

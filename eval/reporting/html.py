@@ -1,23 +1,24 @@
 """report.html: the report as one self-contained page (the figures inline, no script, no external file but the
 episode videos it links).
 
-Every number on the page is read from the same metrics dict as report.md. Table 1, twenty columns wide in
-Markdown, becomes one block per split: its policies in rows, the split's figures under them, and the filmed
-episodes of each value linked. The other sections (directions, interactions, comparisons, rankings, adaptive
-sampling, the isolation certificate, provenance) are report.md's own, rendered by markdown-it.
+Every number on the page is read from the same metrics dict as report.md, and the tables both print (the
+summary, Table 1, the episode videos) are declared once, in eval.reporting.tables: the same columns, headings
+and cells. Table 1 becomes one block per split: its policies in rows, the split's figures under them, and the
+filmed episodes of each value linked. The other sections (directions, interactions, comparisons, rankings,
+adaptive sampling, the isolation certificate, provenance) are report.md's own, rendered by markdown-it.
 """
 
 from __future__ import annotations
 
 import base64
 import html
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from markdown_it import MarkdownIt
 
 from eval.reporting import format as fmt
+from eval.reporting import tables
 from eval.statistics.metrics import policy_layouts
 from roboview_data.variation.instances import DEFAULT_TASK, split_task
 
@@ -42,14 +43,6 @@ code{background:#f2f2f2;padding:0 3px;border-radius:3px;word-break:break-all}
 
 def _e(text: Any) -> str:
     return html.escape(str(text), quote=True)
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]], numeric: Sequence[int] = ()) -> str:
-    """An HTML table; cells are HTML already (escape before), columns in `numeric` right-aligned."""
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td{' class=num' if j in numeric else ''}>{c}</td>" for j, c in enumerate(row))
-                   + "</tr>" for row in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
 def _image(path: Path, alt: str) -> str:
@@ -77,22 +70,10 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
     return found
 
 
-def _verdict(m: dict[str, Any]) -> str:
-    status, why = fmt.bias_status(m)
-    if status == "not testable":
-        return f'<span class="note">not testable: {_e(why)}</span>'
-    if status == "bias":
-        return f'<span class="verdict-bias">bias (p {_e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor")))})</span>'
-    return '<span class="verdict-none">no bias detected</span>'
-
-
 def _values_line(m: dict[str, Any]) -> str:
-    sig = [(v, s) for v, s in m["per_value"].items()
-           if s["q_value"] is not None and s["q_value"] < fmt.ALPHA and s["odds_ratio"] is not None]
-    low = sorted((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] < 1)
-    high = sorted(((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] > 1), reverse=True)
+    low, high = fmt.directions(m)
     text = (lambda items: ", ".join(f"<code>{_e(v)}</code> (OR {o:.2g}, SR {fmt.pct(m['per_value'][v]['sr'])})"
-                                    for o, v in items) or "none")
+                                    for v, o in items) or "none")
     return f"below the rest: {text(low)}; above the rest: {text(high)}"
 
 
@@ -100,19 +81,11 @@ def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], 
                  out: Path) -> str:
     task, factor = split_task(split)
     title = fmt.split_title(factor)
-    rows, notes = [], []
-    for name, layout in layouts.items():
-        m = layout["splits"].get(split)
-        if m is None:
-            continue
-        rows.append([_e(name), _e(fmt.pct(m["sr"]) + fmt.pct_ci(m["sr_ci95"])), _e(fmt.pct(m["cv"])),
-                     _e(fmt.pct(m["cv_null"])), _e(fmt.pct(m["cv_excess"])),
-                     _e(fmt.p_fmt(m["p_value"], m.get("p_value_at_floor"))), str(m["n_episodes"]), _verdict(m)])
-        notes.append(f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}{_infra_line(m)}</li>")
+    notes = [f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}{_infra_line(m)}</li>"
+             for name, layout in layouts.items() if (m := layout["splits"].get(split)) is not None]
     parts = [f'<section class="split" id="split-{_e(split)}"><h3>{_e(title)}'
              + (f' <span class="note">task {_e(task)}</span>' if task != DEFAULT_TASK else "") + "</h3>",
-             _table(["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes", "verdict"], rows,
-                    numeric=(2, 3, 4, 5, 6)),
+             tables.to_html(tables.split_table(metrics, layouts, split)),
              f"<ul>{''.join(notes)}</ul>"]
     parts += _videos(metrics, layouts, split)
     if figures:
@@ -141,34 +114,10 @@ def _isolation_line(m: dict[str, Any]) -> str:
 
 def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> list[str]:
     """The filmed episodes of this split, per policy and value (links relative to the report folder)."""
-    rows = []
-    for name, splits in (metrics.get("videos") or {}).items():
-        per_value = layouts.get(name, {}).get("splits", {}).get(split, {}).get("per_value", {})
-        for value, episodes in splits.get(split, {}).items():
-            links = " ".join(f'<a href="{_e(path)}">{_e(e["label"])} {_e(camera)}</a>'
-                             for e in episodes for camera, path in zip(e["cameras"], e["paths"]))
-            rows.append([_e(name), f"<code>{_e(value)}</code>", _e(fmt.pct(per_value.get(value, {}).get("sr"))), links])
-    if not rows:
+    table = tables.videos_table(metrics, layouts, split)
+    if not table.rows:
         return []
-    return ["<details><summary>Episode videos (✗ failed)</summary>",
-            _table(["Policy", "Value", "SR", "Videos (instance, repeat, camera)"], rows, numeric=(2,)), "</details>"]
-
-
-def _summary(layouts: dict[str, dict]) -> str:
-    """Per policy: average SR and cv_excess, then its splits in three lists — bias, no bias detected, and not
-    testable with the reason (a policy that fails everything is not called unbiased)."""
-    rows = []
-    for name, layout in layouts.items():
-        status = {s: fmt.bias_status(m) for s, m in layout["splits"].items()}
-        biased = [s for s, (v, _) in status.items() if v == "bias"]
-        clean = [s for s, (v, _) in status.items() if v == "no bias detected"]
-        untestable = [f"{s} ({why})" for s, (v, why) in status.items() if v == "not testable"]
-        avg = layout.get("average") or {}
-        rows.append([_e(fmt.policy_label(name)), _e(fmt.pct(avg.get("sr"))), _e(fmt.pct(avg.get("cv_excess"))),
-                     _e(", ".join(biased) or "none"),
-                     _e(", ".join(clean) or "—"), _e(", ".join(untestable) or "—")])
-    return _table(["Policy", "Average SR", "Average cv_excess", "Splits with bias (p < 0.05)", "No bias detected",
-                   "Not testable"], rows, numeric=(1, 2))
+    return ["<details><summary>Episode videos (✗ failed)</summary>", tables.to_html(table), "</details>"]
 
 
 def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path,
@@ -181,14 +130,13 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
     md_render = MarkdownIt("commonmark", {"html": False}).enable("table")
     splits = fmt.task_order(fmt.split_order(layouts, "splits"))
     sections: list[tuple[str, str, str]] = []  # (anchor, title, HTML)
-    sections.append(("summary", "Summary", _summary(layouts)
-                     + "<p class=note>SR: successes / episodes, Wilson 95 % interval. CV: the paper's Bias Coefficient; "
-                       "noise floor: the CV the table shows when the value does not matter; cv_excess: the bias beyond "
-                       "binomial noise (rank on it, not on CV). p: likelihood-ratio test of a binomial GLM value + context "
-                       "against context (the CV permutation p is in metrics.json and the calibration section). A split "
-                       "is not testable when every episode failed or succeeded, or too few ran. All ×100 but p.</p>"))
-    sections.append(("splits", "Splits", "\n".join(_split_block(s, layouts, metrics, figures.get(s, []), out)
-                                                   for s in splits)))
+    summary = tables.summary_table(layouts)
+    sections.append(("summary", "Summary",
+                     tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>"))
+    legend = (f"<p class=note>{_e(tables.Table(tables.SPLIT_COLUMNS).legend())} The CV permutation p is in "
+              "metrics.json and the calibration section.</p>")
+    blocks = [_split_block(s, layouts, metrics, figures.get(s, []), out) for s in splits]
+    sections.append(("splits", "Splits", legend + "\n".join(blocks)))
     titles = {"infra": "Episodes ended by infrastructure", "interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",
               "context": "Success by task context", "adaptive": "Adaptive sampling", "isolation": "Isolation certificate",
               "diagnostics": "Sample sizes and calibration", "agents": "VLM agents",

@@ -31,9 +31,11 @@ from eval.running import inputs, provenance, videos
 from eval.statistics.adaptive import read_record
 from eval.running.agents import agents_markdown, describe_agents
 from eval.statistics.context import context_breakdown
-from eval.reporting.format import (ALPHA, VERSION_KEY, bias_status, p_fmt, pct, pct_ci, policy_label, resampling_line,
-                                 split_order, split_title)
+from eval.reporting.format import (ALPHA, VERSION_KEY, directions, p_fmt, pct, pct_ci, policy_label,
+                                   resampling_line, split_order, split_title)
 from eval.reporting.html import HTML_FILE, render_html
+from eval.reporting.tables import (POLICY, SPLIT_COLUMNS, VIDEO_COLUMNS, Table, markdown_table, split_table,
+                                   summary_table, to_markdown, video_splits, videos_table)
 from eval.statistics.metrics import (
     METRIC_COLUMNS,
     EpisodesError,
@@ -123,44 +125,12 @@ def load_results(paths: Sequence[str | Path],
     return episodes, sources
 
 
-def _row(cells: Sequence[str]) -> str:
-    return "| " + " | ".join(cells) + " |"
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    return [_row(header), _row(["---"] * len(header)), *(_row(r) for r in rows), ""]
-
-
-def _significant_pairs(metrics: dict[str, Any], split: str) -> dict[frozenset[str], float | None]:
-    return {frozenset(c["policies"]): c["p_cv_excess"] for c in metrics.get("comparisons", []) if c["split"] == split}
-
-
-def _bold_lowest(rows: list[list[str]], column: int, values: list[float | None],
-                 pairs: dict[frozenset[str], float | None]) -> None:
-    """Bold the lowest value of a column only where it is significantly lower than the runner-up
-    (paired p_cv_excess < 0.05): a lower CV that is within noise is not a less biased policy."""
-    ranked = sorted((v, i) for i, v in enumerate(values) if v is not None)
-    if len(ranked) < 2:
-        return
-    (_, best), (_, second) = ranked[:2]
-    p = pairs.get(frozenset((rows[best][0], rows[second][0])))
-    if p is not None and p < ALPHA:
-        rows[best][column] = f"**{rows[best][column]}**"
-
-
 def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
-    parts, floor_only = [], []
-    for name, layout in layouts.items():
-        for split, m in layout["splits"].items():
-            if m["cv_null"] is None:
-                continue
-            parts.append(f"{name}/{split} {pct(m['cv_null'])}")
-            if m["p_value"] is None or m["p_value"] >= ALPHA:
-                floor_only.append(f"{name}/{split}")
-    lines = [f"Noise floor (cv_null ×100, the CV this table shows when the value does not matter): {'; '.join(parts)}."]
-    lines.append("CVs indistinguishable from their noise floor (p ≥ 0.05): "
-                 + (", ".join(floor_only) if floor_only else "none") + ".")
-    return [*lines, ""]
+    floor_only = [f"{name}/{split}" for name, layout in layouts.items()
+                  for split, m in layout["splits"].items()
+                  if m["cv_null"] is not None and (m["p_value"] is None or m["p_value"] >= ALPHA)]
+    return ["CVs indistinguishable from their noise floor (p ≥ 0.05): "
+            + (", ".join(floor_only) if floor_only else "none") + ".", ""]
 
 
 def _average(layout: dict, splits: list[str], key: str) -> float | None:
@@ -175,17 +145,10 @@ def _privileged_note(layouts: dict[str, dict]) -> list[str]:
 
 
 def _summary(layouts: dict[str, dict]) -> list[str]:
-    """Is each policy biased? Per policy its average SR and the splits with a bias, with none detected, and those
-    the test could not judge (and why): a policy that fails everything is not reported unbiased."""
-    rows = []
-    for name, layout in layouts.items():
-        status = {s: bias_status(m) for s, m in layout["splits"].items()}
-        biased = [s for s, (v, _) in status.items() if v == "bias"]
-        rows.append([policy_label(name), pct(layout["average"]["sr"]), ", ".join(biased) or "none",
-                     ", ".join(s for s, (v, _) in status.items() if v == "no bias detected") or "—",
-                     ", ".join(f"{s} ({why})" for s, (v, why) in status.items() if v == "not testable") or "—"])
-    return ["## Summary", "", *_table(["Policy", "Average SR (×100)", "Splits with bias (p < 0.05)", "No bias detected",
-                                       "Not testable"], rows), *_privileged_note(layouts)]
+    """Is each policy biased? Per policy its averages and the splits with a bias, with none detected, and
+    those the test could not judge (and why): a policy that fails everything is not reported unbiased."""
+    table = summary_table(layouts)
+    return ["## Summary", "", *to_markdown(table), table.legend(), "", *_privileged_note(layouts)]
 
 
 def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
@@ -200,36 +163,20 @@ def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
     return lines
 
 
-def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str], task: str | None) -> list[str]:
-    header = ["Policy", *(f"{split_title(split_task(s)[1])} {m}" for s in splits for m in ("SR", "CV", "cv_excess", "p")),
-              "Average SR", "Average CV", "Average cv_excess"]
-    rows = []
-    for name, layout in layouts.items():
-        row = [name]
-        for s in splits:
-            m = layout["splits"].get(s)
-            row += ["—"] * 4 if m is None else [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]),
-                                                pct(m["cv_excess"]), p_fmt(m["p_value"], m.get("p_value_at_floor"))]
-        if task is None:
-            row += [pct(layout["average"]["sr"]), pct(layout["average"]["cv"]), pct(layout["average"]["cv_excess"])]
-        else:
-            row += [pct(_average(layout, splits, k)) for k in ("sr", "cv", "cv_excess")]
-        rows.append(row)
-    for j, s in enumerate(splits):
-        column = 1 + 4 * j + 2
-        _bold_lowest(rows, column, [lay["splits"].get(s, {}).get("cv_excess") for lay in layouts.values()],
-                     _significant_pairs(metrics, s))
+def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str],
+                 task: str | None) -> list[str]:
+    """A row per split and policy: the columns of each split's block on the page (eval.reporting.tables)."""
+    groups = [(split_title(split_task(s)[1]), split_table(metrics, layouts, s)) for s in splits]
+    table = Table((POLICY, *SPLIT_COLUMNS)).stacked("Split", groups)
+    averages = []
+    if task is not None:  # the policy's own averages are the summary's; here those of this task's splits
+        averages = ["Averages over these splits (SR / CV / cv_excess ×100): " + "; ".join(
+            f"{name} " + " / ".join(pct(_average(layout, splits, k)) for k in ("sr", "cv", "cv_excess"))
+            for name, layout in layouts.items()) + ".", ""]
     title = "## Table 1 — success rate and Bias Coefficient (×100)" + (f", task `{task}`" if task else "")
-    return [title, "", *_table(header, rows),
-            "SR: successes / episodes of the split (weighted by episodes, not averaged over instances as in "
-            "the paper), Wilson 95 % interval. CV: the paper's Bias Coefficient, mean over contexts of "
-            "σ_v SR(v,c) / (μ_v SR(v,c) + ε); a context where everything failed enters as 0. cv_excess: "
-            "√max(0, CV² − cv_null²), the bias beyond binomial noise — rank policies on it, not on CV. "
-            "p: likelihood-ratio test of a binomial GLM value + context against context (permutation-"
-            "calibrated when cells are sparse). N/A: every episode failed (CV), or no context holds both "
-            "outcomes (p: nothing to test). Bold: lowest cv_excess, only "
-            "where it is significantly lower than the next policy's (paired test, p < 0.05). No interval is "
-            "given for CV or cv_excess: none has passed the coverage simulation.", "",
+    return [title, "", *to_markdown(table), Table(SPLIT_COLUMNS).legend(),
+            "SR is weighted by episodes, not averaged over instances as in the paper. No interval is given "
+            "for CV or cv_excess: none has passed the coverage simulation.", "", *averages,
             *_noise_floor_line(layouts)]
 
 
@@ -248,7 +195,7 @@ def _table2(layouts: dict[str, dict]) -> list[str]:
                          pct(m["iec"][ba]), pct(m["iec_null"][ba]), p_fmt(m["p_interaction"])])
             notes.append(f"- {name}: {_interaction_verdict(m, a, b)}")
         lines += [f"## Table 2 — {split}: Bias Coefficient and Interaction Effect Coefficient (×100)", "",
-                  *_table(header, rows),
+                  *markdown_table(header, rows),
                   f"IEC({a}; {b}): how much the bias from {a} changes with {b}. Its null is the IEC of tables "
                   "drawn from the fitted additive (no-interaction) binomial GLM: main effects and noise alone "
                   "produce it. p_interaction: likelihood-ratio test of A×B against A + B.", "", *notes, ""]
@@ -275,12 +222,9 @@ def _directions(layouts: dict[str, dict]) -> list[str]:
              "BH q < 0.05)", ""]
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():
-            sig = [(v, s) for v, s in m["per_value"].items() if s["q_value"] is not None and s["q_value"] < ALPHA]
-            low = sorted((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] is not None and s["odds_ratio"] < 1)
-            high = sorted(((s["odds_ratio"], v) for v, s in sig if s["odds_ratio"] is not None and s["odds_ratio"] > 1),
-                          reverse=True)
+            low, high = directions(m)
             text = (lambda items: ", ".join(f"{v} (OR {o:.2g}, SR {pct(m['per_value'][v]['sr'])})"
-                                            for o, v in items) or "none")
+                                            for v, o in items) or "none")
             lines.append(f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}")
     return [*lines, ""]
 
@@ -292,7 +236,7 @@ def _comparisons(metrics: dict[str, Any]) -> list[str]:
     rows = [[c["split"], f"{c['policies'][1]} − {c['policies'][0]}", str(c["n_pairs"]), pct(c["delta_sr"]),
              p_fmt(c["p_sr"]), pct(c["delta_cv_excess"]), p_fmt(c["p_cv_excess"])] for c in comps]
     return ["## Policy comparisons (paired within instance and repeat: same seeds)", "",
-            *_table(["Split", "Difference", "Pairs", "ΔSR ×100", "p (McNemar)", "Δcv_excess ×100",
+            *markdown_table(["Split", "Difference", "Pairs", "ΔSR ×100", "p (McNemar)", "Δcv_excess ×100",
                      "p (paired permutation)"], rows), ""]
 
 
@@ -312,7 +256,8 @@ def _rankings(metrics: dict[str, Any]) -> list[str]:
                 f"{r['policy']} {pct(r['value'])} ({r['group']}; {r['rank_range'][0]}"
                 + (f"–{r['rank_range'][1]}" if r['rank_range'][1] != r['rank_range'][0] else "") + ")"
                 for r in table)])
-    return lines + _table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows) + [""]
+    return [*lines, *markdown_table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows),
+            ""]
 
 
 def _context_factors(layouts: dict[str, dict]) -> list[str]:
@@ -327,7 +272,7 @@ def _context_factors(layouts: dict[str, dict]) -> list[str]:
         for factor, m in factors.items():
             values = "; ".join(f"{value}: {pct(v['sr'])} (n={v['n_episodes']})" for value, v in m["per_value"].items())
             rows.append([name, factor, values, p_fmt(m["p_value"]), m["p_value_method"] or "—"])
-    lines += _table(["policy", "context factor", "SR by value", "p", "p method"], rows)
+    lines += markdown_table(["policy", "context factor", "SR by value", "p", "p method"], rows)
     lines += ["", "A policy that ignores language (ACT) should show no instruction effect; a language-conditioned one "
               "(SmolVLA, π0) that does is sensitive to the wording of one goal.", ""]
     return lines
@@ -346,7 +291,7 @@ def _diagnostics(layouts: dict[str, dict]) -> list[str]:
                + ", ".join(f"{s} {pct(v)}" for s, v in c["sr_by_split"].items())
                for name, layout in layouts.items() if (c := layout.get("control"))]
     return ["## Sample sizes, calibration and the control arm", "",
-            *_table(["Policy", "Split", "Instances", "Episodes", "Contexts", "Contexts all failed",
+            *markdown_table(["Policy", "Split", "Instances", "Episodes", "Contexts", "Contexts all failed",
                      "p calibration", "p (CV permutation)"], rows),
             "Control arm (test–retest): the all-baseline instance of each context runs, with the same seeds, in "
             "the color, camera_euler and dist_scale splits.", *control, ""]
@@ -369,8 +314,8 @@ def _adaptive(layouts: dict[str, dict]) -> list[str]:
             f"{design['power']}, at most {design['max_repeats']} rounds; docs/adaptive.md). The sampling was adaptive: "
             "the fixed-sample statistics in the tables above treat the episodes run as a fixed sample, and their "
             "p-values are approximate; the stop below is the sequential test's decision.", "",
-            *_table(["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound", "futility bound"],
-                    rows), ""]
+            *markdown_table(["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound",
+                             "futility bound"], rows), ""]
 
 
 def _isolation(layouts: dict[str, dict]) -> list[str]:
@@ -395,7 +340,8 @@ def _isolation(layouts: dict[str, dict]) -> list[str]:
     return ["## Isolation certificate", "",
             "Every value of one (context, repeat) must share the instruction, the initial robot state and object pose, "
             "the episode seed, every other factor's value and the calibration of the cameras the factor does not move.",
-            "", *_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows), *violations, ""]
+            "", *markdown_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows),
+            *violations, ""]
 
 
 def _infra_errors(layouts: dict[str, dict]) -> list[str]:
@@ -432,20 +378,12 @@ def _extremes(layouts: dict[str, dict]) -> list[str]:
 
 
 def _videos(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
-    """Per-value table of the episodes filmed (--eval.videos), each video linked."""
-    videos = metrics.get("videos") or {}
-    if not videos:
+    """Per-value table of the episodes filmed (--eval.videos), each video linked: the page's video tables."""
+    groups = [(split, videos_table(metrics, layouts, split)) for split in video_splits(metrics)]
+    if not groups:
         return []
-    rows = []
-    for name, splits in videos.items():
-        for split, values in splits.items():
-            per_value = layouts.get(name, {}).get("splits", {}).get(split, {}).get("per_value", {})
-            for value, episodes in values.items():
-                links = " ".join(f"[{e['label']} {camera}]({path})"
-                                 for e in episodes for camera, path in zip(e["cameras"], e["paths"]))
-                rows.append([name, split, value, pct(per_value.get(value, {}).get("sr")), links])
     return ["## Episode videos (per value; `--eval.videos`)", "",
-            *_table(["policy", "split", "value", "SR", "videos (instance, repeat, camera; ✗ failed)"], rows), ""]
+            *to_markdown(Table(VIDEO_COLUMNS).stacked("Split", groups))]
 
 
 def _stacks(sources: list[dict[str, Any]]) -> list[str]:
@@ -476,7 +414,7 @@ def _stacks(sources: list[dict[str, Any]]) -> list[str]:
     return lines + [""] if len(lines) > 2 else []
 
 
-def _provenance(sources: list[dict[str, Any]]) -> list[str]:
+def provenance_section(sources: list[dict[str, Any]]) -> list[str]:
     """What produced each results file: versions, checkpoint hash, command, machine, times."""
     lines = ["## Provenance", ""]
     for source in sources:
@@ -531,7 +469,7 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
             "context": _context_factors(layouts), "adaptive": _adaptive(layouts), "diagnostics": _diagnostics(layouts),
             "isolation": _isolation(layouts), "extremes": _extremes(layouts), "videos": _videos(metrics, layouts),
             "agents": agents_markdown(metrics.get("agents", {})), "stack": _stacks(metrics.get("sources", [])),
-            "provenance": _provenance(metrics.get("sources", []))}
+            "provenance": provenance_section(metrics.get("sources", []))}
 
 
 def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None],

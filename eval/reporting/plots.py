@@ -20,7 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from eval.statistics.metrics import wilson_interval  # noqa: E402
+from eval.statistics.significance import logistic_trend  # noqa: E402
+from eval.statistics.tables import wilson_interval  # noqa: E402
 from roboview_data.variation.colors import CATEGORIES, COLORS  # noqa: E402
 from roboview_data.variation.factors import (  # noqa: E402
     DIST_STEP_M,
@@ -30,6 +31,7 @@ from roboview_data.variation.factors import (  # noqa: E402
     parse_camera_pose,
     parse_dist_scale,
     parse_euler,
+    visual_factors,
 )
 from roboview_data.variation.instances import DEFAULT_TASK, split_task  # noqa: E402
 
@@ -292,18 +294,6 @@ def plot_table_texture(layouts: Layouts, path: Path) -> None:
     _bars(layouts, "table_texture", path, "Success rate by table texture", list(FACTORS["table_texture"].values))
 
 
-def _trend(xs: np.ndarray, successes: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, float, float] | None:
-    """Binomial GLM (logit) success ~ x fitted to per-value counts: (fitted SR on a grid, slope, p)."""
-    import statsmodels.api as sm
-
-    if len(xs) < 3 or n.sum() == 0 or successes.sum() in (0, n.sum()):
-        return None
-    model = sm.GLM(np.column_stack([successes, n - successes]), sm.add_constant(xs), family=sm.families.Binomial())
-    fit = model.fit()
-    grid = np.linspace(xs.min(), xs.max(), 50)
-    return fit.predict(sm.add_constant(grid)), float(fit.params[1]), float(fit.pvalues[1])
-
-
 def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title: str) -> None:
     fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
     for i, (policy, values) in enumerate(_per_value(layouts, split).items()):
@@ -313,7 +303,7 @@ def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title:
         n = np.array([s["n_episodes"] for _, s in items], dtype=float)
         err = _wilson_err([s for _, s in items])
         line = ax.errorbar(x, sr, yerr=err, marker=_MARKERS[i % len(_MARKERS)], ls="none", capsize=3, label=policy)
-        trend = _trend(x, np.round(sr * n), n)
+        trend = logistic_trend(x, np.round(sr * n), n)
         if trend is not None:
             fitted, slope, p = trend
             ax.plot(np.linspace(x.min(), x.max(), 50), fitted, color=line[0].get_color(),
@@ -345,9 +335,8 @@ PLOTS: dict[str, tuple[str, str, Callable[[Layouts, Path], None]]] = {
     "sr_table_texture.png": ("table_texture", "splits", plot_table_texture),
     "sr_distractors.png": ("distractors", "splits", plot_distractors),
     "sr_object_size.png": ("object_size", "splits", plot_object_size),
-    **{f"forest_{split}.png": (split, "splits", plot_forest(split))
-       for split in ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture", "distractors",
-                     "object_size")},
+    # A forest plot per visual factor of the registry, in its order (one registered later: make_plots).
+    **{f"forest_{split}.png": (split, "splits", plot_forest(split)) for split in visual_factors()},
 }
 
 

@@ -22,8 +22,7 @@ import numpy as np
 import pandas as pd
 
 from eval.statistics import significance as stats
-from eval.statistics.metrics import _interval, _lrt_fields, _rng, _Table, _value_order
-from eval.statistics.tables import MetricsConfig, codes
+from eval.statistics.tables import CellTable, MetricsConfig, value_order, wilson_ci95
 from roboview_data.variation.factors import DEFAULT_TASK, baselines, context_factors
 
 
@@ -49,20 +48,16 @@ def context_factor_metrics(episodes: pd.DataFrame, task: str, factor: str,
         return None
     eps = rows[[factor, "split", "value", "repeat", "success"]].astype({factor: str, "value": str}).copy()
     eps["success"] = eps["success"].astype(np.int64)
-    keys = [factor, "split", "value"]
-    eps["cell"] = codes(eps, keys)
-    cells = eps.groupby("cell", sort=True).agg(n=("success", "size"), k=("success", "sum"),
-                                               **{key: (key, "first") for key in keys}).reset_index(drop=True)
-    table = _Table((factor,), cells, eps.reset_index(drop=True))
-    permuted = table.permuted_k(["split", "value"], cfg.n_glm, _rng(cfg, f"{task}:{factor}", "context"))
+    table = CellTable.build(eps, (factor,), [factor, "split", "value"])
+    permuted = table.permuted_k(["split", "value"], cfg.n_glm, cfg.rng(f"{task}:{factor}", "context"))
     test = stats.factor_lrt(table.k, table.n, table.codes([factor]), table.codes(["split", "value"]), permuted)
     per_value = {}
-    for value in _value_order(factor, eps[factor].unique()):
+    for value in value_order(factor, eps[factor].unique()):
         mine = eps[eps[factor] == value]
         k, n = int(mine["success"].sum()), len(mine)
-        per_value[value] = {"sr": k / n, "sr_ci95": _interval(k, n), "n_episodes": n}
+        per_value[value] = {"sr": k / n, "sr_ci95": wilson_ci95(k, n), "n_episodes": n}
     return {"task": task, "n_episodes": len(eps), "n_conditions": int(eps.groupby(["split", "value"]).ngroups),
-            **_lrt_fields(test), "per_value": per_value}
+            **stats.lrt_fields(test), "per_value": per_value}
 
 
 def context_breakdown(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:

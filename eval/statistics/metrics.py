@@ -19,9 +19,7 @@ policy `n_infra_errors` (their total).
 from __future__ import annotations
 
 import logging
-import zlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,14 +34,16 @@ from eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics'
     EPSILON,
     SEQUENTIAL_H,
     Z95,
+    CellTable,
     MetricsConfig,
     codes,
     conditional_cv,
     excess,
     group_sum,
+    value_order,
+    wilson_ci95,
     wilson_interval,
 )
-from roboview_data.variation.factors import FACTORS
 
 log = logging.getLogger(__name__)
 
@@ -51,85 +51,16 @@ log = logging.getLogger(__name__)
 METRIC_COLUMNS = ("policy", "split", "factor", "value", "context_id", "instance_id", "repeat", "success")
 
 
-@dataclass(frozen=True)
-class _Table:
-    """One split's episodes as cells (value(s) × context) plus each episode's cell and repeat."""
-
-    factors: tuple[str, ...]
-    cells: pd.DataFrame  # one row per cell: factor columns, context_id, n, k
-    episodes: pd.DataFrame  # one row per episode: factor columns, context_id, repeat, success, cell
-
-    @property
-    def n(self) -> np.ndarray:
-        return self.cells["n"].to_numpy()
-
-    @property
-    def k(self) -> np.ndarray:
-        return self.cells["k"].to_numpy()
-
-    @property
-    def sr(self) -> np.ndarray:
-        return self.k / self.n
-
-    def codes(self, columns: Sequence[str]) -> np.ndarray:
-        return codes(self.cells, columns)
-
-    def permuted_k(self, within: Sequence[str], n_perm: int, rng: np.random.Generator) -> np.ndarray:
-        """(n_perm, n_cells) success counts with episodes' cell labels shuffled within blocks.
-
-        A block is a combination of `within` columns plus the repeat: under the null every
-        episode of a block is exchangeable (the same seed, the same context, any value).
-        """
-        eps = self.episodes
-        blocks = codes(eps, [*within, "repeat"])
-        success = eps["success"].to_numpy().astype(np.int8)
-        shuffled = np.empty((n_perm, len(eps)), dtype=np.int8)
-        order = np.argsort(blocks, kind="stable")
-        bounds = np.searchsorted(blocks[order], np.arange(blocks.max() + 2))
-        for lo, hi in zip(bounds[:-1], bounds[1:]):
-            idx = order[lo:hi]
-            shuffled[:, idx] = rng.permuted(np.tile(success[idx], (n_perm, 1)), axis=1)
-        return group_sum(shuffled.astype(np.int64), eps["cell"].to_numpy())
-
-
-def _table(episodes: pd.DataFrame, factors: tuple[str, ...]) -> _Table:
-    """Cells of one split (`check_episodes` has vouched for its consistency)."""
+def _table(episodes: pd.DataFrame, factors: tuple[str, ...]) -> CellTable:
+    """Cells (value(s) × context) of one split (`check_episodes` has vouched for its consistency)."""
     eps = episodes[["value", "context_id", "repeat", "success", "instance_id"]].copy()
     parts = eps["value"].astype(str).str.split("|", regex=False)
     for i, name in enumerate(factors):
         eps[name] = parts.str[i]
-    keys = [*factors, "context_id"]
-    eps["cell"] = codes(eps, keys)
-    cells = eps.groupby("cell", sort=True).agg(
-        n=("success", "size"), k=("success", "sum"), **{key: (key, "first") for key in keys})
-    return _Table(factors, cells.reset_index(drop=True), eps.reset_index(drop=True))
+    return CellTable.build(eps, factors, [*factors, "context_id"])
 
 
-def _rng(cfg: MetricsConfig, split: str, purpose: str) -> np.random.Generator:
-    """A stream per (seed, split, purpose): a split's numbers never depend on which others exist."""
-    return np.random.default_rng([cfg.seed, zlib.crc32(f"{split}:{purpose}".encode())])
-
-
-def _value_order(factor: str, values: Sequence[str]) -> list[str]:
-    """Registry order (rings, yaw-major, k) where the factor is known, then the rest sorted."""
-    known = FACTORS[factor].values if factor in FACTORS else ()
-    present = set(values)
-    return [v for v in known if v in present] + sorted(present - set(known))
-
-
-def _interval(successes: int, n: int) -> list[float] | None:
-    ci = wilson_interval(successes, n)
-    return None if ci is None else [ci[0], ci[1]]
-
-
-def _lrt_fields(test: stats.LRT | None) -> dict[str, Any]:
-    if test is None:
-        return {"p_value": None, "p_value_method": None, "p_value_at_floor": None, "lrt": None}
-    return {"p_value": test.p_value, "p_value_method": test.method, "p_value_at_floor": test.at_floor,
-            "lrt": {"statistic": test.statistic, "df": test.df}}
-
-
-def _per_value_tests(table: _Table, factor: str) -> dict[str, stats.ValueTest]:
+def _per_value_tests(table: CellTable, factor: str) -> dict[str, stats.ValueTest]:
     """CMH odds ratio of each value against the rest, stratified by block (context, repeat)."""
     eps = table.episodes
     grid = eps.groupby(["context_id", "repeat", factor], sort=True)["success"].agg(["sum", "size"])
@@ -158,7 +89,7 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     tests = _per_value_tests(table, factor) if k else {}
     grouped = table.cells.assign(dev=dev).groupby(factor)
     per_value: dict[str, dict[str, Any]] = {}
-    for value in _value_order(factor, list(grouped.groups)):
+    for value in value_order(factor, list(grouped.groups)):
         rows = grouped.get_group(value)
         test = tests.get(value, stats.ValueTest(None, None, None))
         per_value[value] = {"sr": float(rows["k"].sum() / rows["n"].sum()), "n_episodes": int(rows["n"].sum()),
@@ -169,8 +100,9 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     out: dict[str, Any] = {"factor": factor, "n_instances": int(episodes["instance_id"].nunique()),
                            "n_episodes": n, "n_contexts": int(ctx.max() + 1),
                            "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
-                           "sr": k / n, "sr_ci95": _interval(k, n), "cv": None, "cv_null": None,
-                           "cv_excess": None, "cv_excess_ci95": None, **_lrt_fields(None), "p_value_cv": None,
+                           "sr": k / n, "sr_ci95": wilson_ci95(k, n), "cv": None, "cv_null": None,
+                           "cv_excess": None, "cv_excess_ci95": None, **stats.lrt_fields(None),
+                           "p_value_cv": None,
                            "p_value_cv_draws": None, "p_value_cv_at_floor": None, "per_value": per_value}
     if k == 0:
         return out
@@ -178,7 +110,7 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     def statistic(sr: np.ndarray) -> np.ndarray:
         return conditional_cv(sr, ctx, cfg.epsilon).mean(axis=-1)
 
-    rng = _rng(cfg, split, "perm")
+    rng = cfg.rng(split, "perm")
     permuted = table.permuted_k(["context_id"], cfg.n_perm, rng)
     null = statistic(permuted / table.n)
     out["cv"] = float(statistic(sr_cell))
@@ -188,11 +120,11 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
                             SEQUENTIAL_H, cfg.max_perm)
     out |= {"p_value_cv": mc.p_value, "p_value_cv_draws": mc.draws, "p_value_cv_at_floor": mc.at_floor}
     value_codes = table.codes([factor])
-    out |= _lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
+    out |= stats.lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
     return out
 
 
-def _factorial_statistics(table: _Table, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
+def _factorial_statistics(table: CellTable, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
     """(cell SRs (..., n_cells) → {A, B, "A|B", "B|A"} arrays; each factor's cell groups (b, c) / (a, c))."""
     a, b = table.factors
     by = {a: table.codes([b, "context_id"]), b: table.codes([a, "context_id"])}
@@ -217,13 +149,13 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     table = _table(episodes, (a, b))
     n, k = len(episodes), int(episodes["success"].sum())
     pooled = table.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
-    order = {f: {v: i for i, v in enumerate(_value_order(f, table.cells[f].unique()))} for f in (a, b)}
+    order = {f: {v: i for i, v in enumerate(value_order(f, table.cells[f].unique()))} for f in (a, b)}
     keys = sorted(pooled.index, key=lambda ab: (order[a][ab[0]], order[b][ab[1]]))
     per_value = {f"{va}|{vb}": {"sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
                                 "n_episodes": int(pooled.loc[(va, vb), "n"])} for va, vb in keys}
     iec_names = (f"{a}|{b}", f"{b}|{a}")
     out: dict[str, Any] = {"factors": [a, b], "n_instances": int(episodes["instance_id"].nunique()), "sr": k / n,
-                           "sr_ci95": _interval(k, n), "n_episodes": n,
+                           "sr_ci95": wilson_ci95(k, n), "n_episodes": n,
                            **{key: dict.fromkeys((a, b)) for key in
                               ("cv", "cv_null", "cv_excess", "p_value", "p_value_method", "p_value_cv")},
                            **{key: dict.fromkeys(iec_names) for key in ("iec", "iec_null", "iec_excess", "p_iec")},
@@ -233,7 +165,7 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     statistics, by = _factorial_statistics(table, cfg.epsilon)
     point = statistics(table.sr)
     for f, other in ((a, b), (b, a)):
-        permuted = table.permuted_k([other, "context_id"], cfg.n_perm, _rng(cfg, split, f"perm:{f}"))
+        permuted = table.permuted_k([other, "context_id"], cfg.n_perm, cfg.rng(split, f"perm:{f}"))
         null = statistics(permuted / table.n)[f]
         out["cv"][f] = float(point[f])
         out["cv_null"][f] = float(null.mean())
@@ -243,7 +175,7 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
         out["p_value"][f] = None if test is None else test.p_value
         out["p_value_method"][f] = None if test is None else test.method
     test, draws = stats.interaction_lrt(table.k, table.n, table.codes([a]), table.codes([b]),
-                                        table.codes(["context_id"]), cfg.n_glm, _rng(cfg, split, "additive"))
+                                        table.codes(["context_id"]), cfg.n_glm, cfg.rng(split, "additive"))
     if test is not None:
         out["p_interaction"], out["p_interaction_method"] = test.p_value, test.method
     null_iec = statistics(draws / table.n) if draws is not None else None

@@ -18,6 +18,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import statsmodels.api as sm
@@ -89,6 +90,15 @@ class LRT:
     method: str  # "asymptotic" (χ²), "permutation" or "parametric_bootstrap"
     # Calibrated by draws none of which reached the statistic: p is the floor 1 / (draws + 1).
     at_floor: bool = False
+
+
+def lrt_fields(test: LRT | None) -> dict[str, Any]:
+    """A test as metrics.json stores it: p_value, p_value_method, p_value_at_floor and lrt {statistic, df};
+    every field None without a test."""
+    if test is None:
+        return {"p_value": None, "p_value_method": None, "p_value_at_floor": None, "lrt": None}
+    return {"p_value": test.p_value, "p_value_method": test.method, "p_value_at_floor": test.at_floor,
+            "lrt": {"statistic": test.statistic, "df": test.df}}
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")  # hundreds of small refits: threads only contend
@@ -300,3 +310,17 @@ def repeats_needed(n_values: int, n_contexts: int, tau: float, sr: float, power:
         if lrt_power(n_values, n_contexts, repeats, tau, sr, alpha) >= power:
             return repeats
     return None
+
+
+def logistic_trend(xs: np.ndarray, successes: np.ndarray,
+                   n: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """Binomial GLM (logit) success ~ x fitted to per-value counts at numeric values `xs`: (fitted SR on 50
+    points from min to max of xs, slope per unit of x, its Wald p). None with fewer than 3 values, no episode,
+    or no failure or no success (nothing to fit)."""
+    if len(xs) < 3 or n.sum() == 0 or successes.sum() in (0, n.sum()):
+        return None
+    model = sm.GLM(np.column_stack([successes, n - successes]), sm.add_constant(xs),
+                   family=sm.families.Binomial())
+    fit = model.fit()
+    grid = np.linspace(xs.min(), xs.max(), 50)
+    return fit.predict(sm.add_constant(grid)), float(fit.params[1]), float(fit.pvalues[1])

@@ -1,16 +1,21 @@
-"""The statistics' shared vocabulary: the metrics config, binomial intervals and the CV's group arithmetic.
+"""The statistics' shared vocabulary: the metrics config and its random streams, binomial intervals, the CV's
+group arithmetic, a split's episodes as cells (`CellTable`) and the order a factor's values are listed in.
 
-Below both `eval.statistics.metrics` (per-split metrics) and `eval.statistics.compare` (paired policy comparisons), which build on it.
+Below `eval.statistics.metrics` (per-split metrics), `eval.statistics.context` (success by context factor) and
+`eval.statistics.compare` (paired policy comparisons), which build on it.
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+
+from roboview_data.variation.factors import FACTORS
 
 EPSILON = 1e-6
 # Exceedances that stop a sequential Monte Carlo p-value (Besag–Clifford): its relative error is ≈ 1/√h.
@@ -46,6 +51,11 @@ class MetricsConfig:
         if self.seed < 0:
             raise ValueError(f"seed={self.seed} must be ≥ 0")
 
+    def rng(self, split: str, purpose: str) -> np.random.Generator:
+        """The random stream of one (seed, split, purpose): a split's numbers never depend on which others
+        exist."""
+        return np.random.default_rng([self.seed, zlib.crc32(f"{split}:{purpose}".encode())])
+
 
 def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float] | None:
     """Wilson score interval for successes/n (None when n = 0); 8/10 → (0.490, 0.943)."""
@@ -59,6 +69,12 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     lo = 0.0 if successes == 0 else max(0.0, center - half)
     hi = 1.0 if successes == n else min(1.0, center + half)
     return lo, hi
+
+
+def wilson_ci95(successes: int, n: int) -> list[float] | None:
+    """`wilson_interval` as metrics.json stores it: [low, high] (None when n = 0); 8/10 → [0.490, 0.943]."""
+    ci = wilson_interval(successes, n)
+    return None if ci is None else [ci[0], ci[1]]
 
 
 def conditional_cv(sr: np.ndarray, groups: np.ndarray, epsilon: float = EPSILON) -> np.ndarray:
@@ -88,3 +104,67 @@ def codes(frame: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
 def excess(observed: float, null: float) -> float:
     """√max(0, observed² − null²): the part of a dispersion not explained by the null's noise."""
     return math.sqrt(max(0.0, observed * observed - null * null))
+
+
+def value_order(factor: str, values: Sequence[str]) -> list[str]:
+    """`values` in the factor registry's order (rings, yaw-major, k) where the factor is known, then the rest
+    sorted; a value listed twice is listed once."""
+    known = FACTORS[factor].values if factor in FACTORS else ()
+    present = set(values)
+    return [v for v in known if v in present] + sorted(present - set(known))
+
+
+@dataclass(frozen=True)
+class CellTable:
+    """Episodes grouped into cells (one per combination of the key columns, e.g. value × context), each
+    episode keeping its cell and repeat: what the CV, its permutation null and the GLM tests read."""
+
+    factors: tuple[str, ...]
+    cells: pd.DataFrame  # one row per cell: the key columns, n (episodes) and k (successes)
+    episodes: pd.DataFrame  # one row per episode: the key columns, repeat, success (0/1) and cell
+
+    @classmethod
+    def build(cls, episodes: pd.DataFrame, factors: Sequence[str], keys: Sequence[str]) -> CellTable:
+        """Cells of `episodes` by `keys` (sorted); `episodes` holds the key columns, repeat and success."""
+        missing = [c for c in (*keys, "repeat", "success") if c not in episodes.columns]
+        if missing:
+            raise ValueError(f"episodes lack column(s) {', '.join(missing)}; a cell table needs the keys "
+                             f"{list(keys)}, repeat and success")
+        eps = episodes.copy()
+        eps["cell"] = codes(eps, keys)
+        cells = eps.groupby("cell", sort=True).agg(
+            n=("success", "size"), k=("success", "sum"), **{key: (key, "first") for key in keys})
+        return cls(tuple(factors), cells.reset_index(drop=True), eps.reset_index(drop=True))
+
+    @property
+    def n(self) -> np.ndarray:
+        return self.cells["n"].to_numpy()
+
+    @property
+    def k(self) -> np.ndarray:
+        return self.cells["k"].to_numpy()
+
+    @property
+    def sr(self) -> np.ndarray:
+        return self.k / self.n
+
+    def codes(self, columns: Sequence[str]) -> np.ndarray:
+        """Group code of each cell by `columns` (see `codes`)."""
+        return codes(self.cells, columns)
+
+    def permuted_k(self, within: Sequence[str], n_perm: int, rng: np.random.Generator) -> np.ndarray:
+        """(n_perm, n_cells) success counts with episodes' cell labels shuffled within blocks.
+
+        A block is a combination of `within` columns plus the repeat: under the null every
+        episode of a block is exchangeable (the same seed, the same context, any value).
+        """
+        eps = self.episodes
+        blocks = codes(eps, [*within, "repeat"])
+        success = eps["success"].to_numpy().astype(np.int8)
+        shuffled = np.empty((n_perm, len(eps)), dtype=np.int8)
+        order = np.argsort(blocks, kind="stable")
+        bounds = np.searchsorted(blocks[order], np.arange(blocks.max() + 2))
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            idx = order[lo:hi]
+            shuffled[:, idx] = rng.permuted(np.tile(success[idx], (n_perm, 1)), axis=1)
+        return group_sum(shuffled.astype(np.int64), eps["cell"].to_numpy())

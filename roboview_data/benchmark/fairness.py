@@ -131,7 +131,7 @@ class FairnessProbe:
             )
             results.append(result)
             min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
-            reasons += _violations(result, thresholds, min_pixels, scene_camera=cam != "wrist",
+            reasons += violations(result, thresholds, min_pixels, scene_camera=cam != "wrist",
                                    judge_nominal=judge_nominal)
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
@@ -157,8 +157,10 @@ def _delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
     return float(delta_e_2000(a, b)) if a is not None and b is not None else float("nan")
 
 
-def _violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, scene_camera: bool,
-                judge_nominal: bool = True) -> list[str]:
+def violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, scene_camera: bool,
+               judge_nominal: bool = True) -> list[str]:
+    """Why one camera's measurements fail the thresholds, one reason each (empty when they pass); the box is
+    judged only by a `scene_camera`, the object's colour shift only with `judge_nominal`."""
     out = []
     if r.object_visible < t.min_object_visible:
         out.append(f"{r.camera}: object visible {r.object_visible:.2f} < {t.min_object_visible}")
