@@ -32,6 +32,7 @@ from roboview_data.benchmark.review import adjudicate, read_decisions
 from roboview_data.benchmark.screen import agreement
 from roboview_data.benchmark.screen import write_decisions as write_screen_decisions
 from roboview_data.cli_errors import flag_errors
+from roboview_data.folders import folder_problem
 from roboview_data.sim.tasks import DEFAULT_TASK
 from roboview_data.variation.instances import (
     PRESETS,
@@ -141,11 +142,10 @@ class BuildResult:
 
 
 def _check_output_dir(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--output_dir={out} is a file; give a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / bio.MANIFEST).is_file():
-        raise ValueError(f"--output_dir={out} is not empty and holds no RoboView benchmark "
-                         f"({bio.MANIFEST} missing); choose a new folder or delete this one")
+    problem = folder_problem(out, "benchmark", bio.MANIFEST, "choose a new folder or delete this one",
+                             label=f"--output_dir={out}", writing=True)
+    if problem:
+        raise ValueError(problem)
 
 
 def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:

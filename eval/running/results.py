@@ -34,6 +34,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from eval.running import provenance
+from roboview_data.folders import folder_problem
 
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
@@ -64,12 +65,11 @@ class EpisodeStore:
 
     def _check_and_load(self) -> None:
         out = self.out
-        if out.exists() and not out.is_dir():
-            raise ResultsError(f"results folder {out} is a file; give a folder")
+        problem = folder_problem(out, "evaluation", RUN_FILE, "choose a new folder",
+                                 label=f"results folder {out}", writing=True)
+        if problem:
+            raise ResultsError(problem)
         run_file = out / RUN_FILE
-        if out.is_dir() and any(out.iterdir()) and not run_file.is_file():
-            raise ResultsError(f"results folder {out} is not empty and holds no RoboView evaluation "
-                               f"({RUN_FILE} missing); choose a new folder")
         if run_file.is_file():
             previous = json.loads(run_file.read_text())
             if previous.get("results_format", 1) != RESULTS_FORMAT:
