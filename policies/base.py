@@ -224,10 +224,6 @@ def load_policy_types() -> tuple[str, ...]:
     return tuple(sorted(PolicyConfig.get_known_choices()))
 
 
-def registered_policies() -> tuple[str, ...]:
-    return load_policy_types()
-
-
 def policy_config(type_name: str, **settings: Any) -> PolicyConfig:
     """The config of policy type `type_name` with `settings` (what `--policy.type=… --policy.x=…` gives)."""
     known = load_policy_types()

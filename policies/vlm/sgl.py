@@ -32,7 +32,6 @@ from roboview_data.sim.env import IMAGE_KEY
 
 PRIORITY = ("color", "state", "size", "position")
 GENERIC_NOUNS = ("object", "thing", "item", "geometry", "solid")
-ATTRIBUTES = ("name", "object_type", "category", "color", "size", "position", "state")
 # Values that describe nothing (the prompt's fallbacks).
 UNINFORMATIVE = {"normal", "", None}
 

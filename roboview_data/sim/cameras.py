@@ -16,9 +16,8 @@ import numpy as np
 # positions and the receiver box, slightly above the table.
 WORKSPACE_CENTER = np.array([0.48, 0.02, 0.03])
 
-# Cameras that a camera factor moves together, and those it never touches.
+# Cameras that a camera factor moves together.
 PERTURBED_CAMERAS = ("front", "left_top")
-SCENE_CAMERAS = ("front", "left_top", "right_top")
 ALL_CAMERAS = ("front", "left_top", "right_top", "wrist")
 
 DEFAULT_FOVY_DEG = 45.0
