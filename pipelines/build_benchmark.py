@@ -33,6 +33,7 @@ from roboview_data.benchmark.screen import agreement
 from roboview_data.benchmark.screen import write_decisions as write_screen_decisions
 from roboview_data.cli_errors import flag_errors
 from roboview_data.folders import folder_problem
+from roboview_data.sim.cameras import IMAGE_SIZE_MIN, check_image_size
 from roboview_data.sim.tasks import DEFAULT_TASK
 from roboview_data.variation.instances import (
     PRESETS,
@@ -43,6 +44,10 @@ from roboview_data.variation.instances import (
 from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
+
+# The perceptual-fairness gate judges visibility from object pixel counts: at 64² the smallest tiny-preset
+# object still covers 6 px of the front camera, at 48² 2 px, at 32² one.
+GATE_IMAGE_MIN = 4 * IMAGE_SIZE_MIN
 
 
 @dataclass
@@ -109,8 +114,9 @@ class BuildConfig:
             raise ValueError(f"unknown --preset={self.preset!r}; allowed: {', '.join(PRESETS)}")
         if self.num_workers <= 0:
             raise ValueError(f"--num_workers={self.num_workers} must be a positive count")
-        if not 64 <= self.image_size <= 640:
-            raise ValueError(f"--image_size={self.image_size} out of range; allowed 64..640")
+        check_image_size(self.image_size, "--image_size", GATE_IMAGE_MIN,
+                         f"the fairness gate counts object pixels; below {GATE_IMAGE_MIN} px the smallest "
+                         "object covers 2 px or fewer of the front camera")
         if not 0.0 < self.min_pass_rate <= 1.0:
             raise ValueError(f"--min_pass_rate={self.min_pass_rate} must lie in (0, 1]")
         self.suite  # validates union mode, colors and factor names now, before any work

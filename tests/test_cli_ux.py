@@ -168,3 +168,23 @@ def test_other_libraries_info_lines_are_silenced_ours_kept(tiny_benchmark):
     proc = _cli("pipelines.plan", f"--benchmark.path={tiny_benchmark}")
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert "OpenGL.acceleratesupport" not in proc.stderr and "OpenGL_accelerate" not in proc.stderr
+
+
+def test_every_image_size_flag_checks_the_one_bound():
+    from pipelines.build_benchmark import GATE_IMAGE_MIN, BuildConfig
+    from pipelines.collect import TRAIN_IMAGE_MIN, DatasetConfig
+    from pipelines.evaluate import EvalConfig
+    from roboview_data.sim.cameras import IMAGE_SIZE_MAX, IMAGE_SIZE_MIN, check_image_size
+
+    assert (IMAGE_SIZE_MIN, TRAIN_IMAGE_MIN, GATE_IMAGE_MIN, IMAGE_SIZE_MAX) == (16, 32, 64, 640)
+    check_image_size(IMAGE_SIZE_MIN)
+    with pytest.raises(ValueError, match=r"^image_size=15 out of range; allowed 16\.\.640$"):
+        check_image_size(IMAGE_SIZE_MIN - 1)
+    with pytest.raises(ValueError, match=r"^--eval.image_size=641 out of range; allowed 16\.\.640 \(or 0"):
+        EvalConfig(image_size=IMAGE_SIZE_MAX + 1)
+    assert EvalConfig(image_size=0).image_size == 0  # the policy's own size
+    with pytest.raises(ValueError, match=r"^--dataset.image_size=16 out of range; allowed 32\.\.640 \(tr"):
+        DatasetConfig(repo_id="a/b", image_size=16)
+    with pytest.raises(ValueError, match=r"^--image_size=32 out of range; allowed 64\.\.640 \(the fairness"):
+        BuildConfig(preset="tiny", image_size=32)
+    assert BuildConfig(preset="tiny", image_size=64).image_size == 64

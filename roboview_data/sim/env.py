@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 
 from roboview_data.errors import RenderError
-from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS
+from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, check_image_size
 from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.scene import (
     BOX_CENTER,
@@ -98,8 +98,7 @@ class PickPlaceEnv(gym.Env):
         unknown = [c for c in cameras if c not in ALL_CAMERAS]
         if unknown or not cameras:
             raise ValueError(f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}")
-        if not 16 <= image_size <= 640:
-            raise ValueError(f"image_size={image_size} out of range; allowed 16..640")
+        check_image_size(image_size)
         if fps <= 0 or 500 % fps:
             raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
         if max_steps <= 0:
