@@ -92,6 +92,36 @@ def test_the_cycle_finder_finds_a_cycle():
     assert "eval.statistics.adaptive" in graph["pipelines.evaluate"]  # imported inside a method
 
 
+# The house's floors, lowest first: a module imports only from its own package or a lower floor (an arrow
+# back up would tie the lower floor to everything above it). roboview_lerobot stands beside the statistics:
+# it reads results as eval.running writes them, nothing above.
+FLOORS = {"roboview_data": 0, "policies": 1, "eval": 2, "eval.running": 2, "eval.statistics": 3,
+          "roboview_lerobot": 3, "eval.reporting": 4, "pipelines": 5, "benchmarks": 6}
+
+
+def floor_of(module: str) -> str:
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "eval" and len(parts) > 1 else parts[0]
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """Every edge from a module to one on another floor that is not below its own."""
+    return sorted(f"{a} → {b}" for a, targets in graph.items() for b in targets
+                  if floor_of(a) != floor_of(b) and FLOORS[floor_of(b)] >= FLOORS[floor_of(a)])
+
+
+def test_no_module_imports_from_a_higher_floor():
+    graph = import_graph()
+    assert {floor_of(m) for m in graph} <= set(FLOORS), "a package without a floor: add it to FLOORS"
+    found = upward_imports(graph)
+    assert not found, "imports from a higher floor: " + "; ".join(found)
+    # The rule sees an arrow back up, a lazy one too.
+    assert upward_imports({"roboview_lerobot.convert": {"pipelines._cli"}, "pipelines._cli": set()}) == [
+        "roboview_lerobot.convert → pipelines._cli"]
+    assert upward_imports({"eval.statistics.x": {"roboview_lerobot.y"}, "roboview_lerobot.y": set()}) == [
+        "eval.statistics.x → roboview_lerobot.y"]
+
+
 def test_importing_the_package_registers_the_gym_ids():
     import subprocess
     import sys
