@@ -198,7 +198,7 @@ def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
 
 def run(cfg: ServingConfig) -> dict:
     from eval.running.provenance import now, start_entry
-    from policies.base import load_policy_types, policy_config
+    from policies.types import load_policy_types, policy_config
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     load_policy_types()

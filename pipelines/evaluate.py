@@ -28,7 +28,8 @@ from eval.running.backends import BACKENDS, ClusterLost, run_local, run_ray
 from eval.running.results import EpisodeStore, ResultsError, is_counted, shard_of
 from eval.running.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
-from policies.base import PolicyConfig, load_policy_types, missing_policy_type
+from policies.base import PolicyConfig, missing_policy_type
+from policies.types import load_policy_types
 from policies.errors import PolicyUnavailable
 from policies.vlm.sgl import SGLConfig
 from roboview_data.benchmark.format import load_benchmark, select_items

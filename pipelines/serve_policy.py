@@ -44,7 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipelines._cli import cli_main
-from policies.base import AgentView, ChunkPredictor, PolicyConfig, load_policy_types, missing_policy_type
+from policies.base import AgentView, ChunkPredictor, PolicyConfig, missing_policy_type
+from policies.types import load_policy_types
 from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
 from roboview_data.sim.cameras import check_image_size

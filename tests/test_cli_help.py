@@ -62,7 +62,7 @@ def accepted_flags(config: type) -> set[str]:
     """The flags draccus's parser of `config` accepts (less the per-section config-file ones)."""
     from draccus.argparsing import ArgumentParser
 
-    from policies.base import load_policy_types
+    from policies.types import load_policy_types
 
     load_policy_types()  # as a command does before it parses: every --policy.type's flags
     actions = ArgumentParser(config_class=config).parser._option_string_actions

@@ -24,7 +24,7 @@ def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedPro
 
 def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
     from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-    from policies.base import policy_config
+    from policies.types import policy_config
 
     out = tmp_path / "ev"
     flags = [f"--benchmark.path={tiny_benchmark}", "--policy.type=expert", "--benchmark.splits=color",
@@ -132,7 +132,7 @@ def test_a_misspelled_flag_gets_two_lines_and_the_closest_real_flag(module, wron
 def test_evaluate_help_puts_the_common_flags_first():
     from pipelines._cli import format_help
     from pipelines.evaluate import EvaluateConfig
-    from policies.base import load_policy_types
+    from policies.types import load_policy_types
 
     load_policy_types()
     text = format_help(EvaluateConfig)

@@ -1,9 +1,12 @@
 """No import cycles between RoboView's modules, counting imports inside functions too (a lazy import that
-breaks a cycle at run time still ties the two modules together)."""
+breaks a cycle at run time still ties the two modules together) and imports by name (a registry's module
+list, `importlib.import_module("pkg.mod")`, a "pkg.mod:Class" a registry resolves): each ties two modules
+as firmly."""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
@@ -19,6 +22,30 @@ def _modules() -> dict[str, Path]:
     return found
 
 
+# A string naming a module below a package ("pkg.mod") or an attribute of one ("pkg.mod:Class").
+MODULE_STRING = re.compile(r"^[a-z_][a-z0-9_]*(\.[a-z0-9_]+)+(:[A-Za-z_][\w.]*)?$")
+
+
+def named_modules(tree: ast.AST) -> set[str]:
+    """What a module imports by name: a literal given to `import_module`, and every other string constant
+    (docstrings aside) that names a module or a module's attribute ("pkg.mod:Class"), as registries declare
+    them (a module list, an env or expert class, a gymnasium entry point) for a helper to import."""
+    docstrings = {id(node.value) for node in ast.walk(tree) if isinstance(node, ast.Expr)}
+    # `[python, "-m", "pkg.mod"]` runs a module in another process: no import.
+    run = {id(b) for node in ast.walk(tree) if isinstance(node, (ast.List, ast.Tuple))
+           for a, b in zip(node.elts, node.elts[1:]) if isinstance(a, ast.Constant) and a.value == "-m"}
+    found = set()
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
+                and isinstance(node.args[0].value, str)
+                and (getattr(node.func, "attr", None) or getattr(node.func, "id", None)) == "import_module"):
+            found.add(node.args[0].value)
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                and id(node) not in docstrings | run and MODULE_STRING.match(node.value)):
+            found.add(node.value.partition(":")[0])
+    return found
+
+
 def import_graph() -> dict[str, set[str]]:
     """module → the project modules it imports (the named module itself, not the packages above it)."""
     modules = _modules()
@@ -26,7 +53,9 @@ def import_graph() -> dict[str, set[str]]:
     for name, path in modules.items():
         edges = set()
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        tree = ast.parse(path.read_text(), str(path))
+        edges |= {t for t in named_modules(tree) if t in modules and t != name}
+        for node in ast.walk(tree):
             if isinstance(node, ast.Import):
                 targets = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -76,9 +105,43 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+# Circles being taken apart in roboview_data.sim and roboview_data.variation: a task's env and expert named by
+# "module:Class" import the task registry back; a factor applier needs the scene that applies the factors.
+# The test fails on a new circle, and on one listed here that is gone (then delete its line).
+KNOWN_CIRCLES = [
+    ["roboview_data.sim.scene", "roboview_data.variation.factors",
+     "roboview_data.variation.factors.object_size"],
+    ["roboview_data.sim.env", "roboview_data.sim.expert", "roboview_data.sim.push",
+     "roboview_data.sim.tasks"],
+]
+
+
 def test_the_project_has_no_import_cycle():
     found = cycles(import_graph())
-    assert not found, "import cycles: " + "; ".join(" ↔ ".join(c) for c in found)
+    new = [c for c in found if c not in KNOWN_CIRCLES]
+    gone = [c for c in KNOWN_CIRCLES if c not in found]
+    assert not new, "import cycles: " + "; ".join(" ↔ ".join(c) for c in new)
+    assert not gone, "gone, delete from KNOWN_CIRCLES: " + "; ".join(" ↔ ".join(c) for c in gone)
+
+
+def test_imports_by_name_are_edges():
+    code = '''"""Docstring naming roboview_data.sim.env is no import."""
+import importlib
+MODULES = ("policies.vision", "not.a.module")
+TASK = dict(env="roboview_data.sim.push:PushEnv")
+importlib.import_module("eval")
+cmd = ["python", "-m", "pipelines.evaluate"]
+label = "a plain string, not.a.name:either"
+'''
+    found = named_modules(ast.parse(code))
+    assert found == {"policies.vision", "not.a.module", "roboview_data.sim.push", "eval"}
+    # In the project: a registry's module list, "module:Class" targets, the console scripts' modules.
+    graph = import_graph()
+    assert "policies.vision" in graph["policies.types"] and "policies.vision" not in graph["policies.base"]
+    assert {"roboview_data.sim.env", "roboview_data.sim.push"} <= graph["roboview_data.sim.tasks"]
+    assert "roboview_data.variation.factors.color" in graph["roboview_data.variation.factors"]
+    assert "pipelines.collect" in graph["pipelines._console"]
+    assert "roboview_lerobot.env" in graph["roboview_lerobot"]
 
 
 def test_the_cycle_finder_finds_a_cycle():

@@ -6,7 +6,8 @@ Privileged state (object pose, box center) is read here only to grade what the p
 import numpy as np
 import pytest
 
-from policies.base import Episode, load_policy_types, policy_config
+from policies.base import Episode
+from policies.types import load_policy_types, policy_config
 from policies.factory import make_policy
 from policies.perception import PerceptionError, perceive
 from roboview_data.sim.env import DEPTH_KEY, IMAGE_KEY, PickPlaceEnv

@@ -14,7 +14,7 @@ import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
 from pipelines.evaluate import run as evaluate
-from policies.base import policy_config
+from policies.types import policy_config
 from policies.vlm.sgl import SGLConfig
 from roboview_data.sim.cameras import ALL_CAMERAS
 

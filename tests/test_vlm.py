@@ -12,7 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from policies.base import Episode, policy_config
+from policies.base import Episode
+from policies.types import policy_config
 from policies.factory import make_policy
 from policies.errors import TransientPolicyError
 from policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
