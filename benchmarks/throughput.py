@@ -355,11 +355,12 @@ def run(cfg: ThroughputConfig) -> dict:
 
 def main(argv: list[str] | None = None) -> dict:
     argv = sys.argv[1:] if argv is None else argv
-    if any(a.startswith("--phase=") for a in argv):  # a child process of the harness: print its JSON result
-        result = cli_main(PhaseConfig, run_phase, args=argv)
-        print(json.dumps(result))
-        return result
-    return cli_main(ThroughputConfig, run, args=argv)
+    if not any(a.startswith("--phase=") for a in argv):
+        return cli_main(ThroughputConfig, run, args=argv)
+    # A child process of the harness: print its JSON result.
+    result = cli_main(PhaseConfig, run_phase, args=argv)
+    print(json.dumps(result))
+    return result
 
 
 if __name__ == "__main__":
