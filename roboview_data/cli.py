@@ -61,6 +61,49 @@ def _check_choices(config_class: type, args: list[str]) -> None:
                     fail(f"unknown {f.name} type {name!r}; allowed: {', '.join(known)}")
 
 
+# --- renamed flags -------------------------------------------------------------------------------------
+#
+# A config class that moved settings (e.g. into a nested config) keeps the old flags working with
+#   flag_aliases = {"old_field": "new.path"}   (a class attribute) --{prefix}old_field=V is read as
+#                                              --{prefix}new.path=V, with one warning line naming it.
+# For a registry-typed field (`--policy.type=NAME`), the aliases of the type named on the command line apply.
+
+
+def flag_aliases(config_class: type, args: Sequence[str], prefix: str = "") -> dict[str, str]:
+    """Every `--old` flag of `config_class` (nested configs and the chosen registry types included) →
+    `--new`."""
+    own = getattr(config_class, "flag_aliases", {})
+    found = {f"--{prefix}{old}": f"--{prefix}{new}" for old, new in own.items()}
+    hints = typing.get_type_hints(config_class)
+    for f in dataclasses.fields(config_class):
+        kind = hints.get(f.name)
+        if _is_choice(kind):
+            given = [a.split("=", 1)[1] for a in args if a.startswith(f"--{prefix}{f.name}.type=")]
+            choice = dict(kind.get_known_choices()).get(given[-1]) if given else None
+            if choice is not None:
+                found |= flag_aliases(choice, args, f"{prefix}{f.name}.")
+        elif (nested := _dataclass_of(kind)) is not None:
+            found |= flag_aliases(nested, args, f"{prefix}{f.name}.")
+    return found
+
+
+def renamed_flags(config_class: type, args: list[str]) -> list[str]:
+    """`args` with every old flag spelled as its new one; one `warning:` line on stderr per old flag used."""
+    aliases = flag_aliases(config_class, args)
+    if not aliases:
+        return args
+    out, warned = [], set()
+    for arg in args:
+        flag, sep, value = arg.partition("=")
+        if flag in aliases:
+            if flag not in warned:
+                print(f"warning: {flag} is deprecated; use {aliases[flag]}", file=sys.stderr)
+                warned.add(flag)
+            arg = aliases[flag] + sep + value
+        out.append(arg)
+    return out
+
+
 def _list_flags(config_class: type, prefix: str = "") -> set[str]:
     """The --flags of `config_class` (nested configs included) whose field holds a list or tuple."""
     found: set[str] = set()
@@ -354,6 +397,7 @@ def parse(config_class: type[T], args: list[str] | None = None) -> T:
     if "-h" in args or "--help" in args:
         print(format_help(config_class, args), end="")
         raise SystemExit(0)
+    args = renamed_flags(config_class, args)
     parser = _parser(config_class)
     _check_flags(parser, args)
     args = comma_lists(config_class, args)

@@ -188,3 +188,41 @@ def test_every_image_size_flag_checks_the_one_bound():
     with pytest.raises(ValueError, match=r"^--image_size=32 out of range; allowed 64\.\.640 \(the fairness"):
         BuildConfig(preset="tiny", image_size=32)
     assert BuildConfig(preset="tiny", image_size=64).image_size == 64
+
+
+def test_vlm_endpoint_flags_nest_and_the_flat_spelling_still_works_with_a_warning(capsys):
+    from pipelines._cli import parse
+    from pipelines.build_benchmark import BuildConfig
+    from pipelines.evaluate import EvaluateConfig
+    from policies.types import load_policy_types
+    from roboview_data.cli import flag_aliases, renamed_flags
+
+    load_policy_types()
+    base = ["--benchmark.path=b", "--policy.type=vlm_simple", "--sgl.enable=true"]
+    new = parse(EvaluateConfig, [*base, "--policy.endpoint.base_url=http://h:1/v1",
+                                 "--policy.endpoint.model=m", "--policy.endpoint.max_in_flight=2",
+                                 "--sgl.endpoint.model=s"])
+    assert capsys.readouterr().err == ""
+    old = parse(EvaluateConfig, [*base, "--policy.base_url=http://h:1/v1", "--policy.model=m",
+                                 "--policy.max_in_flight=2", "--policy.model=m", "--sgl.model=s"])
+    assert old.policy.endpoint == new.policy.endpoint and old.sgl.endpoint == new.sgl.endpoint
+    assert (new.policy.endpoint.base_url, new.policy.endpoint.model, new.policy.endpoint.max_in_flight) == (
+        "http://h:1/v1", "m", 2)
+    assert new.sgl.endpoint.model == "s" and new.policy.options()["model"] == "m"  # run.json keeps its keys
+    assert capsys.readouterr().err.splitlines() == [  # one line per old flag, naming the new one
+        "warning: --policy.base_url is deprecated; use --policy.endpoint.base_url",
+        "warning: --policy.model is deprecated; use --policy.endpoint.model",
+        "warning: --policy.max_in_flight is deprecated; use --policy.endpoint.max_in_flight",
+        "warning: --sgl.model is deprecated; use --sgl.endpoint.model"]
+    # Another policy type's own flag of the same name is left alone (openpi has --policy.timeout_s).
+    openpi = ["--policy.type=openpi", "--policy.timeout_s=5"]
+    assert "--policy.timeout_s" not in flag_aliases(EvaluateConfig, openpi)
+    assert renamed_flags(EvaluateConfig, openpi) == openpi and capsys.readouterr().err == ""
+    # The build's screen is an endpoint itself: its flags keep their names.
+    build = parse(BuildConfig, ["--preset=tiny", "--vlm_screen.base_url=http://h:1/v1",
+                                "--vlm_screen.model=g"])
+    screen = build.vlm_screen
+    assert build.screen_enabled and (screen.base_url, screen.model) == ("http://h:1/v1", "g")
+    with pytest.raises(SystemExit):
+        parse(EvaluateConfig, [*base, "--policy.model=", "--sgl.endpoint.model=s"])
+    assert "--policy.endpoint.model is empty" in capsys.readouterr().err
