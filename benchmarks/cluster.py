@@ -109,8 +109,9 @@ class ClusterBenchConfig:
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # LeRobot checkpoint to evaluate (default: the reference ACT when present, else the scripted expert).
     checkpoint: str = ""
-    # Split and number of its instances evaluated (one repeat each) per layout.
+    # Split evaluated per layout.
     split: str = "color"
+    # Number of the split's instances evaluated (one repeat each) per layout.
     episodes: int = 48
     # Cores in total, in every layout.
     cores: int = 2

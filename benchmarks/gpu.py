@@ -42,8 +42,9 @@ class GpuBenchConfig:
     checkpoint: str = REFERENCE_CHECKPOINT
     # Benchmark folder (default: the tiny preset built here).
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
-    # Split and number of its instances evaluated (one repeat each) per layout.
+    # Split evaluated per layout.
     split: str = "color"
+    # Number of the split's instances evaluated (one repeat each) per layout.
     episodes: int = 200
     # Envs per render worker in the policy-server layout.
     envs_per_worker: int = 4

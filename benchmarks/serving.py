@@ -50,11 +50,13 @@ class ServingConfig:
     checkpoint: str = REFERENCE_CHECKPOINT
     # Benchmark folder; empty: build the tiny preset in a scratch folder.
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
-    # Split and number of its instances evaluated on every path (one repeat each).
+    # Split evaluated on every path.
     split: str = "color"
+    # Number of the split's instances evaluated on every path (one repeat each).
     episodes: int = 48
-    # Concurrent clients and requests per client for the requests-per-second comparison.
+    # Concurrent clients for the requests-per-second comparison.
     clients: int = 4
+    # Requests each client sends in the requests-per-second comparison.
     requests: int = 40
 
     def __post_init__(self) -> None:
@@ -198,7 +200,7 @@ def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
 
 def run(cfg: ServingConfig) -> dict:
     from eval.running.provenance import now, start_entry
-    from policies.base import load_policy_types, policy_config
+    from policies.types import load_policy_types, policy_config
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     load_policy_types()

@@ -1,6 +1,6 @@
 """Why raw CV misleads, measured: the statistics on simulated policies whose bias is known.
 
-    python -m benchmarks.stats_calibration [--sims 40] [--values 9] [--contexts 4] [--repeats 5] [--sr 0.7]
+    python -m benchmarks.stats_calibration [--sims=40] [--values=9] [--contexts=4] [--repeats=5] [--sr=0.7]
 
 For τ = 0 (no bias), 0.3 and 0.6 (logit SD of the value effects) it simulates `--sims` tables of
 one single-factor split (`eval.statistics.simulate`), computes the metrics exactly as `pipelines.report` does,
@@ -12,44 +12,67 @@ q < 0.05". It ends with the planner's predicted power for the same design.
 
 from __future__ import annotations
 
-import argparse
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from eval.statistics.metrics import MetricsConfig, split_metrics
-from eval.statistics.simulate import simulate_split
 from eval.statistics.significance import lrt_power
+from eval.statistics.simulate import simulate_split
+from pipelines._cli import cli_main
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sims", type=int, default=40)
-    parser.add_argument("--values", type=int, default=9)
-    parser.add_argument("--contexts", type=int, default=4)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--sr", type=float, default=0.7)
-    parser.add_argument("--taus", default="0,0.3,0.6")
-    args = parser.parse_args()
-    cfg = MetricsConfig(n_perm=200, n_glm=100)
-    print(f"{args.values} values × {args.contexts} contexts × {args.repeats} repeats, SR ≈ {args.sr}, "
-          f"{args.sims} simulated tables per τ")
+@dataclass
+class CalibrationConfig:
+    # Simulated tables per τ.
+    sims: int = 40
+    # Values of the simulated single-factor split.
+    values: int = 9
+    # Contexts per value.
+    contexts: int = 4
+    # Repeats per (value, context).
+    repeats: int = 5
+    # Mean success rate of the simulated policy.
+    sr: float = 0.7
+    # True biases τ to simulate (logit SD of the value effects); 0 measures the type-I error.
+    taus: list[float] = field(default_factory=lambda: [0.0, 0.3, 0.6])
+
+    def __post_init__(self) -> None:
+        for name in ("sims", "values", "contexts", "repeats"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
+        if not 0.0 < self.sr < 1.0:
+            raise ValueError(f"--sr={self.sr} must lie in (0, 1)")
+        if not self.taus or any(t < 0 for t in self.taus):
+            raise ValueError(f"--taus={','.join(map(str, self.taus))}: give one or more biases ≥ 0")
+
+
+def run(cfg: CalibrationConfig) -> None:
+    metrics = MetricsConfig(n_perm=200, n_glm=100)
+    print(f"{cfg.values} values × {cfg.contexts} contexts × {cfg.repeats} repeats, SR ≈ {cfg.sr}, "
+          f"{cfg.sims} simulated tables per τ")
     print(f"{'τ':>5}{'true CV':>9}{'CV':>8}{'cv_null':>9}{'cv_excess':>11}{'p<.05 GLM':>11}{'p<.05 CV':>10}"
           f"{'any q<.05':>11}{'predicted':>11}{'s/table':>9}")
-    for tau in (float(t) for t in args.taus.split(",")):
+    for tau in cfg.taus:
         rng = np.random.default_rng(0)
         rows = []
         start = time.perf_counter()
-        for _ in range(args.sims):
-            table, true_cv = simulate_split(rng, args.values, args.contexts, args.repeats, tau, args.sr)
-            m = split_metrics(table, cfg)
+        for _ in range(cfg.sims):
+            table, true_cv = simulate_split(rng, cfg.values, cfg.contexts, cfg.repeats, tau, cfg.sr)
+            m = split_metrics(table, metrics)
             qs = [s["q_value"] for s in m["per_value"].values() if s["q_value"] is not None]
             rows.append((true_cv, m["cv"], m["cv_null"], m["cv_excess"], m["p_value"] < 0.05,
                          m["p_value_cv"] < 0.05, min(qs, default=1.0) < 0.05))
         mean = np.mean(np.array(rows, dtype=float), axis=0)
-        predicted = lrt_power(args.values, args.contexts, args.repeats, tau, args.sr) if tau > 0 else 0.05
+        predicted = lrt_power(cfg.values, cfg.contexts, cfg.repeats, tau, cfg.sr) if tau > 0 else 0.05
+        per_table = (time.perf_counter() - start) / cfg.sims
         print(f"{tau:>5.2f}{mean[0]:>9.3f}{mean[1]:>8.3f}{mean[2]:>9.3f}{mean[3]:>11.3f}{mean[4]:>11.2f}"
-              f"{mean[5]:>10.2f}{mean[6]:>11.2f}{predicted:>11.2f}{(time.perf_counter() - start) / args.sims:>9.2f}")
+              f"{mean[5]:>10.2f}{mean[6]:>11.2f}{predicted:>11.2f}{per_table:>9.2f}")
+
+
+def main(args: list[str] | None = None) -> None:
+    cli_main(CalibrationConfig, run, args=args)
 
 
 if __name__ == "__main__":

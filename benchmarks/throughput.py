@@ -92,7 +92,7 @@ def phase_collect(episodes: int, scratch: Path) -> dict:
 def phase_eval(bench: str, policy: str, path: str, splits: str, limit: int, repeats: int, workers: int,
                envs_per_worker: int, eager: bool, out: Path) -> dict:
     from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-    from policies.base import policy_config
+    from policies.types import policy_config
 
     cfg = EvaluateConfig(BenchmarkConfig(bench, splits), policy_config(policy, **({"path": path} if path else {})),
                          EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers,
@@ -131,7 +131,7 @@ def phase_breakdown(bench: str, policy: str, path: str, splits: str, episodes: i
     from eval.running.results import EpisodeStore
     from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
     from pipelines.evaluate import resolve_image_size
-    from policies.base import policy_config
+    from policies.types import policy_config
     from roboview_data.benchmark.format import load_benchmark
 
     config = policy_config(policy, **({"path": path} if path else {}))
@@ -355,11 +355,12 @@ def run(cfg: ThroughputConfig) -> dict:
 
 def main(argv: list[str] | None = None) -> dict:
     argv = sys.argv[1:] if argv is None else argv
-    if any(a.startswith("--phase=") for a in argv):  # a child process of the harness: print its JSON result
-        result = cli_main(PhaseConfig, run_phase, args=argv)
-        print(json.dumps(result))
-        return result
-    return cli_main(ThroughputConfig, run, args=argv)
+    if not any(a.startswith("--phase=") for a in argv):
+        return cli_main(ThroughputConfig, run, args=argv)
+    # A child process of the harness: print its JSON result.
+    result = cli_main(PhaseConfig, run_phase, args=argv)
+    print(json.dumps(result))
+    return result
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipelines._cli import cli_main
-from policies.vlm.client import Endpoint, VLMClient, default_cache_dir
+from policies.vlm.client import Endpoint, VLMClient
 from roboview_data.benchmark import conformance
 from roboview_data.benchmark import format as bio
 from roboview_data.benchmark.card import fairness_stats, write_card
@@ -31,36 +31,17 @@ from roboview_data.benchmark.render import InstanceRenderer
 from roboview_data.benchmark.review import adjudicate, read_decisions
 from roboview_data.benchmark.screen import agreement
 from roboview_data.benchmark.screen import write_decisions as write_screen_decisions
-from roboview_data.cli_errors import flag_errors
+from roboview_data.folders import folder_problem
+from roboview_data.sim.cameras import IMAGE_SIZE_MIN, check_image_size
 from roboview_data.tasks import DEFAULT_TASK, PRESETS, load_preset
 from roboview_data.variation.instances import SuiteConfig, generate_suite
 from roboview_data.workers import WorkerPool
 
 log = logging.getLogger(__name__)
 
-
-@dataclass
-class ScreenConfig:
-    """Stage 1b, optional: the paper's VLM fairness screen over every candidate's front image."""
-
-    # Base URL of the OpenAI-compatible endpoint (e.g. https://api.openai.com/v1).
-    base_url: str = "http://127.0.0.1:8000/v1"
-    # Model name on that endpoint (e.g. gpt-4o); empty: no screen.
-    model: str = ""
-    # Name of the environment variable holding the API key.
-    api_key_env: str = "OPENAI_API_KEY"
-    # Answer cache: a rebuild asks nothing twice ("" turns it off; default $XDG_CACHE_HOME/roboview/vlm).
-    cache_dir: str = field(default_factory=default_cache_dir)
-    # Requests in flight to the endpoint at once.
-    max_in_flight: int = 4
-
-    @property
-    def enabled(self) -> bool:
-        return bool(self.model)
-
-    def endpoint(self) -> Endpoint:
-        return Endpoint(self.base_url, self.model, self.api_key_env, max_in_flight=self.max_in_flight,
-                        cache_dir=self.cache_dir)
+# The perceptual-fairness gate judges visibility from object pixel counts: at 64² the smallest tiny-preset
+# object still covers 6 px of the front camera, at 48² 2 px, at 32² one.
+GATE_IMAGE_MIN = 4 * IMAGE_SIZE_MIN
 
 
 def presets_help() -> str:
@@ -91,9 +72,10 @@ class BuildConfig:
     min_pass_rate: float = 0.95
     # Stage-1 thresholds.
     fairness: FairnessThresholds = field(default_factory=FairnessThresholds)
-    # Stage 1b: the VLM fairness screen (--vlm_screen.model=gpt-4o --vlm_screen.base_url=...), reported
-    # with its agreement with the gate; it rejects nothing itself (see vlm_screen.csv).
-    vlm_screen: ScreenConfig = field(default_factory=ScreenConfig)
+    # Stage 1b, optional: the paper's VLM fairness screen over every candidate's front image, on this endpoint
+    # (--vlm_screen.model=gpt-4o --vlm_screen.base_url=...; no model: no screen), reported with its agreement
+    # with the gate; it rejects nothing itself (see vlm_screen.csv). A rebuild asks nothing twice (the cache).
+    vlm_screen: Endpoint = field(default_factory=Endpoint)
 
     # --help appends the registry's presets to the description of --preset.
     help_details = {"preset": presets_help}
@@ -103,14 +85,18 @@ class BuildConfig:
             raise ValueError(f"unknown --preset={self.preset!r}; allowed: {', '.join(PRESETS)}")
         if self.num_workers <= 0:
             raise ValueError(f"--num_workers={self.num_workers} must be a positive count")
-        if not 64 <= self.image_size <= 640:
-            raise ValueError(f"--image_size={self.image_size} out of range; allowed 64..640")
+        check_image_size(self.image_size, "--image_size", GATE_IMAGE_MIN,
+                         f"the fairness gate counts object pixels; below {GATE_IMAGE_MIN} px the smallest "
+                         "object covers 2 px or fewer of the front camera")
         if not 0.0 < self.min_pass_rate <= 1.0:
             raise ValueError(f"--min_pass_rate={self.min_pass_rate} must lie in (0, 1]")
         self.suite  # validates union mode, colors and factor names now, before any work
-        if self.vlm_screen.enabled:
-            with flag_errors("--vlm_screen"):
-                self.vlm_screen.endpoint().validate()
+        if self.screen_enabled:
+            self.vlm_screen.validate("--vlm_screen.")
+
+    @property
+    def screen_enabled(self) -> bool:
+        return bool(self.vlm_screen.model)
 
     @property
     def suite(self) -> SuiteConfig:
@@ -136,15 +122,14 @@ class BuildResult:
 
 
 def _check_output_dir(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--output_dir={out} is a file; give a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / bio.MANIFEST).is_file():
-        raise ValueError(f"--output_dir={out} is not empty and holds no RoboView benchmark "
-                         f"({bio.MANIFEST} missing); choose a new folder or delete this one")
+    problem = folder_problem(out, "benchmark", bio.MANIFEST, "choose a new folder or delete this one",
+                             label=f"--output_dir={out}", writing=True)
+    if problem:
+        raise ValueError(problem)
 
 
 def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:
-    screen = (VLMClient, cfg.vlm_screen.endpoint()) if cfg.vlm_screen.enabled else None
+    screen = (VLMClient, cfg.vlm_screen) if cfg.screen_enabled else None
     args = (cfg.image_size, cfg.fairness, DEFAULT_TASK, screen)
     bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
     records, passed = [], 0
@@ -178,7 +163,7 @@ def run(cfg: BuildConfig) -> BuildResult:
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     sheet = write_contact_sheet(tmp, records, accepted, rejected_by)
-    screen = agreement(records) if cfg.vlm_screen.enabled else None
+    screen = agreement(records) if cfg.screen_enabled else None
     if screen is not None:
         screen |= {"model": cfg.vlm_screen.model, "base_url": cfg.vlm_screen.base_url}
         write_screen_decisions(tmp / "vlm_screen.csv", records, f"vlm:{cfg.vlm_screen.model}")

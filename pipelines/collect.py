@@ -38,7 +38,7 @@ from roboview_data.demos.dataset import (
     write_checkpoint,
 )
 from roboview_data.demos.recorder import DemoCollector, DemoEpisode
-from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
 from roboview_data.tasks import DEFAULT_TASK, load_task
 from roboview_data.variation.randomization import validate_randomize
 from roboview_data.workers import WorkerPool
@@ -46,6 +46,10 @@ from roboview_data.workers import WorkerPool
 log = logging.getLogger(__name__)
 
 VCODECS = ("libsvtav1", "h264", "hevc")
+# pipelines.train's ACT reads the images at their collected size through a ResNet that downsamples by 32:
+# a collected image is at least one backbone stride wide.
+ACT_BACKBONE_STRIDE = 32
+TRAIN_IMAGE_MIN = max(IMAGE_SIZE_MIN, ACT_BACKBONE_STRIDE)
 
 
 @dataclass
@@ -80,8 +84,9 @@ class DatasetConfig:
             raise ValueError(f"--dataset.num_episodes={self.num_episodes} must be a positive count")
         if self.fps <= 0 or 500 % self.fps:
             raise ValueError(f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)")
-        if not 32 <= self.image_size <= 640:
-            raise ValueError(f"--dataset.image_size={self.image_size} out of range; allowed 32..640")
+        check_image_size(self.image_size, "--dataset.image_size", TRAIN_IMAGE_MIN,
+                         f"training reads the images at this size, and ACT's ResNet backbone downsamples "
+                         f"them by {ACT_BACKBONE_STRIDE}")
         unknown = [c for c in self.cameras if c not in ALL_CAMERAS]
         if unknown or not self.cameras or len(set(self.cameras)) != len(self.cameras):
             raise ValueError(f"--dataset.cameras={self.cameras}: unknown or repeated camera(s) {unknown}; "

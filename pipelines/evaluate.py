@@ -28,11 +28,13 @@ from eval.running.backends import BACKENDS, ClusterLost, run_local, run_ray
 from eval.running.results import EpisodeStore, ResultsError, is_counted, shard_of
 from eval.running.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
-from policies.base import PolicyConfig, load_policy_types, missing_policy_type
+from policies.base import PolicyConfig, missing_policy_type
+from policies.types import load_policy_types
 from policies.errors import PolicyUnavailable
 from policies.vlm.sgl import SGLConfig
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.cli_errors import flag_errors
+from roboview_data.sim.cameras import check_image_size
 from roboview_data.tasks import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -141,8 +143,8 @@ class EvalConfig:
     }
 
     def __post_init__(self) -> None:
-        if self.image_size < 0:
-            raise ValueError(f"--eval.image_size={self.image_size} must be ≥ 0 (0 = the policy's own size)")
+        if self.image_size:  # 0: the policy's own size
+            check_image_size(self.image_size, "--eval.image_size", why="or 0 for the policy's own size")
         for name in ("n_repeats", "num_workers", "max_steps", "envs_per_worker"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")

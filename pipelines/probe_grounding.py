@@ -75,6 +75,7 @@ def _best(grounder, rgb, description: str) -> float:
 
 
 def run(cfg: ProbeConfig) -> dict:
+    from policies.vlm.client import Endpoint
     from policies.vlm.moka import MokaConfig
 
     with flag_errors("--results"):
@@ -88,7 +89,8 @@ def run(cfg: ProbeConfig) -> dict:
     rows = rows[rows["moka_object_description"].map(lambda d: any(c in COLORS for c in color_words(str(d))))]
     if cfg.limit:
         rows = rows.head(cfg.limit)
-    grounder = MokaConfig(grounding=cfg.grounding, detector_model=cfg.detector_model, model="probe").grounder()
+    grounder = MokaConfig(grounding=cfg.grounding, detector_model=cfg.detector_model,
+                          endpoint=Endpoint(model="probe")).grounder()
     env = make_env(cameras=(cfg.camera,), image_size=cfg.image_size)
     cases, per_color = [], {}
     try:

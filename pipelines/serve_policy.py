@@ -44,9 +44,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipelines._cli import cli_main
-from policies.base import AgentView, ChunkPredictor, PolicyConfig, load_policy_types, missing_policy_type
+from policies.base import AgentView, ChunkPredictor, PolicyConfig, missing_policy_type
+from policies.types import load_policy_types
 from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
+from roboview_data.sim.cameras import check_image_size
 from roboview_data.tasks import DEFAULT_TASK, TASKS
 
 log = logging.getLogger(__name__)
@@ -95,9 +97,11 @@ class ServeConfig:
             raise ValueError(f"unknown --task={self.task!r}; allowed: {', '.join(TASKS)}")
         if self.server not in SERVERS:
             raise ValueError(f"unknown --server={self.server!r}; allowed: {', '.join(SERVERS)}")
-        if self.max_clients < 1 or self.gather_ms < 0 or self.image_size < 0 or self.threads < 0:
-            raise ValueError(f"--max_clients={self.max_clients} must be ≥ 1, --gather_ms={self.gather_ms}, "
-                             f"--image_size={self.image_size} and --threads={self.threads} ≥ 0")
+        if self.max_clients < 1 or self.gather_ms < 0 or self.threads < 0:
+            raise ValueError(f"--max_clients={self.max_clients} must be ≥ 1, --gather_ms={self.gather_ms} "
+                             f"and --threads={self.threads} ≥ 0")
+        if self.image_size:  # 0: the policy's own size
+            check_image_size(self.image_size, "--image_size", why="or 0 for the policy's own size")
         if self.server == "openpi" and os.environ.get(self.api_key_env):
             raise ValueError(f"--server=openpi does not check API keys; unset {self.api_key_env} or use --server=roboview")
         if self.policy.privileged:

@@ -1,8 +1,9 @@
 """Serve the classic-CV stand-in model over the OpenAI chat-completions protocol (NOT a VLM).
 
     python -m pipelines.serve_vlm --port=8000
-    python -m pipelines.evaluate --policy.type=vlm_simple --policy.base_url=http://127.0.0.1:8000/v1 \\
-        --policy.model=roboview-classic-cv-standin ...
+    python -m pipelines.evaluate --policy.type=vlm_simple \\
+        --policy.endpoint.base_url=http://127.0.0.1:8000/v1 \\
+        --policy.endpoint.model=roboview-classic-cv-standin ...
 
 The stand-in answers the RoboView agents' prompts (image points, plans, mark choices, scene
 parses, fairness yes/no) with classic computer vision on the image it is sent — no simulator state —

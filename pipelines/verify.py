@@ -29,6 +29,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from pipelines._cli import BenchmarkPath, cli_main
+from roboview_data.folders import folder_problem
 
 
 @dataclass
@@ -126,9 +127,11 @@ def _rows(results: Path) -> tuple[list[dict], dict]:
     """The results' rows (as stored) and run.json; ResultsError for a folder that holds none."""
     from eval.running.results import PARQUET, RUN_FILE, ResultsError, check_format
 
-    if not (results / RUN_FILE).is_file() or not (results / PARQUET).is_file():
-        raise ResultsError(f"{results} holds no RoboView results ({RUN_FILE} and {PARQUET} expected); give the "
-                           "folder pipelines.evaluate wrote (--output_dir)")
+    advice = "give the folder pipelines.evaluate wrote (--output_dir)"
+    problem = (folder_problem(results, "results", RUN_FILE, advice)
+               or folder_problem(results, "results", PARQUET, advice))
+    if problem:
+        raise ResultsError(problem)
     check_format(results / PARQUET)  # refuses other results formats with its own message
     return pq.read_table(results / PARQUET).to_pylist(), json.loads((results / RUN_FILE).read_text())
 

@@ -4,8 +4,8 @@
 with `--policy.type=NAME` (draccus.ChoiceRegistry, as lerobot's `PreTrainedConfig`), knows which
 cameras its policy consumes (and whether it wants depth) so the evaluator renders only those, and
 builds the policy once the env exists. To add a type, write one module like `policies/vision.py`
-(config + policy) and list it in BUILTIN_MODULES, or publish it from your own package under the
-`roboview.policies` entry-point group.
+(config + policy) and list it in `policies.types.BUILTIN_MODULES`, or publish it from your own package
+under the `roboview.policies` entry-point group.
 
 **A policy sees only what a real agent would.** It is built from an `AgentView` (the env's action
 and observation spaces, its cameras and image size, and the robot's kinematic model compiled at
@@ -18,8 +18,6 @@ color and shape, and never the env, whose state holds the object's pose. Only a 
 from __future__ import annotations
 
 import functools
-import importlib
-import importlib.metadata
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -134,12 +132,6 @@ class ChunkPredictor(Protocol):
         """slot → its next `n_action_steps` actions, from one forward pass over every slot's observation."""
 
 
-# Builtin policy types: modules that define and register a PolicyConfig subclass. Imported on
-# demand (by name, never at import time of this module); third-party packages add types through the
-# ENTRY_POINT_GROUP entry points, each naming such a module.
-BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy", "policies.vlm.simple",
-                   "policies.vlm.moka", "policies.openpi", "policies.lerobot_async")
-ENTRY_POINT_GROUP = "roboview.policies"
 # The observed cameras of the paper's agents: VLM agents watch `front`, π0-style ones left_top + wrist.
 DEFAULT_CAMERAS = ("front",)
 
@@ -215,37 +207,19 @@ class PolicyConfig(draccus.ChoiceRegistry):
         return None
 
 
-def load_policy_types() -> tuple[str, ...]:
-    """Import the builtin policy modules and every `roboview.policies` entry point; the type names."""
-    for module in BUILTIN_MODULES:
-        importlib.import_module(module)
-    for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-        importlib.import_module(entry.value.split(":")[0])
+def registered_types() -> tuple[str, ...]:
+    """The policy types registered so far (every one once `policies.types.load_policy_types` has run, as each
+    command's does before it parses)."""
     return tuple(sorted(PolicyConfig.get_known_choices()))
-
-
-def registered_policies() -> tuple[str, ...]:
-    return load_policy_types()
-
-
-def policy_config(type_name: str, **settings: Any) -> PolicyConfig:
-    """The config of policy type `type_name` with `settings` (what `--policy.type=… --policy.x=…` gives)."""
-    known = load_policy_types()
-    if type_name not in known:
-        raise ValueError(f"unknown policy type {type_name!r}; allowed: {', '.join(known)}")
-    return PolicyConfig.get_choice_class(type_name)(**settings)
-
-
-def privileged_types() -> tuple[str, ...]:
-    """The policy types built from the env itself (the scripted `expert`): they read the simulator's state."""
-    return tuple(name for name in load_policy_types() if PolicyConfig.get_choice_class(name).privileged)
 
 
 def missing_policy_type() -> str:
     """The one-line error for a command run without `--policy.type` (there is no default policy)."""
-    notes = [f"; `{name}` is the privileged scripted expert (it reads the simulator state, which no real policy sees)"
-             if name == "expert" else f"; `{name}` is privileged (it reads the simulator state)" for name in privileged_types()]
-    return f"--policy.type is required: one of {', '.join(load_policy_types())}{''.join(notes)}"
+    privileged = [name for name in registered_types() if PolicyConfig.get_choice_class(name).privileged]
+    notes = [f"; `{name}` is the privileged scripted expert (it reads the simulator state, which no real "
+             "policy sees)" if name == "expert" else f"; `{name}` is privileged (it reads the simulator "
+             "state)" for name in privileged]
+    return f"--policy.type is required: one of {', '.join(registered_types())}{''.join(notes)}"
 
 
 class PolicyBatch:

@@ -72,16 +72,17 @@ class RoboViewEnv(EnvConfig):
     features_map: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        from roboview_data.sim.cameras import ALL_CAMERAS
+        from roboview_data.sim.cameras import ALL_CAMERAS, check_image_size
 
         cams = self.camera_list
         unknown = [c for c in cams if c not in ALL_CAMERAS]
         if unknown or not cams:
             raise ValueError(f"--env.cameras={self.cameras!r}: unknown camera(s) {unknown or cams}; "
                              f"allowed: {', '.join(ALL_CAMERAS)}")
-        for name in ("image_size", "n_repeats", "max_steps", "fps"):
+        for name in ("n_repeats", "max_steps", "fps"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
+        check_image_size(self.image_size, "--env.image_size")
         if not self.split_names_given:
             raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
         self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,)),

@@ -115,7 +115,7 @@ def run(cfg: ConvertConfig) -> Path:
 
 
 def main(argv: list[str] | None = None) -> Path:
-    from pipelines._cli import cli_main
+    from roboview_data.cli import cli_main
 
     return cli_main(ConvertConfig, run, lambda cfg, path: print(f"[convert] {path}"), args=argv)
 

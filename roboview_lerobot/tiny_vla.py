@@ -168,7 +168,7 @@ def _summary(cfg: TinyVLAConfig, flags: list[str]) -> None:
 
 
 def main(args: list[str] | None = None) -> list[str]:
-    from pipelines._cli import cli_main
+    from roboview_data.cli import cli_main
 
     return cli_main(TinyVLAConfig, run, _summary, (ValueError,), args)
 

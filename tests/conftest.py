@@ -16,9 +16,9 @@ import pytest  # noqa: E402
 # Test tiers. Slow: a test that uses a rendered environment, the built benchmark or a trained checkpoint, or lives
 # in a module that starts simulations, servers, clusters or a browser. `make test-fast` runs the rest.
 SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_checkpoint", "bench"}
-FAST_MODULES = {"test_adaptive", "test_audit", "test_colors", "test_context_stats", "test_factors", "test_imports",
-                "test_isolation", "test_metrics", "test_ranking", "test_report", "test_report_wording", "test_statistics",
-                "test_stable_ids", "test_svgf"}
+FAST_MODULES = {"test_adaptive", "test_audit", "test_colors", "test_context_stats", "test_factors",
+                "test_folders", "test_imports", "test_isolation", "test_metrics", "test_ranking",
+                "test_report", "test_report_wording", "test_statistics", "test_stable_ids", "test_svgf"}
 
 
 def pytest_collection_modifyitems(config, items):

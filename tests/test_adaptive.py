@@ -11,7 +11,7 @@ import pytest
 from eval.statistics.adaptive import Design, decide, simulate
 from eval.statistics.tables import MetricsConfig
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import policy_config
+from policies.types import policy_config
 
 
 def within(rate: float, level: float, n: int) -> bool:

@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from policies.base import AgentView, Episode, PolicyConfig, policy_config
+from policies.base import AgentView, Episode, PolicyConfig
+from policies.types import policy_config
 from policies.factory import make_policy
 from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.tasks.pick_place import PickPlaceEnv

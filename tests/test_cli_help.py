@@ -20,9 +20,13 @@ ENTRY_POINTS = ("collect", "build_benchmark", "publish", "evaluate", "report", "
 
 # The LeRobot side's own commands.
 LEROBOT_SIDE = ("roboview_lerobot.convert", "roboview_lerobot.tiny_vla")
+# The measurement harnesses (`make bench` and the figures in docs/performance.md).
+HARNESSES = ("adaptive", "cluster", "collect_rate", "conformance_drift", "gpu", "render_rate", "serving",
+             "stats_calibration", "throughput", "verify_rate")
 
 
-@pytest.mark.parametrize("module", [f"pipelines.{name}" for name in ENTRY_POINTS] + list(LEROBOT_SIDE))
+@pytest.mark.parametrize("module", [f"pipelines.{name}" for name in ENTRY_POINTS] + list(LEROBOT_SIDE)
+                         + [f"benchmarks.{name}" for name in HARNESSES])
 def test_help_documents_the_flags(module):
     proc = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True,
                           timeout=120, cwd=ROOT, env=os.environ | {"PYTHONPATH": str(ROOT)})
@@ -62,7 +66,7 @@ def accepted_flags(config: type) -> set[str]:
     """The flags draccus's parser of `config` accepts (less the per-section config-file ones)."""
     from draccus.argparsing import ArgumentParser
 
-    from policies.base import load_policy_types
+    from policies.types import load_policy_types
 
     load_policy_types()  # as a command does before it parses: every --policy.type's flags
     actions = ArgumentParser(config_class=config).parser._option_string_actions
@@ -105,6 +109,10 @@ def test_config_flags_walks_nested_configs():
 def test_every_pipeline_module_is_covered():
     modules = {p.stem for p in (ROOT / "pipelines").glob("*.py") if not p.stem.startswith("_")}
     assert modules == set(ENTRY_POINTS)
+    harnesses = {p.stem for p in (ROOT / "benchmarks").glob("*.py") if not p.stem.startswith("_")}
+    assert harnesses == set(HARNESSES)
+    # Each parses with the one command-line helper (its --help then lists every flag, checked above).
+    assert all(_config_class(f"benchmarks.{name}") is not None for name in HARNESSES)
 
 
 def test_lists_are_written_comma_separated_everywhere():

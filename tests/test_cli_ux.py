@@ -24,7 +24,7 @@ def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedPro
 
 def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
     from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-    from policies.base import policy_config
+    from policies.types import policy_config
 
     out = tmp_path / "ev"
     flags = [f"--benchmark.path={tiny_benchmark}", "--policy.type=expert", "--benchmark.splits=color",
@@ -132,7 +132,7 @@ def test_a_misspelled_flag_gets_two_lines_and_the_closest_real_flag(module, wron
 def test_evaluate_help_puts_the_common_flags_first():
     from pipelines._cli import format_help
     from pipelines.evaluate import EvaluateConfig
-    from policies.base import load_policy_types
+    from policies.types import load_policy_types
 
     load_policy_types()
     text = format_help(EvaluateConfig)
@@ -169,3 +169,61 @@ def test_other_libraries_info_lines_are_silenced_ours_kept(tiny_benchmark):
     proc = _cli("pipelines.plan", f"--benchmark.path={tiny_benchmark}")
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert "OpenGL.acceleratesupport" not in proc.stderr and "OpenGL_accelerate" not in proc.stderr
+
+
+def test_every_image_size_flag_checks_the_one_bound():
+    from pipelines.build_benchmark import GATE_IMAGE_MIN, BuildConfig
+    from pipelines.collect import TRAIN_IMAGE_MIN, DatasetConfig
+    from pipelines.evaluate import EvalConfig
+    from roboview_data.sim.cameras import IMAGE_SIZE_MAX, IMAGE_SIZE_MIN, check_image_size
+
+    assert (IMAGE_SIZE_MIN, TRAIN_IMAGE_MIN, GATE_IMAGE_MIN, IMAGE_SIZE_MAX) == (16, 32, 64, 640)
+    check_image_size(IMAGE_SIZE_MIN)
+    with pytest.raises(ValueError, match=r"^image_size=15 out of range; allowed 16\.\.640$"):
+        check_image_size(IMAGE_SIZE_MIN - 1)
+    with pytest.raises(ValueError, match=r"^--eval.image_size=641 out of range; allowed 16\.\.640 \(or 0"):
+        EvalConfig(image_size=IMAGE_SIZE_MAX + 1)
+    assert EvalConfig(image_size=0).image_size == 0  # the policy's own size
+    with pytest.raises(ValueError, match=r"^--dataset.image_size=16 out of range; allowed 32\.\.640 \(tr"):
+        DatasetConfig(repo_id="a/b", image_size=16)
+    with pytest.raises(ValueError, match=r"^--image_size=32 out of range; allowed 64\.\.640 \(the fairness"):
+        BuildConfig(preset="tiny", image_size=32)
+    assert BuildConfig(preset="tiny", image_size=64).image_size == 64
+
+
+def test_vlm_endpoint_flags_nest_and_the_flat_spelling_still_works_with_a_warning(capsys):
+    from pipelines._cli import parse
+    from pipelines.build_benchmark import BuildConfig
+    from pipelines.evaluate import EvaluateConfig
+    from policies.types import load_policy_types
+    from roboview_data.cli import flag_aliases, renamed_flags
+
+    load_policy_types()
+    base = ["--benchmark.path=b", "--policy.type=vlm_simple", "--sgl.enable=true"]
+    new = parse(EvaluateConfig, [*base, "--policy.endpoint.base_url=http://h:1/v1",
+                                 "--policy.endpoint.model=m", "--policy.endpoint.max_in_flight=2",
+                                 "--sgl.endpoint.model=s"])
+    assert capsys.readouterr().err == ""
+    old = parse(EvaluateConfig, [*base, "--policy.base_url=http://h:1/v1", "--policy.model=m",
+                                 "--policy.max_in_flight=2", "--policy.model=m", "--sgl.model=s"])
+    assert old.policy.endpoint == new.policy.endpoint and old.sgl.endpoint == new.sgl.endpoint
+    assert (new.policy.endpoint.base_url, new.policy.endpoint.model, new.policy.endpoint.max_in_flight) == (
+        "http://h:1/v1", "m", 2)
+    assert new.sgl.endpoint.model == "s" and new.policy.options()["model"] == "m"  # run.json keeps its keys
+    assert capsys.readouterr().err.splitlines() == [  # one line per old flag, naming the new one
+        "warning: --policy.base_url is deprecated; use --policy.endpoint.base_url",
+        "warning: --policy.model is deprecated; use --policy.endpoint.model",
+        "warning: --policy.max_in_flight is deprecated; use --policy.endpoint.max_in_flight",
+        "warning: --sgl.model is deprecated; use --sgl.endpoint.model"]
+    # Another policy type's own flag of the same name is left alone (openpi has --policy.timeout_s).
+    openpi = ["--policy.type=openpi", "--policy.timeout_s=5"]
+    assert "--policy.timeout_s" not in flag_aliases(EvaluateConfig, openpi)
+    assert renamed_flags(EvaluateConfig, openpi) == openpi and capsys.readouterr().err == ""
+    # The build's screen is an endpoint itself: its flags keep their names.
+    build = parse(BuildConfig, ["--preset=tiny", "--vlm_screen.base_url=http://h:1/v1",
+                                "--vlm_screen.model=g"])
+    screen = build.vlm_screen
+    assert build.screen_enabled and (screen.base_url, screen.model) == ("http://h:1/v1", "g")
+    with pytest.raises(SystemExit):
+        parse(EvaluateConfig, [*base, "--policy.model=", "--sgl.endpoint.model=s"])
+    assert "--policy.endpoint.model is empty" in capsys.readouterr().err

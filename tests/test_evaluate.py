@@ -14,7 +14,8 @@ import pandas as pd
 import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import PolicyConfig, policy_config
+from policies.base import PolicyConfig
+from policies.types import policy_config
 
 ROOT = Path(__file__).parents[1]
 RERUN = Path(sys.executable).parent / "rerun"

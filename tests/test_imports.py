@@ -1,10 +1,13 @@
-"""No import cycles between RoboView's modules, counting imports inside functions too (a lazy import that
-breaks a cycle at run time still ties the two modules together); and no module, test or benchmark imports
-another module's private (`_`-prefixed) name: what other modules need is public and documented."""
+"""The import graph of RoboView's modules: no cycle, counting imports inside functions (a lazy import that
+breaks a cycle at run time still ties the two modules together) and imports by name (a registry's module list,
+`importlib.import_module("pkg.mod")`, a "pkg.mod:Class" a registry resolves); no module importing from a
+higher floor; and no module, test or benchmark importing another module's private (`_`-prefixed) name: what
+other modules need is public and documented."""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
@@ -20,6 +23,30 @@ def _modules(packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
     return found
 
 
+# A string naming a module below a package ("pkg.mod") or an attribute of one ("pkg.mod:Class").
+MODULE_STRING = re.compile(r"^[a-z_][a-z0-9_]*(\.[a-z0-9_]+)+(:[A-Za-z_][\w.]*)?$")
+
+
+def named_modules(tree: ast.AST) -> set[str]:
+    """What a module imports by name: a literal given to `import_module`, and every other string constant
+    (docstrings aside) that names a module or a module's attribute ("pkg.mod:Class"), as registries declare
+    them (a module list, an env or expert class, a gymnasium entry point) for a helper to import."""
+    docstrings = {id(node.value) for node in ast.walk(tree) if isinstance(node, ast.Expr)}
+    # `[python, "-m", "pkg.mod"]` runs a module in another process: no import.
+    run = {id(b) for node in ast.walk(tree) if isinstance(node, (ast.List, ast.Tuple))
+           for a, b in zip(node.elts, node.elts[1:]) if isinstance(a, ast.Constant) and a.value == "-m"}
+    found = set()
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
+                and isinstance(node.args[0].value, str)
+                and (getattr(node.func, "attr", None) or getattr(node.func, "id", None)) == "import_module"):
+            found.add(node.args[0].value)
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                and id(node) not in docstrings | run and MODULE_STRING.match(node.value)):
+            found.add(node.value.partition(":")[0])
+    return found
+
+
 def import_graph() -> dict[str, set[str]]:
     """module → the project modules it imports (the named module itself, not the packages above it)."""
     modules = _modules()
@@ -27,7 +54,9 @@ def import_graph() -> dict[str, set[str]]:
     for name, path in modules.items():
         edges = set()
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        tree = ast.parse(path.read_text(), str(path))
+        edges |= {t for t in named_modules(tree) if t in modules and t != name}
+        for node in ast.walk(tree):
             if isinstance(node, ast.Import):
                 targets = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -130,6 +159,27 @@ def test_the_project_has_no_import_cycle():
     assert not found, "import cycles: " + "; ".join(" ↔ ".join(c) for c in found)
 
 
+def test_imports_by_name_are_edges():
+    code = '''"""Docstring naming roboview_data.sim.env is no import."""
+import importlib
+MODULES = ("policies.vision", "not.a.module")
+TASK = dict(env="roboview_data.tasks.push:PushEnv")
+importlib.import_module("eval")
+cmd = ["python", "-m", "pipelines.evaluate"]
+label = "a plain string, not.a.name:either"
+'''
+    found = named_modules(ast.parse(code))
+    assert found == {"policies.vision", "not.a.module", "roboview_data.tasks.push", "eval"}
+    # In the project: a registry's module list, "module:Class" targets, the console scripts' modules.
+    graph = import_graph()
+    assert "policies.vision" in graph["policies.types"] and "policies.vision" not in graph["policies.base"]
+    assert {"roboview_data.tasks.pick_place", "roboview_data.tasks.push"} <= graph["roboview_data.tasks"]
+    assert "roboview_data.tasks.env" in graph["roboview_data.tasks.base"]  # the default expert, "module:Class"
+    assert "roboview_data.variation.factors.color" in graph["roboview_data.variation.factors"]
+    assert "pipelines.collect" in graph["pipelines._console"]
+    assert "roboview_lerobot.env" in graph["roboview_lerobot"]
+
+
 def test_the_cycle_finder_finds_a_cycle():
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert cycles(graph) == [["a", "b", "c"]]
@@ -154,7 +204,8 @@ def test_importing_the_package_registers_the_gym_ids():
 
 # The floors, lowest first: a module imports only from its own floor or those below it.
 FLOORS = (
-    ("roboview_data.errors", "roboview_data.files", "roboview_data.cli_errors", "roboview_data.workers"),
+    ("roboview_data.errors", "roboview_data.files", "roboview_data.folders", "roboview_data.cli",
+     "roboview_data.cli_errors", "roboview_data.workers"),
     ("roboview_data.sim",),
     ("roboview_data.variation",),
     ("roboview_data.tasks",),
@@ -187,7 +238,8 @@ def upward_imports(graph: dict[str, set[str]]) -> list[str]:
 def test_no_module_imports_from_a_higher_floor():
     found = upward_imports(import_graph())
     assert not found, "imports from a higher floor: " + "; ".join(found)
-    # The check sees an arrow back down-up: the world importing a task, a factor importing the world is fine.
+    assert upward_imports({"roboview_lerobot.convert": {"pipelines._cli"}}) == ["roboview_lerobot.convert → pipelines._cli"]
+    # The world importing the factor registry is an arrow back up; a factor importing the world is not.
     assert upward_imports({"roboview_data.sim.scene": {"roboview_data.variation.factors"}}) == [
         "roboview_data.sim.scene → roboview_data.variation.factors"]
     assert upward_imports({"roboview_data.variation.factors.object_size": {"roboview_data.sim.scene"}}) == []

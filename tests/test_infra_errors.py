@@ -28,7 +28,8 @@ import pytest
 from eval.statistics.metrics import MetricsConfig, compute_all_metrics, policy_layouts
 from eval.running.results import INFRA_ERROR, EpisodeStore, read_journal
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import PolicyConfig, TransientPolicyError, policy_config
+from policies.base import PolicyConfig, TransientPolicyError
+from policies.types import policy_config
 from policies.errors import InfraError, RenderError
 
 FAST = MetricsConfig(n_perm=50, n_glm=10)

@@ -9,7 +9,7 @@ import pytest
 from eval.running import isolation
 from eval.statistics.metrics import compute_metrics
 from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
-from policies.base import policy_config
+from policies.types import policy_config
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.tasks.env import TaskEnv
 

@@ -17,7 +17,8 @@ import pandas as pd
 import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import AgentView, Episode, PolicyConfig, policy_config
+from policies.base import AgentView, Episode, PolicyConfig
+from policies.types import policy_config
 from policies.errors import PolicyUnavailable
 
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]

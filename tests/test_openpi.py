@@ -23,7 +23,8 @@ import pandas as pd
 import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import Episode, policy_config
+from policies.base import Episode
+from policies.types import policy_config
 from policies.errors import PolicyUnavailable
 
 COLS = ["instance_id", "repeat", "episode_seed", "success", "steps", "policy", "failure_reason"]

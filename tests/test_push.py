@@ -88,7 +88,7 @@ def test_a_two_task_benchmark_builds_loads_and_evaluates(tmp_path):
     from pipelines.build_benchmark import run as build
     from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
     from pipelines.evaluate import run as evaluate
-    from policies.base import policy_config
+    from policies.types import policy_config
 
     bench = tmp_path / "bench"
     result = build(BuildConfig(output_dir=str(bench), preset="tiny_extended", image_size=64))

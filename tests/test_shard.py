@@ -25,7 +25,7 @@ SPLITS, LIMIT, REPEATS = "color,dist_scale", 3, 2  # 12 episodes
 
 def _evaluate_shard(bench: Path, out: Path, shard: str, policy: str = "expert"):
     from pipelines.evaluate import BenchmarkConfig, EvaluateConfig, run
-    from policies.base import policy_config
+    from policies.types import policy_config
 
     return run(EvaluateConfig(BenchmarkConfig(str(bench), SPLITS), policy_config(policy),
                               EvalConfig(n_repeats=REPEATS, limit=LIMIT, image_size=64, shard=shard), str(out)))

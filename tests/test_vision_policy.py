@@ -6,7 +6,8 @@ Privileged state (object pose, box center) is read here only to grade what the p
 import numpy as np
 import pytest
 
-from policies.base import Episode, policy_config, registered_policies
+from policies.base import Episode
+from policies.types import load_policy_types, policy_config
 from policies.factory import make_policy
 from policies.perception import PerceptionError, perceive
 from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY
@@ -62,7 +63,7 @@ def test_perception_changes_with_colour(rgbd_env):
 
 
 def test_registered_with_camera_option():
-    assert "vision" in registered_policies()
+    assert "vision" in load_policy_types()
     config = policy_config("vision")
     assert config.depth
     assert config.observed_cameras() == ("front",)

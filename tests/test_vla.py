@@ -14,7 +14,8 @@ import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
 from pipelines.evaluate import run as evaluate
-from policies.base import policy_config
+from policies.types import policy_config
+from policies.vlm.client import Endpoint
 from policies.vlm.sgl import SGLConfig
 from roboview_data.sim.cameras import ALL_CAMERAS
 
@@ -170,7 +171,7 @@ def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_
     checkpoint, backbone = smolvla
     server = ScriptedServer(ClassicCVModel())
     try:
-        sgl = SGLConfig(enable=True, base_url=server.url, model=MODEL_NAME)
+        sgl = SGLConfig(enable=True, endpoint=Endpoint(server.url, MODEL_NAME))
         _evaluate(tiny_benchmark, tmp_path / "sgl", checkpoint, sgl)
         rows = pd.read_parquet(tmp_path / "sgl" / "episodes.parquet")
         assert (rows["policy"] == "lerobot:smolvla+sgl").all() and rows["sgl_ambiguous"].all()

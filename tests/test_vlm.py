@@ -12,7 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from policies.base import Episode, policy_config
+from policies.base import Episode
+from policies.types import policy_config
 from policies.factory import make_policy
 from policies.errors import TransientPolicyError
 from policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
@@ -149,12 +150,14 @@ def test_requests_in_flight_are_bounded(server, tmp_path):
 
 
 @pytest.mark.parametrize("settings, why", [
-    ({"base_url": "http//x", "model": "m"}, r"base_url='http//x' must be an http\(s\) URL"),
-    ({"base_url": "http://127.0.0.1:1/v1", "model": ""}, "model is empty"),
+    ({"base_url": "http//x", "model": "m"}, r"^--policy.endpoint.base_url='http//x' must be an http\(s\)"),
+    ({"base_url": "http://127.0.0.1:1/v1", "model": ""}, "^--policy.endpoint.model is empty"),
+    ({"model": "m", "max_in_flight": 0}, r"--policy.endpoint.max_in_flight=0: need > 0, ≥ 0 and ≥ 1$"),
     ({"model": "m", "camera": "ceiling"}, "unknown camera 'ceiling'")])
 def test_bad_endpoints_fail_before_any_work(settings, why):
+    camera = {"camera": settings.pop("camera")} if "camera" in settings else {}
     with pytest.raises(ValueError, match=why):
-        policy_config("vlm_simple", **settings)
+        policy_config("vlm_simple", endpoint=Endpoint(**settings), **camera)
 
 
 # --- SGL: stages 2 and 3 on parsed scenes ---------------------------------------------------------
@@ -223,7 +226,7 @@ def rgbd_env():
 
 @pytest.mark.parametrize("agent", ["vlm_simple", "vlm_moka"])
 def test_agents_succeed_on_red_and_say_why_they_fail_on_gold(standin, rgbd_env, tmp_path, agent):
-    config = policy_config(agent, base_url=standin.url, model=MODEL_NAME, cache_dir=str(tmp_path))
+    config = policy_config(agent, endpoint=Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path)))
     policy = make_policy(config, rgbd_env)
     success, record = _run(policy, rgbd_env, _instance())
     assert success and record["vlm_requests"] >= 1
@@ -244,7 +247,7 @@ def test_agents_succeed_on_red_and_say_why_they_fail_on_gold(standin, rgbd_env, 
 
 
 def test_sgl_records_the_refined_instruction(standin, rgbd_env, tmp_path):
-    config = policy_config("vlm_simple", base_url=standin.url, model=MODEL_NAME, cache_dir=str(tmp_path))
+    config = policy_config("vlm_simple", endpoint=Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path)))
     policy = make_policy(SGLConfig(enable=True).wrap(config), rgbd_env)  # the SGL asks the agent's own endpoint
     assert policy.name == "vlm_simple+sgl"
     success, record = _run(policy, rgbd_env, _instance(color="blue"))
@@ -270,8 +273,9 @@ def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_noth
     s = ScriptedServer(ClassicCVModel(), script)
     try:
         def run(out):
-            config = policy_config("vlm_simple", base_url=s.url, model=MODEL_NAME, cache_dir=str(tmp_path / "cache"),
-                                   max_retries=2, timeout_s=5.0)
+            endpoint = Endpoint(s.url, MODEL_NAME, cache_dir=str(tmp_path / "cache"), max_retries=2,
+                                timeout_s=5.0)
+            config = policy_config("vlm_simple", endpoint=endpoint)
             return evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
                                            EvalConfig(n_repeats=1, limit=5, num_workers=1, max_steps=8, image_size=128),
                                            str(out)))
@@ -299,7 +303,7 @@ def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_noth
 
 
 def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tmp_path):
-    from pipelines.build_benchmark import BuildConfig, ScreenConfig
+    from pipelines.build_benchmark import BuildConfig
     from pipelines.build_benchmark import run as build
 
     no = ("text", json.dumps({"analysis": "The object is hard to make out.", "final_answer": "no"}))
@@ -307,7 +311,7 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
     try:
         out = tmp_path / "bench"
         build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64, num_workers=1,
-                          vlm_screen=ScreenConfig(base_url=s.url, model=MODEL_NAME, cache_dir="")))
+                          vlm_screen=Endpoint(s.url, MODEL_NAME, cache_dir="")))
     finally:
         s.close()
     manifest = json.loads((out / "benchmark.json").read_text())
@@ -352,7 +356,8 @@ def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path)
     from pipelines.evaluate import run as evaluate
 
     bench = tiny_bench
-    config = policy_config("vlm_moka", base_url=standin.url, model=MODEL_NAME, cache_dir=str(tmp_path / "c"))
+    endpoint = Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path / "c"))
+    config = policy_config("vlm_moka", endpoint=endpoint)
     evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
                             EvalConfig(n_repeats=1, limit=3, num_workers=1, max_steps=2, image_size=224), str(tmp_path / "e")))
     result = probe(ProbeConfig(results=str(tmp_path / "e" / "episodes.parquet"), benchmark=BenchmarkPath(str(bench)),

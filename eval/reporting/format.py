@@ -8,7 +8,6 @@ from roboview_data.tasks import DEFAULT_TASK
 from roboview_data.variation.factors import FACTORS, visual_factors
 from roboview_data.variation.instances import split_task
 
-VERSION_KEY = "roboview_benchmark_version"  # a results file's benchmark version, as sources record it
 ALPHA = 0.05  # level at which the report calls a difference significant
 
 

@@ -19,6 +19,7 @@ from markdown_it import MarkdownIt
 
 from eval.reporting import format as fmt
 from eval.reporting import tables
+from eval.running.results import VERSION_KEY
 from eval.statistics.metrics import policy_layouts
 from roboview_data.variation.instances import DEFAULT_TASK, split_task
 
@@ -154,7 +155,7 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
     if skipped:
         sections.append(("skipped", "Figures not drawn", "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in skipped) + "</ul>"))
     nav = "".join(f'<a href="#{a}">{_e(t)}</a>' for a, t, _ in sections)
-    sources = "".join(f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(fmt.VERSION_KEY) or 'not recorded')})</li>"
+    sources = "".join(f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(VERSION_KEY) or 'not recorded')})</li>"
                       for s in metrics.get("sources", []))
     head = (f"<h1>RoboView-Bias report</h1><p>Policies: {_e(', '.join(layouts))}. ε = {metrics['epsilon']:g}; "
             f"{_e(fmt.resampling_line(settings))}.</p>" + (f"<ul>{sources}</ul>" if sources else "") + f"<nav>{nav}</nav>")

@@ -31,8 +31,8 @@ from eval.running import inputs, provenance, videos
 from eval.statistics.adaptive import read_record
 from eval.running.agents import agents_markdown, describe_agents
 from eval.statistics.context import context_breakdown
-from eval.reporting.format import (ALPHA, VERSION_KEY, directions, p_fmt, pct, pct_ci, policy_label,
-                                   resampling_line, split_order, split_title)
+from eval.reporting.format import (ALPHA, directions, p_fmt, pct, pct_ci, policy_label, resampling_line,
+                                   split_order, split_title)
 from eval.reporting.html import HTML_FILE, render_html
 from eval.reporting.tables import (POLICY, SPLIT_COLUMNS, VIDEO_COLUMNS, Table, markdown_table, split_table,
                                    summary_table, to_markdown, video_splits, videos_table)
@@ -44,7 +44,7 @@ from eval.statistics.metrics import (
     compute_all_metrics,
     policy_layouts,
 )
-from eval.running.results import ResultsError, counted, read_episodes, read_version
+from eval.running.results import VERSION_KEY, ResultsError, counted, read_episodes, read_version
 from roboview_data.variation.factors import visual_factors
 from roboview_data.variation.instances import split_task
 

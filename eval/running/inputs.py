@@ -13,6 +13,7 @@ import pyarrow.parquet as pq
 
 from eval.running.results import FORMAT_KEY, JOURNAL, PARQUET, RUN_FILE
 from roboview_data.benchmark.format import MANIFEST
+from roboview_data.folders import folder_problem
 
 PARQUET_MAGIC = b"PAR1"
 RESULTS_COLUMNS = ("instance_id", "repeat", "split", "value", "success")  # columns every results table holds
@@ -105,17 +106,13 @@ def results_file_problem(path: Path) -> str | None:
 def results_folder_problem(path: Path, benchmark_hint: str = "") -> str | None:
     """Why `path` is not a RoboView results folder, in one line; None when it is one. `benchmark_hint` follows
     "not results" when `path` is a benchmark folder (what the command does with one)."""
-    root = benchmark_root(path)
-    if not path.exists():
-        return f"{path} does not exist; {EXPECTED_FOLDER}"
-    if path.is_file():
-        if is_results_folder(path.parent) and path.name in (PARQUET, JOURNAL, RUN_FILE):
-            return f"{path} is a file of a results folder: pass the folder, {path.parent}"
-        return f"{path} is a file, not a folder; {EXPECTED_FOLDER}"
-    if root == path:
+    if path.is_file() and is_results_folder(path.parent) and path.name in (PARQUET, JOURNAL, RUN_FILE):
+        return f"{path} is a file of a results folder: pass the folder, {path.parent}"
+    if path.is_dir() and benchmark_root(path) == path:
         return f"{path} is a benchmark folder (pipelines.build_benchmark), not results{benchmark_hint}; {EXPECTED_FOLDER}"
-    if not (path / RUN_FILE).is_file():
-        return f"{path} holds no RoboView results ({RUN_FILE} missing); {EXPECTED_FOLDER}"
+    problem = folder_problem(path, "results", RUN_FILE, EXPECTED_FOLDER)
+    if problem:
+        return problem
     try:
         run = json.loads((path / RUN_FILE).read_text())
     except (ValueError, UnicodeDecodeError) as exc:
@@ -132,13 +129,8 @@ def results_folder_problem(path: Path, benchmark_hint: str = "") -> str | None:
 def benchmark_folder_problem(path: Path) -> str | None:
     """Why `path` is not a benchmark folder, in one line; None when it holds a benchmark manifest."""
     expected = "expected a benchmark folder (pipelines.build_benchmark's --output_dir, holding benchmark.json)"
-    if not path.exists():
-        return f"{path} does not exist; {expected}"
-    if path.is_file():
-        root = benchmark_root(path.parent)
-        return f"{path} is a file, not a folder; " + (f"pass the benchmark folder, {root}" if root else expected)
-    if (path / MANIFEST).is_file():
-        return None
-    if is_results_folder(path):
+    root = benchmark_root(path.parent) if path.is_file() else None
+    if not (path / MANIFEST).is_file() and is_results_folder(path):
         return f"{path} is a results folder (pipelines.evaluate), not a benchmark: verify it with --results={path}"
-    return f"{path} holds no RoboView benchmark ({MANIFEST} missing); {expected}"
+    advice = f"pass the benchmark folder, {root}" if root else expected
+    return folder_problem(path, "benchmark", MANIFEST, advice)

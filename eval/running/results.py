@@ -34,11 +34,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from eval.running import provenance
+from roboview_data.folders import folder_problem
 
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
 RUN_FILE = "run.json"
-VERSION_KEY = b"roboview_benchmark_version"
+VERSION_KEY = "roboview_benchmark_version"  # parquet metadata key: the benchmark version a results file ran
 FORMAT_KEY = b"roboview_results_format"
 # 2: episode seeds from (context_id, repeat), shared by every value of a context (common random
 # numbers); 1 (or no key): seeds hashed from instance_id. The two must never be mixed.
@@ -64,12 +65,11 @@ class EpisodeStore:
 
     def _check_and_load(self) -> None:
         out = self.out
-        if out.exists() and not out.is_dir():
-            raise ResultsError(f"results folder {out} is a file; give a folder")
+        problem = folder_problem(out, "evaluation", RUN_FILE, "choose a new folder",
+                                 label=f"results folder {out}", writing=True)
+        if problem:
+            raise ResultsError(problem)
         run_file = out / RUN_FILE
-        if out.is_dir() and any(out.iterdir()) and not run_file.is_file():
-            raise ResultsError(f"results folder {out} is not empty and holds no RoboView evaluation "
-                               f"({RUN_FILE} missing); choose a new folder")
         if run_file.is_file():
             previous = json.loads(run_file.read_text())
             if previous.get("results_format", 1) != RESULTS_FORMAT:
@@ -130,7 +130,7 @@ class EpisodeStore:
         # those journalled before a resume); pyarrow would take the first row's keys only.
         columns = list(dict.fromkeys(k for row in rows for k in row))
         table = pa.Table.from_pylist([{k: row.get(k) for k in columns} for row in rows]) if rows else pa.table({})
-        meta = {VERSION_KEY: self.run_info["benchmark_version"].encode(),
+        meta = {VERSION_KEY.encode(): self.run_info["benchmark_version"].encode(),
                 b"roboview_policy": self.run_info["policy"].encode(), FORMAT_KEY: str(RESULTS_FORMAT).encode()}
         table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
         path = self.out / PARQUET
@@ -166,7 +166,7 @@ def counted(episodes: pd.DataFrame) -> pd.DataFrame:
 
 def read_version(path: str | Path) -> str | None:
     """The results file's benchmark version (parquet metadata); None when it records none."""
-    raw = (pq.read_schema(path).metadata or {}).get(VERSION_KEY)
+    raw = (pq.read_schema(path).metadata or {}).get(VERSION_KEY.encode())
     return None if raw is None else raw.decode()
 
 

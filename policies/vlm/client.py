@@ -29,7 +29,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -54,30 +54,51 @@ def default_cache_dir() -> str:
 
 @dataclass(frozen=True)
 class Endpoint:
-    """Where and how to ask: an OpenAI-compatible server and a model name on it."""
+    """A VLM endpoint: an OpenAI-compatible chat-completions server, a model on it, and how to ask it.
+    Every command that asks a VLM nests one (`--policy.endpoint.*`, `--sgl.endpoint.*`, `--vlm_screen.*`)."""
 
-    # Base URL of the chat-completions API, e.g. https://api.openai.com/v1, http://localhost:8000/v1
-    # (vLLM), http://localhost:11434/v1 (Ollama), or the stand-in server (pipelines.serve_vlm).
-    base_url: str
-    model: str
-    # Name of the environment variable holding the API key (never the key itself); unset: "EMPTY",
-    # which local servers accept.
+    # Base URL of the API: https://api.openai.com/v1, http://localhost:8000/v1 (vLLM),
+    # http://localhost:11434/v1 (Ollama), or pipelines.serve_vlm's stand-in.
+    base_url: str = "http://127.0.0.1:8000/v1"
+    # Model name on that endpoint (gpt-4o, qwen-vl-max, Qwen/Qwen2.5-VL-7B-Instruct, ...).
+    model: str = ""
+    # Name of the environment variable holding the API key (the key itself never goes in a file); unset:
+    # "EMPTY", which local servers accept.
     api_key_env: str = "OPENAI_API_KEY"
+    # Seconds per request.
     timeout_s: float = 60.0
+    # Retries of a request answered 429 / 5xx or timed out, with exponential backoff, before it fails.
     max_retries: int = 4
+    # Requests in flight to this endpoint at once, across every worker process on this machine.
     max_in_flight: int = 4
-    # Answer cache folder ("" turns caching off); default $XDG_CACHE_HOME/roboview/vlm (~/.cache/roboview/vlm).
+    # Answer cache: a rerun asks nothing twice ("" turns it off); default $XDG_CACHE_HOME/roboview/vlm.
     cache_dir: str = field(default_factory=default_cache_dir)
 
-    def validate(self) -> None:
+    def validate(self, flag: str = "") -> None:
+        """ValueError naming the bad setting (as `flag` + its name, e.g. `--policy.endpoint.model`)."""
         if not re.match(r"^https?://", self.base_url):
-            raise ValueError(f"base_url={self.base_url!r} must be an http(s) URL of an OpenAI-compatible API "
-                             "(e.g. https://api.openai.com/v1 or http://127.0.0.1:8000/v1)")
+            raise ValueError(f"{flag}base_url={self.base_url!r} must be an http(s) URL of an "
+                             "OpenAI-compatible API (e.g. https://api.openai.com/v1 or "
+                             "http://127.0.0.1:8000/v1)")
         if not self.model:
-            raise ValueError("model is empty: name the model to ask (e.g. gpt-4o, Qwen/Qwen2.5-VL-7B-Instruct)")
+            raise ValueError(f"{flag}model is empty: name the model to ask (e.g. gpt-4o, "
+                             "Qwen/Qwen2.5-VL-7B-Instruct)")
         if self.timeout_s <= 0 or self.max_retries < 0 or self.max_in_flight < 1:
-            raise ValueError(f"timeout_s={self.timeout_s}, max_retries={self.max_retries}, "
-                             f"max_in_flight={self.max_in_flight}: need > 0, ≥ 0 and ≥ 1")
+            raise ValueError(f"{flag}timeout_s={self.timeout_s}, {flag}max_retries={self.max_retries}, "
+                             f"{flag}max_in_flight={self.max_in_flight}: need > 0, ≥ 0 and ≥ 1")
+
+
+# The fields of an Endpoint, which configs that once declared them flat still accept flat on the command
+# line (`--policy.model` → `--policy.endpoint.model`, with a deprecation line).
+ENDPOINT_FIELDS = tuple(f.name for f in fields(Endpoint))
+
+
+def endpoint_aliases(*names: str) -> dict[str, str]:
+    """Old flat flag names → their place in a config's nested `endpoint` (a config's `flag_aliases`)."""
+    unknown = [n for n in names if n not in ENDPOINT_FIELDS]
+    if unknown:
+        raise ValueError(f"not Endpoint fields: {unknown}; allowed: {', '.join(ENDPOINT_FIELDS)}")
+    return {name: f"endpoint.{name}" for name in names or ENDPOINT_FIELDS}
 
 
 def png_data_url(image: np.ndarray) -> str:

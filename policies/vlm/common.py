@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -14,7 +14,7 @@ from policies.perception import (
     back_project,
     footprint_yaw,
 )
-from policies.vlm.client import Endpoint, default_cache_dir
+from policies.vlm.client import Endpoint, endpoint_aliases
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
 
 # Around the point the VLM gave: the object's points lie within this xy radius (m) and above this
@@ -28,43 +28,30 @@ MIN_POINTS = 4
 class VLMConfig(PolicyConfig):
     """An agent that asks an OpenAI-compatible chat-completions endpoint about its camera image."""
 
-    # Base URL of the API: https://api.openai.com/v1, http://localhost:8000/v1 (vLLM),
-    # http://localhost:11434/v1 (Ollama), or pipelines.serve_vlm's stand-in.
-    base_url: str = "http://127.0.0.1:8000/v1"
-    # Model name on that endpoint (gpt-4o, qwen-vl-max, Qwen/Qwen2.5-VL-7B-Instruct, ...).
-    model: str = ""
-    # Name of the environment variable holding the API key (the key itself never goes in a file).
-    api_key_env: str = "OPENAI_API_KEY"
-    # Seconds per request; retries of 429 / 5xx / timeouts with exponential backoff.
-    timeout_s: float = 60.0
-    # Retries of a request answered 429 / 5xx or timed out, with exponential backoff, before it fails.
-    max_retries: int = 4
-    # Requests in flight to this endpoint at once, across every worker process on this machine.
-    max_in_flight: int = 4
-    # Answer cache: a rerun asks nothing twice ("" turns it off); default $XDG_CACHE_HOME/roboview/vlm.
-    cache_dir: str = field(default_factory=default_cache_dir)
+    # The VLM endpoint the agent asks (--policy.endpoint.base_url, --policy.endpoint.model, ...).
+    endpoint: Endpoint = field(default_factory=Endpoint)
     # Scene camera the agent looks through (RGB-D; the VLM sees the RGB image).
     camera: str = "front"
 
     depth = True
+    # The endpoint's settings were once flags of their own: --policy.model still means
+    # --policy.endpoint.model.
+    flag_aliases: ClassVar[dict[str, str]] = endpoint_aliases()
 
     def __post_init__(self) -> None:
         if self.camera not in ALL_CAMERAS:
             raise ValueError(f"unknown camera {self.camera!r}; allowed: {', '.join(ALL_CAMERAS)}")
-        self.endpoint().validate()
+        self.endpoint.validate("--policy.endpoint.")
         super().__post_init__()
-
-    def endpoint(self) -> Endpoint:
-        return Endpoint(self.base_url, self.model, self.api_key_env, self.timeout_s, self.max_retries,
-                        self.max_in_flight, self.cache_dir)
 
     def observed_cameras(self) -> tuple[str, ...]:
         return (self.camera,)
 
     def options(self) -> dict[str, Any]:
-        # Where the answers come from matters for a resume; the key's variable name and the cache do not.
-        skip = ("api_key_env", "cache_dir", "timeout_s", "max_retries", "max_in_flight")
-        return {k: v for k, v in super().options().items() if k not in skip}
+        # Where the answers come from matters for a resume (recorded flat, as run.json has always held them);
+        # the key's variable name, the cache and the request limits do not.
+        own = {k: v for k, v in super().options().items() if k != "endpoint"}
+        return {"base_url": self.endpoint.base_url, "model": self.endpoint.model, **own}
 
 
 def check_point(value: Any, key: str, width: int, height: int) -> tuple[float, float] | None:

@@ -93,7 +93,7 @@ class MokaAgent:
 
     def __init__(self, view: AgentView, config: MokaConfig, grounder: Grounder) -> None:
         self.camera = config.camera
-        self.client = VLMClient(config.endpoint())
+        self.client = VLMClient(config.endpoint)
         self.grounder = grounder
         self.planner = PickPlacePlanner(view.kinematic_model())
         self.failure_reason = ""

@@ -20,19 +20,18 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 
 from policies.base import Episode, Policy, PolicyConfig
-from policies.vlm.client import Endpoint, VLMClient
+from policies.vlm.client import Endpoint, VLMClient, endpoint_aliases
 from policies.vlm.prompts import SGL_SCENE_PARSE
 from roboview_data.tasks.env import IMAGE_KEY
 
 PRIORITY = ("color", "state", "size", "position")
 GENERIC_NOUNS = ("object", "thing", "item", "geometry", "solid")
-ATTRIBUTES = ("name", "object_type", "category", "color", "size", "position", "state")
 # Values that describe nothing (the prompt's fallbacks).
 UNINFORMATIVE = {"normal", "", None}
 
@@ -142,25 +141,32 @@ class SGLConfig:
     # Wrap the policy in the SGL: a VLM parses the first frame and the instruction is refined ("the small
     # object" → "the small red cube") before the policy acts.
     enable: bool = False
-    # Base URL of the SGL's VLM endpoint (OpenAI-compatible); with model also empty, a VLM agent's own endpoint.
-    base_url: str = ""
-    # Model name on that endpoint; with base_url also empty, a VLM agent's own model.
-    model: str = ""
-    # Name of the environment variable holding the endpoint's API key (the key itself never goes in a file).
-    api_key_env: str = "OPENAI_API_KEY"
+    # The SGL's VLM endpoint; with --sgl.endpoint.model empty, a VLM agent's own endpoint.
+    endpoint: Endpoint = field(default_factory=Endpoint)
 
-    def endpoint(self, policy: PolicyConfig) -> Endpoint:
+    # The endpoint's settings the SGL once took as flags of their own (--sgl.model → --sgl.endpoint.model).
+    flag_aliases: ClassVar[dict[str, str]] = endpoint_aliases("base_url", "model", "api_key_env")
+
+    @property
+    def own_endpoint(self) -> bool:
+        """Whether the SGL asks the wrapped VLM agent's endpoint (no model named for the SGL itself)."""
+        return not self.endpoint.model
+
+    def endpoint_for(self, policy: PolicyConfig) -> Endpoint:
         own = getattr(policy, "endpoint", None)
-        if not self.base_url and not self.model and callable(own):
-            return own()
-        return Endpoint(self.base_url, self.model, self.api_key_env)
+        return own if self.own_endpoint and isinstance(own, Endpoint) else self.endpoint
 
     def wrap(self, policy: PolicyConfig) -> PolicyConfig:
         """`policy` itself when the SGL is off, else a config whose policies are wrapped in it (the endpoint is
         validated now, before any rollout)."""
         if not self.enable:
             return policy
-        self.endpoint(policy).validate()
+        if self.own_endpoint and self.endpoint.base_url != Endpoint.base_url:
+            raise ValueError(f"--sgl.endpoint.base_url={self.endpoint.base_url!r} without "
+                             "--sgl.endpoint.model: name the model on it, or drop the URL to ask the VLM "
+                             "agent's own endpoint")
+        endpoint = self.endpoint_for(policy)
+        endpoint.validate("--policy.endpoint." if endpoint is not self.endpoint else "--sgl.endpoint.")
         return GroundedConfig(policy, self)
 
 
@@ -189,9 +195,13 @@ class GroundedConfig:
         return None
 
     def options(self) -> dict[str, Any]:
-        return {**self.inner.options(), "sgl": True, "sgl_base_url": self.sgl.base_url, "sgl_model": self.sgl.model,
-                "sgl_api_key_env": self.sgl.api_key_env}
+        # As run.json has always recorded them: empty URL and model when the SGL asks the agent's own
+        # endpoint.
+        e = self.sgl.endpoint
+        url = "" if self.sgl.own_endpoint else e.base_url
+        return {**self.inner.options(), "sgl": True, "sgl_base_url": url, "sgl_model": e.model,
+                "sgl_api_key_env": e.api_key_env}
 
     def build(self, view) -> Policy:
-        return SemanticGroundingLayer(self.inner.build(view), self.sgl.endpoint(self.inner),
+        return SemanticGroundingLayer(self.inner.build(view), self.sgl.endpoint_for(self.inner),
                                       self.inner.observed_cameras()[0])

@@ -24,7 +24,8 @@ from roboview_data.sim.motion import PickPlacePlanner
 @PolicyConfig.register_subclass("vlm_simple")
 @dataclass
 class SimpleAgentConfig(VLMConfig):
-    doc = "SimpleAgent: a VLM names image points, depth + calibration turn them into a grasp (--policy.base_url/model)"
+    doc = ("SimpleAgent: a VLM names image points, depth + calibration turn them into a grasp "
+           "(--policy.endpoint.base_url/model)")
 
     def build(self, view: AgentView) -> SimpleAgent:
         return SimpleAgent(view, self)
@@ -35,7 +36,7 @@ class SimpleAgent:
 
     def __init__(self, view: AgentView, config: SimpleAgentConfig) -> None:
         self.camera = config.camera
-        self.client = VLMClient(config.endpoint())
+        self.client = VLMClient(config.endpoint)
         self.planner = PickPlacePlanner(view.kinematic_model())
         self.failure_reason = ""
         self._episode: Episode | None = None

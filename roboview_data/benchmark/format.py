@@ -32,6 +32,7 @@ import datasets
 import pyarrow.parquet as pq
 
 from roboview_data.files import files_sha256
+from roboview_data.folders import folder_problem
 from roboview_data.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
 from roboview_data.variation.instances import TaskInstance, canonical_json
 
@@ -249,10 +250,11 @@ class Benchmark:
 
 def read_manifest(root: Path) -> dict:
     """The manifest of a finished, readable benchmark folder (else BenchmarkError saying what to do)."""
-    path = Path(root) / MANIFEST
-    if not path.is_file():
-        raise BenchmarkError(f"{root} holds no RoboView benchmark ({MANIFEST} missing); "
+    problem = folder_problem(Path(root), "benchmark", MANIFEST,
                              "build one with `python -m pipelines.build_benchmark`")
+    if problem:
+        raise BenchmarkError(problem)
+    path = Path(root) / MANIFEST
     manifest = json.loads(path.read_text())
     if manifest.get("format") not in READABLE_FORMATS:
         raise BenchmarkError(f"{root} has benchmark format {manifest.get('format')!r}; this version reads formats "

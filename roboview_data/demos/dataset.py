@@ -20,6 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from roboview_data.demos.recorder import DemoEpisode
+from roboview_data.folders import folder_problem
 from roboview_data.tasks.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
 from roboview_data.variation.factors import DEFAULT_TASK
 
@@ -99,14 +100,12 @@ class Progress:
 
 def check_root(root: Path, signature: CollectionSignature) -> Progress | None:
     """Validate `root` before any work: None = start fresh, else the checkpoint to resume from."""
-    if root.exists() and not root.is_dir():
-        raise DatasetRootError(f"dataset root {root} is a file; give a folder (new or from an earlier run)")
-    if not root.exists() or not any(root.iterdir()):
-        return None
+    problem = folder_problem(root, "collection", PROGRESS_FILE, "choose a new folder (or one from an earlier "
+                             "run) or delete this one", label=f"dataset root {root}", writing=True)
+    if problem:
+        raise DatasetRootError(problem)
     if not (root / PROGRESS_FILE).is_file():
-        raise DatasetRootError(
-            f"dataset root {root} is not empty and holds no RoboView collection "
-            f"({PROGRESS_FILE} missing); choose a new folder or delete this one")
+        return None  # new or empty
     progress = Progress.load(root)
     if progress.signature != signature:
         diffs = {k: (v, getattr(signature, k)) for k, v in asdict(progress.signature).items()

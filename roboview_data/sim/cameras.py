@@ -16,9 +16,23 @@ import numpy as np
 # positions and the receiver box, slightly above the table.
 WORKSPACE_CENTER = np.array([0.48, 0.02, 0.03])
 
-# Cameras that a camera factor moves together, and those it never touches.
+# Side of the square camera images the renderer makes (pixels): the one bound every image size is
+# checked against. A consumer that needs larger images raises the minimum for a reason it states.
+IMAGE_SIZE_MIN = 16
+IMAGE_SIZE_MAX = 640
+
+
+def check_image_size(size: int, name: str = "image_size", minimum: int = IMAGE_SIZE_MIN,
+                     why: str = "") -> None:
+    """ValueError naming `name`={size} and the allowed range unless minimum ≤ size ≤ IMAGE_SIZE_MAX; `why`
+    (appended in parentheses) says why a caller's minimum lies above IMAGE_SIZE_MIN."""
+    if not minimum <= size <= IMAGE_SIZE_MAX:
+        because = f" ({why})" if why else ""
+        raise ValueError(f"{name}={size} out of range; allowed {minimum}..{IMAGE_SIZE_MAX}{because}")
+
+
+# Cameras that a camera factor moves together.
 PERTURBED_CAMERAS = ("front", "left_top")
-SCENE_CAMERAS = ("front", "left_top", "right_top")
 ALL_CAMERAS = ("front", "left_top", "right_top", "wrist")
 
 DEFAULT_FOVY_DEG = 45.0

@@ -18,9 +18,8 @@ from typing import Any
 
 import gymnasium as gym
 
+from roboview_data.tasks.env import DEFAULT_MAX_STEPS
 from roboview_data.variation.factors import DEFAULT_TASK, context_factors
-
-DEFAULT_MAX_STEPS = 120
 
 
 def resolve(target: str) -> Any:

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from roboview_data.errors import RenderError
-from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS
+from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, check_image_size
 from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.motion import PickPlacePlanner, yaw_of
 from roboview_data.sim.scene import (
@@ -31,7 +31,6 @@ from roboview_data.sim.scene import (
     RenderQuality,
     Scene,
 )
-from roboview_data.tasks.base import DEFAULT_MAX_STEPS
 from roboview_data.variation.factors import (
     DEFAULT_TASK,
     FACTORS,
@@ -44,6 +43,7 @@ from roboview_data.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
 
+DEFAULT_MAX_STEPS = 120
 STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
 ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
 IMAGE_KEY = "observation.images.{}"
@@ -143,8 +143,7 @@ class TaskEnv(gym.Env):
         unknown = [c for c in cameras if c not in ALL_CAMERAS]
         if unknown or not cameras:
             raise ValueError(f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}")
-        if not 16 <= image_size <= 640:
-            raise ValueError(f"image_size={image_size} out of range; allowed 16..640")
+        check_image_size(image_size)
         if fps <= 0 or 500 % fps:
             raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
         if max_steps <= 0:
