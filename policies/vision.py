@@ -22,15 +22,13 @@ import numpy as np
 from policies.base import AgentView, Episode, PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
-from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
 
 log = logging.getLogger(__name__)
 
 DEFAULT_CAMERA = "front"
-# The object's extent across the gripper (along a push), assumed (the policy does not know the shape): 4 cm.
-PUSH_REACH_M = 0.04
 
 
 @PolicyConfig.register_subclass("vision")
@@ -110,7 +108,7 @@ class VisionPolicy:
             return
         p = self.perception
         # The task's own scripted solution, as its expert runs it, through the perceived poses.
-        self._task.env_class().plan(self._motion, p.object_pos, p.object_yaw, p.symmetry, PUSH_REACH_M, p.box_xy,
+        self._task.env_class().plan(self._motion, p.object_pos, p.object_yaw, p.symmetry, ASSUMED_REACH_M, p.box_xy,
                                     arm_q)
 
     def close(self) -> None:

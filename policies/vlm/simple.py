@@ -17,7 +17,8 @@ from policies.base import AgentView, Episode, PolicyConfig
 from policies.vlm.client import VLMClient
 from policies.vlm.common import VLMConfig, check_point, object_from_point, world_point
 from policies.vlm.prompts import SIMPLE_POINTS
-from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks import load_task
+from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
 
 
@@ -83,7 +84,9 @@ class SimpleAgent:
             return
         center, yaw, symmetry = grasp
         box_xy = world_point(target_px, depth, calibration)[:2]
-        self.planner.plan(center, yaw, symmetry, arm_q, box_xy=box_xy)
+        # The task's own scripted solution through the points the VLM gave.
+        load_task(episode.task).env_class().plan(self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy,
+                                                 arm_q)
 
     def episode_record(self) -> dict:
         """Columns this agent adds to the episode row: its VLM usage and the points it was given."""

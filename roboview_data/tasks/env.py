@@ -44,6 +44,9 @@ from roboview_data.variation.instances import TaskInstance
 log = logging.getLogger(__name__)
 
 DEFAULT_MAX_STEPS = 120
+# The object's extent across the gripper (along a push) a non-privileged agent assumes, not knowing the
+# shape: a 4 cm solid.
+ASSUMED_REACH_M = 0.04
 STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
 ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
 IMAGE_KEY = "observation.images.{}"
