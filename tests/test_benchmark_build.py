@@ -131,21 +131,31 @@ def _cli(module: str, *args: str, env_extra: dict | None = None) -> subprocess.C
                           env=env)
 
 
-def test_bad_input_fails_before_work(tmp_path, built):
+def _build_main(capsys, *args: str) -> subprocess.CompletedProcess:
+    """`_cli("pipelines.build_benchmark", *args)` through its `main`, in this process: status and stderr."""
+    from pipelines.build_benchmark import main
+
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        main(list(args))
+    return subprocess.CompletedProcess(args, exit_.value.code, "", capsys.readouterr().err)
+
+
+def test_bad_input_fails_before_work(tmp_path, built, capsys):
+    # The command line itself (exit status 2, the message on stderr); the rest through the same `main`.
     proc = _cli("pipelines.build_benchmark", f"--output_dir={tmp_path / 'x'}", "--preset=huge")
     assert proc.returncode == 2 and "unknown --preset='huge'; allowed: paper, paper_dedupe, tiny" in proc.stderr
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("%")
-    proc = _cli("pipelines.build_benchmark", f"--output_dir={foreign}", "--preset=tiny")
+    proc = _build_main(capsys, f"--output_dir={foreign}", "--preset=tiny")
     assert proc.returncode == 2 and "holds no RoboView benchmark" in proc.stderr
     decisions = tmp_path / "d.csv"
     decisions.write_text("instance_id,verdict\n0123456789abcdef,reject\n")
-    proc = _cli("pipelines.build_benchmark", f"--output_dir={tmp_path / 'y'}", "--preset=tiny",
-                f"--decisions={decisions}")
+    proc = _build_main(capsys, f"--output_dir={tmp_path / 'y'}", "--preset=tiny", f"--decisions={decisions}")
     assert proc.returncode == 2 and "0123456789abcdef" in proc.stderr and "not in this suite" in proc.stderr
     assert not (tmp_path / "y").exists()
-    proc = _cli("pipelines.build_benchmark", f"--output_dir={tmp_path / 'z'}", "--union_mode=union")
+    proc = _build_main(capsys, f"--output_dir={tmp_path / 'z'}", "--union_mode=union")
     assert proc.returncode == 2 and "unknown union_mode 'union'" in proc.stderr
 
 

@@ -137,6 +137,16 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
                           timeout=120, cwd=cwd, env=os.environ | {"PYTHONPATH": str(Path(__file__).parents[1])})
 
 
+def _main(capsys, *args: str) -> subprocess.CompletedProcess:
+    """`_cli(*args)` through pipelines.collect's `main` in this process: its exit status and stderr."""
+    from pipelines.collect import main
+
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        main(list(args))
+    return subprocess.CompletedProcess(args, exit_.value.code, "", capsys.readouterr().err)
+
+
 @pytest.mark.parametrize("args, message", [
     (["--dataset.num_episodes=0"], "--dataset.num_episodes=0 must be a positive count"),
     (["--num_workers=-1"], "--num_workers=-1 must be a positive count"),
@@ -146,34 +156,35 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     (["--dataset.repo_id=noslash"], "'noslash' must look like ORG/NAME"),
     (["--dataset.randomize=[color,lighting]"], "factor(s) ['lighting']; allowed: color, camera_pose"),
 ])
-def test_cli_rejects_bad_values_before_work(tmp_path, args, message):
+def test_cli_rejects_bad_values_before_work(tmp_path, capsys, args, message):
     root = tmp_path / "ds"
-    proc = _cli(f"--dataset.root={root}", *args, cwd=tmp_path)
+    proc = _main(capsys, f"--dataset.root={root}", *args)
     assert proc.returncode == 2
     assert message in proc.stderr and "Traceback" not in proc.stderr
     assert not root.exists()
 
 
-def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path):
+def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path, capsys):
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine")
+    # The command line itself (exit status 2, the message on stderr); the rest through the same `main`.
     proc = _cli(f"--dataset.root={foreign}", f"--dataset.repo_id={REPO_ID}", cwd=tmp_path)
     assert proc.returncode == 2 and "holds no RoboView collection" in proc.stderr
     assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
 
     before = (reference / "meta/info.json").read_text()
-    proc = _cli(f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}", "--dataset.num_episodes=6",
-                "--dataset.image_size=96", cwd=tmp_path)
+    proc = _main(capsys, f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}",
+                 "--dataset.num_episodes=6", "--dataset.image_size=96")
     assert proc.returncode == 2 and "image_size: existing 64 vs requested 96" in proc.stderr
-    proc = _cli(f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}", "--dataset.image_size=64",
-                "--max_steps=100", "--dataset.randomize=[color]", cwd=tmp_path)
+    proc = _main(capsys, f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}",
+                 "--dataset.image_size=64", "--max_steps=100", "--dataset.randomize=[color]")
     assert proc.returncode == 2 and "randomize: existing () vs requested ('color',)" in proc.stderr
     assert (reference / "meta/info.json").read_text() == before
 
     a_file = tmp_path / "file"
     a_file.write_text("x")
-    proc = _cli(f"--dataset.root={a_file}", f"--dataset.repo_id={REPO_ID}", cwd=tmp_path)
+    proc = _main(capsys, f"--dataset.root={a_file}", f"--dataset.repo_id={REPO_ID}")
     assert proc.returncode == 2 and "is a file" in proc.stderr
 
 

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import re
 import shlex
-import subprocess
-import sys
 from concurrent.futures import ThreadPoolExecutor
-from functools import cache
 from pathlib import Path
 
 import pytest
+
+from tests.test_cli_help import help_run
 
 ROOT = Path(__file__).parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
@@ -84,10 +83,8 @@ def _module_of(command: str) -> tuple[str, list[str]] | None:
     return None
 
 
-@cache
 def help_text(module: str) -> str:
-    proc = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=180,
-                          cwd=ROOT)
+    proc = help_run(module)
     assert proc.returncode == 0, f"{module} --help failed: {proc.stderr[-800:]}"
     return proc.stdout
 

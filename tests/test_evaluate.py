@@ -121,53 +121,72 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
                           timeout=300, env=os.environ | {"PYTHONPATH": str(ROOT)})
 
 
-def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path):
+def _main(capsys, *args: str) -> subprocess.CompletedProcess:
+    """`_cli(*args)` through pipelines.evaluate's `main` in this process: its exit status and stderr."""
+    from pipelines.evaluate import main
+
+    if not any(a.startswith("--policy.type=") for a in args):
+        args = ("--policy.type=expert", *args)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        main(list(args))
+    return subprocess.CompletedProcess(args, exit_.value.code, "", capsys.readouterr().err)
+
+
+def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path, capsys):
     out = tmp_path / "out"
+    # The command line itself (exit status 2, the message on stderr); the rest through the same `main`.
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=oracle", f"--output_dir={out}")
     assert proc.returncode == 2 and "unknown policy type 'oracle'; allowed: expert, lerobot, lerobot_async, openpi, random" in proc.stderr
-    proc = _cli(f"--benchmark.path={bench}", "--benchmark.splits=colour", f"--output_dir={out}")
+    proc = _main(capsys, f"--benchmark.path={bench}", "--benchmark.splits=colour", f"--output_dir={out}")
     assert proc.returncode == 2 and "unknown split(s) ['colour']" in proc.stderr
-    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tmp_path}", f"--output_dir={out}")
+    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tmp_path}",
+                 f"--output_dir={out}")
     assert proc.returncode == 2 and "holds no LeRobot checkpoint" in proc.stderr
     bad = tmp_path / "bad_ckpt"
     bad.mkdir()
     config = json.loads((tiny_checkpoint / "config.json").read_text())
     config["input_features"]["observation.images.top_down"] = config["input_features"].pop("observation.images.wrist")
     (bad / "config.json").write_text(json.dumps(config))
-    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}", f"--output_dir={out}")
+    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}",
+                 f"--output_dir={out}")
     assert proc.returncode == 2 and "camera 'top_down'" in proc.stderr
     assert not out.exists()
     # Images the env cannot render (non-square): refused before any rollout, naming the shapes.
     config = json.loads((tiny_checkpoint / "config.json").read_text())
     config["input_features"]["observation.images.wrist"]["shape"] = [3, 64, 48]
     (bad / "config.json").write_text(json.dumps(config))
-    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}", f"--output_dir={out}")
+    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}",
+                 f"--output_dir={out}")
     assert proc.returncode == 2 and "(3, 64, 48)" in proc.stderr and "square" in proc.stderr
     assert not out.exists()
     # An explicit image size that disagrees with the checkpoint's: both sizes named, nothing run.
-    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tiny_checkpoint}",
-                "--eval.image_size=96", f"--output_dir={out}")
+    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot",
+                 f"--policy.path={tiny_checkpoint}", "--eval.image_size=96", f"--output_dir={out}")
     assert proc.returncode == 2 and "--eval.image_size=96" in proc.stderr and "64×64" in proc.stderr
     assert not out.exists()
-    proc = _cli(f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tiny_checkpoint}",
-                "--policy.device=tpu", f"--output_dir={out}")
+    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot",
+                 f"--policy.path={tiny_checkpoint}", "--policy.device=tpu", f"--output_dir={out}")
     assert proc.returncode == 2 and "--policy.device='tpu'" in proc.stderr and "auto, cpu, cuda" in proc.stderr
     # Results from another benchmark version in the output folder: refuse to mix them.
     out.mkdir()
     (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert",
                                               "results_format": 2}))
-    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1")
+    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1",
+                 "--eval.n_repeats=1")
     assert proc.returncode == 2 and "existing 'paper-000000000000' vs requested 'tiny-" in proc.stderr
     assert not (out / "episodes.jsonl").exists()
     # Results written under the old seed rule (no results_format): refuse to resume into them.
     (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert"}))
-    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1")
+    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1",
+                 "--eval.n_repeats=1")
     assert proc.returncode == 2 and "results of format 1" in proc.stderr and "choose a new folder" in proc.stderr
     # Per-split repeats: a typo fails before any rollout, naming the entry.
-    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'z'}", "--eval.split_repeats=color=two")
+    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'z'}",
+                 "--eval.split_repeats=color=two")
     assert proc.returncode == 2 and "'color=two' must be split=N" in proc.stderr
-    proc = _cli(f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'v'}", "--benchmark.splits=color",
-                "--benchmark.values=red,chartreuse")
+    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'v'}",
+                 "--benchmark.splits=color", "--benchmark.values=red,chartreuse")
     assert proc.returncode == 2 and "['chartreuse']" in proc.stderr and "red" in proc.stderr
 
 

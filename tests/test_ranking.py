@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from eval.statistics.metrics import MetricsConfig, compute_all_metrics
-from eval.statistics.ranking import compact_letters, rank_table
+from eval.statistics.ranking import compact_letters, holm, rank_table
 
 FAST = MetricsConfig(n_perm=100, n_glm=20, max_perm=100)
 
@@ -37,6 +37,9 @@ def test_rank_ranges_claim_only_what_holm_supports():
     p = {frozenset(("x", "y")): 0.03, frozenset(("x", "z")): 0.001, frozenset(("y", "z")): 0.02}
     # Holm over 3: 0.001·3 = 0.003 < .05; 0.02·2 = 0.04 < .05; 0.03·1 = 0.03 < .05 -> all differ
     assert [r["rank_range"] for r in rank_table(values, p, True)] == [[1, 1], [2, 2], [3, 3]]
+    # Holm by hand: sorted p × (m, m − 1, …), then non-decreasing (0.025·2 → 0.06), capped at 1
+    assert holm([0.025, 0.001, 0.02, 0.5]).tolist() == pytest.approx([0.06, 0.004, 0.06, 0.5])
+    assert holm([0.6, 0.7]).tolist() == [1.0, 1.0] and holm([]).size == 0
     p[frozenset(("x", "y"))] = 0.2  # x and y no longer separable: they share ranks 1–2 and a letter
     ranked = rank_table(values, p, True)
     assert [(r["policy"], r["group"], r["rank_range"]) for r in ranked] == \

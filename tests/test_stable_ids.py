@@ -54,7 +54,7 @@ def _scene_state(env) -> list[np.ndarray]:
 
 
 def test_paper_instances_compile_to_the_pinned_scenes():
-    env = PickPlaceEnv(cameras=("front",), image_size=16)
+    env = PickPlaceEnv(cameras=("front",), image_size=16, lazy=True)
     suite = generate_suite(load_preset("paper"))
     sample = [i for i in suite if i.split == "color"][::25] + [i for i in suite if i.split != "color"]
     digest = hashlib.sha256()
