@@ -17,7 +17,7 @@ export PYOPENGL_PLATFORM ?= egl
 export HF_HUB_OFFLINE ?= 1
 DEMO_DIR ?= outputs/demo
 
-.PHONY: install sysdeps demo test test-fast bench clean-demo
+.PHONY: install sysdeps demo test test-fast lint format bench clean-demo
 
 install: sysdeps $(STAMP)
 
@@ -60,13 +60,23 @@ demo: install
 	@echo "Contact sheet:  $(DEMO_DIR)/benchmark/contact_sheet/index.html"
 	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
 
-# The whole suite, with its 30 slowest tests listed at the end; test-fast: the tests that take seconds (statistics,
-# formats, factor registry, imports), no rendering, training or servers.
-test: install
+# Lint and format check first (ruff, pyproject.toml), then the whole suite with its 30 slowest tests listed at
+# the end; test-fast: the tests that take seconds (statistics, formats, factor registry, imports), no rendering,
+# training or servers.
+test: install lint
 	$(PY) -m pytest -q --durations=30
 
-test-fast: install
+test-fast: install lint
 	$(PY) -m pytest -q -m "not slow" --durations=10
+
+lint: install
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+
+# Applies the formatter and the lint fixes that are safe.
+format: install
+	$(PY) -m ruff format .
+	$(PY) -m ruff check --fix .
 
 # The throughput harness (docs/performance.md): one JSON with every rate, side by side with lerobot-eval.
 # BENCH_ARGS=--quick=true for the under-10-minute version; --checkpoint=DIR for another checkpoint.

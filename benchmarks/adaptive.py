@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import json
 import time
-
-import pandas as pd
 from dataclasses import dataclass
 from pathlib import Path
+
+import pandas as pd
 
 from eval.statistics.adaptive import Design, read_record, simulate
 from eval.statistics.significance import lrt_power
@@ -44,8 +44,10 @@ class AdaptiveBenchConfig:
         if self.sims < 10:
             raise ValueError(f"--sims={self.sims} must be ≥ 10")
         if self.results and read_record(Path(self.results)) is None:
-            raise ValueError(f"--results={self.results} holds no adaptive.json: run pipelines.evaluate with "
-                             "--eval.adaptive=true into it first")
+            raise ValueError(
+                f"--results={self.results} holds no adaptive.json: run pipelines.evaluate with "
+                "--eval.adaptive=true into it first"
+            )
 
 
 def real_run(results: Path) -> dict:
@@ -56,19 +58,46 @@ def real_run(results: Path) -> dict:
     splits = {}
     for split, stop in record["splits"].items():
         rows = episodes[episodes["split"] == split]
-        n_values, n_contexts, sr = rows["value"].nunique(), rows["context_id"].nunique(), float(rows["success"].mean())
-        fixed = next((n for n in range(1, 41) if lrt_power(n_values, n_contexts, n, design["tau"], min(max(sr, 0.02), 0.98),
-                                                            design["alpha"]) >= design["power"]), 40)
+        n_values, n_contexts, sr = (
+            rows["value"].nunique(),
+            rows["context_id"].nunique(),
+            float(rows["success"].mean()),
+        )
+        fixed = next(
+            (
+                n
+                for n in range(1, 41)
+                if lrt_power(
+                    n_values, n_contexts, n, design["tau"], min(max(sr, 0.02), 0.98), design["alpha"]
+                )
+                >= design["power"]
+            ),
+            40,
+        )
         fixed_episodes = fixed * n_values * n_contexts
-        splits[split] = {**stop, "values": n_values, "contexts": n_contexts, "sr": round(sr, 4),
-                         "fixed_repeats_equal_power": fixed, "fixed_episodes": fixed_episodes,
-                         "saving": round(1 - stop["episodes"] / fixed_episodes, 3)}
-        print(f"[adaptive] {split} ({n_values}×{n_contexts}, SR {sr:.2f}): stopped {stop['stopped']} after "
-              f"{stop['rounds']} round(s), {stop['episodes']} episodes vs fixed {fixed_episodes} ({fixed} repeats)",
-              flush=True)
+        splits[split] = {
+            **stop,
+            "values": n_values,
+            "contexts": n_contexts,
+            "sr": round(sr, 4),
+            "fixed_repeats_equal_power": fixed,
+            "fixed_episodes": fixed_episodes,
+            "saving": round(1 - stop["episodes"] / fixed_episodes, 3),
+        }
+        print(
+            f"[adaptive] {split} ({n_values}×{n_contexts}, SR {sr:.2f}): stopped {stop['stopped']} after "
+            f"{stop['rounds']} round(s), {stop['episodes']} episodes vs fixed {fixed_episodes} ({fixed} repeats)",
+            flush=True,
+        )
     total = sum(s["episodes"] for s in splits.values()), sum(s["fixed_episodes"] for s in splits.values())
-    return {"results": str(results), "design": design, "splits": splits, "episodes": total[0],
-            "fixed_episodes": total[1], "saving": round(1 - total[0] / total[1], 3)}
+    return {
+        "results": str(results),
+        "design": design,
+        "splits": splits,
+        "episodes": total[0],
+        "fixed_episodes": total[1],
+        "saving": round(1 - total[0] / total[1], 3),
+    }
 
 
 def run(cfg: AdaptiveBenchConfig) -> dict:
@@ -81,18 +110,33 @@ def run(cfg: AdaptiveBenchConfig) -> dict:
     for n_values, n_contexts, max_repeats in DESIGNS:
         design = Design(alpha=0.05, tau=0.6, power=0.8, max_repeats=max_repeats)
         start = time.perf_counter()
-        rows = {tau: simulate(n_values, n_contexts, 0.7, tau, design, cfg.sims, seed=7) for tau in (0.0, 0.3, 0.6)}
+        rows = {
+            tau: simulate(n_values, n_contexts, 0.7, tau, design, cfg.sims, seed=7) for tau in (0.0, 0.3, 0.6)
+        }
         power = rows[0.6]["rejection_rate"]
         fixed = next((n for n in range(1, 41) if lrt_power(n_values, n_contexts, n, 0.6, 0.7) >= power), 40)
         fixed_episodes = fixed * n_values * n_contexts
-        results.append({"values": n_values, "contexts": n_contexts, "max_repeats": max_repeats,
-                        "adaptive": {str(t): r for t, r in rows.items()}, "fixed_repeats_equal_power": fixed,
-                        "fixed_episodes": fixed_episodes,
-                        "saving": {str(t): round(1 - r["mean_episodes"] / fixed_episodes, 3) for t, r in rows.items()},
-                        "seconds": round(time.perf_counter() - start, 1)})
-        print(f"[adaptive] {n_values}×{n_contexts}: type-I {rows[0.0]['rejection_rate']:.3f}, power(0.6) {power:.2f}; "
-              f"episodes τ=0/0.3/0.6: " + "/".join(f"{rows[t]['mean_episodes']:.0f}" for t in (0.0, 0.3, 0.6))
-              + f" vs fixed {fixed_episodes} ({fixed} repeats)", flush=True)
+        results.append(
+            {
+                "values": n_values,
+                "contexts": n_contexts,
+                "max_repeats": max_repeats,
+                "adaptive": {str(t): r for t, r in rows.items()},
+                "fixed_repeats_equal_power": fixed,
+                "fixed_episodes": fixed_episodes,
+                "saving": {
+                    str(t): round(1 - r["mean_episodes"] / fixed_episodes, 3) for t, r in rows.items()
+                },
+                "seconds": round(time.perf_counter() - start, 1),
+            }
+        )
+        print(
+            f"[adaptive] {n_values}×{n_contexts}: type-I {rows[0.0]['rejection_rate']:.3f}, power(0.6) {power:.2f}; "
+            f"episodes τ=0/0.3/0.6: "
+            + "/".join(f"{rows[t]['mean_episodes']:.0f}" for t in (0.0, 0.3, 0.6))
+            + f" vs fixed {fixed_episodes} ({fixed} repeats)",
+            flush=True,
+        )
     out = {"sims": cfg.sims, "alpha": 0.05, "tau_design": 0.6, "sr": 0.7, "designs": results}
     Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
     Path(cfg.output).write_text(json.dumps(out, indent=2))

@@ -47,35 +47,69 @@ class LocalCluster:
     """A Ray head and worker nodes on 127.0.0.1, started with Ray's own CLI (`ray start --block`, one raylet each),
     token-authenticated. `kill(node)` ends a node as a lost machine ends: every process under it at once."""
 
-    def __init__(self, workers: int = 1, cpus: int = 1, head_cpus: int | None = None, scratch: Path | None = None,
-                 timeout_s: float = 120) -> None:
+    def __init__(
+        self,
+        workers: int = 1,
+        cpus: int = 1,
+        head_cpus: int | None = None,
+        scratch: Path | None = None,
+        timeout_s: float = 120,
+    ) -> None:
         scratch = Path(scratch or tempfile.mkdtemp(prefix="roboview-ray-"))
         token = scratch / f"ray_token_{secrets.token_hex(4)}"
         token.write_text(secrets.token_hex(32))
-        self.env = os.environ | {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN_PATH": str(token), "PYTHONPATH": str(ROOT),
-                                 "RAY_USAGE_STATS_ENABLED": "0", "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
+        self.env = os.environ | {
+            "RAY_AUTH_MODE": "token",
+            "RAY_AUTH_TOKEN_PATH": str(token),
+            "PYTHONPATH": str(ROOT),
+            "RAY_USAGE_STATS_ENABLED": "0",
+            "MUJOCO_GL": "egl",
+            "PYOPENGL_PLATFORM": "egl",
+        }
         self.port = free_port()
         self.address = f"127.0.0.1:{self.port}"
-        self.head = self._start(["--head", f"--port={self.port}", "--include-dashboard=false",
-                                 f"--num-cpus={cpus if head_cpus is None else head_cpus}",
-                                 f"--node-manager-port={free_port()}", f"--object-manager-port={free_port()}"])
-        self.workers = [self._start([f"--address={self.address}", f"--num-cpus={cpus}"]) for _ in range(workers)]
+        self.head = self._start(
+            [
+                "--head",
+                f"--port={self.port}",
+                "--include-dashboard=false",
+                f"--num-cpus={cpus if head_cpus is None else head_cpus}",
+                f"--node-manager-port={free_port()}",
+                f"--object-manager-port={free_port()}",
+            ]
+        )
+        self.workers = [
+            self._start([f"--address={self.address}", f"--num-cpus={cpus}"]) for _ in range(workers)
+        ]
         deadline = time.time() + timeout_s
         while self.alive_nodes() < 1 + workers:
             if time.time() > deadline:
                 self.close()
-                raise TimeoutError(f"Ray did not start {1 + workers} nodes on this machine within {timeout_s:.0f} s")
+                raise TimeoutError(
+                    f"Ray did not start {1 + workers} nodes on this machine within {timeout_s:.0f} s"
+                )
             time.sleep(1)
 
     def _start(self, args: list[str]) -> subprocess.Popen:
-        return subprocess.Popen([str(RAY), "start", "--block", "--node-ip-address=127.0.0.1", *args], env=self.env,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        return subprocess.Popen(
+            [str(RAY), "start", "--block", "--node-ip-address=127.0.0.1", *args],
+            env=self.env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
 
     def alive_nodes(self) -> int:
-        code = ("import ray; ray.init(address=%r, log_to_driver=False); "
-                "print(sum(n['Alive'] for n in ray.nodes()))" % self.address)
-        proc = subprocess.run([sys.executable, "-c", code], env=self.env, capture_output=True, text=True, timeout=120)
-        return int(proc.stdout.strip().splitlines()[-1]) if proc.returncode == 0 and proc.stdout.strip() else 0
+        code = (
+            f"import ray; ray.init(address={self.address!r}, log_to_driver=False); "
+            "print(sum(n['Alive'] for n in ray.nodes()))"
+        )
+        proc = subprocess.run(
+            [sys.executable, "-c", code], env=self.env, capture_output=True, text=True, timeout=120
+        )
+        return (
+            int(proc.stdout.strip().splitlines()[-1]) if proc.returncode == 0 and proc.stdout.strip() else 0
+        )
 
     @staticmethod
     def kill(proc: subprocess.Popen) -> None:
@@ -121,10 +155,22 @@ class ClusterBenchConfig:
             raise ValueError(f"--episodes={self.episodes} must be ≥ 4 and --cores={self.cores} ≥ 2")
 
 
-def _evaluate(cfg: ClusterBenchConfig, bench: str, policy: list[str], out: Path, env: dict, extra: list[str]) -> float:
-    cmd = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}", f"--benchmark.splits={cfg.split}",
-           f"--eval.limit={cfg.episodes}", "--eval.n_repeats=1", f"--eval.num_workers={cfg.cores}", *policy, *extra,
-           f"--output_dir={out}"]
+def _evaluate(
+    cfg: ClusterBenchConfig, bench: str, policy: list[str], out: Path, env: dict, extra: list[str]
+) -> float:
+    cmd = [
+        sys.executable,
+        "-m",
+        "pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        f"--benchmark.splits={cfg.split}",
+        f"--eval.limit={cfg.episodes}",
+        "--eval.n_repeats=1",
+        f"--eval.num_workers={cfg.cores}",
+        *policy,
+        *extra,
+        f"--output_dir={out}",
+    ]
     start = time.perf_counter()
     proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -136,7 +182,9 @@ def run(cfg: ClusterBenchConfig) -> dict:
     import pandas as pd
 
     scratch = Path(tempfile.mkdtemp(prefix="roboview-cluster-bench-"))
-    bench = cfg.benchmark.path or ("outputs/benchmark_paper" if Path("outputs/benchmark_paper").is_dir() else "")
+    bench = cfg.benchmark.path or (
+        "outputs/benchmark_paper" if Path("outputs/benchmark_paper").is_dir() else ""
+    )
     if not bench:
         from pipelines.build_benchmark import BuildConfig
         from pipelines.build_benchmark import run as build
@@ -144,33 +192,56 @@ def run(cfg: ClusterBenchConfig) -> dict:
         bench = str(scratch / "bench")
         build(BuildConfig(output_dir=bench, preset="tiny", image_size=64))
     checkpoint = cfg.checkpoint or (REFERENCE_CHECKPOINT if Path(REFERENCE_CHECKPOINT).is_dir() else "")
-    policy = ["--policy.type=lerobot", f"--policy.path={checkpoint}"] if checkpoint else ["--policy.type=expert",
-                                                                                          "--eval.image_size=96"]
+    policy = (
+        ["--policy.type=lerobot", f"--policy.path={checkpoint}"]
+        if checkpoint
+        else ["--policy.type=expert", "--eval.image_size=96"]
+    )
     layouts: dict[str, dict] = {}
     base_env = os.environ | {"PYTHONPATH": str(ROOT)}
     seconds = _evaluate(cfg, bench, policy, scratch / "local", base_env, [])
     layouts["local"] = {"seconds": round(seconds, 1)}
     for name, workers, cpus in (("ray_1_node", 0, cfg.cores), (f"ray_{cfg.cores}_nodes", cfg.cores - 1, 1)):
         with LocalCluster(workers=workers, cpus=cpus, scratch=scratch) as cluster:
-            seconds = _evaluate(cfg, bench, policy, scratch / name, cluster.env,
-                                ["--eval.backend=ray", f"--eval.ray_address={cluster.address}"])
+            seconds = _evaluate(
+                cfg,
+                bench,
+                policy,
+                scratch / name,
+                cluster.env,
+                ["--eval.backend=ray", f"--eval.ray_address={cluster.address}"],
+            )
         record = json.loads((scratch / name / "provenance.json").read_text())[-1]["ray"]
         layouts[name] = {"seconds": round(seconds, 1), "episodes_per_node": sorted(record["nodes"].values())}
 
     def table(name: str):
-        return (pd.read_parquet(scratch / name / "episodes.parquet").drop(columns=["duration_s"])
-                .sort_values(["instance_id", "repeat"]).reset_index(drop=True))
+        return (
+            pd.read_parquet(scratch / name / "episodes.parquet")
+            .drop(columns=["duration_s"])
+            .sort_values(["instance_id", "repeat"])
+            .reset_index(drop=True)
+        )
 
     reference = table("local")
     for name, layout in layouts.items():
         layout["episodes_per_hour"] = round(3600 * cfg.episodes / layout["seconds"])
         layout["over_local"] = round(layouts["local"]["seconds"] / layout["seconds"], 3)
         layout["rows_equal_local"] = frames_equal(table(name), reference)
-        print(f"[cluster] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_local']}× local), "
-              f"rows equal: {layout['rows_equal_local']}", flush=True)
-    out = {"policy": checkpoint or "expert", "benchmark": bench, "split": cfg.split, "episodes": cfg.episodes,
-           "cores": cfg.cores, "cpu": os.cpu_count(), "layouts": layouts,
-           "note": "wall clock of the whole evaluate command, start-up (model load, Ray connect) included"}
+        print(
+            f"[cluster] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_local']}× local), "
+            f"rows equal: {layout['rows_equal_local']}",
+            flush=True,
+        )
+    out = {
+        "policy": checkpoint or "expert",
+        "benchmark": bench,
+        "split": cfg.split,
+        "episodes": cfg.episodes,
+        "cores": cfg.cores,
+        "cpu": os.cpu_count(),
+        "layouts": layouts,
+        "note": "wall clock of the whole evaluate command, start-up (model load, Ray connect) included",
+    }
     Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
     Path(cfg.output).write_text(json.dumps(out, indent=2))
     return out

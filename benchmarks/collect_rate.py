@@ -1,6 +1,6 @@
 """Collection throughput: successful demos per hour with four 224² cameras and two workers.
 
-    python -m benchmarks.collect_rate [--episodes=30] [--workers=2] [--size=224]
+python -m benchmarks.collect_rate [--episodes=30] [--workers=2] [--size=224]
 """
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipelines._cli import cli_main
-from pipelines.collect import CollectConfig, DatasetConfig, run as collect
+from pipelines.collect import CollectConfig, DatasetConfig
+from pipelines.collect import run as collect
 
 
 @dataclass
@@ -28,13 +29,23 @@ class CollectRateConfig:
 def run(cfg: CollectRateConfig) -> dict:
     root = Path(tempfile.mkdtemp(prefix="roboview_bench_")) / "ds"
     try:
-        collect_cfg = CollectConfig(dataset=DatasetConfig(repo_id="bench/demos", root=str(root),
-                                                          num_episodes=cfg.episodes, image_size=cfg.size),
-                                    num_workers=cfg.workers)
+        collect_cfg = CollectConfig(
+            dataset=DatasetConfig(
+                repo_id="bench/demos", root=str(root), num_episodes=cfg.episodes, image_size=cfg.size
+            ),
+            num_workers=cfg.workers,
+        )
         result = collect(collect_cfg)
-        return {"episodes": result.new_episodes, "attempts": result.attempts, "failures": result.failures,
-                "elapsed_s": round(result.elapsed_s, 1), "demos_per_hour": round(result.demos_per_hour),
-                "workers": cfg.workers, "image_size": cfg.size, "cameras": 4}
+        return {
+            "episodes": result.new_episodes,
+            "attempts": result.attempts,
+            "failures": result.failures,
+            "elapsed_s": round(result.elapsed_s, 1),
+            "demos_per_hour": round(result.demos_per_hour),
+            "workers": cfg.workers,
+            "image_size": cfg.size,
+            "cameras": 4,
+        }
     finally:
         shutil.rmtree(root.parent, ignore_errors=True)
 

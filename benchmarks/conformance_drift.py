@@ -46,6 +46,7 @@ def _friction(scale: float):
         if not hasattr(env, "_built_friction"):
             env._built_friction = env.model.geom_friction[:, 0].copy()
         env.model.geom_friction[:, 0] = scale * env._built_friction
+
     return change
 
 
@@ -53,9 +54,15 @@ def _timestep(env) -> None:
     env.model.opt.timestep = 0.0021
 
 
-CHANGES = {"object color +0.04": _color, "lights -10 %": _light, "table material": _texture,
-           "cameras +1 cm": _camera, "friction x0.9": _friction(0.9), "friction x0.7": _friction(0.7),
-           "timestep 0.0021 s": _timestep}
+CHANGES = {
+    "object color +0.04": _color,
+    "lights -10 %": _light,
+    "table material": _texture,
+    "cameras +1 cm": _camera,
+    "friction x0.9": _friction(0.9),
+    "friction x0.7": _friction(0.7),
+    "timestep 0.0021 s": _timestep,
+}
 
 
 @dataclass
@@ -72,6 +79,7 @@ def run(cfg: DriftConfig) -> dict:
     reset = TaskEnv.reset
     out = {}
     for name, change in {"none": None, **CHANGES}.items():
+
         def patched(self, *args, _change=change, **kwargs):
             obs = reset(self, *args, **kwargs)
             if _change is not None:
@@ -86,10 +94,13 @@ def run(cfg: DriftConfig) -> dict:
             TaskEnv.reset = reset
         out[name] = {"verdict": report.verdict, **report.drift}
         d = report.drift
-        print(f"[conformance_drift] {name:<20} {report.verdict:<10} images identical {d['images_identical']}/{d['images']}, "
-              f"≤ {d['pixel_fraction_max']:.2%} differing, region px ≤ {d['region_pixels_max']}; rollouts identical "
-              f"{d['physics_identical']}/{d['physics']}, joints ≤ {d['joint_max']:.1e} rad, object ≤ "
-              f"{d['object_error_m_max']:.1e} m", flush=True)
+        print(
+            f"[conformance_drift] {name:<20} {report.verdict:<10} images identical {d['images_identical']}/{d['images']}, "
+            f"≤ {d['pixel_fraction_max']:.2%} differing, region px ≤ {d['region_pixels_max']}; rollouts identical "
+            f"{d['physics_identical']}/{d['physics']}, joints ≤ {d['joint_max']:.1e} rad, object ≤ "
+            f"{d['object_error_m_max']:.1e} m",
+            flush=True,
+        )
     Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
     Path(cfg.output).write_text(json.dumps(out, indent=2))
     return out

@@ -53,32 +53,56 @@ class GpuBenchConfig:
         if self.episodes < 8:
             raise ValueError(f"--episodes={self.episodes} must be ≥ 8")
         if not Path(self.checkpoint).is_dir():
-            raise ValueError(f"--checkpoint={self.checkpoint} is not a checkpoint folder (a lerobot-train "
-                             "pretrained_model); train one with pipelines.train or pass its path")
+            raise ValueError(
+                f"--checkpoint={self.checkpoint} is not a checkpoint folder (a lerobot-train "
+                "pretrained_model); train one with pipelines.train or pass its path"
+            )
 
 
 def _evaluate(cfg: GpuBenchConfig, bench: str, out: Path, flags: list[str]) -> dict:
     import pandas as pd
 
-    cmd = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}", f"--benchmark.splits={cfg.split}",
-           f"--eval.limit={cfg.episodes}", "--eval.n_repeats=1", *flags, f"--output_dir={out}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        f"--benchmark.splits={cfg.split}",
+        f"--eval.limit={cfg.episodes}",
+        "--eval.n_repeats=1",
+        *flags,
+        f"--output_dir={out}",
+    ]
     start = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=ROOT, env=os.environ | {"PYTHONPATH": str(ROOT)}, capture_output=True, text=True)
+    proc = subprocess.run(
+        cmd, cwd=ROOT, env=os.environ | {"PYTHONPATH": str(ROOT)}, capture_output=True, text=True
+    )
     wall = time.perf_counter() - start
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
-    rows = (pd.read_parquet(out / "episodes.parquet").drop(columns=["duration_s"])
-            .sort_values(["instance_id", "repeat"]).reset_index(drop=True))
-    return {"wall_s": round(wall, 1), "episodes_per_hour": round(3600 * len(rows) / wall),
-            "successes": int(rows["success"].sum()), "command": " ".join(cmd), "_rows": rows}
+    rows = (
+        pd.read_parquet(out / "episodes.parquet")
+        .drop(columns=["duration_s"])
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
+    return {
+        "wall_s": round(wall, 1),
+        "episodes_per_hour": round(3600 * len(rows) / wall),
+        "successes": int(rows["success"].sum()),
+        "command": " ".join(cmd),
+        "_rows": rows,
+    }
 
 
 def run(cfg: GpuBenchConfig) -> dict:
     import torch
 
     if not torch.cuda.is_available():
-        raise RuntimeError("no CUDA device: benchmarks.gpu measures the GPU layouts and needs an NVIDIA GPU "
-                           "(the CPU figures are make bench's)")
+        raise RuntimeError(
+            "no CUDA device: benchmarks.gpu measures the GPU layouts and needs an NVIDIA GPU "
+            "(the CPU figures are make bench's)"
+        )
     cores = os.cpu_count() or 2
     scratch = Path(tempfile.mkdtemp(prefix="roboview-gpu-bench-"))
     bench = cfg.benchmark.path
@@ -90,21 +114,39 @@ def run(cfg: GpuBenchConfig) -> dict:
         build(BuildConfig(output_dir=bench, preset="tiny", image_size=64))
     model = ["--policy.type=lerobot", f"--policy.path={cfg.checkpoint}"]
     layouts = {
-        "cpu": _evaluate(cfg, bench, scratch / "cpu", [*model, "--policy.device=cpu", f"--eval.num_workers={cores}"]),
-        "gpu_per_worker": _evaluate(cfg, bench, scratch / "gpu_per_worker",
-                                    [*model, "--policy.device=cuda", f"--eval.num_workers={cores}"]),
-        "gpu_policy_server": _evaluate(cfg, bench, scratch / "gpu_policy_server",
-                                       [*model, "--policy.device=cuda", "--eval.policy_server=true",
-                                        f"--eval.num_workers={cores - 1}",
-                                        f"--eval.envs_per_worker={cfg.envs_per_worker}"]),
+        "cpu": _evaluate(
+            cfg, bench, scratch / "cpu", [*model, "--policy.device=cpu", f"--eval.num_workers={cores}"]
+        ),
+        "gpu_per_worker": _evaluate(
+            cfg,
+            bench,
+            scratch / "gpu_per_worker",
+            [*model, "--policy.device=cuda", f"--eval.num_workers={cores}"],
+        ),
+        "gpu_policy_server": _evaluate(
+            cfg,
+            bench,
+            scratch / "gpu_policy_server",
+            [
+                *model,
+                "--policy.device=cuda",
+                "--eval.policy_server=true",
+                f"--eval.num_workers={cores - 1}",
+                f"--eval.envs_per_worker={cfg.envs_per_worker}",
+            ],
+        ),
     }
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     port = free_port()
     log = scratch / "serve_policy.log"
-    server = subprocess.Popen([sys.executable, "-m", "pipelines.serve_policy", *model, "--policy.device=cuda",
-                               f"--port={port}"], stdout=log.open("w"), stderr=subprocess.STDOUT, cwd=ROOT,
-                              env=os.environ | {"PYTHONPATH": str(ROOT)})
+    server = subprocess.Popen(
+        [sys.executable, "-m", "pipelines.serve_policy", *model, "--policy.device=cuda", f"--port={port}"],
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+        cwd=ROOT,
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+    )
     try:
         import urllib.request
 
@@ -117,10 +159,18 @@ def run(cfg: GpuBenchConfig) -> dict:
                 if server.poll() is not None or time.time() > deadline:
                     raise RuntimeError(f"serve_policy did not start:\n{log.read_text()[-2000:]}") from None
                 time.sleep(0.5)
-        layouts["gpu_served"] = _evaluate(cfg, bench, scratch / "gpu_served", [
-            "--policy.type=openpi", f"--policy.url=ws://127.0.0.1:{port}",
-            f"--policy.cameras={','.join(checkpoint_cameras(cfg.checkpoint))}",
-            f"--policy.image_size={checkpoint_image_size(cfg.checkpoint)}", f"--eval.num_workers={cores - 1}"])
+        layouts["gpu_served"] = _evaluate(
+            cfg,
+            bench,
+            scratch / "gpu_served",
+            [
+                "--policy.type=openpi",
+                f"--policy.url=ws://127.0.0.1:{port}",
+                f"--policy.cameras={','.join(checkpoint_cameras(cfg.checkpoint))}",
+                f"--policy.image_size={checkpoint_image_size(cfg.checkpoint)}",
+                f"--eval.num_workers={cores - 1}",
+            ],
+        )
     finally:
         stop(server)
     reference = layouts["cpu"]["_rows"]
@@ -128,10 +178,20 @@ def run(cfg: GpuBenchConfig) -> dict:
         rows = layout.pop("_rows")
         layout["over_cpu"] = round(layout["episodes_per_hour"] / layouts["cpu"]["episodes_per_hour"], 3)
         layout["rows_equal_cpu"] = frames_equal(rows, reference)
-        print(f"[gpu] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_cpu']}× cpu), "
-              f"{layout['successes']}/{cfg.episodes} successes", flush=True)
-    out = {"device": torch.cuda.get_device_name(0), "cores": cores, "checkpoint": cfg.checkpoint, "benchmark": bench,
-           "split": cfg.split, "episodes": cfg.episodes, "layouts": layouts}
+        print(
+            f"[gpu] {name}: {layout['episodes_per_hour']} episodes/h ({layout['over_cpu']}× cpu), "
+            f"{layout['successes']}/{cfg.episodes} successes",
+            flush=True,
+        )
+    out = {
+        "device": torch.cuda.get_device_name(0),
+        "cores": cores,
+        "checkpoint": cfg.checkpoint,
+        "benchmark": bench,
+        "split": cfg.split,
+        "episodes": cfg.episodes,
+        "layouts": layouts,
+    }
     Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
     Path(cfg.output).write_text(json.dumps(out, indent=2))
     return out

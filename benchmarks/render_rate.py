@@ -12,14 +12,13 @@ import json
 import time
 from dataclasses import dataclass
 
-from pipelines._cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
-
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from pipelines._cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
 from roboview_data.sim.cameras import ALL_CAMERAS  # noqa: E402
-from roboview_data.tasks.env import TaskEnv  # noqa: E402
 from roboview_data.tasks import make_env  # noqa: E402
+from roboview_data.tasks.env import TaskEnv  # noqa: E402
 
 
 @dataclass
@@ -64,8 +63,10 @@ def run(cfg: RenderRateConfig) -> dict:
         env.reset()
         # Interleaved rounds and medians: llvmpipe timings drift with whatever else the machine does.
         rounds = [(bare_fps(env, cfg.frames), pipeline_fps(env, cfg.frames)) for _ in range(cfg.rounds)]
-        results[quality] = {"bare_fps": float(np.median([r[0] for r in rounds])),
-                            "pipeline_fps": float(np.median([r[1] for r in rounds]))}
+        results[quality] = {
+            "bare_fps": float(np.median([r[0] for r in rounds])),
+            "pipeline_fps": float(np.median([r[1] for r in rounds])),
+        }
         env.close()
     fast = results["fast"]
     results["pipeline_over_bare"] = fast["pipeline_fps"] / fast["bare_fps"]

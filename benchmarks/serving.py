@@ -60,9 +60,14 @@ class ServingConfig:
     requests: int = 40
 
     def __post_init__(self) -> None:
-        if not (Path(self.checkpoint) / "config.json").is_file() and not (Path(self.checkpoint) / "pretrained_model").is_dir():
-            raise ValueError(f"--checkpoint={self.checkpoint} is not a LeRobot checkpoint folder (no config.json); "
-                             "train one with pipelines.train or pass its pretrained_model folder")
+        if (
+            not (Path(self.checkpoint) / "config.json").is_file()
+            and not (Path(self.checkpoint) / "pretrained_model").is_dir()
+        ):
+            raise ValueError(
+                f"--checkpoint={self.checkpoint} is not a LeRobot checkpoint folder (no config.json); "
+                "train one with pipelines.train or pass its pretrained_model folder"
+            )
         for name in ("episodes", "clients", "requests"):
             if getattr(self, name) < 1:
                 raise ValueError(f"--{name}={getattr(self, name)} must be ≥ 1")
@@ -78,11 +83,25 @@ def _env() -> dict:
     return os.environ | {"PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "HF_HUB_OFFLINE": "1"}
 
 
-def serve_policy(checkpoint: str, port: int, log: Path, server: str = "roboview", threads: int = 1) -> subprocess.Popen:
+def serve_policy(
+    checkpoint: str, port: int, log: Path, server: str = "roboview", threads: int = 1
+) -> subprocess.Popen:
     env = _env() if threads == 1 else {k: v for k, v in _env().items() if k != "OMP_NUM_THREADS"}
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.serve_policy", "--policy.type=lerobot",
-                             f"--policy.path={checkpoint}", f"--port={port}", f"--threads={threads}",
-                             f"--server={server}"], stdout=log.open("w"), stderr=subprocess.STDOUT, env=env)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.serve_policy",
+            "--policy.type=lerobot",
+            f"--policy.path={checkpoint}",
+            f"--port={port}",
+            f"--threads={threads}",
+            f"--server={server}",
+        ],
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+        env=env,
+    )
     deadline = time.time() + 180
     while time.time() < deadline:
         try:
@@ -99,9 +118,22 @@ def serve_policy(checkpoint: str, port: int, log: Path, server: str = "roboview"
 def lerobot_server(port: int, cwd: Path) -> subprocess.Popen:
     from policies.lerobot_async import check_reachable
 
-    proc = subprocess.Popen([sys.executable, "-m", "lerobot.async_inference.policy_server", "--host=127.0.0.1",
-                             f"--port={port}", "--fps=10", "--inference_latency=0", "--obs_queue_timeout=2"],
-                            cwd=cwd, stdout=(cwd / f"server_{port}.log").open("w"), stderr=subprocess.STDOUT, env=_env())
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "lerobot.async_inference.policy_server",
+            "--host=127.0.0.1",
+            f"--port={port}",
+            "--fps=10",
+            "--inference_latency=0",
+            "--obs_queue_timeout=2",
+        ],
+        cwd=cwd,
+        stdout=(cwd / f"server_{port}.log").open("w"),
+        stderr=subprocess.STDOUT,
+        env=_env(),
+    )
     deadline = time.time() + 180
     while time.time() < deadline:
         try:
@@ -112,7 +144,9 @@ def lerobot_server(port: int, cwd: Path) -> subprocess.Popen:
                 break
             time.sleep(0.5)
     proc.kill()
-    raise RuntimeError(f"lerobot policy server did not start:\n{(cwd / f'server_{port}.log').read_text()[-2000:]}")
+    raise RuntimeError(
+        f"lerobot policy server did not start:\n{(cwd / f'server_{port}.log').read_text()[-2000:]}"
+    )
 
 
 def stop(*procs: subprocess.Popen) -> None:
@@ -131,12 +165,27 @@ def evaluate(cfg: ServingConfig, bench: str, policy, out: Path) -> dict:
     from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 
     start = time.perf_counter()
-    result = run(EvaluateConfig(BenchmarkConfig(bench, cfg.split), policy,
-                                EvalConfig(n_repeats=1, limit=cfg.episodes, num_workers=2), str(out)))
+    result = run(
+        EvaluateConfig(
+            BenchmarkConfig(bench, cfg.split),
+            policy,
+            EvalConfig(n_repeats=1, limit=cfg.episodes, num_workers=2),
+            str(out),
+        )
+    )
     wall = time.perf_counter() - start
-    rows = pd.read_parquet(out / "episodes.parquet").sort_values(["instance_id", "repeat"]).reset_index(drop=True)
-    return {"episodes": result.new_episodes, "successes": int(rows["success"].sum()), "wall_s": round(wall, 2),
-            "episodes_per_hour": round(3600 * result.new_episodes / wall, 1), "_rows": rows[ROW]}
+    rows = (
+        pd.read_parquet(out / "episodes.parquet")
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
+    return {
+        "episodes": result.new_episodes,
+        "successes": int(rows["success"].sum()),
+        "wall_s": round(wall, 2),
+        "episodes_per_hour": round(3600 * result.new_episodes / wall, 1),
+        "_rows": rows[ROW],
+    }
 
 
 def requests_per_second(cfg: ServingConfig, port: int, observations: list[dict]) -> dict:
@@ -184,7 +233,9 @@ def observations_for(cfg: ServingConfig, bench: str, image_size: int, cameras: t
 def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
-    observations = observations_for(cfg, bench, checkpoint_image_size(cfg.checkpoint), checkpoint_cameras(cfg.checkpoint))
+    observations = observations_for(
+        cfg, bench, checkpoint_image_size(cfg.checkpoint), checkpoint_cameras(cfg.checkpoint)
+    )
     rps = {}
     for name, server in (("serve_policy", "roboview"), ("openpi_server", "openpi")):
         port = free_port()
@@ -194,14 +245,18 @@ def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
         finally:
             stop(proc)
         rps[name]["server_log"] = (scratch / f"rps_{name}.log").read_text().strip().splitlines()[-1]
-    return rps | {"clients": cfg.clients, "batching_speedup": round(rps["serve_policy"]["requests_per_second"] /
-                                                                    rps["openpi_server"]["requests_per_second"], 2)}
+    return rps | {
+        "clients": cfg.clients,
+        "batching_speedup": round(
+            rps["serve_policy"]["requests_per_second"] / rps["openpi_server"]["requests_per_second"], 2
+        ),
+    }
 
 
 def run(cfg: ServingConfig) -> dict:
     from eval.running.provenance import now, start_entry
-    from policies.types import load_policy_types, policy_config
     from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
+    from policies.types import load_policy_types, policy_config
 
     load_policy_types()
     scratch = Path(tempfile.mkdtemp(prefix="roboview_serving_"))
@@ -216,33 +271,47 @@ def run(cfg: ServingConfig) -> dict:
             build(BuildConfig(output_dir=bench, preset="tiny", image_size=64))
         cameras, size = checkpoint_cameras(cfg.checkpoint), checkpoint_image_size(cfg.checkpoint)
         openpi = dict(cameras=",".join(cameras), image_size=size)
-        results: dict = {"checkpoint": cfg.checkpoint, "benchmark": bench, "split": cfg.split,
-                         "cameras": list(cameras), "image_size": size}
+        results: dict = {
+            "checkpoint": cfg.checkpoint,
+            "benchmark": bench,
+            "split": cfg.split,
+            "cameras": list(cameras),
+            "image_size": size,
+        }
         paths: dict[str, dict] = {}
         print("[serving] in-process …", flush=True)
-        paths["in_process"] = evaluate(cfg, bench, policy_config("lerobot", path=cfg.checkpoint), scratch / "inproc")
+        paths["in_process"] = evaluate(
+            cfg, bench, policy_config("lerobot", path=cfg.checkpoint), scratch / "inproc"
+        )
         for name, server in (("serve_policy", "roboview"), ("openpi_server", "openpi")):
             print(f"[serving] {name} …", flush=True)
             port = free_port()
             proc = serve_policy(cfg.checkpoint, port, scratch / f"{name}.log", server)
             try:
-                paths[name] = evaluate(cfg, bench, policy_config("openpi", url=f"ws://127.0.0.1:{port}", **openpi),
-                                       scratch / name)
+                paths[name] = evaluate(
+                    cfg,
+                    bench,
+                    policy_config("openpi", url=f"ws://127.0.0.1:{port}", **openpi),
+                    scratch / name,
+                )
             finally:
                 stop(proc)
         print("[serving] lerobot_async …", flush=True)
         ports = [free_port(), free_port()]
         procs = [lerobot_server(p, scratch) for p in ports]
         try:
-            policy = policy_config("lerobot_async", server=",".join(f"127.0.0.1:{p}" for p in ports),
-                                   path=cfg.checkpoint)
+            policy = policy_config(
+                "lerobot_async", server=",".join(f"127.0.0.1:{p}" for p in ports), path=cfg.checkpoint
+            )
             paths["lerobot_async"] = evaluate(cfg, bench, policy, scratch / "lerobot_async")
         finally:
             stop(*procs)
         reference = paths["in_process"]["_rows"]
-        for name, path in paths.items():
+        for path in paths.values():
             rows = path.pop("_rows")
-            path["over_in_process"] = round(path["episodes_per_hour"] / paths["in_process"]["episodes_per_hour"], 3)
+            path["over_in_process"] = round(
+                path["episodes_per_hour"] / paths["in_process"]["episodes_per_hour"], 3
+            )
             path["rows_equal_in_process"] = bool(rows.equals(reference))
             path["rows_differing"] = int((rows != reference).any(axis=1).sum())
         results["episodes_per_hour"] = paths
@@ -259,11 +328,15 @@ def run(cfg: ServingConfig) -> dict:
 
 def _summary(cfg: ServingConfig, results: dict) -> None:
     for name, path in results["episodes_per_hour"].items():
-        print(f"[serving] {name:14s} {path['episodes_per_hour']:8.0f} episodes/h  ({path['over_in_process']:.2f}× "
-              f"in-process; rows equal: {path['rows_equal_in_process']})")
+        print(
+            f"[serving] {name:14s} {path['episodes_per_hour']:8.0f} episodes/h  ({path['over_in_process']:.2f}× "
+            f"in-process; rows equal: {path['rows_equal_in_process']})"
+        )
     rps = results["requests_per_second"]
-    print(f"[serving] {rps['clients']} clients: serve_policy {rps['serve_policy']['requests_per_second']} req/s, "
-          f"openpi-server {rps['openpi_server']['requests_per_second']} req/s ({rps['batching_speedup']}×) → {cfg.output}")
+    print(
+        f"[serving] {rps['clients']} clients: serve_policy {rps['serve_policy']['requests_per_second']} req/s, "
+        f"openpi-server {rps['openpi_server']['requests_per_second']} req/s ({rps['batching_speedup']}×) → {cfg.output}"
+    )
 
 
 def main(args: list[str] | None = None) -> dict:

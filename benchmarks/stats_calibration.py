@@ -50,10 +50,14 @@ class CalibrationConfig:
 
 def run(cfg: CalibrationConfig) -> None:
     metrics = MetricsConfig(n_perm=200, n_glm=100)
-    print(f"{cfg.values} values × {cfg.contexts} contexts × {cfg.repeats} repeats, SR ≈ {cfg.sr}, "
-          f"{cfg.sims} simulated tables per τ")
-    print(f"{'τ':>5}{'true CV':>9}{'CV':>8}{'cv_null':>9}{'cv_excess':>11}{'p<.05 GLM':>11}{'p<.05 CV':>10}"
-          f"{'any q<.05':>11}{'predicted':>11}{'s/table':>9}")
+    print(
+        f"{cfg.values} values × {cfg.contexts} contexts × {cfg.repeats} repeats, SR ≈ {cfg.sr}, "
+        f"{cfg.sims} simulated tables per τ"
+    )
+    print(
+        f"{'τ':>5}{'true CV':>9}{'CV':>8}{'cv_null':>9}{'cv_excess':>11}{'p<.05 GLM':>11}{'p<.05 CV':>10}"
+        f"{'any q<.05':>11}{'predicted':>11}{'s/table':>9}"
+    )
     for tau in cfg.taus:
         rng = np.random.default_rng(0)
         rows = []
@@ -62,13 +66,24 @@ def run(cfg: CalibrationConfig) -> None:
             table, true_cv = simulate_split(rng, cfg.values, cfg.contexts, cfg.repeats, tau, cfg.sr)
             m = split_metrics(table, metrics)
             qs = [s["q_value"] for s in m["per_value"].values() if s["q_value"] is not None]
-            rows.append((true_cv, m["cv"], m["cv_null"], m["cv_excess"], m["p_value"] < 0.05,
-                         m["p_value_cv"] < 0.05, min(qs, default=1.0) < 0.05))
+            rows.append(
+                (
+                    true_cv,
+                    m["cv"],
+                    m["cv_null"],
+                    m["cv_excess"],
+                    m["p_value"] < 0.05,
+                    m["p_value_cv"] < 0.05,
+                    min(qs, default=1.0) < 0.05,
+                )
+            )
         mean = np.mean(np.array(rows, dtype=float), axis=0)
         predicted = lrt_power(cfg.values, cfg.contexts, cfg.repeats, tau, cfg.sr) if tau > 0 else 0.05
         per_table = (time.perf_counter() - start) / cfg.sims
-        print(f"{tau:>5.2f}{mean[0]:>9.3f}{mean[1]:>8.3f}{mean[2]:>9.3f}{mean[3]:>11.3f}{mean[4]:>11.2f}"
-              f"{mean[5]:>10.2f}{mean[6]:>11.2f}{predicted:>11.2f}{per_table:>9.2f}")
+        print(
+            f"{tau:>5.2f}{mean[0]:>9.3f}{mean[1]:>8.3f}{mean[2]:>9.3f}{mean[3]:>11.3f}{mean[4]:>11.2f}"
+            f"{mean[5]:>10.2f}{mean[6]:>11.2f}{predicted:>11.2f}{per_table:>9.2f}"
+        )
 
 
 def main(args: list[str] | None = None) -> None:

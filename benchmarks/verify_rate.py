@@ -40,8 +40,10 @@ class VerifyBenchConfig:
         if self.rows <= 0:
             raise ValueError(f"--rows={self.rows} must be a positive count")
         if not (Path(self.benchmark.path) / "benchmark.json").is_file():
-            raise ValueError(f"--benchmark.path={self.benchmark.path} holds no benchmark; build one with "
-                             "`python -m pipelines.build_benchmark --preset=tiny --output_dir=outputs/demo/benchmark`")
+            raise ValueError(
+                f"--benchmark.path={self.benchmark.path} holds no benchmark; build one with "
+                "`python -m pipelines.build_benchmark --preset=tiny --output_dir=outputs/demo/benchmark`"
+            )
 
 
 def _timed(fn):
@@ -63,17 +65,33 @@ def run(cfg: VerifyBenchConfig) -> dict:
     out: dict = {"benchmark": version, "rows": cfg.rows}
     with tempfile.TemporaryDirectory(prefix="roboview-verify-") as scratch:
         scratch = Path(scratch)
-        report, out["at_start_measured_s"] = _timed(lambda: conformance.at_start(root, version, scratch / "cache"))
+        report, out["at_start_measured_s"] = _timed(
+            lambda: conformance.at_start(root, version, scratch / "cache")
+        )
         _, out["at_start_cached_s"] = _timed(lambda: conformance.at_start(root, version, scratch / "cache"))
         out["check_s"] = round(report.seconds, 2)
         out["verdict"] = report.verdict
-        print(f"[verify_rate] start-of-run check: {out['at_start_measured_s']:.1f} s measured "
-              f"({report.seconds:.1f} s re-rendering and re-simulating {len(report.checks)} checks), "
-              f"{out['at_start_cached_s']:.1f} s from the cache; verdict {report.verdict}", flush=True)
+        print(
+            f"[verify_rate] start-of-run check: {out['at_start_measured_s']:.1f} s measured "
+            f"({report.seconds:.1f} s re-rendering and re-simulating {len(report.checks)} checks), "
+            f"{out['at_start_cached_s']:.1f} s from the cache; verdict {report.verdict}",
+            flush=True,
+        )
 
         base = scratch / "base"
-        subprocess.run([sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={root}", "--policy.type=expert",
-                        "--eval.n_repeats=1", f"--output_dir={base}"], check=True, capture_output=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "pipelines.evaluate",
+                f"--benchmark.path={root}",
+                "--policy.type=expert",
+                "--eval.n_repeats=1",
+                f"--output_dir={base}",
+            ],
+            check=True,
+            capture_output=True,
+        )
         run_info = json.loads((base / "run.json").read_text())
         rows = pq.read_table(base / "episodes.parquet").to_pylist()
         repeats = -(-cfg.rows // len(rows))
@@ -81,15 +99,25 @@ def run(cfg: VerifyBenchConfig) -> dict:
         run_info.pop("results_format", None)
         big = scratch / "big"
         store = EpisodeStore(big, run_info)
-        store.add_many([{**row, "repeat": r, "episode_seed": episode_seed(row["context_id"], r)}
-                        for r in range(repeats) for row in rows])
+        store.add_many(
+            [
+                {**row, "repeat": r, "episode_seed": episode_seed(row["context_id"], r)}
+                for r in range(repeats)
+                for row in rows
+            ]
+        )
         store.close()
         (big / "provenance.json").write_text((base / "provenance.json").read_text())
-        result, out["verify_results_s"] = _timed(lambda: verify(VerifyConfig(BenchmarkPath(str(root)), str(big))))
+        result, out["verify_results_s"] = _timed(
+            lambda: verify(VerifyConfig(BenchmarkPath(str(root)), str(big)))
+        )
         out["verify_rows"] = len(store.rows)
         out["verify_passed"] = result.passed
-        print(f"[verify_rate] verify --results on {len(store.rows):,} rows: {out['verify_results_s']:.1f} s "
-              f"({'passed' if result.passed else 'FAILED'})", flush=True)
+        print(
+            f"[verify_rate] verify --results on {len(store.rows):,} rows: {out['verify_results_s']:.1f} s "
+            f"({'passed' if result.passed else 'FAILED'})",
+            flush=True,
+        )
     out = {k: round(v, 2) if isinstance(v, float) else v for k, v in out.items()}
     Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
     Path(cfg.output).write_text(json.dumps(out, indent=2))

@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from eval.statistics.metrics import MetricsConfig, policy_layouts
 from eval.reporting.markdown import REPORT_FILE, write_report
+from eval.statistics.metrics import MetricsConfig, policy_layouts
 from eval.statistics.significance import lrt_power
 from pipelines._cli import cli_main
 
@@ -89,7 +89,9 @@ class AuditConfig:
         if not self.map.factor and not self.factor_name:
             missing.append("--map.factor (or --factor_name)")
         if missing:
-            raise ValueError(f"missing {', '.join(missing)}: name the columns of {self.results} that hold them")
+            raise ValueError(
+                f"missing {', '.join(missing)}: name the columns of {self.results} that hold them"
+            )
         if not self.tau > 0:
             raise ValueError(f"--tau={self.tau} must be > 0 (a logit SD, e.g. 0.3)")
 
@@ -107,10 +109,14 @@ def input_problem(path: Path) -> str | None:
         return f"--results={path}: no such file; {EXPECTED}"
     if path.is_dir():
         if benchmark_root(path) == path:
-            return f"--results={path} is a benchmark folder (its instances), not per-episode results; {EXPECTED}"
+            return (
+                f"--results={path} is a benchmark folder (its instances), not per-episode results; {EXPECTED}"
+            )
         if is_results_folder(path):
-            return (f"--results={path} is a RoboView results folder: report it with python -m pipelines.report "
-                    f"--results={path / 'episodes.parquet'} (audit reads other benchmarks' per-episode files)")
+            return (
+                f"--results={path} is a RoboView results folder: report it with python -m pipelines.report "
+                f"--results={path / 'episodes.parquet'} (audit reads other benchmarks' per-episode files)"
+            )
         return f"--results={path} is a folder; {EXPECTED}"
     if path.suffix.lower() not in FORMATS:
         return f"--results={path}: unknown format {path.suffix!r}; {EXPECTED}"
@@ -134,8 +140,9 @@ def read_table(path: str) -> pd.DataFrame:
             table = pd.read_json(file, lines=True)
     except Exception as exc:  # pandas' and pyarrow's parse errors, undecodable bytes, an empty file
         reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise ValueError(f"--results={path} could not be read as {kind} ({type(exc).__name__}: {reason}); "
-                         f"{EXPECTED}") from None
+        raise ValueError(
+            f"--results={path} could not be read as {kind} ({type(exc).__name__}: {reason}); {EXPECTED}"
+        ) from None
     if table.empty:
         raise ValueError(f"--results={path} holds no rows; {EXPECTED}")
     return table
@@ -147,8 +154,10 @@ def _success(column: pd.Series, name: str) -> np.ndarray:
     text = column.astype(str).str.strip().str.lower().str.removesuffix(".0")
     bad = sorted(set(text) - TRUE - FALSE)
     if bad:
-        raise ValueError(f"--map.success={name}: values {bad[:5]} are not outcomes; allowed: 1/0, true/false, "
-                         "yes/no, success/failure")
+        raise ValueError(
+            f"--map.success={name}: values {bad[:5]} are not outcomes; allowed: 1/0, true/false, "
+            "yes/no, success/failure"
+        )
     return text.isin(TRUE).to_numpy()
 
 
@@ -158,24 +167,33 @@ def to_episodes(table: pd.DataFrame, cfg: AuditConfig) -> pd.DataFrame:
     columns = [c for c in (m.factor, m.value, m.context, m.success, m.repeat, m.policy) if c]
     missing = [c for c in columns if c not in table]
     if missing:
-        raise ValueError(f"{cfg.results} has no column(s) {missing}; its columns: {', '.join(map(str, table.columns))}")
+        raise ValueError(
+            f"{cfg.results} has no column(s) {missing}; its columns: {', '.join(map(str, table.columns))}"
+        )
     factor = table[m.factor].astype(str) if m.factor else pd.Series(cfg.factor_name, index=table.index)
-    out = pd.DataFrame({
-        "policy": table[m.policy].astype(str) if m.policy else cfg.policy_name,
-        "factor": factor.str.replace("|", "/", regex=False),
-        "value": table[m.value].astype(str).str.replace("|", "/", regex=False),
-        "context_id": table[m.context].astype(str),
-        "success": _success(table[m.success], m.success)})
+    out = pd.DataFrame(
+        {
+            "policy": table[m.policy].astype(str) if m.policy else cfg.policy_name,
+            "factor": factor.str.replace("|", "/", regex=False),
+            "value": table[m.value].astype(str).str.replace("|", "/", regex=False),
+            "context_id": table[m.context].astype(str),
+            "success": _success(table[m.success], m.success),
+        }
+    )
     out["split"] = out["factor"]
-    out["instance_id"] = [hashlib.sha256(f"{f}\0{v}\0{c}".encode()).hexdigest()[:16]
-                          for f, v, c in zip(out["factor"], out["value"], out["context_id"])]
+    out["instance_id"] = [
+        hashlib.sha256(f"{f}\0{v}\0{c}".encode()).hexdigest()[:16]
+        for f, v, c in zip(out["factor"], out["value"], out["context_id"])
+    ]
     if m.repeat:
         out["repeat"] = pd.factorize(table[m.repeat].astype(str), sort=True)[0]
         dup = out.duplicated(["policy", "instance_id", "repeat"])
         if dup.any():
             row = out[dup].iloc[0]
-            raise ValueError(f"--map.repeat={m.repeat}: {int(dup.sum())} episodes repeat a (policy, factor, value, "
-                             f"context, repeat), e.g. {row['factor']}={row['value']} in {row['context_id']}")
+            raise ValueError(
+                f"--map.repeat={m.repeat}: {int(dup.sum())} episodes repeat a (policy, factor, value, "
+                f"context, repeat), e.g. {row['factor']}={row['value']} in {row['context_id']}"
+            )
     else:
         out["repeat"] = out.groupby(["policy", "instance_id"]).cumcount()
     return out
@@ -189,17 +207,25 @@ def power_lines(episodes: pd.DataFrame, tau: float) -> dict[str, dict[str, dict]
         repeats = int(round(len(rows) / max(1, n_values * n_contexts)))
         sr = float(np.clip(rows["success"].mean(), 0.02, 0.98))
         power = lrt_power(n_values, n_contexts, max(1, repeats), tau, sr) if n_values > 1 else None
-        out.setdefault(str(policy), {})[str(split)] = {"tau": tau, "n_values": int(n_values),
-                                                        "n_contexts": int(n_contexts), "repeats": repeats,
-                                                        "power": power}
+        out.setdefault(str(policy), {})[str(split)] = {
+            "tau": tau,
+            "n_values": int(n_values),
+            "n_contexts": int(n_contexts),
+            "repeats": repeats,
+            "power": power,
+        }
     return out
 
 
 def run(cfg: AuditConfig):
     episodes = to_episodes(read_table(cfg.results), cfg)
     metrics_cfg = cfg.metrics
-    source = {"path": str(cfg.results), "roboview_benchmark_version": None, "provenance": [],
-              "mapping": {k: v for k, v in vars(cfg.map).items() if v}}
+    source = {
+        "path": str(cfg.results),
+        "roboview_benchmark_version": None,
+        "provenance": [],
+        "mapping": {k: v for k, v in vars(cfg.map).items() if v},
+    }
     result = write_report(episodes, cfg.output_dir, metrics_cfg, sources=[source], plots=False)
     power = power_lines(episodes, cfg.tau)
     for name, layout in policy_layouts(result.metrics).items():
@@ -207,25 +233,37 @@ def run(cfg: AuditConfig):
             m["power"] = power.get(name, {}).get(split)
     out = Path(cfg.output_dir)
     (out / METRICS_FILE).write_text(json.dumps(result.metrics, indent=2, allow_nan=False) + "\n")
-    lines = ["## Audit: mapping and power", "",
-             f"Source `{cfg.results}`: {len(episodes)} episodes; factor ← {cfg.map.factor or repr(cfg.factor_name)}, "
-             f"value ← {cfg.map.value}, context ← {cfg.map.context}, success ← {cfg.map.success}, repeat ← "
-             f"{cfg.map.repeat or 'file order'}, policy ← {cfg.map.policy or repr(cfg.policy_name)}.", "",
-             "| policy | split | values | contexts | repeats | power at τ = " + f"{cfg.tau:g} |",
-             "| --- | --- | --- | --- | --- | --- |"]
+    lines = [
+        "## Audit: mapping and power",
+        "",
+        f"Source `{cfg.results}`: {len(episodes)} episodes; factor ← {cfg.map.factor or repr(cfg.factor_name)}, "
+        f"value ← {cfg.map.value}, context ← {cfg.map.context}, success ← {cfg.map.success}, repeat ← "
+        f"{cfg.map.repeat or 'file order'}, policy ← {cfg.map.policy or repr(cfg.policy_name)}.",
+        "",
+        "| policy | split | values | contexts | repeats | power at τ = " + f"{cfg.tau:g} |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
     for name, splits in power.items():
         for split, p in splits.items():
-            lines.append(f"| {name} | {split} | {p['n_values']} | {p['n_contexts']} | {p['repeats']} | "
-                         + ("N/A" if p["power"] is None else f"{100 * p['power']:.2f}") + " |")
+            lines.append(
+                f"| {name} | {split} | {p['n_values']} | {p['n_contexts']} | {p['repeats']} | "
+                + ("N/A" if p["power"] is None else f"{100 * p['power']:.2f}")
+                + " |"
+            )
     with (out / REPORT_FILE).open("a") as fh:
         fh.write("\n" + "\n".join(lines) + "\n")
     return result
 
 
 def _summary(cfg: AuditConfig, result) -> None:
-    print(f"[audit] {Path(cfg.output_dir) / REPORT_FILE} and {METRICS_FILE}: "
-          + ", ".join(f"{name}/{split} p {m['p_value'] if m['p_value'] is None else f'{m['p_value']:.3g}'}"
-                      for name, layout in policy_layouts(result.metrics).items() for split, m in layout["splits"].items()))
+    print(
+        f"[audit] {Path(cfg.output_dir) / REPORT_FILE} and {METRICS_FILE}: "
+        + ", ".join(
+            f"{name}/{split} p {m['p_value'] if m['p_value'] is None else f'{m["p_value"]:.3g}'}"
+            for name, layout in policy_layouts(result.metrics).items()
+            for split, m in layout["splits"].items()
+        )
+    )
 
 
 def main(args: list[str] | None = None):

@@ -85,12 +85,16 @@ class BuildConfig:
             raise ValueError(f"unknown --preset={self.preset!r}; allowed: {', '.join(PRESETS)}")
         if self.num_workers <= 0:
             raise ValueError(f"--num_workers={self.num_workers} must be a positive count")
-        check_image_size(self.image_size, "--image_size", GATE_IMAGE_MIN,
-                         f"the fairness gate counts object pixels; below {GATE_IMAGE_MIN} px the smallest "
-                         "object covers 2 px or fewer of the front camera")
+        check_image_size(
+            self.image_size,
+            "--image_size",
+            GATE_IMAGE_MIN,
+            f"the fairness gate counts object pixels; below {GATE_IMAGE_MIN} px the smallest "
+            "object covers 2 px or fewer of the front camera",
+        )
         if not 0.0 < self.min_pass_rate <= 1.0:
             raise ValueError(f"--min_pass_rate={self.min_pass_rate} must lie in (0, 1]")
-        self.suite  # validates union mode, colors and factor names now, before any work
+        self.suite  # noqa: B018  (validates union mode, colors and factor names now, before any work)
         if self.screen_enabled:
             self.vlm_screen.validate("--vlm_screen.")
 
@@ -122,8 +126,14 @@ class BuildResult:
 
 
 def _check_output_dir(out: Path) -> None:
-    problem = folder_problem(out, "benchmark", bio.MANIFEST, "choose a new folder or delete this one",
-                             label=f"--output_dir={out}", writing=True)
+    problem = folder_problem(
+        out,
+        "benchmark",
+        bio.MANIFEST,
+        "choose a new folder or delete this one",
+        label=f"--output_dir={out}",
+        writing=True,
+    )
     if problem:
         raise ValueError(problem)
 
@@ -150,7 +160,9 @@ def run(cfg: BuildConfig) -> BuildResult:
     _check_output_dir(out)
     suite = cfg.suite
     instances = generate_suite(suite)
-    decisions = read_decisions(Path(cfg.decisions), {i.instance_id for i in instances}) if cfg.decisions else {}
+    decisions = (
+        read_decisions(Path(cfg.decisions), {i.instance_id for i in instances}) if cfg.decisions else {}
+    )
     t0 = time.perf_counter()
     records = _render_all(cfg, instances)
     verdicts = [adjudicate(r, decisions.get(r["instance_id"])) for r in records]
@@ -191,16 +203,31 @@ def run(cfg: BuildConfig) -> BuildResult:
         reference = bio.reference_hash(tmp)
     manifest = {
         "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
-        "suite": {"preset": suite.preset, "union_mode": suite.union_mode, "splits": list(suite.splits),
-                  "factorial_colors": list(suite.factorial_colors),
-                  "cartesian": [list(c) for c in suite.cartesian],
-                  "value_subsets": {k: list(v) for k, v in suite.value_subsets}},
-        "image_size": cfg.image_size, "thresholds": asdict(cfg.fairness),
-        "candidates": len(records), "gate_pass_rate": gate_rate, "min_pass_rate": cfg.min_pass_rate,
-        "splits": bio.split_counts(records, accepted, rejected_by), "rejected": len(rejected_rows),
-        **({"rejected_tables": sorted(map(_rejected_table, _by_task(rejected_rows)))} if rejected_rows else {}),
-        "decisions": len(decisions), "reviewers": sorted({d.reviewer for d in decisions.values()}),
-        "suite_hash": digest, "content": content, "stack": stack,
+        "suite": {
+            "preset": suite.preset,
+            "union_mode": suite.union_mode,
+            "splits": list(suite.splits),
+            "factorial_colors": list(suite.factorial_colors),
+            "cartesian": [list(c) for c in suite.cartesian],
+            "value_subsets": {k: list(v) for k, v in suite.value_subsets},
+        },
+        "image_size": cfg.image_size,
+        "thresholds": asdict(cfg.fairness),
+        "candidates": len(records),
+        "gate_pass_rate": gate_rate,
+        "min_pass_rate": cfg.min_pass_rate,
+        "splits": bio.split_counts(records, accepted, rejected_by),
+        "rejected": len(rejected_rows),
+        **(
+            {"rejected_tables": sorted(map(_rejected_table, _by_task(rejected_rows)))}
+            if rejected_rows
+            else {}
+        ),
+        "decisions": len(decisions),
+        "reviewers": sorted({d.reviewer for d in decisions.values()}),
+        "suite_hash": digest,
+        "content": content,
+        "stack": stack,
         "benchmark_version": bio.benchmark_version(suite.preset, content, reference),
         "fairness_stats": fairness_stats(records),
         **({"vlm_screen": screen} if screen is not None else {}),
@@ -212,16 +239,20 @@ def run(cfg: BuildConfig) -> BuildResult:
     tmp.rename(out)
     sheet = out / sheet.relative_to(tmp)
     if manifest["status"] != "ok":
-        raise GateFailure(f"only {gate_rate:.1%} of {len(records)} candidates pass the fairness gate "
-                          f"(need {cfg.min_pass_rate:.0%}); offenders in {out / 'fairness_report.csv'}, "
-                          f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold.")
+        raise GateFailure(
+            f"only {gate_rate:.1%} of {len(records)} candidates pass the fairness gate "
+            f"(need {cfg.min_pass_rate:.0%}); offenders in {out / 'fairness_report.csv'}, "
+            f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold."
+        )
     _print_summary(manifest)
     if screen is not None:
         kappa = "undefined" if screen["cohens_kappa"] is None else f"{screen['cohens_kappa']:.3f}"
-        print(f"VLM screen ({screen['model']}): {screen['pass_rate']:.1%} yes over {screen['screened']} "
-              f"(paper target ≥ 95 %: {'met' if screen['meets_paper_target'] else 'NOT met'}), agreement with the "
-              f"gate {screen['observed_agreement']:.1%}, Cohen's κ {kappa}, {len(screen['disagreements'])} "
-              f"disagreements (contact sheet; answers in vlm_screen.csv)")
+        print(
+            f"VLM screen ({screen['model']}): {screen['pass_rate']:.1%} yes over {screen['screened']} "
+            f"(paper target ≥ 95 %: {'met' if screen['meets_paper_target'] else 'NOT met'}), agreement with the "
+            f"gate {screen['observed_agreement']:.1%}, Cohen's κ {kappa}, {len(screen['disagreements'])} "
+            f"disagreements (contact sheet; answers in vlm_screen.csv)"
+        )
     return BuildResult(out, len(records), sum(accepted), gate_rate, digest, time.perf_counter() - t0, sheet)
 
 
@@ -247,21 +278,33 @@ def _write_offenders(out: Path, records: list[dict]) -> None:
         writer.writerow(["instance_id", "task", "split", "value", "context", "reject_reason"])
         for r in records:
             if not r["fairness"]["passed"]:
-                writer.writerow([r["instance_id"], r.get("task", DEFAULT_TASK), r["split"], r["value"], context_text(r),
-                                 r["fairness"]["reject_reason"]])
+                writer.writerow(
+                    [
+                        r["instance_id"],
+                        r.get("task", DEFAULT_TASK),
+                        r["split"],
+                        r["value"],
+                        context_text(r),
+                        r["fairness"]["reject_reason"],
+                    ]
+                )
 
 
 def _print_summary(manifest: dict) -> None:
     print(f"{'split':<22}{'candidates':>11}{'accepted':>10}{'rejected':>10}{'pass':>8}")
     for split, c in manifest["splits"].items():
         rejected = c["rejected_gate"] + c["rejected_review"]
-        print(f"{split:<22}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{c['accepted'] / c['candidates']:>8.1%}")
+        print(
+            f"{split:<22}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{c['accepted'] / c['candidates']:>8.1%}"
+        )
     print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
 
 
 def _summary(cfg: BuildConfig, result: BuildResult) -> None:
-    print(f"[build_benchmark] {result.accepted}/{result.candidates} instances in {result.output_dir} "
-          f"({result.elapsed_s:.0f} s); contact sheet: {result.contact_sheet}")
+    print(
+        f"[build_benchmark] {result.accepted}/{result.candidates} instances in {result.output_dir} "
+        f"({result.elapsed_s:.0f} s); contact sheet: {result.contact_sheet}"
+    )
 
 
 def main(args: list[str] | None = None) -> BuildResult:
@@ -269,8 +312,10 @@ def main(args: list[str] | None = None) -> BuildResult:
 
 
 def _interrupted(cfg: BuildConfig) -> str:
-    return (f"nothing written to {cfg.output_dir} (a build writes its folder only at the end, once every instance is "
-            "rendered); rerun the same command to build it")
+    return (
+        f"nothing written to {cfg.output_dir} (a build writes its folder only at the end, once every instance is "
+        "rendered); rerun the same command to build it"
+    )
 
 
 if __name__ == "__main__":

@@ -83,14 +83,22 @@ class DatasetConfig:
         if self.num_episodes <= 0:
             raise ValueError(f"--dataset.num_episodes={self.num_episodes} must be a positive count")
         if self.fps <= 0 or 500 % self.fps:
-            raise ValueError(f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)")
-        check_image_size(self.image_size, "--dataset.image_size", TRAIN_IMAGE_MIN,
-                         f"training reads the images at this size, and ACT's ResNet backbone downsamples "
-                         f"them by {ACT_BACKBONE_STRIDE}")
+            raise ValueError(
+                f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)"
+            )
+        check_image_size(
+            self.image_size,
+            "--dataset.image_size",
+            TRAIN_IMAGE_MIN,
+            f"training reads the images at this size, and ACT's ResNet backbone downsamples "
+            f"them by {ACT_BACKBONE_STRIDE}",
+        )
         unknown = [c for c in self.cameras if c not in ALL_CAMERAS]
         if unknown or not self.cameras or len(set(self.cameras)) != len(self.cameras):
-            raise ValueError(f"--dataset.cameras={self.cameras}: unknown or repeated camera(s) {unknown}; "
-                             f"allowed: {', '.join(ALL_CAMERAS)}")
+            raise ValueError(
+                f"--dataset.cameras={self.cameras}: unknown or repeated camera(s) {unknown}; "
+                f"allowed: {', '.join(ALL_CAMERAS)}"
+            )
         if self.vcodec not in VCODECS:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
         with flag_errors("--dataset.randomize"):
@@ -123,8 +131,16 @@ class CollectConfig:
     @property
     def signature(self) -> CollectionSignature:
         d = self.dataset
-        return CollectionSignature(d.repo_id, d.fps, d.image_size, tuple(d.cameras), self.seed, self.max_steps,
-                                   tuple(d.randomize), d.task)
+        return CollectionSignature(
+            d.repo_id,
+            d.fps,
+            d.image_size,
+            tuple(d.cameras),
+            self.seed,
+            self.max_steps,
+            tuple(d.randomize),
+            d.task,
+        )
 
 
 @dataclass(frozen=True)
@@ -171,11 +187,22 @@ def _open_dataset(cfg: CollectConfig, create: bool):
     # was made for live capture); we feed frames faster than real time, so under CPU load frames went
     # missing (1 of ~13,000 per camera in a 250-demo run: an episode's video one frame short of its
     # parquet rows). A queue that holds a whole episode can never fill: no frame can be dropped.
-    kwargs = dict(rgb_encoder=RGBEncoderConfig(vcodec=d.vcodec), streaming_encoding=True, encoder_threads=1,
-                  encoder_queue_maxsize=cfg.max_steps + 1)
+    kwargs = dict(
+        rgb_encoder=RGBEncoderConfig(vcodec=d.vcodec),
+        streaming_encoding=True,
+        encoder_threads=1,
+        encoder_queue_maxsize=cfg.max_steps + 1,
+    )
     if create:
-        return LeRobotDataset.create(d.repo_id, d.fps, demo_features(tuple(d.cameras), d.image_size),
-                                     root=d.root, robot_type=ROBOT_TYPE, use_videos=True, **kwargs)
+        return LeRobotDataset.create(
+            d.repo_id,
+            d.fps,
+            demo_features(tuple(d.cameras), d.image_size),
+            root=d.root,
+            robot_type=ROBOT_TYPE,
+            use_videos=True,
+            **kwargs,
+        )
     return LeRobotDataset.resume(d.repo_id, root=d.root, **kwargs)  # reopened for writing: new files
 
 
@@ -189,8 +216,12 @@ def run(cfg: CollectConfig) -> CollectResult:
             shutil.rmtree(root)
             progress = None
     if progress is not None and progress.episodes_saved >= cfg.dataset.num_episodes:
-        log.info("%s already holds %d episodes (asked for %d); nothing to do",
-                 root, progress.episodes_saved, cfg.dataset.num_episodes)
+        log.info(
+            "%s already holds %d episodes (asked for %d); nothing to do",
+            root,
+            progress.episodes_saved,
+            cfg.dataset.num_episodes,
+        )
         return CollectResult(root, progress.episodes_saved, 0, 0, 0, 0.0)
     if progress is None:
         if root.exists():
@@ -201,7 +232,11 @@ def run(cfg: CollectConfig) -> CollectResult:
     else:
         dataset = _open_dataset(cfg, create=False)
     provenance = load_provenance(root)
-    start_saved, start_attempt, start_failures = progress.episodes_saved, progress.next_attempt, progress.failures
+    start_saved, start_attempt, start_failures = (
+        progress.episodes_saved,
+        progress.next_attempt,
+        progress.failures,
+    )
     target = cfg.dataset.num_episodes
     t0 = time.perf_counter()
 
@@ -218,10 +253,14 @@ def run(cfg: CollectConfig) -> CollectResult:
                 bar.update(1)
             else:
                 progress.failures += 1
-                log.info("attempt %d failed after %d steps (context %s)", ep.attempt, ep.steps, ep.instance.context)
+                log.info(
+                    "attempt %d failed after %d steps (context %s)", ep.attempt, ep.steps, ep.instance.context
+                )
             tried = progress.next_attempt - start_attempt
-            bar.set_postfix(success=f"{(tried - progress.failures + start_failures) / tried:.1%}",
-                            failed=progress.failures)
+            bar.set_postfix(
+                success=f"{(tried - progress.failures + start_failures) / tried:.1%}",
+                failed=progress.failures,
+            )
             done = progress.episodes_saved >= target
             if ep.success and (done or progress.episodes_saved % cfg.checkpoint_every == 0):
                 dataset.finalize()
@@ -235,29 +274,46 @@ def run(cfg: CollectConfig) -> CollectResult:
                 raise RuntimeError(
                     f"{progress.failures} attempts failed (limit --max_failures={cfg.max_failures}); "
                     f"the {progress.episodes_saved} episodes checkpointed so far are kept. "
-                    "Check the scene or raise --max_steps / --max_failures.")
+                    "Check the scene or raise --max_steps / --max_failures."
+                )
     except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
         since = progress.episodes_saved - checkpointed
-        lost = (f" (the {since} collected since its last checkpoint are collected again; "
-                f"--checkpoint_every={cfg.checkpoint_every})" if since else "")
-        raise interrupted(exc, f"{checkpointed} demo{'s' * (checkpointed != 1)} saved in {root}{lost}; "
-                               "rerun the same command to resume")
+        lost = (
+            f" (the {since} collected since its last checkpoint are collected again; "
+            f"--checkpoint_every={cfg.checkpoint_every})"
+            if since
+            else ""
+        )
+        raise interrupted(
+            exc,
+            f"{checkpointed} demo{'s' * (checkpointed != 1)} saved in {root}{lost}; "
+            "rerun the same command to resume",
+        ) from exc
     finally:
         episodes.close()
         bar.close()
-    return CollectResult(root, progress.episodes_saved, progress.episodes_saved - start_saved,
-                         progress.next_attempt - start_attempt, progress.failures - start_failures,
-                         time.perf_counter() - t0)
+    return CollectResult(
+        root,
+        progress.episodes_saved,
+        progress.episodes_saved - start_saved,
+        progress.next_attempt - start_attempt,
+        progress.failures - start_failures,
+        time.perf_counter() - t0,
+    )
 
 
 def summary(cfg: CollectConfig, result: CollectResult) -> None:
     """The line the command prints when it ends: demos, where, attempts, the expert's success, the rate."""
     if not result.attempts:
-        print(f"[collect] {result.episodes} episodes in {result.root}: already complete, nothing new to collect")
+        print(
+            f"[collect] {result.episodes} episodes in {result.root}: already complete, nothing new to collect"
+        )
         return
-    print(f"[collect] {result.episodes} episodes in {result.root} "
-          f"({result.new_episodes} new; {result.attempts} attempts, {result.failures} failed, "
-          f"expert success {result.success_rate:.1%}; {result.demos_per_hour:.0f} demos/h)")
+    print(
+        f"[collect] {result.episodes} episodes in {result.root} "
+        f"({result.new_episodes} new; {result.attempts} attempts, {result.failures} failed, "
+        f"expert success {result.success_rate:.1%}; {result.demos_per_hour:.0f} demos/h)"
+    )
 
 
 def main(args: list[str] | None = None) -> CollectResult:

@@ -87,21 +87,41 @@ def _plot(visuals: TrainingVisuals, table: pd.DataFrame, records: list[dict], pa
         pts = [(r["color_lab"], r["color_rgb"]) for k, r in colors if status[k] == st]
         if pts:
             lab, rgb = np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
-            ax_c.scatter(lab[:, 1], lab[:, 2], s=40, c=rgb, marker=marker,
-                         edgecolors="k" if marker not in "x." else None, linewidths=0.4,
-                         label=f"test color: {st} ({len(pts)})")
+            ax_c.scatter(
+                lab[:, 1],
+                lab[:, 2],
+                s=40,
+                c=rgb,
+                marker=marker,
+                edgecolors="k" if marker not in "x." else None,
+                linewidths=0.4,
+                label=f"test color: {st} ({len(pts)})",
+            )
     ax_c.set(xlabel="a*", ylabel="b*", title="Object color (CIELAB a*–b*)")
     ax_c.legend(fontsize=7, loc="lower left")
     if visuals.camera is not None:
         ax_p.scatter(visuals.pos[:, 0], visuals.pos[:, 1], s=6, c="0.6", label="training")
-        for split, color in (("camera_pose", "tab:blue"), ("camera_euler", "tab:green"), ("dist_scale", "tab:red")):
+        for split, color in (
+            ("camera_pose", "tab:blue"),
+            ("camera_euler", "tab:green"),
+            ("dist_scale", "tab:red"),
+        ):
             for st, marker in markers.items():
-                pts = [next(c["pos"] for c in r["cameras"] if c["name"] == visuals.camera)
-                       for k, r in by_key.items() if r["split"] == split and status[k] == st]
+                pts = [
+                    next(c["pos"] for c in r["cameras"] if c["name"] == visuals.camera)
+                    for k, r in by_key.items()
+                    if r["split"] == split and status[k] == st
+                ]
                 if pts:
                     pts = np.array(pts)
-                    ax_p.scatter(pts[:, 0], pts[:, 1], s=40, marker=marker, c=color,
-                                 label=f"{split}: {st} ({len(pts)})")
+                    ax_p.scatter(
+                        pts[:, 0],
+                        pts[:, 1],
+                        s=40,
+                        marker=marker,
+                        c=color,
+                        label=f"{split}: {st} ({len(pts)})",
+                    )
         ax_p.set(xlabel="x (m)", ylabel="y (m)", title=f"Camera '{visuals.camera}' position (top view)")
         ax_p.set_aspect("equal")
         ax_p.legend(fontsize=7, loc="best")
@@ -112,20 +132,28 @@ def _plot(visuals: TrainingVisuals, table: pd.DataFrame, records: list[dict], pa
 
 def _markdown(cfg: CoverageConfig, visuals: TrainingVisuals, table: pd.DataFrame) -> str:
     counts = summary(table)
-    lines = [f"# Coverage of {cfg.benchmark.path} by {cfg.dataset.root}", "",
-             f"{visuals.n} training episodes; randomized: {', '.join(visuals.randomized) or 'nothing (context-only)'}; "
-             f"camera audited: {visuals.camera or 'none (no perturbed camera recorded)'}. Nearby = "
-             f"ΔE2000 ≤ {cfg.color_radius:g}, camera ≤ {cfg.pose_radius_m:g} m and ≤ {cfg.pose_angle_deg:g}°.", "",
-             "| split | exact | nearby | never | unobserved | test contexts seen in training |",
-             "|---|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"# Coverage of {cfg.benchmark.path} by {cfg.dataset.root}",
+        "",
+        f"{visuals.n} training episodes; randomized: {', '.join(visuals.randomized) or 'nothing (context-only)'}; "
+        f"camera audited: {visuals.camera or 'none (no perturbed camera recorded)'}. Nearby = "
+        f"ΔE2000 ≤ {cfg.color_radius:g}, camera ≤ {cfg.pose_radius_m:g} m and ≤ {cfg.pose_angle_deg:g}°.",
+        "",
+        "| split | exact | nearby | never | unobserved | test contexts seen in training |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
     for split, row in counts.iterrows():
         ctx = table.loc[table["split"] == split, "contexts_in_training"].mean()
-        lines.append(f"| {split} | {row['exact']} | {row['nearby']} | {row['never']} | {row['unobserved']} "
-                     f"| {ctx:.0%} |")
+        lines.append(
+            f"| {split} | {row['exact']} | {row['nearby']} | {row['never']} | {row['unobserved']} "
+            f"| {ctx:.0%} |"
+        )
     lines += ["", "## Values seen in training (exact or nearby)", ""]
     seen = table[table["status"].isin(("exact", "nearby"))]
     for split, group in seen.groupby("split", sort=False):
-        lines.append(f"- **{split}**: " + ", ".join(f"{v} ({s})" for v, s in zip(group["value"], group["status"])))
+        lines.append(
+            f"- **{split}**: " + ", ".join(f"{v} ({s})" for v, s in zip(group["value"], group["status"]))
+        )
     if seen.empty:
         lines.append("None.")
     return "\n".join(lines) + "\n"
@@ -141,12 +169,20 @@ def run(cfg: CoverageConfig) -> pd.DataFrame:
     table = audit(visuals, records, Radii(cfg.color_radius, cfg.pose_radius_m, cfg.pose_angle_deg))
     out = Path(cfg.output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    payload = {"dataset": cfg.dataset.root, "benchmark_version": bench.version, "episodes": visuals.n,
-               "randomized": list(visuals.randomized), "camera": visuals.camera,
-               "radii": {"color_delta_e": cfg.color_radius, "pose_m": cfg.pose_radius_m,
-                         "pose_deg": cfg.pose_angle_deg},
-               "summary": {split: {k: int(v) for k, v in row.items()} for split, row in summary(table).iterrows()},
-               "values": json.loads(table.to_json(orient="records"))}
+    payload = {
+        "dataset": cfg.dataset.root,
+        "benchmark_version": bench.version,
+        "episodes": visuals.n,
+        "randomized": list(visuals.randomized),
+        "camera": visuals.camera,
+        "radii": {
+            "color_delta_e": cfg.color_radius,
+            "pose_m": cfg.pose_radius_m,
+            "pose_deg": cfg.pose_angle_deg,
+        },
+        "summary": {split: {k: int(v) for k, v in row.items()} for split, row in summary(table).iterrows()},
+        "values": json.loads(table.to_json(orient="records")),
+    }
     (out / "coverage.json").write_text(json.dumps(payload, indent=1))
     (out / "coverage.md").write_text(_markdown(cfg, visuals, table))
     if cfg.plots:
@@ -157,9 +193,14 @@ def run(cfg: CoverageConfig) -> pd.DataFrame:
 def _summary(cfg: CoverageConfig, table: pd.DataFrame) -> None:
     counts = summary(table)
     for split, row in counts.iterrows():
-        print(f"[coverage] {split}: " + ", ".join(f"{row[s]} {s}" for s in STATUSES)
-              + (f", {row['unobserved']} unobserved" if row["unobserved"] else ""))
-    print(f"[coverage] wrote coverage.json, coverage.md{', coverage.png' if cfg.plots else ''} to {cfg.output_dir}")
+        print(
+            f"[coverage] {split}: "
+            + ", ".join(f"{row[s]} {s}" for s in STATUSES)
+            + (f", {row['unobserved']} unobserved" if row["unobserved"] else "")
+        )
+    print(
+        f"[coverage] wrote coverage.json, coverage.md{', coverage.png' if cfg.plots else ''} to {cfg.output_dir}"
+    )
 
 
 def main(args: list[str] | None = None) -> pd.DataFrame:

@@ -29,8 +29,8 @@ from eval.running.results import EpisodeStore, ResultsError, is_counted, shard_o
 from eval.running.rollout import WorkerSpec, WorkItem
 from pipelines._cli import cli_main
 from policies.base import PolicyConfig, missing_policy_type
-from policies.types import load_policy_types
 from policies.errors import PolicyUnavailable
+from policies.types import load_policy_types
 from policies.vlm.sgl import SGLConfig
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.cli_errors import flag_errors
@@ -136,10 +136,22 @@ class EvalConfig:
     # --help lists these fields after the common ones, under these headings.
     help_groups = {
         "advanced --eval.* (speed, scale and recovery; docs/evaluation.md, docs/scaling.md)": (
-            "envs_per_worker", "policy_server", "eager_render", "backend", "ray_address", "shard", "rerun",
-            "max_infra_retries"),
-        "adaptive evaluation, --eval.adaptive=true (docs/adaptive.md)": ("adaptive", "max_repeats", "alpha", "tau",
-                                                                          "power"),
+            "envs_per_worker",
+            "policy_server",
+            "eager_render",
+            "backend",
+            "ray_address",
+            "shard",
+            "rerun",
+            "max_infra_retries",
+        ),
+        "adaptive evaluation, --eval.adaptive=true (docs/adaptive.md)": (
+            "adaptive",
+            "max_repeats",
+            "alpha",
+            "tau",
+            "power",
+        ),
     }
 
     def __post_init__(self) -> None:
@@ -151,7 +163,9 @@ class EvalConfig:
         if self.limit < 0:
             raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")
         if self.max_infra_retries < 0:
-            raise ValueError(f"--eval.max_infra_retries={self.max_infra_retries} must be ≥ 0 (0 = no re-run in this run)")
+            raise ValueError(
+                f"--eval.max_infra_retries={self.max_infra_retries} must be ≥ 0 (0 = no re-run in this run)"
+            )
         if self.contexts < 0:
             raise ValueError(f"--eval.contexts={self.contexts} must be ≥ 0 (0 = every context)")
         if self.backend not in BACKENDS:
@@ -159,15 +173,19 @@ class EvalConfig:
         if self.rerun and not self.rerun.endswith(".rrd"):
             raise ValueError(f"--eval.rerun={self.rerun!r} must name a .rrd file")
         if self.protocol not in PROTOCOLS:
-            raise ValueError(f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}")
-        self.split_repeat_table  # parses split_repeats now, so a typo fails before any work
-        self.shard_index  # parses shard now
+            raise ValueError(
+                f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}"
+            )
+        self.split_repeat_table  # noqa: B018  (parses split_repeats now, so a typo fails before any work)
+        self.shard_index  # noqa: B018  (parses shard now)
         if self.shard and self.adaptive:
-            raise ValueError(f"--eval.shard={self.shard} with --eval.adaptive=true: an adaptive split decides on all of "
-                             "its instances at once, so it cannot be sharded; drop one of the two")
-        self.video_mode  # parses videos now
+            raise ValueError(
+                f"--eval.shard={self.shard} with --eval.adaptive=true: an adaptive split decides on all of "
+                "its instances at once, so it cannot be sharded; drop one of the two"
+            )
+        self.video_mode  # noqa: B018  (parses videos now)
         if self.adaptive:
-            self.design  # validates alpha, tau, power, max_repeats
+            self.design  # noqa: B018  (validates alpha, tau, power, max_repeats)
 
     @property
     def shard_index(self) -> tuple[int, int] | None:
@@ -176,7 +194,9 @@ class EvalConfig:
             return None
         i, sep, n = self.shard.partition("/")
         if not (sep and i.strip().isdigit() and n.strip().isdigit() and 0 <= int(i) < int(n)):
-            raise ValueError(f"--eval.shard={self.shard!r} must be i/N with 0 ≤ i < N, e.g. 0/4 (the first of four)")
+            raise ValueError(
+                f"--eval.shard={self.shard!r} must be i/N with 0 ≤ i < N, e.g. 0/4 (the first of four)"
+            )
         return int(i), int(n)
 
     @property
@@ -244,8 +264,10 @@ def resolve_image_size(policy: PolicyConfig, requested: int) -> int:
     """The policy's own image side if it has one (a checkpoint's), else `requested`, else 224."""
     own = policy.input_image_size()
     if own is not None and requested and requested != own:
-        raise ValueError(f"--eval.image_size={requested} but the checkpoint {policy.checkpoint} was trained on {own}×{own} "
-                         f"images; drop the flag (the checkpoint's size is used) or pass {own}")
+        raise ValueError(
+            f"--eval.image_size={requested} but the checkpoint {policy.checkpoint} was trained on {own}×{own} "
+            f"images; drop the flag (the checkpoint's size is used) or pass {own}"
+        )
     return own or requested or DEFAULT_IMAGE_SIZE
 
 
@@ -263,8 +285,12 @@ class Plan:
 
     @property
     def work(self) -> list[WorkItem]:
-        return [WorkItem(item, r) for split, items in self.chosen.items() for item in items
-                for r in range(self.repeats[split])]
+        return [
+            WorkItem(item, r)
+            for split, items in self.chosen.items()
+            for item in items
+            for r in range(self.repeats[split])
+        ]
 
 
 def plan(cfg: EvaluateConfig) -> Plan:
@@ -274,32 +300,54 @@ def plan(cfg: EvaluateConfig) -> Plan:
     policy = cfg.policy
     unknown = [s for s in cfg.eval.split_repeat_table if s not in bench.splits]
     if unknown:
-        raise ValueError(f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
-                         f"evaluated: {', '.join(bench.splits)}")
+        raise ValueError(
+            f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
+            f"evaluated: {', '.join(bench.splits)}"
+        )
     if cfg.benchmark.value_list:
         present = {i.record["value"] for items in bench.splits.values() for i in items}
         missing = sorted(set(cfg.benchmark.value_list) - present)
         if missing:
-            raise ValueError(f"--benchmark.values names {missing}, absent from the chosen splits; present: "
-                             f"{', '.join(sorted(present)[:20])}{' …' if len(present) > 20 else ''}")
+            raise ValueError(
+                f"--benchmark.values names {missing}, absent from the chosen splits; present: "
+                f"{', '.join(sorted(present)[:20])}{' …' if len(present) > 20 else ''}"
+            )
         keep = set(cfg.benchmark.value_list)
-        bench.splits.update({s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()})
+        bench.splits.update(
+            {s: [i for i in items if i.record["value"] in keep] for s, items in bench.splits.items()}
+        )
     if cfg.eval.policy_server and not policy.batchable():
-        raise ValueError(f"--eval.policy_server=true needs a policy with one batched model (a chunked LeRobot "
-                         f"checkpoint: act, pi0, pi05, smolvla); {policy.type!r} has none: drop the flag")
+        raise ValueError(
+            f"--eval.policy_server=true needs a policy with one batched model (a chunked LeRobot "
+            f"checkpoint: act, pi0, pi05, smolvla); {policy.type!r} has none: drop the flag"
+        )
     if cfg.eval.policy_server and cfg.eval.backend != "local":
         raise ValueError("--eval.policy_server=true runs with --eval.backend=local only")
-    adaptive = {split for split, items in bench.splits.items()
-                if cfg.eval.adaptive and items and "|" not in items[0].record["factor"]}
-    chosen = {split: select_items(items, cfg.eval.contexts, cfg.eval.limit) for split, items in bench.splits.items()}
+    adaptive = {
+        split
+        for split, items in bench.splits.items()
+        if cfg.eval.adaptive and items and "|" not in items[0].record["factor"]
+    }
+    chosen = {
+        split: select_items(items, cfg.eval.contexts, cfg.eval.limit) for split, items in bench.splits.items()
+    }
     if cfg.eval.shard_index is not None:
         i, n = cfg.eval.shard_index
-        chosen = {split: [x for x in items if shard_of(x.record["instance_id"], n) == i] for split, items in chosen.items()}
-    return Plan(version=bench.version, chosen=chosen, adaptive=adaptive,
-                repeats={split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
-                         for split in bench.splits},
-                tasks=list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items)),
-                image_size=resolve_image_size(policy, cfg.eval.image_size))
+        chosen = {
+            split: [x for x in items if shard_of(x.record["instance_id"], n) == i]
+            for split, items in chosen.items()
+        }
+    return Plan(
+        version=bench.version,
+        chosen=chosen,
+        adaptive=adaptive,
+        repeats={
+            split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
+            for split in bench.splits
+        },
+        tasks=list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items)),
+        image_size=resolve_image_size(policy, cfg.eval.image_size),
+    )
 
 
 def check_conformance(bench: BenchmarkConfig, version: str) -> dict:
@@ -314,13 +362,30 @@ def check_conformance(bench: BenchmarkConfig, version: str) -> dict:
 def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
     """What run.json records: a rerun into the same folder must ask for exactly this to resume."""
     policy = cfg.policy
-    return {"benchmark_version": p.version, "values": cfg.benchmark.value_list,
-            "policy": policy.type, "policy_path": policy.checkpoint, **({"policy_name": policy.name} if policy.name else {}),
-            "policy_options": policy.options(), "n_repeats": p.repeats,
-            "max_steps": cfg.eval.max_steps, "image_size": p.image_size,
-            **({"adaptive": {"alpha": cfg.eval.alpha, "tau": cfg.eval.tau, "power": cfg.eval.power,
-                             "max_repeats": cfg.eval.max_repeats}} if cfg.eval.adaptive else {}),
-            **({"shard": cfg.eval.shard} if cfg.eval.shard else {})}
+    return {
+        "benchmark_version": p.version,
+        "values": cfg.benchmark.value_list,
+        "policy": policy.type,
+        "policy_path": policy.checkpoint,
+        **({"policy_name": policy.name} if policy.name else {}),
+        "policy_options": policy.options(),
+        "n_repeats": p.repeats,
+        "max_steps": cfg.eval.max_steps,
+        "image_size": p.image_size,
+        **(
+            {
+                "adaptive": {
+                    "alpha": cfg.eval.alpha,
+                    "tau": cfg.eval.tau,
+                    "power": cfg.eval.power,
+                    "max_repeats": cfg.eval.max_repeats,
+                }
+            }
+            if cfg.eval.adaptive
+            else {}
+        ),
+        **({"shard": cfg.eval.shard} if cfg.eval.shard else {}),
+    }
 
 
 class Runner:
@@ -346,23 +411,38 @@ class Runner:
             self.per_split[row["split"]][1] += 1
             self.policy_name = row.get("policy") or self.policy_name
         done = sum(store.done(w.key) for w in p.work)
-        self.bar = tqdm(total=total, initial=done, desc=f"eval {cfg.policy.type}", unit="ep", dynamic_ncols=True)
+        self.bar = tqdm(
+            total=total, initial=done, desc=f"eval {cfg.policy.type}", unit="ep", dynamic_ncols=True
+        )
         self.new = self.started = 0
 
     def streams(self, todo: list[WorkItem]):
         """One pool per task (each worker holds one task's env and the policy), tasks one after another."""
         cfg = self.cfg
         for task in self.plan.tasks or [DEFAULT_TASK]:
-            spec = WorkerSpec(cfg.policy, self.plan.image_size, cfg.eval.max_steps, record_media=self.rerun is not None,
-                              torch_threads=self.threads, task=task, envs_per_worker=cfg.eval.envs_per_worker,
-                              videos_of_failures_only=self.mode == "failures", eager=cfg.eval.eager_render,
-                              policy_server=cfg.eval.policy_server)
+            spec = WorkerSpec(
+                cfg.policy,
+                self.plan.image_size,
+                cfg.eval.max_steps,
+                record_media=self.rerun is not None,
+                torch_threads=self.threads,
+                task=task,
+                envs_per_worker=cfg.eval.envs_per_worker,
+                videos_of_failures_only=self.mode == "failures",
+                eager=cfg.eval.eager_render,
+                policy_server=cfg.eval.policy_server,
+            )
             items = [w for w in todo if w.item.instance.task == task]
             if not items:
                 continue
             if cfg.eval.backend == "ray":
-                inner = run_ray(spec, items, cfg.eval.num_workers, cfg.eval.ray_address or None,
-                                stats=self.cluster.setdefault(task, {}))
+                inner = run_ray(
+                    spec,
+                    items,
+                    cfg.eval.num_workers,
+                    cfg.eval.ray_address or None,
+                    stats=self.cluster.setdefault(task, {}),
+                )
             else:
                 inner = run_local(spec, items, cfg.eval.num_workers)
             try:
@@ -374,8 +454,10 @@ class Runner:
         """Run `todo`, journalling each row as it finishes (videos for the episodes `--eval.videos` films); then
         run those that infrastructure ended again, at most `--eval.max_infra_retries` times."""
         if self.mode:
-            todo = [WorkItem(w.item, w.repeat, video=videos.filmed(self.mode, self.started + i))
-                    for i, w in enumerate(todo)]
+            todo = [
+                WorkItem(w.item, w.repeat, video=videos.filmed(self.mode, self.started + i))
+                for i, w in enumerate(todo)
+            ]
         self.started += len(todo)
         self._pass(todo)
         retries = self.cfg.eval.max_infra_retries
@@ -384,8 +466,14 @@ class Runner:
             if not again:
                 break
             reason = self.store.rows[again[0].key]["failure_reason"]
-            log.warning("%d episode(s) ended by infrastructure, not by the policy (e.g. %s); running them again "
-                        "(%d/%d)", len(again), reason, attempt, retries)
+            log.warning(
+                "%d episode(s) ended by infrastructure, not by the policy (e.g. %s); running them again "
+                "(%d/%d)",
+                len(again),
+                reason,
+                attempt,
+                retries,
+            )
             self._pass(again)
 
     def _pass(self, todo: list[WorkItem]) -> None:
@@ -440,8 +528,12 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     if cfg.policy.served_by() is not None:
         entry["policy_server"] = cfg.policy.served_by()
     provenance.record(Path(cfg.output_dir), entry)
-    log.info("%d episodes planned%s, %d already done", len(work), " at most (adaptive)" if p.adaptive else "",
-             sum(store.done(w.key) for w in work))
+    log.info(
+        "%d episodes planned%s, %d already done",
+        len(work),
+        " at most (adaptive)" if p.adaptive else "",
+        sum(store.done(w.key) for w in work),
+    )
     runner = Runner(cfg, p, store, len(work))
     runner.conformance = verdict
     t0 = time.perf_counter()
@@ -454,21 +546,39 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         from pipelines._cli import interrupted
 
         n = len(store.rows)
-        raise interrupted(exc, f"{n} episode{'s' * (n != 1)} saved in {cfg.output_dir}; "
-                               "rerun the same command to resume")
+        raise interrupted(
+            exc, f"{n} episode{'s' * (n != 1)} saved in {cfg.output_dir}; rerun the same command to resume"
+        ) from exc
     finally:
         runner.close()
-        provenance.record(Path(cfg.output_dir), entry | {"ended": provenance.now(), "episodes_run": runner.new}
-                          | ({"ray": _merge_cluster(runner.cluster)} if runner.cluster else {}))
+        provenance.record(
+            Path(cfg.output_dir),
+            entry
+            | {"ended": provenance.now(), "episodes_run": runner.new}
+            | ({"ray": _merge_cluster(runner.cluster)} if runner.cluster else {}),
+        )
     total = len(store.rows)
     kept = [r for r in store.rows.values() if is_counted(r)]
     successes = sum(r["success"] for r in kept)
-    return EvaluateResult(Path(cfg.output_dir), total, runner.new, successes / len(kept) if kept else float("nan"),
-                          time.perf_counter() - t0, infra_errors=total - len(kept))
+    return EvaluateResult(
+        Path(cfg.output_dir),
+        total,
+        runner.new,
+        successes / len(kept) if kept else float("nan"),
+        time.perf_counter() - t0,
+        infra_errors=total - len(kept),
+    )
 
 
-def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, int], adaptive: set[str],
-               store: EpisodeStore, execute, bar) -> None:
+def run_rounds(
+    cfg: EvaluateConfig,
+    chosen: dict[str, list],
+    repeats: dict[str, int],
+    adaptive: set[str],
+    store: EpisodeStore,
+    execute,
+    bar,
+) -> None:
     """Adaptive evaluation: round r runs repeat r of every instance of the splits still running (and of the
     fixed splits); before each round the splits' test decides who stops. A rerun recomputes the same
     decisions from the rows already written, so it resumes mid-split where it stopped."""
@@ -481,24 +591,47 @@ def run_rounds(cfg: EvaluateConfig, chosen: dict[str, list], repeats: dict[str, 
     for r in range(design.max_repeats + 1):
         for split in sorted(active):
             # Rows infrastructure ended (still so after their re-runs) enter no decision.
-            rows = [row for item in chosen[split] for rep in range(r)
-                    if (row := store.rows.get((item.record["instance_id"], rep))) is not None and is_counted(row)]
+            rows = [
+                row
+                for item in chosen[split]
+                for rep in range(r)
+                if (row := store.rows.get((item.record["instance_id"], rep))) is not None and is_counted(row)
+            ]
             decision = decide_split(rows, r, design)
             if decision.stopped:
                 records[split] = decision.record(len(rows))
                 active.discard(split)
                 bar.total -= len(chosen[split]) * (design.max_repeats - r)
                 bar.refresh()
-                log.info("split %s: stopped after %d round(s): %s (LRT %s)", split, r, decision.stopped,
-                         "—" if decision.statistic is None else f"{decision.statistic:.1f}")
+                log.info(
+                    "split %s: stopped after %d round(s): %s (LRT %s)",
+                    split,
+                    r,
+                    decision.stopped,
+                    "—" if decision.statistic is None else f"{decision.statistic:.1f}",
+                )
                 write_record(out, design, records)
         if r == design.max_repeats:
             break
-        execute([WorkItem(item, r) for split, items in chosen.items() for item in items
-                 if (split in active or (split not in adaptive and r < repeats[split]))
-                 and not store.done((item.record["instance_id"], r))])
-    execute([WorkItem(item, rep) for split, items in chosen.items() if split not in adaptive for item in items
-             for rep in range(design.max_repeats, repeats[split]) if not store.done((item.record["instance_id"], rep))])
+        execute(
+            [
+                WorkItem(item, r)
+                for split, items in chosen.items()
+                for item in items
+                if (split in active or (split not in adaptive and r < repeats[split]))
+                and not store.done((item.record["instance_id"], r))
+            ]
+        )
+    execute(
+        [
+            WorkItem(item, rep)
+            for split, items in chosen.items()
+            if split not in adaptive
+            for item in items
+            for rep in range(design.max_repeats, repeats[split])
+            if not store.done((item.record["instance_id"], rep))
+        ]
+    )
 
 
 def _merge_cluster(per_task: dict[str, dict]) -> dict:
@@ -508,12 +641,15 @@ def _merge_cluster(per_task: dict[str, dict]) -> dict:
         for node, n in stats.get("nodes", {}).items():
             nodes[node] = nodes.get(node, 0) + n
     first = next(iter(per_task.values()))
-    return {"address": first.get("address"), "nodes": nodes,
-            "lost_actors": sum(s.get("lost_actors", 0) for s in per_task.values())}
+    return {
+        "address": first.get("address"),
+        "nodes": nodes,
+        "lost_actors": sum(s.get("lost_actors", 0) for s in per_task.values()),
+    }
 
 
 def rate_text(result: EvaluateResult) -> str:
-    """"N new, SR x%, R episodes/h"; a rerun with nothing left to run says so instead of printing 0/h or nan."""
+    """ "N new, SR x%, R episodes/h"; a rerun with nothing left to run says so instead of printing 0/h or nan."""
     sr = "SR —" if result.success_rate != result.success_rate else f"SR {result.success_rate:.1%}"
     if not result.new_episodes:
         return f"already complete, nothing new to run; {sr}"
@@ -522,28 +658,41 @@ def rate_text(result: EvaluateResult) -> str:
 
 def summary(cfg: EvaluateConfig, result: EvaluateResult) -> None:
     """The line the command prints when it ends: episodes, where, the rate, infrastructure errors."""
-    infra = (f"; {result.infra_errors} ended by infrastructure errors (status infra_error), counted in no rate: "
-             "rerun the same command to re-run them" if result.infra_errors else "")
+    infra = (
+        f"; {result.infra_errors} ended by infrastructure errors (status infra_error), counted in no rate: "
+        "rerun the same command to re-run them"
+        if result.infra_errors
+        else ""
+    )
     policy = cfg.policy.name or cfg.policy.type
     if cfg.policy.privileged:
         policy += " (privileged: reads the simulator state; a ceiling, not a policy's result)"
-    print(f"[evaluate] {result.episodes} episodes of {policy} in {result.output_dir / 'episodes.parquet'} "
-          f"({rate_text(result)}{infra})")
+    print(
+        f"[evaluate] {result.episodes} episodes of {policy} in {result.output_dir / 'episodes.parquet'} "
+        f"({rate_text(result)}{infra})"
+    )
     if cfg.eval.rerun:
         from eval.running.rerun_log import recordings
 
         files = recordings(cfg.eval.rerun)
-        print(f"[evaluate] Rerun recording{'s' if len(files) > 1 else ''} of {cfg.eval.rerun}: "
-              + (f"rerun {' '.join(map(str, files))}" if files else "none yet (no episode was recorded)"))
+        print(
+            f"[evaluate] Rerun recording{'s' if len(files) > 1 else ''} of {cfg.eval.rerun}: "
+            + (f"rerun {' '.join(map(str, files))}" if files else "none yet (no episode was recorded)")
+        )
 
 
 def main(args: list[str] | None = None) -> EvaluateResult:
     # Builtin and plugin policy types load first, so --policy.type can name any of them.
     from roboview_data.benchmark.conformance import ConformanceError
 
-    return cli_main(EvaluateConfig, run, summary, (ValueError, ResultsError, ClusterLost, PolicyUnavailable,
-                                                    ConformanceError), args,
-                    before_parse=load_policy_types)
+    return cli_main(
+        EvaluateConfig,
+        run,
+        summary,
+        (ValueError, ResultsError, ClusterLost, PolicyUnavailable, ConformanceError),
+        args,
+        before_parse=load_policy_types,
+    )
 
 
 if __name__ == "__main__":

@@ -77,7 +77,9 @@ class ExportConfig:
 
     def __post_init__(self) -> None:
         if not self.root:
-            raise ExportError("--root is required: a LeRobot v3.0 dataset folder written by pipelines.collect")
+            raise ExportError(
+                "--root is required: a LeRobot v3.0 dataset folder written by pipelines.collect"
+            )
         if self.format not in FORMATS:
             raise ExportError(f"--format={self.format!r} unknown; allowed: {', '.join(FORMATS)}")
         if self.repo_id and (self.repo_id.count("/") != 1 or not all(self.repo_id.split("/"))):
@@ -122,8 +124,10 @@ def _check_source(root: Path) -> tuple[_Source, str | None]:
     info = json.loads(info_path.read_text())
     version = info.get("codebase_version")
     if version != SOURCE_VERSION:
-        raise ExportError(f"{root} is a LeRobot {version} dataset; allowed: {SOURCE_VERSION} "
-                          f"(this command exports {SOURCE_VERSION} to {', '.join(FORMATS)})")
+        raise ExportError(
+            f"{root} is a LeRobot {version} dataset; allowed: {SOURCE_VERSION} "
+            f"(this command exports {SOURCE_VERSION} to {', '.join(FORMATS)})"
+        )
     video_keys = [key for key, ft in info["features"].items() if ft["dtype"] == "video"]
     for key, template in (("data_path", V30_DATA_PATH), ("video_path", V30_VIDEO_PATH)):
         if info.get(key) != template and (key == "data_path" or video_keys):
@@ -137,30 +141,45 @@ def _check_source(root: Path) -> tuple[_Source, str | None]:
             raise ExportError(
                 f"{root} holds an interrupted collection ({progress.get('episodes_saved')} episodes checkpointed, "
                 f"meta/info.json lists {info['total_episodes']}); rerun pipelines.collect with the same "
-                "settings to finish it, then export")
+                "settings to finish it, then export"
+            )
 
     files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
-    episodes = sorted((row for f in files for row in pq.read_table(f).to_pylist()),
-                      key=lambda row: row["episode_index"])
+    episodes = sorted(
+        (row for f in files for row in pq.read_table(f).to_pylist()), key=lambda row: row["episode_index"]
+    )
     indices = [row["episode_index"] for row in episodes]
     if indices != list(range(info["total_episodes"])):
-        raise ExportError(f"{root}: meta/episodes lists episodes {indices[:5]}… ({len(indices)}), expected "
-                          f"0..{info['total_episodes'] - 1} as meta/info.json says")
+        raise ExportError(
+            f"{root}: meta/episodes lists episodes {indices[:5]}… ({len(indices)}), expected "
+            f"0..{info['total_episodes'] - 1} as meta/info.json says"
+        )
     if sum(row["length"] for row in episodes) != info["total_frames"]:
-        raise ExportError(f"{root}: episode lengths add up to {sum(row['length'] for row in episodes)} frames, "
-                          f"meta/info.json says {info['total_frames']}")
+        raise ExportError(
+            f"{root}: episode lengths add up to {sum(row['length'] for row in episodes)} frames, "
+            f"meta/info.json says {info['total_frames']}"
+        )
     if not episodes:
         raise ExportError(f"{root} holds no episodes; nothing to export")
 
-    needed = {V30_DATA_PATH.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"])
-              for row in episodes}
-    needed |= {V30_VIDEO_PATH.format(video_key=key, chunk_index=row[f"videos/{key}/chunk_index"],
-                                     file_index=row[f"videos/{key}/file_index"])
-               for row in episodes for key in video_keys}
+    needed = {
+        V30_DATA_PATH.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"])
+        for row in episodes
+    }
+    needed |= {
+        V30_VIDEO_PATH.format(
+            video_key=key,
+            chunk_index=row[f"videos/{key}/chunk_index"],
+            file_index=row[f"videos/{key}/file_index"],
+        )
+        for row in episodes
+        for key in video_keys
+    }
     missing = sorted(rel for rel in needed if not (root / rel).is_file())
     if missing:
-        raise ExportError(f"{root} is incomplete: {len(missing)} file(s) its metadata lists are missing, "
-                          f"e.g. {missing[0]}")
+        raise ExportError(
+            f"{root} is incomplete: {len(missing)} file(s) its metadata lists are missing, e.g. {missing[0]}"
+        )
 
     tasks = pq.read_table(root / "meta/tasks.parquet").to_pandas()
     task_list = sorted((int(index), str(task)) for task, index in zip(tasks.index, tasks["task_index"]))
@@ -209,15 +228,22 @@ class _DataFiles:
         key = (row["data/chunk_index"], row["data/file_index"])
         if key != self.key:
             self.key = key
-            self.table = pq.read_table(self.root / V30_DATA_PATH.format(chunk_index=key[0], file_index=key[1]))
+            self.table = pq.read_table(
+                self.root / V30_DATA_PATH.format(chunk_index=key[0], file_index=key[1])
+            )
             self.first_index = int(self.table["index"][0].as_py())
         start = row["dataset_from_index"] - self.first_index
         part = self.table.slice(start, row["length"])
         ep = row["episode_index"]
-        if (part.num_rows != row["length"] or not (part["episode_index"].to_numpy() == ep).all()
-                or not np.array_equal(part["frame_index"].to_numpy(), np.arange(row["length"]))):
-            raise ExportError(f"{self.root}: the data rows of episode {ep} are not where meta/episodes puts them "
-                              f"(rows {row['dataset_from_index']}..{row['dataset_to_index']})")
+        if (
+            part.num_rows != row["length"]
+            or not (part["episode_index"].to_numpy() == ep).all()
+            or not np.array_equal(part["frame_index"].to_numpy(), np.arange(row["length"]))
+        ):
+            raise ExportError(
+                f"{self.root}: the data rows of episode {ep} are not where meta/episodes puts them "
+                f"(rows {row['dataset_from_index']}..{row['dataset_to_index']})"
+            )
         metadata = dict(part.schema.metadata or {})
         if b"huggingface" in metadata:
             metadata[b"huggingface"] = _datasets3_features(metadata[b"huggingface"])
@@ -239,10 +265,14 @@ class _VideoSegments:
         import av
 
         self.close()
-        path = self.root / V30_VIDEO_PATH.format(video_key=self.video_key, chunk_index=key[0], file_index=key[1])
+        path = self.root / V30_VIDEO_PATH.format(
+            video_key=self.video_key, chunk_index=key[0], file_index=key[1]
+        )
         self.key, self.container = key, av.open(str(path))
         self.stream = self.container.streams.video[0]
-        self.packets = (p for p in self.container.demux(self.stream) if p.dts is not None and p.pts is not None)
+        self.packets = (
+            p for p in self.container.demux(self.stream) if p.dts is not None and p.pts is not None
+        )
         self.pending = next(self.packets, None)
 
     def close(self) -> None:
@@ -267,11 +297,15 @@ class _VideoSegments:
             first = f"{float(packets[0].pts * tb):.3f} s" if packets else "nothing"
             raise ExportError(f"{where}: its video starts at {first}, not where meta/episodes says")
         if not packets[0].is_keyframe:
-            raise ExportError(f"{where} does not start on a keyframe, so it cannot be cut out without "
-                              "re-encoding; this command only stream-copies")
+            raise ExportError(
+                f"{where} does not start on a keyframe, so it cannot be cut out without "
+                "re-encoding; this command only stream-copies"
+            )
         if len(packets) != row["length"]:
-            raise ExportError(f"{where} holds {len(packets)} video frames but {row['length']} data rows; "
-                              "the source dataset is inconsistent")
+            raise ExportError(
+                f"{where} holds {len(packets)} video frames but {row['length']} data rows; "
+                "the source dataset is inconsistent"
+            )
         return self.stream, packets
 
 
@@ -297,8 +331,10 @@ def _info_v21(info: dict, num_episodes: int, video_keys: list[str]) -> dict:
     for key, ft in info["features"].items():
         ft = dict(ft)
         if ft["dtype"] == "video":
-            ft["info"] = {**ft.get("info", {}),
-                          "video.is_depth_map": bool(ft.get("info", {}).get("is_depth_map", False))}
+            ft["info"] = {
+                **ft.get("info", {}),
+                "video.is_depth_map": bool(ft.get("info", {}).get("is_depth_map", False)),
+            }
         else:
             ft.pop("fps", None)  # v2.1 keeps fps only in info.json's top level and the video info
         features[key] = ft
@@ -325,7 +361,7 @@ def _episode_stats(row: dict) -> dict:
     stats: dict[str, dict] = {}
     for column, value in row.items():
         if column.startswith("stats/") and value is not None:
-            feature, stat = column[len("stats/"):].rsplit("/", 1)
+            feature, stat = column[len("stats/") :].rsplit("/", 1)
             stats.setdefault(feature, {})[stat] = value
     return stats
 
@@ -355,20 +391,31 @@ def _export(source: _Source, out: Path) -> int:
             pq.write_table(data.episode(row), path)
             for key, segments in videos.items():
                 stream, packets = segments.episode(row)
-                _write_video(stream, packets, out / V21_VIDEO_PATH.format(episode_chunk=chunk, video_key=key,
-                                                                          episode_index=ep))
+                _write_video(
+                    stream,
+                    packets,
+                    out / V21_VIDEO_PATH.format(episode_chunk=chunk, video_key=key, episode_index=ep),
+                )
                 written += 1
     finally:
         for segments in videos.values():
             segments.close()
 
     _write_jsonl(out / V21_TASKS_PATH, ({"task_index": i, "task": task} for i, task in source.tasks))
-    _write_jsonl(out / V21_EPISODES_PATH, ({"episode_index": row["episode_index"], "tasks": list(row["tasks"]),
-                                            "length": row["length"]} for row in source.episodes))
-    _write_jsonl(out / V21_EPISODES_STATS_PATH, ({"episode_index": row["episode_index"],
-                                                  "stats": _episode_stats(row)} for row in source.episodes))
-    (out / "meta/info.json").write_text(json.dumps(_info_v21(info, len(source.episodes), source.video_keys),
-                                                   indent=4, ensure_ascii=False))
+    _write_jsonl(
+        out / V21_EPISODES_PATH,
+        (
+            {"episode_index": row["episode_index"], "tasks": list(row["tasks"]), "length": row["length"]}
+            for row in source.episodes
+        ),
+    )
+    _write_jsonl(
+        out / V21_EPISODES_STATS_PATH,
+        ({"episode_index": row["episode_index"], "stats": _episode_stats(row)} for row in source.episodes),
+    )
+    (out / "meta/info.json").write_text(
+        json.dumps(_info_v21(info, len(source.episodes), source.video_keys), indent=4, ensure_ascii=False)
+    )
     if (source.root / PROVENANCE).is_file():
         (out / PROVENANCE).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(source.root / PROVENANCE, out / PROVENANCE)
@@ -387,8 +434,10 @@ def run(cfg: ExportConfig) -> ExportResult:
 
         out = HF_LEROBOT_HOME / repo_id
     else:
-        raise ExportError(f"--root={root} was not written by pipelines.collect, so it names no repo id: "
-                          "give --output_dir, or --repo_id to export to $HF_LEROBOT_HOME/<repo_id>")
+        raise ExportError(
+            f"--root={root} was not written by pipelines.collect, so it names no repo id: "
+            "give --output_dir, or --repo_id to export to $HF_LEROBOT_HOME/<repo_id>"
+        )
     with flag_errors("--output_dir"):
         _check_output(out, root)
 
@@ -404,18 +453,29 @@ def run(cfg: ExportConfig) -> ExportResult:
             for child in out.iterdir():
                 shutil.rmtree(child) if child.is_dir() else child.unlink()
         raise
-    return ExportResult(out, repo_id or "", len(source.episodes), source.info["total_frames"], videos,
-                        time.perf_counter() - t0, in_lerobot_home=not cfg.output_dir)
+    return ExportResult(
+        out,
+        repo_id or "",
+        len(source.episodes),
+        source.info["total_frames"],
+        videos,
+        time.perf_counter() - t0,
+        in_lerobot_home=not cfg.output_dir,
+    )
 
 
 def _summary(cfg: ExportConfig, result: ExportResult) -> None:
-    print(f"[export_dataset] {result.episodes} episodes, {result.frames:,} frames, {result.videos} videos "
-          f"(stream copy) → {result.output_dir} as LeRobot {cfg.format} in {result.elapsed_s:.2f} s")
+    print(
+        f"[export_dataset] {result.episodes} episodes, {result.frames:,} frames, {result.videos} videos "
+        f"(stream copy) → {result.output_dir} as LeRobot {cfg.format} in {result.elapsed_s:.2f} s"
+    )
     if result.in_lerobot_home:
         print(f"  a v2.x lerobot (openpi: repo_id={result.repo_id!r}) finds it there")
     elif result.repo_id:
-        print(f"  a v2.x lerobot (openpi: repo_id={result.repo_id!r}) reads it from "
-              f"$HF_LEROBOT_HOME/{result.repo_id}: copy or link it there")
+        print(
+            f"  a v2.x lerobot (openpi: repo_id={result.repo_id!r}) reads it from "
+            f"$HF_LEROBOT_HOME/{result.repo_id}: copy or link it there"
+        )
 
 
 def main(args: list[str] | None = None) -> ExportResult:

@@ -33,14 +33,18 @@ class MergeConfig:
 
         missing = [str(f) for f in self.folders if not f.exists()]
         if missing:
-            raise ValueError(f"--results names folder(s) that do not exist: {', '.join(missing)}; expected the "
-                             "results folders of one sharded run (pipelines.evaluate --eval.shard=i/N --output_dir)")
+            raise ValueError(
+                f"--results names folder(s) that do not exist: {', '.join(missing)}; expected the "
+                "results folders of one sharded run (pipelines.evaluate --eval.shard=i/N --output_dir)"
+            )
         for folder in self.folders:
             problem = results_folder_problem(folder)
             if problem:
                 raise ValueError(f"--results: {problem}")
         if len(self.folders) < 2:
-            raise ValueError(f"--results={self.results!r} must name two results folders or more, comma-separated")
+            raise ValueError(
+                f"--results={self.results!r} must name two results folders or more, comma-separated"
+            )
 
     @property
     def folders(self) -> list[Path]:
@@ -63,8 +67,10 @@ def run(cfg: MergeConfig) -> MergeResult:
 
 
 def _summary(cfg: MergeConfig, result: MergeResult) -> None:
-    print(f"[merge] {result.episodes} episodes from {len(result.per_folder)} shards in "
-          f"{result.output_dir / PARQUET}")
+    print(
+        f"[merge] {result.episodes} episodes from {len(result.per_folder)} shards in "
+        f"{result.output_dir / PARQUET}"
+    )
 
 
 def main(args: list[str] | None = None) -> MergeResult:

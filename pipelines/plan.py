@@ -79,20 +79,32 @@ def _layouts(cfg: PlanConfig) -> list[tuple[str, str, int, int]]:
 
 
 def run(cfg: PlanConfig) -> list[SplitPlan]:
-    return [SplitPlan(split, factor, n_values, n_strata,
-                      repeats_needed(n_values, n_strata, cfg.tau, cfg.sr, cfg.power, cfg.alpha),
-                      lrt_power(n_values, n_strata, 5, cfg.tau, cfg.sr, cfg.alpha))
-            for split, factor, n_values, n_strata in _layouts(cfg) if n_values >= 2]
+    return [
+        SplitPlan(
+            split,
+            factor,
+            n_values,
+            n_strata,
+            repeats_needed(n_values, n_strata, cfg.tau, cfg.sr, cfg.power, cfg.alpha),
+            lrt_power(n_values, n_strata, 5, cfg.tau, cfg.sr, cfg.alpha),
+        )
+        for split, factor, n_values, n_strata in _layouts(cfg)
+        if n_values >= 2
+    ]
 
 
 def _summary(cfg: PlanConfig, plans: list[SplitPlan]) -> None:
-    print(f"Repeats per instance for {cfg.power:.0%} power to detect a logit-SD {cfg.tau:g} bias at "
-          f"α = {cfg.alpha:g}, success rate ≈ {cfg.sr:.0%} (GLM likelihood-ratio test):")
+    print(
+        f"Repeats per instance for {cfg.power:.0%} power to detect a logit-SD {cfg.tau:g} bias at "
+        f"α = {cfg.alpha:g}, success rate ≈ {cfg.sr:.0%} (GLM likelihood-ratio test):"
+    )
     print(f"{'split':<22}{'factor':<14}{'|V|':>5}{'strata':>8}{'repeats':>9}{'power at 5':>12}")
     for p in plans:
         need = ">1000" if p.repeats is None else str(p.repeats)
         print(f"{p.split:<22}{p.factor:<14}{p.n_values:>5}{p.n_strata:>8}{need:>9}{p.power_at_5:>12.2f}")
-    single = ",".join(f"{p.split}={p.repeats}" for p in plans if p.repeats is not None and "_x_" not in p.split)
+    single = ",".join(
+        f"{p.split}={p.repeats}" for p in plans if p.repeats is not None and "_x_" not in p.split
+    )
     print(f"\nFor pipelines.evaluate: --eval.split_repeats={single}" if single else "")
 
 

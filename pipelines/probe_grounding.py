@@ -27,8 +27,8 @@ from eval.running.results import read_episodes
 from pipelines._cli import BenchmarkPath, cli_main
 from roboview_data.benchmark.format import load_benchmark
 from roboview_data.cli_errors import flag_errors
-from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.tasks import make_env
+from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.variation.colors import COLORS, delta_e_2000
 from roboview_data.variation.instances import episode_seed
 
@@ -81,7 +81,9 @@ def run(cfg: ProbeConfig) -> dict:
     with flag_errors("--results"):
         episodes = read_episodes(cfg.results)
     if "moka_object_description" not in episodes:
-        raise ValueError(f"{cfg.results} holds no MOKA descriptions (moka_object_description): run vlm_moka first")
+        raise ValueError(
+            f"{cfg.results} holds no MOKA descriptions (moka_object_description): run vlm_moka first"
+        )
     with flag_errors("--benchmark.path"):
         bench = load_benchmark(cfg.benchmark.path)
     instances = {item.instance.instance_id: item for items in bench.splits.values() for item in items}
@@ -89,8 +91,9 @@ def run(cfg: ProbeConfig) -> dict:
     rows = rows[rows["moka_object_description"].map(lambda d: any(c in COLORS for c in color_words(str(d))))]
     if cfg.limit:
         rows = rows.head(cfg.limit)
-    grounder = MokaConfig(grounding=cfg.grounding, detector_model=cfg.detector_model,
-                          endpoint=Endpoint(model="probe")).grounder()
+    grounder = MokaConfig(
+        grounding=cfg.grounding, detector_model=cfg.detector_model, endpoint=Endpoint(model="probe")
+    ).grounder()
     env = make_env(cameras=(cfg.camera,), image_size=cfg.image_size)
     cases, per_color = [], {}
     try:
@@ -107,28 +110,47 @@ def run(cfg: ProbeConfig) -> dict:
             for other in neighbours(word, cfg.neighbours):
                 swapped = re.sub(rf"\b{word}\b", other, text)
                 rise = _best(grounder, rgb, swapped) - base
-                cases.append({"instance_id": row["instance_id"], "repeat": int(row["repeat"]), "description": text,
-                              "neighbour": other, "base": round(base, 4), "rise": round(rise, 4)})
+                cases.append(
+                    {
+                        "instance_id": row["instance_id"],
+                        "repeat": int(row["repeat"]),
+                        "description": text,
+                        "neighbour": other,
+                        "base": round(base, 4),
+                        "rise": round(rise, 4),
+                    }
+                )
                 stats = per_color.setdefault(word, [0, 0])
                 stats[0] += rise > cfg.margin
                 stats[1] += 1
     finally:
         env.close()
     n = len(cases)
-    result = {"episodes": int(len({(c["instance_id"], c["repeat"]) for c in cases})), "cases": n,
-              "margin": cfg.margin, "neighbours": cfg.neighbours, "grounding": cfg.grounding,
-              "rises": int(sum(c["rise"] > cfg.margin for c in cases)),
-              "share": round(sum(c["rise"] > cfg.margin for c in cases) / n, 4) if n else None,
-              "per_color": {w: {"rises": a, "cases": b} for w, (a, b) in sorted(per_color.items())}, "detail": cases}
+    result = {
+        "episodes": int(len({(c["instance_id"], c["repeat"]) for c in cases})),
+        "cases": n,
+        "margin": cfg.margin,
+        "neighbours": cfg.neighbours,
+        "grounding": cfg.grounding,
+        "rises": int(sum(c["rise"] > cfg.margin for c in cases)),
+        "share": round(sum(c["rise"] > cfg.margin for c in cases) / n, 4) if n else None,
+        "per_color": {w: {"rises": a, "cases": b} for w, (a, b) in sorted(per_color.items())},
+        "detail": cases,
+    }
     out = Path(cfg.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "probe.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = ["# Grounding-deviation probe", "",
-             f"{result['episodes']} MOKA episodes whose description names a colour, {n} substitutions of that "
-             f"colour by one of its {cfg.neighbours} nearest named colours (CIELAB ΔE2000); grounding backend "
-             f"`{cfg.grounding}`. The neighbour grounds with more than {cfg.margin} higher confidence in "
-             f"**{result['rises']} of {n} cases ({(result['share'] or 0):.2%})** (the paper: 17.78 %).", "",
-             "| colour word | rises | cases |", "|---|---|---|"]
+    lines = [
+        "# Grounding-deviation probe",
+        "",
+        f"{result['episodes']} MOKA episodes whose description names a colour, {n} substitutions of that "
+        f"colour by one of its {cfg.neighbours} nearest named colours (CIELAB ΔE2000); grounding backend "
+        f"`{cfg.grounding}`. The neighbour grounds with more than {cfg.margin} higher confidence in "
+        f"**{result['rises']} of {n} cases ({(result['share'] or 0):.2%})** (the paper: 17.78 %).",
+        "",
+        "| colour word | rises | cases |",
+        "|---|---|---|",
+    ]
     lines += [f"| {w} | {v['rises']} | {v['cases']} |" for w, v in result["per_color"].items()]
     (out / "probe.md").write_text("\n".join(lines) + "\n")
     return result
@@ -136,8 +158,10 @@ def run(cfg: ProbeConfig) -> dict:
 
 def _summary(cfg: ProbeConfig, result: dict) -> None:
     share = "n/a" if result["share"] is None else f"{result['share']:.2%}"
-    print(f"[probe_grounding] {result['rises']} of {result['cases']} substitutions ground better by > {cfg.margin} "
-          f"({share}); {Path(cfg.output_dir) / 'probe.md'}")
+    print(
+        f"[probe_grounding] {result['rises']} of {result['cases']} substitutions ground better by > {cfg.margin} "
+        f"({share}); {Path(cfg.output_dir) / 'probe.md'}"
+    )
 
 
 def main(args: list[str] | None = None) -> dict:

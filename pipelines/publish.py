@@ -50,22 +50,31 @@ class PublishConfig:
     env_repo_id: str | None = None
 
     def __post_init__(self) -> None:
-        for flag, value in (("repo_id", self.repo_id), ("lerobot_repo_id", self.lerobot_repo_id),
-                            ("env_repo_id", self.env_repo_id)):
+        for flag, value in (
+            ("repo_id", self.repo_id),
+            ("lerobot_repo_id", self.lerobot_repo_id),
+            ("env_repo_id", self.env_repo_id),
+        ):
             if value is not None and (value.count("/") != 1 or not all(value.split("/"))):
                 raise ValueError(f"--{flag}={value!r} must look like ORG/NAME")
         manifest = Path(self.path) / MANIFEST
         if not manifest.is_file():
-            raise ValueError(f"--path={self.path} holds no built benchmark ({MANIFEST} missing); "
-                             "run pipelines.build_benchmark first")
+            raise ValueError(
+                f"--path={self.path} holds no built benchmark ({MANIFEST} missing); "
+                "run pipelines.build_benchmark first"
+            )
         if json.loads(manifest.read_text()).get("status") != "ok":
             raise ValueError(f"--path={self.path} is a failed build (fairness gate); fix and rebuild first")
-        with flag_errors("--path"):  # every cell against the build's checksums: an edited benchmark is not published
+        with flag_errors(
+            "--path"
+        ):  # every cell against the build's checksums: an edited benchmark is not published
             load_benchmark(self.path)
         if (self.lerobot_root is None) != (self.lerobot_repo_id is None):
             raise ValueError("--lerobot_root and --lerobot_repo_id go together")
         if self.lerobot_root is not None and not (Path(self.lerobot_root) / "meta/info.json").is_file():
-            raise ValueError(f"--lerobot_root={self.lerobot_root} is not a LeRobot dataset (meta/info.json missing)")
+            raise ValueError(
+                f"--lerobot_root={self.lerobot_root} is not a LeRobot dataset (meta/info.json missing)"
+            )
 
 
 @dataclass(frozen=True)
@@ -105,15 +114,17 @@ def env_hub_files(env_repo_id: str, benchmark_repo_id: str, version: str) -> dic
     import roboview_lerobot
 
     env_py = (Path(roboview_lerobot.__file__).parent / "hub" / "env.py").read_text()
-    readme = (f"---\ntags: [lerobot, envhub, roboview, robot-learning, visual-bias]\n---\n"
-              f"# RoboView-Bias ({version}) as a LeRobot EnvHub environment\n\n"
-              f"Frozen, factor-isolated splits of the RoboView-Bias benchmark (`{benchmark_repo_id}`).\n"
-              "Needs the `roboview` package installed beside lerobot.\n\n"
-              "```python\nimport os\nfrom lerobot.envs.factory import make_env\n\n"
-              f"os.environ[\"ROBOVIEW_BENCHMARK\"] = \"{benchmark_repo_id}\"\n"
-              "os.environ[\"ROBOVIEW_TASK\"] = \"color,camera_pose\"\n"
-              f"envs = make_env(\"{env_repo_id}\", n_envs=4, trust_remote_code=True)\n```\n\n"
-              "Settings: see the docstring of `env.py`.\n")
+    readme = (
+        f"---\ntags: [lerobot, envhub, roboview, robot-learning, visual-bias]\n---\n"
+        f"# RoboView-Bias ({version}) as a LeRobot EnvHub environment\n\n"
+        f"Frozen, factor-isolated splits of the RoboView-Bias benchmark (`{benchmark_repo_id}`).\n"
+        "Needs the `roboview` package installed beside lerobot.\n\n"
+        "```python\nimport os\nfrom lerobot.envs.factory import make_env\n\n"
+        f'os.environ["ROBOVIEW_BENCHMARK"] = "{benchmark_repo_id}"\n'
+        'os.environ["ROBOVIEW_TASK"] = "color,camera_pose"\n'
+        f'envs = make_env("{env_repo_id}", n_envs=4, trust_remote_code=True)\n```\n\n'
+        "Settings: see the docstring of `env.py`.\n"
+    )
     return {"env.py": env_py, "README.md": readme}
 
 
@@ -122,18 +133,24 @@ def _hub_api():
     from huggingface_hub import HfApi, constants, get_token
 
     if constants.HF_HUB_OFFLINE:
-        raise PublishError("offline mode is on (HF_HUB_OFFLINE=1); unset it to publish, "
-                           "or use --dry_run=true to see what would be uploaded")
+        raise PublishError(
+            "offline mode is on (HF_HUB_OFFLINE=1); unset it to publish, "
+            "or use --dry_run=true to see what would be uploaded"
+        )
     token = get_token()
     if not token:
-        raise PublishError("no Hugging Face token: run `huggingface-cli login` or set HF_TOKEN "
-                           "(use --dry_run=true to see what would be uploaded)")
+        raise PublishError(
+            "no Hugging Face token: run `huggingface-cli login` or set HF_TOKEN "
+            "(use --dry_run=true to see what would be uploaded)"
+        )
     api = HfApi(token=token)
     try:
         user = api.whoami()
     except Exception as exc:  # network down, endpoint unreachable, token refused
-        raise PublishError(f"cannot reach the hub at {constants.ENDPOINT} or the token was refused: "
-                           f"{type(exc).__name__}: {exc}") from exc
+        raise PublishError(
+            f"cannot reach the hub at {constants.ENDPOINT} or the token was refused: "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
     log.info("publishing as %s", user.get("name"))
     return api
 
@@ -142,21 +159,29 @@ def publish(cfg: PublishConfig, the_plan: Plan) -> str:
     api = _hub_api()
     api.create_repo(cfg.repo_id, repo_type="dataset", private=cfg.private, exist_ok=True)
     ignore = None if cfg.include_contact_sheet else [CONTACT_SHEET]
-    commit = api.upload_folder(folder_path=cfg.path, repo_id=cfg.repo_id, repo_type="dataset",
-                               ignore_patterns=ignore, commit_message=f"RoboView benchmark {the_plan.version}")
+    commit = api.upload_folder(
+        folder_path=cfg.path,
+        repo_id=cfg.repo_id,
+        repo_type="dataset",
+        ignore_patterns=ignore,
+        commit_message=f"RoboView benchmark {the_plan.version}",
+    )
     api.create_tag(cfg.repo_id, tag=the_plan.version, repo_type="dataset", exist_ok=True)
     if cfg.env_repo_id:
         from huggingface_hub import CommitOperationAdd
 
         api.create_repo(cfg.env_repo_id, private=cfg.private, exist_ok=True)
-        api.create_commit(cfg.env_repo_id, [CommitOperationAdd(path, text.encode())
-                                            for path, text in the_plan.env_files.items()],
-                          commit_message=f"RoboView EnvHub env for {cfg.repo_id} {the_plan.version}")
+        api.create_commit(
+            cfg.env_repo_id,
+            [CommitOperationAdd(path, text.encode()) for path, text in the_plan.env_files.items()],
+            commit_message=f"RoboView EnvHub env for {cfg.repo_id} {the_plan.version}",
+        )
     if cfg.lerobot_root:
         from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
         LeRobotDataset(cfg.lerobot_repo_id, root=cfg.lerobot_root).push_to_hub(
-            tags=["roboview", "franka-panda", "mujoco"], private=cfg.private)
+            tags=["roboview", "franka-panda", "mujoco"], private=cfg.private
+        )
     return str(commit)
 
 
@@ -172,8 +197,10 @@ def run(cfg: PublishConfig) -> Plan:
         for rel, text in the_plan.env_files.items():
             print(f"{len(text.encode()):>12,}  {cfg.env_repo_id}/{rel}")
         count = len(the_plan.files) + len(the_plan.lerobot_files) + len(the_plan.env_files)
-        print(f"[dry run] {count} files, "
-              f"{the_plan.total_bytes:,} bytes; tag {the_plan.version}; nothing uploaded")
+        print(
+            f"[dry run] {count} files, "
+            f"{the_plan.total_bytes:,} bytes; tag {the_plan.version}; nothing uploaded"
+        )
         return the_plan
     publish(cfg, the_plan)
     print(f"[publish] {cfg.repo_id} tagged {the_plan.version}")

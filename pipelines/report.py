@@ -15,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from eval.statistics.metrics import EpisodesError, MetricsConfig
 from eval.reporting.markdown import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
+from eval.statistics.metrics import EpisodesError, MetricsConfig
 from pipelines._cli import cli_main
 
 
@@ -43,7 +43,9 @@ class ReportConfig:
         entries = []
         for item in filter(None, (x.strip() for x in self.results.split(","))):
             name, sep, path = item.partition("=")
-            entries.append((name.strip(), Path(path.strip())) if sep and "/" not in name else (None, Path(item)))
+            entries.append(
+                (name.strip(), Path(path.strip())) if sep and "/" not in name else (None, Path(item))
+            )
         return entries
 
     @property
@@ -58,8 +60,10 @@ def run(cfg: ReportConfig) -> ReportResult:
 
 def _summary(cfg: ReportConfig, result: ReportResult) -> None:
     skipped = [name for name, reason in result.plots.items() if reason is not None]
-    print(f"[report] {result.output_dir / REPORT_FILE} and {HTML_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
-          + (f", skipped {', '.join(skipped)}" if skipped else ""))
+    print(
+        f"[report] {result.output_dir / REPORT_FILE} and {HTML_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
+        + (f", skipped {', '.join(skipped)}" if skipped else "")
+    )
 
 
 def main(args: list[str] | None = None) -> ReportResult:

@@ -45,9 +45,9 @@ import numpy as np
 
 from pipelines._cli import cli_main
 from policies.base import AgentView, ChunkPredictor, PolicyConfig, missing_policy_type
-from policies.types import load_policy_types
 from policies.factory import build_policy
 from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from_message, wire_format
+from policies.types import load_policy_types
 from roboview_data.sim.cameras import check_image_size
 from roboview_data.tasks import DEFAULT_TASK, TASKS
 
@@ -98,15 +98,21 @@ class ServeConfig:
         if self.server not in SERVERS:
             raise ValueError(f"unknown --server={self.server!r}; allowed: {', '.join(SERVERS)}")
         if self.max_clients < 1 or self.gather_ms < 0 or self.threads < 0:
-            raise ValueError(f"--max_clients={self.max_clients} must be ≥ 1, --gather_ms={self.gather_ms} "
-                             f"and --threads={self.threads} ≥ 0")
+            raise ValueError(
+                f"--max_clients={self.max_clients} must be ≥ 1, --gather_ms={self.gather_ms} "
+                f"and --threads={self.threads} ≥ 0"
+            )
         if self.image_size:  # 0: the policy's own size
             check_image_size(self.image_size, "--image_size", why="or 0 for the policy's own size")
         if self.server == "openpi" and os.environ.get(self.api_key_env):
-            raise ValueError(f"--server=openpi does not check API keys; unset {self.api_key_env} or use --server=roboview")
+            raise ValueError(
+                f"--server=openpi does not check API keys; unset {self.api_key_env} or use --server=roboview"
+            )
         if self.policy.privileged:
-            raise ValueError(f"--policy.type={self.policy.type} reads the simulator's state and cannot be served; "
-                             "serve a policy that acts from observations (lerobot, vision, vlm_simple, …)")
+            raise ValueError(
+                f"--policy.type={self.policy.type} reads the simulator's state and cannot be served; "
+                "serve a policy that acts from observations (lerobot, vision, vlm_simple, …)"
+            )
 
 
 class _Session:
@@ -147,21 +153,33 @@ class PolicyService:
         self.config = cfg.policy
         own = cfg.policy.input_image_size()
         if own is not None and cfg.image_size and cfg.image_size != own:
-            raise ValueError(f"--image_size={cfg.image_size} but the policy takes {own}×{own} images; drop the flag")
+            raise ValueError(
+                f"--image_size={cfg.image_size} but the policy takes {own}×{own} images; drop the flag"
+            )
         self.image_size = own or cfg.image_size or 224
         cameras = cfg.policy.observed_cameras()
         self.format = wire_format(cfg.obs_format, cameras, cfg.key_map, cfg.policy.depth)
         self.view = AgentView.of_task(cfg.task, cameras, self.image_size, cfg.policy.depth)
-        self.batched = cfg.policy.build_batched(self.view, cfg.max_clients) if cfg.policy.batchable() else None
+        self.batched = (
+            cfg.policy.build_batched(self.view, cfg.max_clients) if cfg.policy.batchable() else None
+        )
         if not isinstance(self.batched, ChunkPredictor):
             self.batched = None
         name = self.batched.name if self.batched is not None else cfg.policy.type
         self.horizon = getattr(self.batched, "n_action_steps", 1) if self.batched is not None else 1
-        self.metadata = {ROBOVIEW_KEY: {"policy": cfg.policy.name or name, "policy_type": cfg.policy.type,
-                                        "checkpoint": cfg.policy.checkpoint, "cameras": list(cameras),
-                                        "image_size": self.image_size, "obs_format": cfg.obs_format,
-                                        "action_horizon": self.horizon, "batched": self.batched is not None,
-                                        "task": cfg.task}}
+        self.metadata = {
+            ROBOVIEW_KEY: {
+                "policy": cfg.policy.name or name,
+                "policy_type": cfg.policy.type,
+                "checkpoint": cfg.policy.checkpoint,
+                "cameras": list(cameras),
+                "image_size": self.image_size,
+                "obs_format": cfg.obs_format,
+                "action_horizon": self.horizon,
+                "batched": self.batched is not None,
+                "task": cfg.task,
+            }
+        }
         if cfg.threads and "torch" in sys.modules:
             sys.modules["torch"].set_num_threads(cfg.threads)
         self.requests = 0
@@ -173,8 +191,9 @@ class PolicyService:
 
     def predict(self, batch: dict[int, tuple[dict, str]]) -> dict[int, np.ndarray]:
         """One forward pass over slot -> (observation, instruction): each slot's next chunk, (H, 8)."""
-        chunks = self.batched.predict_chunks({s: o for s, (o, _) in batch.items()},
-                                             instructions={s: i for s, (_, i) in batch.items()})
+        chunks = self.batched.predict_chunks(
+            {s: o for s, (o, _) in batch.items()}, instructions={s: i for s, (_, i) in batch.items()}
+        )
         self.requests += len(batch)
         self.forward_passes += 1
         return {slot: np.stack(actions).astype(np.float32) for slot, actions in chunks.items()}
@@ -205,19 +224,25 @@ class OneRequestPolicy:
 
 def _gate(api_key: str | None):
     """`process_request`: /healthz answers OK; with a key, a connection without it is refused (401)."""
+
     def check(connection, request):
         if request.path == "/healthz":
             return connection.respond(http.HTTPStatus.OK, "OK\n")
         if api_key and request.headers.get("Authorization") != f"Api-Key {api_key}":
-            return connection.respond(http.HTTPStatus.UNAUTHORIZED, "missing or wrong API key (Authorization: Api-Key …)\n")
+            return connection.respond(
+                http.HTTPStatus.UNAUTHORIZED, "missing or wrong API key (Authorization: Api-Key …)\n"
+            )
         return None
+
     return check
 
 
 class BatchingServer:
     """openpi's protocol over asyncio websockets; requests of all connections gathered into forward passes."""
 
-    def __init__(self, service: PolicyService, max_clients: int, gather_s: float, api_key: str | None = None) -> None:
+    def __init__(
+        self, service: PolicyService, max_clients: int, gather_s: float, api_key: str | None = None
+    ) -> None:
         self.service = service
         self.api_key = api_key
         self.gather_s = gather_s
@@ -271,7 +296,9 @@ class BatchingServer:
         from openpi_client import msgpack_numpy
 
         if not self.free:
-            await websocket.close(code=1013, reason=f"server full ({len(self.free)} free slots); try again later")
+            await websocket.close(
+                code=1013, reason=f"server full ({len(self.free)} free slots); try again later"
+            )
             return
         slot = self.free.pop()
         self.connected += 1
@@ -289,22 +316,30 @@ class BatchingServer:
                     actions = await self._infer(slot, session, msgpack_numpy.unpackb(message))
                 except Exception:
                     await websocket.send(traceback.format_exc())
-                    await websocket.close(code=1011, reason="Internal server error. Traceback included in previous frame.")
+                    await websocket.close(
+                        code=1011, reason="Internal server error. Traceback included in previous frame."
+                    )
                     break
-                await websocket.send(packer.pack({"actions": actions,
-                                                  "server_timing": {"infer_ms": 1000 * (time.monotonic() - start)}}))
+                await websocket.send(
+                    packer.pack(
+                        {"actions": actions, "server_timing": {"infer_ms": 1000 * (time.monotonic() - start)}}
+                    )
+                )
         finally:
             self.connected -= 1
             self.free.append(slot)
             session.close()
 
-    async def serve(self, host: str, port: int, ready: threading.Event | None = None, bound: list | None = None):
+    async def serve(
+        self, host: str, port: int, ready: threading.Event | None = None, bound: list | None = None
+    ):
         from websockets.asyncio.server import serve
 
         self.queue = asyncio.Queue()
         batcher = asyncio.create_task(self._batcher())
-        async with serve(self._handler, host, port, compression=None, max_size=None,
-                         process_request=_gate(self.api_key)) as server:
+        async with serve(
+            self._handler, host, port, compression=None, max_size=None, process_request=_gate(self.api_key)
+        ) as server:
             if bound is not None:
                 bound.append(server.sockets[0].getsockname()[1])
             if ready is not None:
@@ -317,8 +352,10 @@ class BatchingServer:
 
 def _stop_on_sigterm() -> None:
     """SIGTERM ends the server as Ctrl-C does (the summary line is printed, the model released)."""
+
     def stop(*_):
         raise KeyboardInterrupt
+
     signal.signal(signal.SIGTERM, stop)
 
 
@@ -326,8 +363,13 @@ def run(cfg: ServeConfig) -> None:
     _stop_on_sigterm()
     service = PolicyService(cfg)
     info = service.metadata[ROBOVIEW_KEY]
-    mode = ("one request at a time (openpi-server)" if cfg.server == "openpi" else
-            "batched across connections" if service.batched is not None else "one policy per connection")
+    mode = (
+        "one request at a time (openpi-server)"
+        if cfg.server == "openpi"
+        else "batched across connections"
+        if service.batched is not None
+        else "one policy per connection"
+    )
     what = f"{info['policy']} ({cfg.obs_format} layout, {service.image_size}² images, {mode}, horizon {service.horizon})"
     try:
         if cfg.server == "openpi":
@@ -345,14 +387,21 @@ def run(cfg: ServeConfig) -> None:
                 print(f"[serve_policy] {what} at ws://{cfg.host}:{bound[0]}  (Ctrl-C stops)", flush=True)
 
             threading.Thread(target=announce, daemon=True).start()
-            server = BatchingServer(service, cfg.max_clients, cfg.gather_ms / 1000, os.environ.get(cfg.api_key_env))
+            server = BatchingServer(
+                service, cfg.max_clients, cfg.gather_ms / 1000, os.environ.get(cfg.api_key_env)
+            )
             asyncio.run(server.serve(cfg.host, cfg.port, ready, bound))
     except KeyboardInterrupt:
         pass
     except OSError as exc:
-        raise ValueError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror}; pick another --port") from None
+        raise ValueError(
+            f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror}; pick another --port"
+        ) from None
     finally:
-        print(f"[serve_policy] {service.requests} requests in {service.forward_passes} forward passes", flush=True)
+        print(
+            f"[serve_policy] {service.requests} requests in {service.forward_passes} forward passes",
+            flush=True,
+        )
         service.close()
 
 

@@ -39,8 +39,13 @@ def run(cfg: ServeConfig) -> None:
     try:
         server, url = start_server(model, cfg.host, cfg.port)
     except OSError as exc:
-        raise ValueError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror}; pick another --port") from None
-    print(f"[serve_vlm] model {model.name!r} (classic-CV stand-in, NOT a VLM) at {url}  (Ctrl-C stops)", flush=True)
+        raise ValueError(
+            f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror}; pick another --port"
+        ) from None
+    print(
+        f"[serve_vlm] model {model.name!r} (classic-CV stand-in, NOT a VLM) at {url}  (Ctrl-C stops)",
+        flush=True,
+    )
     try:
         while True:
             time.sleep(3600)

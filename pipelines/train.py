@@ -73,20 +73,34 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.device not in DEVICES:
             raise ValueError(f"unknown --device={self.device!r}; allowed: {', '.join(DEVICES)}")
-        for name in ("steps", "save_freq", "batch_size", "chunk_size", "n_action_steps", "eval_episodes", "eval_freq"):
+        for name in (
+            "steps",
+            "save_freq",
+            "batch_size",
+            "chunk_size",
+            "n_action_steps",
+            "eval_episodes",
+            "eval_freq",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
         if self.num_threads < 0:
             raise ValueError(f"--num_threads={self.num_threads} must be ≥ 0 (0 = one fewer than the cores)")
         if self.n_action_steps > self.chunk_size:
-            raise ValueError(f"--n_action_steps={self.n_action_steps} cannot exceed --chunk_size={self.chunk_size}")
+            raise ValueError(
+                f"--n_action_steps={self.n_action_steps} cannot exceed --chunk_size={self.chunk_size}"
+            )
         info = Path(self.dataset.root) / "meta" / "info.json"
         if not self.dataset.root or not info.is_file():
-            raise ValueError(f"--dataset.root={self.dataset.root!r} holds no LeRobot dataset (meta/info.json "
-                             "missing); collect one with `python -m pipelines.collect`")
+            raise ValueError(
+                f"--dataset.root={self.dataset.root!r} holds no LeRobot dataset (meta/info.json "
+                "missing); collect one with `python -m pipelines.collect`"
+            )
         cameras = [k for k in json.loads(info.read_text())["features"] if k.startswith("observation.images.")]
         if not cameras:
-            raise ValueError(f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one")
+            raise ValueError(
+                f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one"
+            )
         if self.benchmark.path:
             from roboview_data.benchmark.format import load_benchmark
 
@@ -98,15 +112,24 @@ class TrainConfig:
         if not self.benchmark.path:
             return []
         features = json.loads((Path(self.dataset.root) / "meta" / "info.json").read_text())["features"]
-        images = {k.removeprefix("observation.images."): v["shape"] for k, v in features.items()
-                  if k.startswith("observation.images.")}
+        images = {
+            k.removeprefix("observation.images."): v["shape"]
+            for k, v in features.items()
+            if k.startswith("observation.images.")
+        }
         side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
-        return ["--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
-                f"--env.benchmark_path={self.benchmark.path}", f"--env.task={self.eval_split}",
-                f"--env.limit={self.eval_episodes}", f"--env.cameras={','.join(images)}", f"--env.image_size={side}",
-                f"--env_eval_freq={self.eval_freq}", f"--eval.n_episodes={self.eval_episodes}",
-                f"--eval.batch_size={min(self.eval_episodes, 8)}"]
-
+        return [
+            "--env.discover_packages_path=roboview_lerobot",
+            "--env.type=roboview",
+            f"--env.benchmark_path={self.benchmark.path}",
+            f"--env.task={self.eval_split}",
+            f"--env.limit={self.eval_episodes}",
+            f"--env.cameras={','.join(images)}",
+            f"--env.image_size={side}",
+            f"--env_eval_freq={self.eval_freq}",
+            f"--eval.n_episodes={self.eval_episodes}",
+            f"--eval.batch_size={min(self.eval_episodes, 8)}",
+        ]
 
     @property
     def threads(self) -> int:
@@ -132,16 +155,35 @@ def command(cfg: TrainConfig) -> list[str]:
     if resume is not None:
         return [*trainer, f"--config_path={resume}", "--resume=true", f"--steps={cfg.steps}"]
     if out.exists() and any(out.iterdir()):
-        raise ValueError(f"--output_dir={out} is not empty and holds no checkpoint to resume; choose a new folder")
-    return [*trainer, f"--dataset.repo_id={cfg.dataset.repo_id}", f"--dataset.root={cfg.dataset.root}",
-            "--policy.type=act", "--policy.pretrained_backbone_weights=null", "--policy.push_to_hub=false",
-            f"--policy.device={_device(cfg.device)}", "--policy.dim_model=256",
-            "--policy.dim_feedforward=1024", "--policy.n_encoder_layers=2", "--policy.n_vae_encoder_layers=2",
-            f"--policy.chunk_size={cfg.chunk_size}", f"--policy.n_action_steps={cfg.n_action_steps}",
-            f"--policy.optimizer_lr={cfg.lr}", f"--policy.optimizer_lr_backbone={cfg.lr}",
-            f"--batch_size={cfg.batch_size}", f"--steps={cfg.steps}", f"--save_freq={cfg.save_freq}",
-            f"--log_freq={min(100, cfg.save_freq)}", "--num_workers=0", "--wandb.enable=false",
-            f"--output_dir={out}", f"--job_name={out.name}", *cfg.eval_flags()]
+        raise ValueError(
+            f"--output_dir={out} is not empty and holds no checkpoint to resume; choose a new folder"
+        )
+    return [
+        *trainer,
+        f"--dataset.repo_id={cfg.dataset.repo_id}",
+        f"--dataset.root={cfg.dataset.root}",
+        "--policy.type=act",
+        "--policy.pretrained_backbone_weights=null",
+        "--policy.push_to_hub=false",
+        f"--policy.device={_device(cfg.device)}",
+        "--policy.dim_model=256",
+        "--policy.dim_feedforward=1024",
+        "--policy.n_encoder_layers=2",
+        "--policy.n_vae_encoder_layers=2",
+        f"--policy.chunk_size={cfg.chunk_size}",
+        f"--policy.n_action_steps={cfg.n_action_steps}",
+        f"--policy.optimizer_lr={cfg.lr}",
+        f"--policy.optimizer_lr_backbone={cfg.lr}",
+        f"--batch_size={cfg.batch_size}",
+        f"--steps={cfg.steps}",
+        f"--save_freq={cfg.save_freq}",
+        f"--log_freq={min(100, cfg.save_freq)}",
+        "--num_workers=0",
+        "--wandb.enable=false",
+        f"--output_dir={out}",
+        f"--job_name={out.name}",
+        *cfg.eval_flags(),
+    ]
 
 
 def run(cfg: TrainConfig) -> Path:
@@ -153,7 +195,11 @@ def run(cfg: TrainConfig) -> Path:
         return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
     # lerobot imports the roboview_lerobot plugin by name: make this checkout importable in the trainer.
     root = str(Path(__file__).resolve().parents[1])
-    env = os.environ | threads | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
+    env = (
+        os.environ
+        | threads
+        | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
+    )
     print(f"[train] lerobot-train with {cfg.threads} CPU thread(s) (--num_threads)", flush=True)
     proc = subprocess.run(cmd, env=env)
     if proc.returncode != 0:
@@ -163,8 +209,10 @@ def run(cfg: TrainConfig) -> Path:
 
 def _summary(cfg: TrainConfig, checkpoint: Path) -> None:
     if not cfg.dry_run:
-        print(f"[train] checkpoint: {checkpoint} (evaluate: python -m pipelines.evaluate --policy.type=lerobot "
-              f"--policy.path={checkpoint} ...)")
+        print(
+            f"[train] checkpoint: {checkpoint} (evaluate: python -m pipelines.evaluate --policy.type=lerobot "
+            f"--policy.path={checkpoint} ...)"
+        )
 
 
 def main(args: list[str] | None = None) -> Path:

@@ -41,12 +41,15 @@ class VerifyConfig:
 
     def __post_init__(self) -> None:
         if not self.results and not self.benchmark.path:
-            raise ValueError("give --benchmark.path=DIR (verify a benchmark on this machine) or --results=DIR "
-                             "(verify a results folder against its benchmark)")
+            raise ValueError(
+                "give --benchmark.path=DIR (verify a benchmark on this machine) or --results=DIR "
+                "(verify a results folder against its benchmark)"
+            )
         from eval.running.inputs import benchmark_folder_problem, results_folder_problem
 
         problem = self.results and results_folder_problem(
-            Path(self.results), f" (verify a benchmark with --benchmark.path={self.results})")
+            Path(self.results), f" (verify a benchmark with --benchmark.path={self.results})"
+        )
         if problem:
             raise ValueError(f"--results: {problem}")
         problem = self.benchmark.path and benchmark_folder_problem(Path(self.benchmark.path))
@@ -90,21 +93,33 @@ def verify_benchmark(root: Path) -> VerifyResult:
     for path in tables:
         try:
             rows = verify_table(root, path, manifest)
-            checks.append(Check(f"content {path.relative_to(root).with_suffix('')}", True,
-                                f"{len(rows)} rows, every cell as built"))
+            checks.append(
+                Check(
+                    f"content {path.relative_to(root).with_suffix('')}",
+                    True,
+                    f"{len(rows)} rows, every cell as built",
+                )
+            )
         except BenchmarkError as exc:
             checks.append(Check(f"content {path.relative_to(root).with_suffix('')}", False, str(exc)))
     report = conformance.check(root)
     for line in report.lines():
         print(line)
     differences = stack.differences(manifest.get("stack"), report.stack)
-    checks.append(Check("stack", True, "the same as the build's" if not differences else "; ".join(differences)))
+    checks.append(
+        Check("stack", True, "the same as the build's" if not differences else "; ".join(differences))
+    )
     d = report.drift
-    checks.append(Check("conformance", report.verdict != "different",
-                        f"{report.verdict}: {d['images_identical']}/{d['images']} images and {d['physics_identical']}/"
-                        f"{d['physics']} rollouts bit-identical; ≤ {d['pixel_fraction_max']:.3%} pixels differ (max Δ "
-                        f"{d['max_level_diff']}, region px {d['region_pixels_max']}); joints ≤ {d['joint_max']:.1e} rad, "
-                        f"object ≤ {d['object_error_m_max']:.1e} m"))
+    checks.append(
+        Check(
+            "conformance",
+            report.verdict != "different",
+            f"{report.verdict}: {d['images_identical']}/{d['images']} images and {d['physics_identical']}/"
+            f"{d['physics']} rollouts bit-identical; ≤ {d['pixel_fraction_max']:.3%} pixels differ (max Δ "
+            f"{d['max_level_diff']}, region px {d['region_pixels_max']}); joints ≤ {d['joint_max']:.1e} rad, "
+            f"object ≤ {d['object_error_m_max']:.1e} m",
+        )
+    )
     return VerifyResult(checks, time.perf_counter() - start, report.verdict)
 
 
@@ -119,8 +134,10 @@ def _benchmark_path(cfg: VerifyConfig, results: Path) -> Path:
     recorded = [e.get("benchmark_path") for e in provenance.read(results) if e.get("benchmark_path")]
     if recorded and Path(recorded[-1]).is_dir():
         return Path(recorded[-1])
-    raise ValueError(f"{results} does not name a benchmark folder that exists here "
-                     f"({recorded[-1] if recorded else 'none recorded'}); pass --benchmark.path=DIR")
+    raise ValueError(
+        f"{results} does not name a benchmark folder that exists here "
+        f"({recorded[-1] if recorded else 'none recorded'}); pass --benchmark.path=DIR"
+    )
 
 
 def _rows(results: Path) -> tuple[list[dict], dict]:
@@ -128,8 +145,9 @@ def _rows(results: Path) -> tuple[list[dict], dict]:
     from eval.running.results import PARQUET, RUN_FILE, ResultsError, check_format
 
     advice = "give the folder pipelines.evaluate wrote (--output_dir)"
-    problem = (folder_problem(results, "results", RUN_FILE, advice)
-               or folder_problem(results, "results", PARQUET, advice))
+    problem = folder_problem(results, "results", RUN_FILE, advice) or folder_problem(
+        results, "results", PARQUET, advice
+    )
     if problem:
         raise ResultsError(problem)
     check_format(results / PARQUET)  # refuses other results formats with its own message
@@ -153,30 +171,62 @@ def check_rows(rows: list[dict], bench) -> list[Check]:
             cols = [c for c, v in record.items() if row.get(c) != v]
             if cols:
                 edited.append(f"{row['instance_id']} repeat {row['repeat']} ({', '.join(cols)})")
-    checks = [Check("instances", not unknown and not edited,
-                    f"{len(rows)} rows, each an instance of the benchmark with identical content" if not unknown and not edited
-                    else "; ".join(filter(None, [
+    checks = [
+        Check(
+            "instances",
+            not unknown and not edited,
+            f"{len(rows)} rows, each an instance of the benchmark with identical content"
+            if not unknown and not edited
+            else "; ".join(
+                filter(
+                    None,
+                    [
                         f"{len(unknown)} rows name instances the benchmark does not hold: {_listed(sorted(set(unknown)))}"
-                        if unknown else "",
-                        f"{len(edited)} rows differ from their instance's record: {_listed(edited)}" if edited else ""])))]
-    bad_seeds = [f"{r['instance_id']} repeat {r['repeat']} (seed {r.get('episode_seed')}, expected "
-                 f"{episode_seed(records[r['instance_id']]['context_id'], r['repeat'])})"
-                 for r in rows if r["instance_id"] in records
-                 and r.get("episode_seed") != episode_seed(records[r["instance_id"]]["context_id"], r["repeat"])]
-    checks.append(Check("seeds", not bad_seeds, "every episode seed is its (context, repeat)'s common-random-number seed"
-                        if not bad_seeds else f"{len(bad_seeds)} rows with another seed: {_listed(bad_seeds)}"))
+                        if unknown
+                        else "",
+                        f"{len(edited)} rows differ from their instance's record: {_listed(edited)}"
+                        if edited
+                        else "",
+                    ],
+                )
+            ),
+        )
+    ]
+    bad_seeds = [
+        f"{r['instance_id']} repeat {r['repeat']} (seed {r.get('episode_seed')}, expected "
+        f"{episode_seed(records[r['instance_id']]['context_id'], r['repeat'])})"
+        for r in rows
+        if r["instance_id"] in records
+        and r.get("episode_seed") != episode_seed(records[r["instance_id"]]["context_id"], r["repeat"])
+    ]
+    checks.append(
+        Check(
+            "seeds",
+            not bad_seeds,
+            "every episode seed is its (context, repeat)'s common-random-number seed"
+            if not bad_seeds
+            else f"{len(bad_seeds)} rows with another seed: {_listed(bad_seeds)}",
+        )
+    )
     counts = Counter((r["instance_id"], r["repeat"]) for r in rows)
     twice = [f"{i} repeat {r} ×{n}" for (i, r), n in counts.items() if n > 1]
-    checks.append(Check("duplicates", not twice, "no (instance, repeat) twice" if not twice
-                        else f"{len(twice)} (instance, repeat) pairs appear more than once: {_listed(twice)}"))
+    checks.append(
+        Check(
+            "duplicates",
+            not twice,
+            "no (instance, repeat) twice"
+            if not twice
+            else f"{len(twice)} (instance, repeat) pairs appear more than once: {_listed(twice)}",
+        )
+    )
     return checks
 
 
 def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
     """Every split the run chose: all its instances (after the run's value filter and shard) × its repeats, or,
     for an adaptive split, the rounds its stopping record says, with the decision its rows give."""
-    from eval.statistics.adaptive import Design, decide_split, read_record
     from eval.running.results import shard_of
+    from eval.statistics.adaptive import Design, decide_split, read_record
 
     values = set(run.get("values") or [])
     shard = run.get("shard")
@@ -193,25 +243,39 @@ def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
             continue
         stopped = adaptive.get("splits", {}).get(split)
         if run.get("adaptive") and "|" not in split and stopped is None and items:
-            problems.append(f"{split}: adaptive run with no stopping record (unfinished: rerun the same command)")
+            problems.append(
+                f"{split}: adaptive run with no stopping record (unfinished: rerun the same command)"
+            )
             continue
         rounds = stopped["rounds"] if stopped else repeats
-        missing = [(i.record["instance_id"], r) for i in items for r in range(rounds)
-                   if (i.record["instance_id"], r) not in have]
+        missing = [
+            (i.record["instance_id"], r)
+            for i in items
+            for r in range(rounds)
+            if (i.record["instance_id"], r) not in have
+        ]
         if not any((i.record["instance_id"], 0) in have for i in items) and items:
             problems.append(f"{split}: missing (no episode of its {len(items)} instances)")
         elif missing:
-            problems.append(f"{split}: {len(missing)} of {len(items) * rounds} episodes missing "
-                            f"(e.g. {missing[0][0]} repeat {missing[0][1]}; a sample or an unfinished run)")
+            problems.append(
+                f"{split}: {len(missing)} of {len(items) * rounds} episodes missing "
+                f"(e.g. {missing[0][0]} repeat {missing[0][1]}; a sample or an unfinished run)"
+            )
         elif stopped:
             design = Design(**adaptive["design"])
             split_rows = [r for r in rows if r["split"] == split and r["repeat"] < rounds]
             decision = decide_split(split_rows, rounds, design)
             if decision.stopped != stopped["stopped"]:
-                problems.append(f"{split}: its rows give {decision.stopped!r} after {rounds} rounds, its record says "
-                                f"{stopped['stopped']!r}")
+                problems.append(
+                    f"{split}: its rows give {decision.stopped!r} after {rounds} rounds, its record says "
+                    f"{stopped['stopped']!r}"
+                )
         summary.append(f"{split} {len(items)}×{rounds}")
-    return Check("complete", not problems, "; ".join(problems) if problems else "every split complete: " + ", ".join(summary))
+    return Check(
+        "complete",
+        not problems,
+        "; ".join(problems) if problems else "every split complete: " + ", ".join(summary),
+    )
 
 
 def verify_results(cfg: VerifyConfig) -> VerifyResult:
@@ -229,9 +293,18 @@ def verify_results(cfg: VerifyConfig) -> VerifyResult:
         return VerifyResult([Check("benchmark", False, str(exc))], time.perf_counter() - start)
     checks = [Check("benchmark", True, f"{root}: version {bench.version}, every cell as built")]
     recorded = read_version(results / "episodes.parquet")
-    checks.append(Check("identity", recorded == bench.version == run.get("benchmark_version"),
-                        f"results of benchmark {recorded}" + ("" if recorded == bench.version == run.get("benchmark_version")
-                                                              else f", not of {bench.version} (another benchmark or version)")))
+    checks.append(
+        Check(
+            "identity",
+            recorded == bench.version == run.get("benchmark_version"),
+            f"results of benchmark {recorded}"
+            + (
+                ""
+                if recorded == bench.version == run.get("benchmark_version")
+                else f", not of {bench.version} (another benchmark or version)"
+            ),
+        )
+    )
     checks += check_rows(rows, bench)
     import pandas as pd
 
@@ -239,24 +312,51 @@ def verify_results(cfg: VerifyConfig) -> VerifyResult:
     certificate = isolation.verify(frame) if rows else {}
     unrecorded = [s for s, r in certificate.items() if not r["recorded"]]
     violations = {s: len(r["violations"]) for s, r in certificate.items() if r["violations"]}
-    checks.append(Check("isolation", not unrecorded and not violations,
-                        f"{sum(r['blocks'] for r in certificate.values())} blocks, only the factor differs in each"
-                        if not unrecorded and not violations else "; ".join(
-                            [f"{s}: no certificate recorded" for s in unrecorded]
-                            + [f"{s}: {n} blocks where more than the factor differs" for s, n in violations.items()])))
+    checks.append(
+        Check(
+            "isolation",
+            not unrecorded and not violations,
+            f"{sum(r['blocks'] for r in certificate.values())} blocks, only the factor differs in each"
+            if not unrecorded and not violations
+            else "; ".join(
+                [f"{s}: no certificate recorded" for s in unrecorded]
+                + [f"{s}: {n} blocks where more than the factor differs" for s, n in violations.items()]
+            ),
+        )
+    )
     checks.append(check_complete(rows, bench, run, results))
     infra = Counter(r["split"] for r in rows if r.get("status") == "infra_error")
-    checks.append(Check("infrastructure", not infra, "no episode ended by infrastructure" if not infra else
-                        f"{sum(infra.values())} episodes ended by infrastructure, not results ("
-                        + ", ".join(f"{s}: {n}" for s, n in infra.items()) + "); rerun the same command to re-run them"))
+    checks.append(
+        Check(
+            "infrastructure",
+            not infra,
+            "no episode ended by infrastructure"
+            if not infra
+            else f"{sum(infra.values())} episodes ended by infrastructure, not results ("
+            + ", ".join(f"{s}: {n}" for s, n in infra.items())
+            + "); rerun the same command to re-run them",
+        )
+    )
     verdicts = Counter(r.get("conformance") or "not recorded" for r in rows)
     entries = [e for e in provenance.read(results) if e.get("conformance")]
     ok = bool(rows) and set(verdicts) <= {"identical", "equivalent"} and bool(entries)
-    stacks = sorted({json.dumps(e["conformance"].get("stack", {}).get("renderer", {}), sort_keys=True) for e in entries})
-    checks.append(Check("conformance", ok, ", ".join(f"{n} rows {v}" for v, n in sorted(verdicts.items()))
-                        + f"; {len(entries)} run(s) recorded their stack ({len(stacks)} renderer(s))"
-                        + ("" if ok else " — every row must come from a stack whose conformance is identical or "
-                                         "equivalent, recorded in provenance.json")))
+    stacks = sorted(
+        {json.dumps(e["conformance"].get("stack", {}).get("renderer", {}), sort_keys=True) for e in entries}
+    )
+    checks.append(
+        Check(
+            "conformance",
+            ok,
+            ", ".join(f"{n} rows {v}" for v, n in sorted(verdicts.items()))
+            + f"; {len(entries)} run(s) recorded their stack ({len(stacks)} renderer(s))"
+            + (
+                ""
+                if ok
+                else " — every row must come from a stack whose conformance is identical or "
+                "equivalent, recorded in provenance.json"
+            ),
+        )
+    )
     return VerifyResult(checks, time.perf_counter() - start)
 
 
@@ -272,8 +372,10 @@ def _summary(cfg: VerifyConfig, result: VerifyResult) -> None:
         print(f"{'PASS' if c.passed else 'FAIL'}  {c.name:<{width}}  {c.detail}")
     failed = sum(not c.passed for c in result.checks)
     what = cfg.results or cfg.benchmark.path
-    print(f"[verify] {what}: {'passed' if result.passed else f'FAILED ({failed} of {len(result.checks)} checks)'} "
-          f"in {result.seconds:.1f} s")
+    print(
+        f"[verify] {what}: {'passed' if result.passed else f'FAILED ({failed} of {len(result.checks)} checks)'} "
+        f"in {result.seconds:.1f} s"
+    )
     if not result.passed:
         raise SystemExit(1)
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
-from roboview_data.tasks.env import TaskEnv
 from roboview_data.tasks import load_task
+from roboview_data.tasks.env import TaskEnv
 
 
 class ExpertPolicy:

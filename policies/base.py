@@ -28,8 +28,8 @@ import numpy as np
 
 from policies.errors import TransientPolicyError  # noqa: F401  (part of the policy API)
 from roboview_data.sim.cameras import CameraPose
-from roboview_data.tasks.env import TaskEnv
 from roboview_data.sim.scene import Scene
+from roboview_data.tasks.env import TaskEnv
 
 
 @dataclass(frozen=True)
@@ -50,8 +50,13 @@ class Episode:
     @classmethod
     def of(cls, env: TaskEnv, seed: int) -> Episode:
         """The episode an env just reset into (reads its instruction and camera calibration only)."""
-        return cls(env.instance.task, env.instruction, seed,
-                   {c: env.scene.camera_pose(c) for c in env.cameras}, env.image_size)
+        return cls(
+            env.instance.task,
+            env.instruction,
+            seed,
+            {c: env.scene.camera_pose(c) for c in env.cameras},
+            env.image_size,
+        )
 
 
 @dataclass(frozen=True)
@@ -68,8 +73,15 @@ class AgentView:
 
     @classmethod
     def of(cls, env: TaskEnv) -> AgentView:
-        return cls(env.instance.task, env.cameras, env.image_size, env.depth, env.fps, env.action_space,
-                   env.observation_space)
+        return cls(
+            env.instance.task,
+            env.cameras,
+            env.image_size,
+            env.depth,
+            env.fps,
+            env.action_space,
+            env.observation_space,
+        )
 
     @classmethod
     def of_task(cls, task: str, cameras: tuple[str, ...], image_size: int, depth: bool = False) -> AgentView:
@@ -127,8 +139,9 @@ class ChunkPredictor(Protocol):
     # Actions of a chunk that run before the next prediction.
     n_action_steps: int
 
-    def predict_chunks(self, observations: dict[int, dict],
-                       instructions: dict[int, str] | None = None) -> dict[int, list[np.ndarray]]:
+    def predict_chunks(
+        self, observations: dict[int, dict], instructions: dict[int, str] | None = None
+    ) -> dict[int, list[np.ndarray]]:
         """slot → its next `n_action_steps` actions, from one forward pass over every slot's observation."""
 
 
@@ -216,9 +229,13 @@ def registered_types() -> tuple[str, ...]:
 def missing_policy_type() -> str:
     """The one-line error for a command run without `--policy.type` (there is no default policy)."""
     privileged = [name for name in registered_types() if PolicyConfig.get_choice_class(name).privileged]
-    notes = [f"; `{name}` is the privileged scripted expert (it reads the simulator state, which no real "
-             "policy sees)" if name == "expert" else f"; `{name}` is privileged (it reads the simulator "
-             "state)" for name in privileged]
+    notes = [
+        f"; `{name}` is the privileged scripted expert (it reads the simulator state, which no real "
+        "policy sees)"
+        if name == "expert"
+        else f"; `{name}` is privileged (it reads the simulator state)"
+        for name in privileged
+    ]
     return f"--policy.type is required: one of {', '.join(registered_types())}{''.join(notes)}"
 
 

@@ -88,19 +88,25 @@ SERVER_DEVICE = re.compile(r"^(cpu|mps|cuda(:\d+)?)$")
 ADDRESS = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
 # Seconds for `Ready` (the reachability check, and each reconnect attempt's first call).
 CONNECT_TIMEOUT_S = 10.0
-START_SERVER = ("python -m lerobot.async_inference.policy_server --host={host} --port={port} --fps=10 "
-                "--inference_latency=0")
+START_SERVER = (
+    "python -m lerobot.async_inference.policy_server --host={host} --port={port} --fps=10 "
+    "--inference_latency=0"
+)
 
 
 def parse_servers(value: str) -> tuple[str, ...]:
     """`HOST:PORT` or a comma-separated list of them (worker i uses entry i mod n)."""
     servers = tuple(s.strip() for s in value.split(",") if s.strip())
     if not servers:
-        raise ValueError("give the LeRobot policy server as HOST:PORT (or a comma-separated list, one per worker)")
+        raise ValueError(
+            "give the LeRobot policy server as HOST:PORT (or a comma-separated list, one per worker)"
+        )
     for server in servers:
         match = ADDRESS.match(server)
         if match is None or not 1 <= int(match.group(2)) <= 65535:
-            raise ValueError(f"{server!r} is not HOST:PORT (e.g. 127.0.0.1:8080; a list: HOST:PORT,HOST:PORT)")
+            raise ValueError(
+                f"{server!r} is not HOST:PORT (e.g. 127.0.0.1:8080; a list: HOST:PORT,HOST:PORT)"
+            )
     return servers
 
 
@@ -109,7 +115,9 @@ def _channel(address: str):
     from lerobot.transport import services_pb2_grpc
     from lerobot.transport.utils import grpc_channel_options
 
-    channel = grpc.insecure_channel(address, grpc_channel_options())  # lerobot's client options (4 MB, retries)
+    channel = grpc.insecure_channel(
+        address, grpc_channel_options()
+    )  # lerobot's client options (4 MB, retries)
     return channel, services_pb2_grpc.AsyncInferenceStub(channel)
 
 
@@ -122,8 +130,10 @@ def _rpc_reason(exc: Exception) -> str:
 
 def _down(address: str) -> str:
     host, _, port = address.rpartition(":")
-    return (f"is the LeRobot policy server running there? Start it with `{START_SERVER.format(host=host, port=port)}` "
-            "and check the address")
+    return (
+        f"is the LeRobot policy server running there? Start it with `{START_SERVER.format(host=host, port=port)}` "
+        "and check the address"
+    )
 
 
 def check_reachable(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
@@ -135,8 +145,9 @@ def check_reachable(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     try:
         stub.Ready(services_pb2.Empty(), timeout=timeout_s)
     except grpc.RpcError as exc:
-        raise ValueError(f"the LeRobot policy server at {address} does not answer ({_rpc_reason(exc)}); "
-                         f"{_down(address)}") from None
+        raise ValueError(
+            f"the LeRobot policy server at {address} does not answer ({_rpc_reason(exc)}); {_down(address)}"
+        ) from None
     finally:
         channel.close()
 
@@ -204,22 +215,31 @@ class LeRobotAsyncPolicy:
         s = self.spec
         if self._channel is None:
             self._channel, self._stub = _channel(s.address)
-        instructions = RemotePolicyConfig(policy_type=s.policy_type, pretrained_name_or_path=s.path,
-                                          lerobot_features=self.features, actions_per_chunk=s.actions_per_chunk,
-                                          device=s.device)
+        instructions = RemotePolicyConfig(
+            policy_type=s.policy_type,
+            pretrained_name_or_path=s.path,
+            lerobot_features=self.features,
+            actions_per_chunk=s.actions_per_chunk,
+            device=s.device,
+        )
         try:
             self._stub.Ready(services_pb2.Empty(), timeout=CONNECT_TIMEOUT_S)
             start = time.perf_counter()
-            self._stub.SendPolicyInstructions(services_pb2.PolicySetup(data=pickle.dumps(instructions)),
-                                              timeout=s.load_timeout_s)
+            self._stub.SendPolicyInstructions(
+                services_pb2.PolicySetup(data=pickle.dumps(instructions)), timeout=s.load_timeout_s
+            )
         except grpc.RpcError as exc:
-            if exc.code() in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED,
-                              grpc.StatusCode.DEADLINE_EXCEEDED):
+            if exc.code() in (
+                grpc.StatusCode.UNAVAILABLE,
+                grpc.StatusCode.CANCELLED,
+                grpc.StatusCode.DEADLINE_EXCEEDED,
+            ):
                 raise _ConnectionLost(_rpc_reason(exc)) from exc
             raise PolicyUnavailable(
                 f"the LeRobot policy server at {s.address} could not load {s.policy_type} checkpoint {s.path!r} on "
                 f"{s.device} ({_rpc_reason(exc)}; its log has the traceback); fix that and rerun the same command "
-                "to resume (finished episodes are kept)") from None
+                "to resume (finished episodes are kept)"
+            ) from None
         log.info("policy server %s loaded %s in %.2f s", s.address, s.path, time.perf_counter() - start)
         self.connected = True
 
@@ -236,13 +256,19 @@ class LeRobotAsyncPolicy:
                 return
             except _ConnectionLost as exc:
                 reason = str(exc)
-                log.warning("policy server %s unreachable (%s); attempt %d/%d", self.spec.address, reason,
-                            attempt + 1, attempts)
+                log.warning(
+                    "policy server %s unreachable (%s); attempt %d/%d",
+                    self.spec.address,
+                    reason,
+                    attempt + 1,
+                    attempts,
+                )
         self.connected = False
         raise PolicyUnavailable(
             f"the LeRobot policy server at {self.spec.address} is unreachable ({reason}; {attempts} connection "
             f"attempt(s) failed); {_down(self.spec.address)}, then rerun the same command to resume (finished "
-            "episodes are kept)")
+            "episodes are kept)"
+        )
 
     # -- the policy protocol ------------------------------------------------------------------------
     def reset(self, episode: Episode, slot: int = 0) -> None:
@@ -266,8 +292,10 @@ class LeRobotAsyncPolicy:
                     self.connected = False
                     self._drop_channel()
                     self._connect(str(exc))  # PolicyUnavailable (the run stops) if the server stays away
-                    raise InfraError(f"lost the LeRobot policy server at {self.spec.address} mid-episode ({exc}); "
-                                     "reconnected, so only this episode is lost (it runs again)") from None
+                    raise InfraError(
+                        f"lost the LeRobot policy server at {self.spec.address} mid-episode ({exc}); "
+                        "reconnected, so only this episode is lost (it runs again)"
+                    ) from None
         return {slot: self.queues[slot].popleft() for slot in observations}
 
     def raw_observation(self, observation: dict, task: str) -> dict[str, Any]:
@@ -290,28 +318,43 @@ class LeRobotAsyncPolicy:
         raw = self.raw_observation(observation, task)
         for attempt in range(2):
             self._timestep += 1
-            sent = TimedObservation(timestamp=time.time(), timestep=self._timestep, observation=raw, must_go=True)
+            sent = TimedObservation(
+                timestamp=time.time(), timestep=self._timestep, observation=raw, must_go=True
+            )
             deadline = time.monotonic() + s.timeout_s
             try:
-                self._stub.SendObservations(send_bytes_in_chunks(pickle.dumps(sent), services_pb2.Observation),
-                                            timeout=s.timeout_s)
-                reply = self._stub.GetActions(services_pb2.Empty(), timeout=max(0.1, deadline - time.monotonic()))
+                self._stub.SendObservations(
+                    send_bytes_in_chunks(pickle.dumps(sent), services_pb2.Observation), timeout=s.timeout_s
+                )
+                reply = self._stub.GetActions(
+                    services_pb2.Empty(), timeout=max(0.1, deadline - time.monotonic())
+                )
             except grpc.RpcError as exc:
                 if exc.code() in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED):
                     raise _ConnectionLost(_rpc_reason(exc)) from exc
                 if exc.code() == grpc.StatusCode.DEADLINE_EXCEEDED:
-                    raise TimeoutError(f"no action chunk from the LeRobot policy server at {s.address} within "
-                                       f"--policy.timeout_s={s.timeout_s:g} s") from None
-                raise RuntimeError(f"the LeRobot policy server at {s.address} failed: {_rpc_reason(exc)}") from None
+                    raise TimeoutError(
+                        f"no action chunk from the LeRobot policy server at {s.address} within "
+                        f"--policy.timeout_s={s.timeout_s:g} s"
+                    ) from None
+                raise RuntimeError(
+                    f"the LeRobot policy server at {s.address} failed: {_rpc_reason(exc)}"
+                ) from None
             if reply.data:
                 break
             if attempt == 0:  # a restarted server has no policy; an inference error also answers empty
-                log.warning("policy server %s sent no actions for observation #%d; sending the policy and the "
-                            "observation once more", s.address, sent.timestep)
+                log.warning(
+                    "policy server %s sent no actions for observation #%d; sending the policy and the "
+                    "observation once more",
+                    s.address,
+                    sent.timestep,
+                )
                 self._load()
         else:
-            raise RuntimeError(f"the LeRobot policy server at {s.address} sent no actions for the observation twice "
-                               "(an inference error: its log says which)")
+            raise RuntimeError(
+                f"the LeRobot policy server at {s.address} sent no actions for the observation twice "
+                "(an inference error: its log says which)"
+            )
         actions = pickle.loads(reply.data)  # nosec: list[TimedAction] from the server we were pointed at
         if not actions or actions[0].get_timestep() != sent.timestep:
             got = actions[0].get_timestep() if actions else None
@@ -319,7 +362,8 @@ class LeRobotAsyncPolicy:
                 f"the LeRobot policy server at {s.address} answered another client's observation (#{got}, ours "
                 f"#{sent.timestep}): it serves one client at a time. Give every worker its own server "
                 "(--policy.server=HOST:PORT,HOST:PORT,… with at least --eval.num_workers entries; envs_per_worker "
-                "share their worker's) and rerun the same command to resume")
+                "share their worker's) and rerun the same command to resume"
+            )
         self.round_trips += 1
         self.round_trip_s += time.perf_counter() - start
         return [np.asarray(a.get_action().numpy(), dtype=np.float32) for a in actions]
@@ -398,56 +442,100 @@ class LeRobotAsyncConfig(PolicyConfig):
     def _resolve(self) -> tuple[str, str, int, tuple[str, ...], int]:
         """(policy type, path sent, actions per chunk, cameras, image side); ValueError naming the flag."""
         if not self.path:
-            raise ValueError("--policy.path: give the checkpoint as the server loads it (a pretrained_model folder "
-                             "or a hub id ORG/NAME)")
+            raise ValueError(
+                "--policy.path: give the checkpoint as the server loads it (a pretrained_model folder "
+                "or a hub id ORG/NAME)"
+            )
         flag_cams = self._flag_cameras()
         unknown = [c for c in flag_cams if c not in ALL_CAMERAS]
         if unknown:
-            raise ValueError(f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
-                             f"{', '.join(ALL_CAMERAS)}")
+            raise ValueError(
+                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
+                f"{', '.join(ALL_CAMERAS)}"
+            )
         if self.local:
             with flag_errors("--policy.path"):
                 root, config = load_config(self.path)
                 side = checkpoint_image_size(self.path)
             # The cameras the checkpoint reads (none for a state-only one; the env still renders `front`).
-            cameras = tuple(k.removeprefix("observation.images.") for k in config.input_features
-                            if k.startswith("observation.images."))
+            cameras = tuple(
+                k.removeprefix("observation.images.")
+                for k in config.input_features
+                if k.startswith("observation.images.")
+            )
             kind, sent = config.type, str(root.absolute())
-            per_chunk = self.actions_per_chunk or int(getattr(config, "n_action_steps", None) or config.chunk_size)
+            per_chunk = self.actions_per_chunk or int(
+                getattr(config, "n_action_steps", None) or config.chunk_size
+            )
             if not is_chunked(config) or kind not in SERVED_TYPES:
-                what = "an ACT checkpoint with temporal ensembling" if kind == "act" else f"a {kind!r} checkpoint"
-                raise ValueError(f"--policy.path: {what} is not served as it runs in-process (LeRobot's server only "
-                                 "calls predict_action_chunk: per-step state is lost); served: chunked "
-                                 f"{', '.join(SERVED_TYPES)} checkpoints. Use --policy.type=lerobot")
+                what = (
+                    "an ACT checkpoint with temporal ensembling"
+                    if kind == "act"
+                    else f"a {kind!r} checkpoint"
+                )
+                raise ValueError(
+                    f"--policy.path: {what} is not served as it runs in-process (LeRobot's server only "
+                    "calls predict_action_chunk: per-step state is lost); served: chunked "
+                    f"{', '.join(SERVED_TYPES)} checkpoints. Use --policy.type=lerobot"
+                )
             chunk_size = getattr(config, "chunk_size", None)
             if chunk_size and per_chunk > chunk_size:
-                raise ValueError(f"--policy.actions_per_chunk={per_chunk} exceeds the checkpoint's chunk_size "
-                                 f"{chunk_size}")
-            clashes = [f"--policy.{flag}={given!r} but the checkpoint says {own!r}" for flag, given, own in (
-                ("policy_type", self.policy_type, kind), ("cameras", ",".join(flag_cams), ",".join(cameras)),
-                ("image_size", self.image_size, side)) if given and given != own]
+                raise ValueError(
+                    f"--policy.actions_per_chunk={per_chunk} exceeds the checkpoint's chunk_size {chunk_size}"
+                )
+            clashes = [
+                f"--policy.{flag}={given!r} but the checkpoint says {own!r}"
+                for flag, given, own in (
+                    ("policy_type", self.policy_type, kind),
+                    ("cameras", ",".join(flag_cams), ",".join(cameras)),
+                    ("image_size", self.image_size, side),
+                )
+                if given and given != own
+            ]
             if clashes:
                 raise ValueError(f"{'; '.join(clashes)} (drop the flag: a checkpoint folder here is read)")
             return kind, sent, per_chunk, cameras, int(side or 0)
-        missing = [flag for flag, given in (("policy_type", self.policy_type), ("cameras", flag_cams),
-                                            ("image_size", self.image_size),
-                                            ("actions_per_chunk", self.actions_per_chunk)) if not given]
+        missing = [
+            flag
+            for flag, given in (
+                ("policy_type", self.policy_type),
+                ("cameras", flag_cams),
+                ("image_size", self.image_size),
+                ("actions_per_chunk", self.actions_per_chunk),
+            )
+            if not given
+        ]
         if missing:
-            raise ValueError(f"--policy.path={self.path!r} is not a folder on this machine (the server loads it on its "
-                             "side), so its cameras, image size, type and chunk length cannot be read here: pass "
-                             + " ".join(f"--policy.{flag}=…" for flag in missing)
-                             + " (e.g. --policy.cameras=left_top,wrist --policy.image_size=224 "
-                               "--policy.policy_type=act --policy.actions_per_chunk=50)")
+            raise ValueError(
+                f"--policy.path={self.path!r} is not a folder on this machine (the server loads it on its "
+                "side), so its cameras, image size, type and chunk length cannot be read here: pass "
+                + " ".join(f"--policy.{flag}=…" for flag in missing)
+                + " (e.g. --policy.cameras=left_top,wrist --policy.image_size=224 "
+                "--policy.policy_type=act --policy.actions_per_chunk=50)"
+            )
         if self.policy_type not in SERVED_TYPES:
-            raise ValueError(f"--policy.policy_type={self.policy_type!r}: served types are {', '.join(SERVED_TYPES)}")
+            raise ValueError(
+                f"--policy.policy_type={self.policy_type!r}: served types are {', '.join(SERVED_TYPES)}"
+            )
         return self.policy_type, self.path, self.actions_per_chunk, flag_cams, self.image_size
 
     def spec(self, rank: int | None = None) -> _Spec:
         servers = parse_servers(self.server)
         kind, sent, per_chunk, cameras, side = self._resolve()
         address = servers[(worker_rank() if rank is None else rank) % len(servers)]
-        return _Spec(address, kind, sent, self.device, per_chunk, cameras, side, self.timeout_s, self.load_timeout_s,
-                     self.reconnects, self.reconnect_backoff_s)
+        return _Spec(
+            address,
+            kind,
+            sent,
+            self.device,
+            per_chunk,
+            cameras,
+            side,
+            self.timeout_s,
+            self.load_timeout_s,
+            self.reconnects,
+            self.reconnect_backoff_s,
+        )
 
     @property
     def checkpoint(self) -> str | None:
@@ -462,8 +550,14 @@ class LeRobotAsyncConfig(PolicyConfig):
 
     def served_by(self) -> dict:
         kind, sent, per_chunk, cameras, side = self._resolve()
-        return {"protocol": "lerobot_async", "servers": list(parse_servers(self.server)), "policy_type": kind,
-                "pretrained_name_or_path": sent, "device": self.device, "actions_per_chunk": per_chunk}
+        return {
+            "protocol": "lerobot_async",
+            "servers": list(parse_servers(self.server)),
+            "policy_type": kind,
+            "pretrained_name_or_path": sent,
+            "device": self.device,
+            "actions_per_chunk": per_chunk,
+        }
 
     def options(self) -> dict[str, Any]:
         # What decides the actions; not where the server runs nor how long to wait for it.

@@ -63,7 +63,9 @@ def check_features(config) -> None:
     action = config.output_features.get("action")
     if action is None or tuple(action.shape) != (len(ACTION_NAMES),):
         shape = None if action is None else tuple(action.shape)
-        problems.append(f"action shape {shape} (env expects ({len(ACTION_NAMES)},): 7 joint targets + gripper)")
+        problems.append(
+            f"action shape {shape} (env expects ({len(ACTION_NAMES)},): 7 joint targets + gripper)"
+        )
     if problems:
         raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
 
@@ -71,18 +73,25 @@ def check_features(config) -> None:
 def checkpoint_image_size(path: str | None) -> int | None:
     """The side of the checkpoint's (square) input images; every camera must share it."""
     _, config = load_config(path)
-    shapes = {k: tuple(f.shape) for k, f in config.input_features.items() if k.startswith("observation.images.")}
+    shapes = {
+        k: tuple(f.shape) for k, f in config.input_features.items() if k.startswith("observation.images.")
+    }
     sides = {shape[-1] for shape in shapes.values()}
     if any(shape[-1] != shape[-2] for shape in shapes.values()) or len(sides) > 1:
-        raise CheckpointError(f"checkpoint image shapes {shapes}: the env renders every camera as one square "
-                              "size; retrain on a dataset collected with --dataset.image_size=N")
+        raise CheckpointError(
+            f"checkpoint image shapes {shapes}: the env renders every camera as one square "
+            "size; retrain on a dataset collected with --dataset.image_size=N"
+        )
     return sides.pop() if sides else None
 
 
 def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
     _, config = load_config(path)
-    cams = tuple(k.removeprefix("observation.images.") for k in config.input_features
-                 if k.startswith("observation.images."))
+    cams = tuple(
+        k.removeprefix("observation.images.")
+        for k in config.input_features
+        if k.startswith("observation.images.")
+    )
     return cams or ("front",)
 
 
@@ -119,18 +128,24 @@ class LeRobotPolicy:
         self.policy = get_policy_class(config.type).from_pretrained(root, config=config)
         self.policy.eval()
         self.preprocessor, self.postprocessor = make_pre_post_processors(
-            policy_cfg=config, pretrained_path=str(root),
-            preprocessor_overrides={"device_processor": {"device": device}})
+            policy_cfg=config,
+            pretrained_path=str(root),
+            preprocessor_overrides={"device_processor": {"device": device}},
+        )
         self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
         # Chunked: the adapter pops the chunk itself (observations read once per chunk, slots batched).
         self.chunked = is_chunked(config) and hasattr(self.policy, "predict_action_chunk")
         self.n_action_steps = int(getattr(config, "n_action_steps", 1))
         if slots > 1 and not self.chunked:
-            raise ValueError(f"batched inference needs a chunked policy ({', '.join(CHUNKED_TYPES)} without temporal "
-                             f"ensembling); {config.type!r} keeps per-episode observation state: use envs_per_worker=1")
+            raise ValueError(
+                f"batched inference needs a chunked policy ({', '.join(CHUNKED_TYPES)} without temporal "
+                f"ensembling); {config.type!r} keeps per-episode observation state: use envs_per_worker=1"
+            )
         self.slots = slots
         self.tasks = [""] * slots
-        self.queues: list[collections.deque] = [collections.deque() for _ in range(slots)]  # post-processed actions
+        self.queues: list[collections.deque] = [
+            collections.deque() for _ in range(slots)
+        ]  # post-processed actions
         self.reads = 0  # observations turned into model input (chunks predicted, per slot)
 
     def reset(self, episode: Episode, slot: int = 0) -> None:
@@ -144,7 +159,10 @@ class LeRobotPolicy:
 
     def _batch(self, observations: list[dict], tasks: list[str]) -> dict:
         torch = self._torch
-        batch = {STATE_KEY: torch.from_numpy(np.stack([o[STATE_KEY] for o in observations])).float(), "task": tasks}
+        batch = {
+            STATE_KEY: torch.from_numpy(np.stack([o[STATE_KEY] for o in observations])).float(),
+            "task": tasks,
+        }
         for key in self.image_keys:
             images = np.stack([o[key] for o in observations])
             batch[key] = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
@@ -158,7 +176,7 @@ class LeRobotPolicy:
         """One action per slot in `observations` (slot -> that env's observation at this step)."""
         torch = self._torch
         if not self.chunked:
-            (slot, observation), = observations.items()
+            ((slot, observation),) = observations.items()
             with torch.inference_mode():
                 action = self.policy.select_action(self._batch([observation], [self.tasks[slot]]))
             return {slot: self._postprocess(action)}
@@ -168,8 +186,9 @@ class LeRobotPolicy:
                 self.queues[slot].extend(actions)
         return {slot: self.queues[slot].popleft() for slot in observations}
 
-    def predict_chunks(self, observations: dict[int, dict],
-                       instructions: dict[int, str] | None = None) -> dict[int, list[np.ndarray]]:
+    def predict_chunks(
+        self, observations: dict[int, dict], instructions: dict[int, str] | None = None
+    ) -> dict[int, list[np.ndarray]]:
         """One forward pass over `observations` (slot -> observation): each slot's next `n_action_steps`
         actions, post-processed (what lerobot's `select_action` would pop one at a time). Each slot's
         instruction is its episode's, or the one given (a server's request carries its own)."""
@@ -228,7 +247,9 @@ class LeRobotConfig(PolicyConfig):
 
     def build_batched(self, view: AgentView, slots: int) -> LeRobotPolicy | None:
         if not self.batchable():
-            log.warning("%s keeps per-episode observation state: one model copy per env instead of a batch",
-                        load_config(self.path)[1].type)
+            log.warning(
+                "%s keeps per-episode observation state: one model copy per env instead of a batch",
+                load_config(self.path)[1].type,
+            )
             return None
         return LeRobotPolicy(self.path, self.device, slots)

@@ -90,8 +90,11 @@ class WireFormat:
 
     @property
     def cameras(self) -> tuple[str, ...]:
-        return tuple(dict.fromkeys(src.split(":", 1)[1] for _, src in self.entries
-                                   if src.startswith(("camera:", "camera_chw:"))))
+        return tuple(
+            dict.fromkeys(
+                src.split(":", 1)[1] for _, src in self.entries if src.startswith(("camera:", "camera_chw:"))
+            )
+        )
 
     @property
     def depth_cameras(self) -> tuple[str, ...]:
@@ -116,7 +119,9 @@ class WireFormat:
             node: Any = request
             for key in path:
                 if not isinstance(node, dict) or key not in node:
-                    raise ValueError(f"request has no {'/'.join(path)!r} ({self.name} layout); keys: {sorted(request)}")
+                    raise ValueError(
+                        f"request has no {'/'.join(path)!r} ({self.name} layout); keys: {sorted(request)}"
+                    )
                 node = node[key]
             if src == "instruction":
                 instruction = str(node)
@@ -130,13 +135,17 @@ class WireFormat:
                     array = array.transpose(1, 2, 0)
                 expected = (image_size, image_size, 3) if kind != "depth" else (image_size, image_size)
                 if array.shape != expected:
-                    raise ValueError(f"{'/'.join(path)} has shape {array.shape}; this server's policy takes "
-                                     f"{expected} (images are not resized: render them at {image_size}²)")
+                    raise ValueError(
+                        f"{'/'.join(path)} has shape {array.shape}; this server's policy takes "
+                        f"{expected} (images are not resized: render them at {image_size}²)"
+                    )
                 key = DEPTH_KEY.format(cam) if kind == "depth" else IMAGE_KEY.format(cam)
                 obs[key] = array.astype(np.float32 if kind == "depth" else np.uint8, copy=False)
         if np.isnan(state).any():
-            raise ValueError(f"the {self.name} layout leaves state entries {np.flatnonzero(np.isnan(state)).tolist()} "
-                             f"unset (RoboView's state is {len(STATE_NAMES)}: {', '.join(STATE_NAMES)})")
+            raise ValueError(
+                f"the {self.name} layout leaves state entries {np.flatnonzero(np.isnan(state)).tolist()} "
+                f"unset (RoboView's state is {len(STATE_NAMES)}: {', '.join(STATE_NAMES)})"
+            )
         obs[STATE_KEY] = state
         return obs, instruction
 
@@ -173,24 +182,36 @@ def parse_key_map(text: str) -> tuple[tuple[tuple[str, ...], str], ...]:
         if src.startswith(("camera:", "camera_chw:", "depth:")):
             cam = src.split(":", 1)[1]
             if cam not in ALL_CAMERAS:
-                raise ValueError(f"--policy.key_map entry {item!r}: unknown camera {cam!r}; "
-                                 f"allowed: {', '.join(ALL_CAMERAS)}")
+                raise ValueError(
+                    f"--policy.key_map entry {item!r}: unknown camera {cam!r}; "
+                    f"allowed: {', '.join(ALL_CAMERAS)}"
+                )
         elif src.startswith("state"):
             match = _SLICE.match(src)
-            if src != "state" and (match is None or not (0 <= int(match.group(1) or 0) < int(match.group(2) or 8) <= 8)):
-                raise ValueError(f"--policy.key_map entry {item!r}: state slices are state[i:j] with "
-                                 f"0 ≤ i < j ≤ {len(STATE_NAMES)} ({', '.join(STATE_NAMES)})")
+            if src != "state" and (
+                match is None or not (0 <= int(match.group(1) or 0) < int(match.group(2) or 8) <= 8)
+            ):
+                raise ValueError(
+                    f"--policy.key_map entry {item!r}: state slices are state[i:j] with "
+                    f"0 ≤ i < j ≤ {len(STATE_NAMES)} ({', '.join(STATE_NAMES)})"
+                )
         elif src != "instruction":
-            raise ValueError(f"--policy.key_map entry {item!r}: unknown source {src!r}; allowed: camera:NAME, "
-                             "camera_chw:NAME, depth:NAME, state, state[i:j], instruction")
+            raise ValueError(
+                f"--policy.key_map entry {item!r}: unknown source {src!r}; allowed: camera:NAME, "
+                "camera_chw:NAME, depth:NAME, state, state[i:j], instruction"
+            )
         entries.append(((wire,), src))
     if not entries:
-        raise ValueError("--policy.obs_format=custom needs --policy.key_map='wire_key=SOURCE,…' (e.g. "
-                         "'observation/image=camera:left_top,observation/state=state[0:8],prompt=instruction')")
+        raise ValueError(
+            "--policy.obs_format=custom needs --policy.key_map='wire_key=SOURCE,…' (e.g. "
+            "'observation/image=camera:left_top,observation/state=state[0:8],prompt=instruction')"
+        )
     return tuple(entries)
 
 
-def wire_format(obs_format: str, cameras: tuple[str, ...], key_map: str = "", depth: bool = False) -> WireFormat:
+def wire_format(
+    obs_format: str, cameras: tuple[str, ...], key_map: str = "", depth: bool = False
+) -> WireFormat:
     """The layout `obs_format` for these cameras (scene cameras in order, then the wrist)."""
     if obs_format not in OBS_FORMATS:
         raise ValueError(f"unknown --policy.obs_format={obs_format!r}; allowed: {', '.join(OBS_FORMATS)}")
@@ -199,11 +220,15 @@ def wire_format(obs_format: str, cameras: tuple[str, ...], key_map: str = "", de
     scene = [c for c in cameras if c != "wrist"]
     wrist = "wrist" in cameras
     if not scene:
-        raise ValueError(f"--policy.obs_format={obs_format} needs a scene camera among --policy.cameras "
-                         f"(got {','.join(cameras)}; scene cameras: {', '.join(c for c in ALL_CAMERAS if c != 'wrist')})")
+        raise ValueError(
+            f"--policy.obs_format={obs_format} needs a scene camera among --policy.cameras "
+            f"(got {','.join(cameras)}; scene cameras: {', '.join(c for c in ALL_CAMERAS if c != 'wrist')})"
+        )
     limit = {"droid": 2, "libero": 1, "aloha": 2}[obs_format]
     if len(scene) > limit:
-        raise ValueError(f"--policy.obs_format={obs_format} carries {limit} scene camera(s), got {', '.join(scene)}")
+        raise ValueError(
+            f"--policy.obs_format={obs_format} carries {limit} scene camera(s), got {', '.join(scene)}"
+        )
     entries: list[tuple[tuple[str, ...], str]] = []
     if obs_format == "droid":
         entries += [(("observation/exterior_image_1_left",), f"camera:{scene[0]}")]
@@ -211,14 +236,19 @@ def wire_format(obs_format: str, cameras: tuple[str, ...], key_map: str = "", de
             entries += [(("observation/exterior_image_2_left",), f"camera:{scene[1]}")]
         if wrist:
             entries += [(("observation/wrist_image_left",), "camera:wrist")]
-        entries += [(("observation/joint_position",), "state[0:7]"), (("observation/gripper_position",), "state[7:8]")]
+        entries += [
+            (("observation/joint_position",), "state[0:7]"),
+            (("observation/gripper_position",), "state[7:8]"),
+        ]
     elif obs_format == "libero":
         entries += [(("observation/image",), f"camera:{scene[0]}")]
         if wrist:
             entries += [(("observation/wrist_image",), "camera:wrist")]
         entries += [(("observation/state",), "state")]
     else:
-        entries += [(("images", name), f"camera_chw:{cam}") for name, cam in zip(("cam_high", "cam_low"), scene)]
+        entries += [
+            (("images", name), f"camera_chw:{cam}") for name, cam in zip(("cam_high", "cam_low"), scene)
+        ]
         if wrist:
             entries += [(("images", "cam_left_wrist"), "camera_chw:wrist")]
         entries += [(("state",), "state")]
@@ -230,17 +260,27 @@ def wire_format(obs_format: str, cameras: tuple[str, ...], key_map: str = "", de
 
 def episode_message(episode: Episode) -> dict:
     """What RoboView's own server needs to reset a stateful policy (sent only to a server that asks)."""
-    return {"task": episode.task, "seed": episode.seed, "image_size": episode.image_size,
-            "cameras": {name: {"pos": list(p.pos), "quat": list(p.quat), "fovy": p.fovy}
-                        for name, p in episode.cameras.items()}}
+    return {
+        "task": episode.task,
+        "seed": episode.seed,
+        "image_size": episode.image_size,
+        "cameras": {
+            name: {"pos": list(p.pos), "quat": list(p.quat), "fovy": p.fovy}
+            for name, p in episode.cameras.items()
+        },
+    }
 
 
 def episode_from_message(message: dict, instruction: str) -> Episode:
     from roboview_data.sim.cameras import CameraPose
 
-    cameras = {name: CameraPose(name, tuple(c["pos"]), tuple(c["quat"]), float(c["fovy"]))
-               for name, c in message.get("cameras", {}).items()}
-    return Episode(str(message["task"]), instruction, int(message["seed"]), cameras, int(message["image_size"]))
+    cameras = {
+        name: CameraPose(name, tuple(c["pos"]), tuple(c["quat"]), float(c["fovy"]))
+        for name, c in message.get("cameras", {}).items()
+    }
+    return Episode(
+        str(message["task"]), instruction, int(message["seed"]), cameras, int(message["image_size"])
+    )
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -273,8 +313,15 @@ class Connection:
         self._codec = msgpack_numpy
         self._packer = msgpack_numpy.Packer()
         headers = {"Authorization": f"Api-Key {api_key}"} if api_key else None
-        self.ws = connect(url, compression=None, max_size=None, additional_headers=headers,
-                          open_timeout=open_timeout_s, close_timeout=1, legacy=True)
+        self.ws = connect(
+            url,
+            compression=None,
+            max_size=None,
+            additional_headers=headers,
+            open_timeout=open_timeout_s,
+            close_timeout=1,
+            legacy=True,
+        )
         try:
             self.metadata = msgpack_numpy.unpackb(self.ws.recv(timeout=open_timeout_s))
         except Exception:
@@ -331,9 +378,11 @@ class OpenPIPolicy:
                 last = exc
                 if attempt < cfg.reconnects:
                     time.sleep(cfg.reconnect_backoff_s * 2**attempt)
-        raise PolicyUnavailable(f"openpi server {self.url} is unreachable after {cfg.reconnects + 1} attempts "
-                                f"({type(last).__name__}: {last}); start it (or fix --policy.url) and rerun the "
-                                "same command: finished episodes are kept and the run resumes")
+        raise PolicyUnavailable(
+            f"openpi server {self.url} is unreachable after {cfg.reconnects + 1} attempts "
+            f"({type(last).__name__}: {last}); start it (or fix --policy.url) and rerun the "
+            "same command: finished episodes are kept and the run resumes"
+        )
 
     def reset(self, episode: Episode) -> None:
         self.queue.clear()
@@ -359,13 +408,17 @@ class OpenPIPolicy:
         except TimeoutError as exc:  # an answer may still come: a fresh connection keeps requests in order
             self.conn.close()
             self.conn = None
-            raise TimeoutError(f"openpi server {self.url} did not answer within {self.config.timeout_s:g} s") from exc
+            raise TimeoutError(
+                f"openpi server {self.url} did not answer within {self.config.timeout_s:g} s"
+            ) from exc
         except (ConnectionClosed, OSError) as exc:
             self.conn = None
             self.queue.clear()
             self._connect()  # PolicyUnavailable (the run stops) if the server stays away
-            raise InfraError(f"lost the openpi server {self.url} mid-episode: it closed the connection ({exc}); "
-                             "reconnected, so only this episode is lost (it runs again)") from None
+            raise InfraError(
+                f"lost the openpi server {self.url} mid-episode: it closed the connection ({exc}); "
+                "reconnected, so only this episode is lost (it runs again)"
+            ) from None
         self.pending_episode = None
         self.requests += 1
         return self._chunk(answer)
@@ -378,9 +431,16 @@ class OpenPIPolicy:
         chunk = np.asarray(actions, np.float32)
         if chunk.ndim == 1:
             chunk = chunk[None]
-        if chunk.ndim != 2 or chunk.shape[0] < 1 or chunk.shape[1] != WIRE_DIMS or not np.isfinite(chunk).all():
-            raise ProtocolError(f"openpi server {self.url} answered actions of shape {np.shape(actions)}; RoboView "
-                                f"takes (H, {WIRE_DIMS}) finite values: 7 joint {self.config.action_space}s + gripper")
+        if (
+            chunk.ndim != 2
+            or chunk.shape[0] < 1
+            or chunk.shape[1] != WIRE_DIMS
+            or not np.isfinite(chunk).all()
+        ):
+            raise ProtocolError(
+                f"openpi server {self.url} answered actions of shape {np.shape(actions)}; RoboView "
+                f"takes (H, {WIRE_DIMS}) finite values: 7 joint {self.config.action_space}s + gripper"
+            )
         steps = self.config.replan_steps or len(chunk)
         return chunk[:steps]
 
@@ -443,18 +503,26 @@ class OpenPIConfig(PolicyConfig):
 
     def __post_init__(self) -> None:
         if not self.url_list:
-            raise ValueError("--policy.url is required: ws://HOST:PORT of the openpi server (comma-separated for several)")
+            raise ValueError(
+                "--policy.url is required: ws://HOST:PORT of the openpi server (comma-separated for several)"
+            )
         for url in self.url_list:
             if not url.startswith(("ws://", "wss://")):
-                raise ValueError(f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)")
-        for name, value, allowed in (("action_space", self.action_space, ACTION_SPACES),
-                                     ("gripper", self.gripper, GRIPPER_MODES)):
+                raise ValueError(
+                    f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)"
+                )
+        for name, value, allowed in (
+            ("action_space", self.action_space, ACTION_SPACES),
+            ("gripper", self.gripper, GRIPPER_MODES),
+        ):
             if value not in allowed:
                 raise ValueError(f"unknown --policy.{name}={value!r}; allowed: {', '.join(allowed)}")
         unknown = [c for c in self.camera_list if c not in ALL_CAMERAS]
         if unknown or not self.camera_list:
-            raise ValueError(f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
-                             f"{', '.join(ALL_CAMERAS)}")
+            raise ValueError(
+                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
+                f"{', '.join(ALL_CAMERAS)}"
+            )
         for name in ("image_size", "open_timeout_s", "timeout_s"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
@@ -464,15 +532,19 @@ class OpenPIConfig(PolicyConfig):
         fmt = self.wire_format()  # validates obs_format / key_map against the cameras
         missing = [c for c in fmt.cameras if c not in self.camera_list]
         if missing:
-            raise ValueError(f"--policy.key_map reads camera(s) {missing} not in --policy.cameras={self.cameras}")
+            raise ValueError(
+                f"--policy.key_map reads camera(s) {missing} not in --policy.cameras={self.cameras}"
+            )
         # A server that is down fails here, before any rollout; its metadata goes into provenance.json.
         self._metadata = {}
         for url in self.url_list:
             try:
                 conn = connect(url, self.api_key_env, self.open_timeout_s, self.timeout_s)
             except Exception as exc:
-                raise ValueError(f"cannot reach the openpi server at --policy.url={url} ({type(exc).__name__}: "
-                                 f"{exc}); is it running, and is the port right?") from None
+                raise ValueError(
+                    f"cannot reach the openpi server at --policy.url={url} ({type(exc).__name__}: "
+                    f"{exc}); is it running, and is the port right?"
+                ) from None
             self._metadata[url] = _plain(conn.metadata)
             conn.close()
         super().__post_init__()
@@ -493,8 +565,12 @@ class OpenPIConfig(PolicyConfig):
         return wire_format(self.obs_format, self.camera_list, self.key_map, self.send_depth)
 
     def served_by(self) -> dict:
-        return {"protocol": "openpi", "urls": self.url_list, "obs_format": self.obs_format,
-                "metadata": getattr(self, "_metadata", {})}
+        return {
+            "protocol": "openpi",
+            "urls": self.url_list,
+            "obs_format": self.obs_format,
+            "metadata": getattr(self, "_metadata", {}),
+        }
 
     def observed_cameras(self) -> tuple[str, ...]:
         return self.camera_list

@@ -156,8 +156,9 @@ def footprint_yaw(xy: np.ndarray) -> tuple[float, float]:
     return float(np.arctan2(short[1], short[0])), aspect
 
 
-def locate_object(candidates: np.ndarray, lab: np.ndarray, table_lab: np.ndarray, points: np.ndarray,
-                  min_pixels: int) -> tuple[np.ndarray, float, float, int, float]:
+def locate_object(
+    candidates: np.ndarray, lab: np.ndarray, table_lab: np.ndarray, points: np.ndarray, min_pixels: int
+) -> tuple[np.ndarray, float, float, int, float]:
     """The most salient compact blob of graspable size: (center, yaw, symmetry, pixels, ΔE)."""
     n, labels, stats = _components(candidates)
     delta_e = np.linalg.norm(lab - table_lab, axis=-1)
@@ -194,7 +195,9 @@ def locate_object(candidates: np.ndarray, lab: np.ndarray, table_lab: np.ndarray
 TARGET_MASKS = {"box": lambda rgb: yellow_mask(rgb), "zone": lambda rgb: zone_mask(rgb)}
 
 
-def perceive(rgb: np.ndarray, depth: np.ndarray, camera: CameraPose, target: str | None = "box") -> Perception:
+def perceive(
+    rgb: np.ndarray, depth: np.ndarray, camera: CameraPose, target: str | None = "box"
+) -> Perception:
     """Find the small object and the task's target — the yellow box, the push task's marked zone, or
     nothing (None) — in one RGB-D frame; raise PerceptionError if not. `box_xy` is the target's center."""
     if target is not None and target not in TARGET_MASKS:
@@ -216,5 +219,6 @@ def perceive(rgb: np.ndarray, depth: np.ndarray, camera: CameraPose, target: str
     on_table = points[..., 2] > TABLE_SURFACE_MIN_Z
     candidates = on_table & ~table_mask(lab, table_lab) & ~yellow & ~robot_mask(points)
     center, yaw, symmetry, pixels, saliency = locate_object(
-        candidates, lab, table_lab, points, max(1, round(MIN_OBJECT_PIXELS_224 * scale)))
+        candidates, lab, table_lab, points, max(1, round(MIN_OBJECT_PIXELS_224 * scale))
+    )
     return Perception(center, yaw, symmetry, box_xy, pixels, box_pixels, saliency)

@@ -14,8 +14,15 @@ from typing import Any
 from policies.base import PolicyConfig, registered_types
 
 # Builtin policy types: modules that define and register a PolicyConfig subclass.
-BUILTIN_MODULES = ("policies.adapters", "policies.vision", "policies.lerobot_policy", "policies.vlm.simple",
-                   "policies.vlm.moka", "policies.openpi", "policies.lerobot_async")
+BUILTIN_MODULES = (
+    "policies.adapters",
+    "policies.vision",
+    "policies.lerobot_policy",
+    "policies.vlm.simple",
+    "policies.vlm.moka",
+    "policies.openpi",
+    "policies.lerobot_async",
+)
 # Third-party packages add types through entry points in this group, each naming such a module.
 ENTRY_POINT_GROUP = "roboview.policies"
 

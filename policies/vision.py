@@ -22,9 +22,9 @@ import numpy as np
 from policies.base import AgentView, Episode, PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
-from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
+from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +44,9 @@ class VisionConfig(PolicyConfig):
 
     def __post_init__(self) -> None:
         if self.camera not in ALL_CAMERAS:
-            raise ValueError(f"vision policy: unknown camera {self.camera!r}; allowed: {', '.join(ALL_CAMERAS)}")
+            raise ValueError(
+                f"vision policy: unknown camera {self.camera!r}; allowed: {', '.join(ALL_CAMERAS)}"
+            )
         super().__post_init__()
 
     def observed_cameras(self) -> tuple[str, ...]:
@@ -67,8 +69,10 @@ class VisionPolicy:
 
     def __init__(self, view: AgentView, camera: str = DEFAULT_CAMERA) -> None:
         if camera not in view.cameras or not view.depth:
-            raise ValueError(f"vision policy needs RGB-D from camera {camera!r}; env renders "
-                             f"{view.cameras} with depth={view.depth}")
+            raise ValueError(
+                f"vision policy needs RGB-D from camera {camera!r}; env renders "
+                f"{view.cameras} with depth={view.depth}"
+            )
         self.camera = camera
         self._motion = PickPlacePlanner(view.kinematic_model())
         self._calibration: CameraPose | None = None
@@ -98,9 +102,12 @@ class VisionPolicy:
         self._planned = True
         arm_q = observation[STATE_KEY][:7].astype(np.float64)
         try:
-            self.perception = perceive(observation[IMAGE_KEY.format(self.camera)],
-                                       observation[DEPTH_KEY.format(self.camera)],
-                                       self._calibration, target=self._task.target)
+            self.perception = perceive(
+                observation[IMAGE_KEY.format(self.camera)],
+                observation[DEPTH_KEY.format(self.camera)],
+                self._calibration,
+                target=self._task.target,
+            )
         except PerceptionError as err:
             self.failure_reason = err.reason
             self._hold = np.append(arm_q, 0.0).astype(np.float32)
@@ -108,8 +115,9 @@ class VisionPolicy:
             return
         p = self.perception
         # The task's own scripted solution, as its expert runs it, through the perceived poses.
-        self._task.env_class().plan(self._motion, p.object_pos, p.object_yaw, p.symmetry, ASSUMED_REACH_M, p.box_xy,
-                                    arm_q)
+        self._task.env_class().plan(
+            self._motion, p.object_pos, p.object_yaw, p.symmetry, ASSUMED_REACH_M, p.box_xy, arm_q
+        )
 
     def close(self) -> None:
         pass

@@ -16,16 +16,12 @@ import sys
 import textwrap
 import types
 import typing
-from dataclasses import dataclass
 from collections.abc import Callable, Sequence
-from typing import TypeVar
+from dataclasses import dataclass
 
 import draccus
 from draccus.argparsing import ArgumentParser
 from draccus.wrappers import docstring
-
-T = TypeVar("T")
-R = TypeVar("R")
 
 # MuJoCo picks its GL backend when first imported, which the pipelines do before main() runs:
 # the headless defaults must be in place as soon as this module is (it is imported first).
@@ -110,7 +106,11 @@ def _list_flags(config_class: type, prefix: str = "") -> set[str]:
     hints = typing.get_type_hints(config_class)
     for f in dataclasses.fields(config_class):
         kind = hints.get(f.name)
-        if isinstance(kind, type) and dataclasses.is_dataclass(kind) and not issubclass(kind, draccus.ChoiceRegistry):
+        if (
+            isinstance(kind, type)
+            and dataclasses.is_dataclass(kind)
+            and not issubclass(kind, draccus.ChoiceRegistry)
+        ):
             found |= _list_flags(kind, f"{prefix}{f.name}.")
             continue
         outer = [typing.get_origin(k) for k in (kind, *typing.get_args(kind))]
@@ -245,10 +245,14 @@ class _Layout:
     main: list[Section] = dataclasses.field(default_factory=list)
     groups: list[Section] = dataclasses.field(default_factory=list)
     choices: list[Section] = dataclasses.field(default_factory=list)
-    chosen: dict[str, str] = dataclasses.field(default_factory=dict)  # registry path → the type given with --help
+    chosen: dict[str, str] = dataclasses.field(
+        default_factory=dict
+    )  # registry path → the type given with --help
 
 
-def _walk(cls: type, prefix: str, section: Section, layout: _Layout, skip: frozenset[str] = frozenset()) -> None:
+def _walk(
+    cls: type, prefix: str, section: Section, layout: _Layout, skip: frozenset[str] = frozenset()
+) -> None:
     """Add `cls`'s fields (flags `--{prefix}field`) to `section`, nested configs as sections of their own."""
     hints = typing.get_type_hints(cls)
     grouped = {name: title for title, names in getattr(cls, "help_groups", {}).items() for name in names}
@@ -274,17 +278,27 @@ def _walk(cls: type, prefix: str, section: Section, layout: _Layout, skip: froze
             target.flags.append(Flag(flag, _metavar(kind), field_help(cls, f.name), _shown(_default(f))))
 
 
-def _walk_choice(kind: type, f: dataclasses.Field, owner: type, path: str, section: Section, layout: _Layout) -> None:
+def _walk_choice(
+    kind: type, f: dataclasses.Field, owner: type, path: str, section: Section, layout: _Layout
+) -> None:
     """A registry-typed field (`--policy.type=NAME`): the type flag and the fields every type shares in `section`;
     each type's own fields under a heading of their own (a type extending another lists only what it adds)."""
     known = dict(kind.get_known_choices())
     default = _default(f)
     shown = kind.get_choice_name(type(default)) if type(default) in known.values() else None
     what = field_help(owner, f.name) or _class_help(kind)
-    section.flags.append(Flag(f"--{path}.type", "{" + ",".join(known) + "}",
-                              f"{what} Each type's own flags follow under --{path}.type=NAME (with "
-                              f"--{path}.type=NAME, --help lists that type's only).".strip(), shown))
-    shared = frozenset(x.name for x in dataclasses.fields(kind)) if dataclasses.is_dataclass(kind) else frozenset()
+    section.flags.append(
+        Flag(
+            f"--{path}.type",
+            "{" + ",".join(known) + "}",
+            f"{what} Each type's own flags follow under --{path}.type=NAME (with "
+            f"--{path}.type=NAME, --help lists that type's only).".strip(),
+            shown,
+        )
+    )
+    shared = (
+        frozenset(x.name for x in dataclasses.fields(kind)) if dataclasses.is_dataclass(kind) else frozenset()
+    )
     if shared:
         _walk(kind, f"{path}.", section, layout)
     listed: list[type] = []
@@ -299,8 +313,10 @@ def _walk_choice(kind: type, f: dataclasses.Field, owner: type, path: str, secti
                 seen = frozenset(x.name for x in dataclasses.fields(ancestor))
                 common = [x.name for x in dataclasses.fields(ancestor) if x.init and x.name not in shared]
                 if common:
-                    about += (f". Shares the flags of --{path}.type={kind.get_choice_name(earlier)}: "
-                              f"{', '.join(common)}.")
+                    about += (
+                        f". Shares the flags of --{path}.type={kind.get_choice_name(earlier)}: "
+                        f"{', '.join(common)}."
+                    )
                 break
         listed.append(choice)
         if layout.chosen.get(path, name) != name:
@@ -316,9 +332,16 @@ def help_sections(config_class: type, args: Sequence[str] = ()) -> list[Section]
     chosen = dict(arg[2:].split(".type=", 1) for arg in args if arg.startswith("--") and ".type=" in arg)
     layout = _Layout(chosen=chosen)
     top = Section("")
-    top.flags += [Flag("-h, --help", "", "Show this help and exit.", ""),
-                  Flag("--config_path", "str", "A YAML file of these settings, nested as the flags are (--a.b=1 "
-                       "is `a: {b: 1}`); flags on the command line override it.", "none")]
+    top.flags += [
+        Flag("-h, --help", "", "Show this help and exit.", ""),
+        Flag(
+            "--config_path",
+            "str",
+            "A YAML file of these settings, nested as the flags are (--a.b=1 "
+            "is `a: {b: 1}`); flags on the command line override it.",
+            "none",
+        ),
+    ]
     layout.main.append(top)
     _walk(config_class, "", top, layout)
     return [s for s in layout.main + layout.groups + layout.choices if s.flags or s.shown_empty]
@@ -345,21 +368,33 @@ def format_help(config_class: type, args: Sequence[str] = ()) -> str:
     """The text of `--help`: usage, what the command does, then every flag with its description and default."""
     width = max(60, min(shutil.get_terminal_size().columns - 2, 120))
     sections = help_sections(config_class, args)
-    required = [f"{f.name}={'NAME' if f.name.endswith('.type') else 'VALUE'}" for s in sections for f in s.flags
-                if f.default is None]
+    required = [
+        f"{f.name}={'NAME' if f.name.endswith('.type') else 'VALUE'}"
+        for s in sections
+        for f in s.flags
+        if f.default is None
+    ]
     out = [" ".join(["usage:", _prog(config_class), *required, "[--FLAG=VALUE ...]"]), ""]
     if summary := _summary_line(config_class):
         out += [*textwrap.wrap(summary, width, break_on_hyphens=False), ""]
     for section in sections:
         if section.title:
             # (continuation lines indented 4: a line indented 2 starts a flag)
-            out += textwrap.wrap(f"{section.title}: {section.description}".strip(), width, subsequent_indent="    ",
-                                 break_on_hyphens=False, break_long_words=False)
+            out += textwrap.wrap(
+                f"{section.title}: {section.description}".strip(),
+                width,
+                subsequent_indent="    ",
+                break_on_hyphens=False,
+                break_long_words=False,
+            )
         for flag in section.flags:
             head = f"  {flag.name} {flag.metavar}".rstrip()
-            default = "(required)" if flag.default is None else f"(default: {flag.default})" if flag.default else ""
-            body = textwrap.wrap(f"{flag.help} {default}".strip(), width - 24, break_on_hyphens=False,
-                                 break_long_words=False) or [""]
+            default = (
+                "(required)" if flag.default is None else f"(default: {flag.default})" if flag.default else ""
+            )
+            body = textwrap.wrap(
+                f"{flag.help} {default}".strip(), width - 24, break_on_hyphens=False, break_long_words=False
+            ) or [""]
             if len(head) <= 22:
                 out.append(f"{head:<24}{body[0]}")
                 body = body[1:]
@@ -384,13 +419,20 @@ def _check_flags(parser: ArgumentParser, args: list[str]) -> None:
         return
     real = [name for name, action in known.items() if not (action.help or "").startswith("Config file for")]
     close = [match for name in unknown for match in difflib.get_close_matches(name, real, n=1, cutoff=0.6)]
-    print(f"error: unknown flag{'s' if len(unknown) > 1 else ''} {', '.join(dict.fromkeys(unknown))}", file=sys.stderr)
-    print(f"did you mean {', '.join(dict.fromkeys(close))}? (--help lists every flag)" if close
-          else "--help lists every flag", file=sys.stderr)
+    print(
+        f"error: unknown flag{'s' if len(unknown) > 1 else ''} {', '.join(dict.fromkeys(unknown))}",
+        file=sys.stderr,
+    )
+    print(
+        f"did you mean {', '.join(dict.fromkeys(close))}? (--help lists every flag)"
+        if close
+        else "--help lists every flag",
+        file=sys.stderr,
+    )
     raise SystemExit(2)
 
 
-def parse(config_class: type[T], args: list[str] | None = None) -> T:
+def parse[T](config_class: type[T], args: list[str] | None = None) -> T:
     """Parse `args` into `config_class`: `--help` prints `format_help`, an unknown flag names the closest real one,
     validation errors exit with the validator's own message."""
     args = sys.argv[1:] if args is None else list(args)
@@ -463,10 +505,15 @@ def interrupted(exc: KeyboardInterrupt, message: str) -> KeyboardInterrupt:
     return exc
 
 
-def cli_main(config_class: type[T], run: Callable[[T], R], summary: Callable[[T, R], None] | None = None,
-             errors: tuple[type[BaseException], ...] = (ValueError,), args: list[str] | None = None,
-             before_parse: Callable[[], object] | None = None,
-             on_interrupt: Callable[[T], str] | None = None) -> R:
+def cli_main[T, R](
+    config_class: type[T],
+    run: Callable[[T], R],
+    summary: Callable[[T, R], None] | None = None,
+    errors: tuple[type[BaseException], ...] = (ValueError,),
+    args: list[str] | None = None,
+    before_parse: Callable[[], object] | None = None,
+    on_interrupt: Callable[[T], str] | None = None,
+) -> R:
     """Every pipeline's `main`: environment, parse, run; `errors` (the ones a user can fix) exit
     with their message and no traceback; then `summary(cfg, result)` prints the one-line outcome.
     Ctrl-C ends with one line saying what was kept: the message the run attached (`interrupted`), else
@@ -488,6 +535,9 @@ def cli_main(config_class: type[T], run: Callable[[T], R], summary: Callable[[T,
         message = getattr(exc, _SAID, None)
         if message is None and on_interrupt is not None and cfg is not None:
             message = on_interrupt(cfg)
-        print(f"interrupted: {message}" if message else "interrupted; rerun the same command", file=sys.stderr,
-              flush=True)
+        print(
+            f"interrupted: {message}" if message else "interrupted; rerun the same command",
+            file=sys.stderr,
+            flush=True,
+        )
         raise SystemExit(INTERRUPTED) from None

@@ -16,8 +16,9 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def folder_problem(path: Path, what: str, marker: str | Path, advice: str, *, label: str = "",
-                   writing: bool = False) -> str | None:
+def folder_problem(
+    path: Path, what: str, marker: str | Path, advice: str, *, label: str = "", writing: bool = False
+) -> str | None:
     """Why `path` is not a folder holding a RoboView `what` (the file `marker` in it says it does), in one
     line ending with `advice`; None when it is one, and, when `writing`, also when it is new or empty."""
     path = Path(path)

@@ -68,14 +68,17 @@ def _call(method: str, item: Any) -> Any:
 class WorkerPool:
     """`num_workers` spawned processes, each holding `factory(*args)`; items go to its `method`."""
 
-    def __init__(self, num_workers: int, factory: Callable[..., Any], args: tuple = (), method: str = "run") -> None:
+    def __init__(
+        self, num_workers: int, factory: Callable[..., Any], args: tuple = (), method: str = "run"
+    ) -> None:
         if num_workers < 1:
             raise ValueError(f"num_workers={num_workers} must be at least 1")
         self.num_workers = num_workers
         self.method = method
         ctx = mp.get_context("spawn")
-        self._executor = ProcessPoolExecutor(num_workers, mp_context=ctx, initializer=_init,
-                                             initargs=(factory, args, ctx.Value("i", 0)))
+        self._executor = ProcessPoolExecutor(
+            num_workers, mp_context=ctx, initializer=_init, initargs=(factory, args, ctx.Value("i", 0))
+        )
 
     def submit(self, item: Any) -> Future:
         return self._executor.submit(_call, self.method, item)

@@ -77,20 +77,25 @@ class RoboViewEnv(EnvConfig):
         cams = self.camera_list
         unknown = [c for c in cams if c not in ALL_CAMERAS]
         if unknown or not cams:
-            raise ValueError(f"--env.cameras={self.cameras!r}: unknown camera(s) {unknown or cams}; "
-                             f"allowed: {', '.join(ALL_CAMERAS)}")
+            raise ValueError(
+                f"--env.cameras={self.cameras!r}: unknown camera(s) {unknown or cams}; "
+                f"allowed: {', '.join(ALL_CAMERAS)}"
+            )
         for name in ("n_repeats", "max_steps", "fps"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
         check_image_size(self.image_size, "--env.image_size")
         if not self.split_names_given:
             raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
-        self.features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,)),
-                         "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(8,))}
+        self.features = {
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,)),
+            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(8,)),
+        }
         self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
         for cam in cams:
-            self.features[f"pixels/{cam}"] = PolicyFeature(type=FeatureType.VISUAL,
-                                                           shape=(self.image_size, self.image_size, 3))
+            self.features[f"pixels/{cam}"] = PolicyFeature(
+                type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3)
+            )
             self.features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
 
     @property
@@ -111,8 +116,10 @@ class RoboViewEnv(EnvConfig):
             return available
         unknown = [s for s in names if s not in available]
         if unknown:
-            raise ValueError(f"--env.task: unknown split(s) {unknown}; the benchmark at {self.benchmark_path} has: "
-                             f"{', '.join(available)} (or `all`)")
+            raise ValueError(
+                f"--env.task: unknown split(s) {unknown}; the benchmark at {self.benchmark_path} has: "
+                f"{', '.join(available)} (or `all`)"
+            )
         return list(names)
 
     @property
@@ -129,9 +136,18 @@ class RoboViewEnv(EnvConfig):
         return self.split_kwargs(self.splits()[0])
 
     def split_kwargs(self, split: str) -> dict:
-        return {"benchmark_path": self.benchmark_path, "split": split, "cameras": self.camera_list,
-                "image_size": self.image_size, "n_repeats": self.n_repeats, "contexts": self.contexts,
-                "limit": self.limit, "max_steps": self.max_steps, "start_seed": self.start_seed, "fps": self.fps}
+        return {
+            "benchmark_path": self.benchmark_path,
+            "split": split,
+            "cameras": self.camera_list,
+            "image_size": self.image_size,
+            "n_repeats": self.n_repeats,
+            "contexts": self.contexts,
+            "limit": self.limit,
+            "max_steps": self.max_steps,
+            "start_seed": self.start_seed,
+            "fps": self.fps,
+        }
 
     def check_conformance(self) -> dict:
         """pipelines.evaluate's start-of-run check: `different` raises (unless --env.allow_drift=true) before any
@@ -140,10 +156,13 @@ class RoboViewEnv(EnvConfig):
         from roboview_data.benchmark.format import read_manifest
 
         root = Path(self.benchmark_path)
-        return conformance.gate(root, read_manifest(root)["benchmark_version"], self.allow_drift,
-                                "--env.allow_drift").record()
+        return conformance.gate(
+            root, read_manifest(root)["benchmark_version"], self.allow_drift, "--env.allow_drift"
+        ).record()
 
-    def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+    def create_envs(
+        self, n_envs: int, use_async_envs: bool = False
+    ) -> dict[str, dict[int, gym.vector.VectorEnv]]:
         """{split: {0: VectorEnv of n_envs}}: lerobot-eval runs --eval.n_episodes episodes of each split.
 
         Async envs start their worker processes only when lerobot reaches that split (lerobot's lazy

@@ -34,33 +34,62 @@ def successes(eval_info: dict) -> dict[str, list[bool]]:
     for entry in tasks:
         split = entry["task_group"]
         if split in out:
-            raise ValueError(f"eval_info.json holds split {split!r} twice; a RoboView split is one task group")
+            raise ValueError(
+                f"eval_info.json holds split {split!r} twice; a RoboView split is one task group"
+            )
         out[split] = [bool(s) for s in entry["metrics"]["successes"]]
     return out
 
 
-def convert(eval_info: Path, benchmark_path: str, output_dir: Path, n_repeats: int = 1, contexts: int = 0,
-            limit: int = 0, start_seed: int = 1000, policy_name: str = "lerobot-eval", max_steps: int = 120,
-            image_size: int = 96) -> Path:
+def convert(
+    eval_info: Path,
+    benchmark_path: str,
+    output_dir: Path,
+    n_repeats: int = 1,
+    contexts: int = 0,
+    limit: int = 0,
+    start_seed: int = 1000,
+    policy_name: str = "lerobot-eval",
+    max_steps: int = 120,
+    image_size: int = 96,
+) -> Path:
     info = json.loads(Path(eval_info).read_text())
     per_split = successes(info)
     plans = {split: episode_plan(benchmark_path, split, n_repeats, contexts, limit) for split in per_split}
     for split, done in per_split.items():
         if len(done) > len(plans[split][1]):
-            raise ValueError(f"eval_info.json has {len(done)} episodes of split {split!r}, which selects "
-                             f"{len(plans[split][1])}: run lerobot-eval with --eval.n_episodes at most that")
+            raise ValueError(
+                f"eval_info.json has {len(done)} episodes of split {split!r}, which selects "
+                f"{len(plans[split][1])}: run lerobot-eval with --eval.n_episodes at most that"
+            )
     version = next(iter(plans.values()))[0]
-    store = EpisodeStore(Path(output_dir), {"benchmark_version": version, "policy": policy_name, "policy_path": None,
-                                            "policy_options": {"source": str(Path(eval_info).resolve()),
-                                                               "start_seed": start_seed},
-                                            "n_repeats": {split: n_repeats for split in per_split},
-                                            "max_steps": max_steps, "image_size": image_size, "values": None})
+    store = EpisodeStore(
+        Path(output_dir),
+        {
+            "benchmark_version": version,
+            "policy": policy_name,
+            "policy_path": None,
+            "policy_options": {"source": str(Path(eval_info).resolve()), "start_seed": start_seed},
+            "n_repeats": {split: n_repeats for split in per_split},
+            "max_steps": max_steps,
+            "image_size": image_size,
+            "values": None,
+        },
+    )
     for split, done in per_split.items():
         for (item, repeat), success in zip(plans[split][1], done):
-            store.add({**item.record, "repeat": repeat,
-                       "episode_seed": episode_seed(item.record["context_id"], repeat), "success": success,
-                       "steps": None, "duration_s": None, "policy": policy_name,
-                       "failure_reason": "" if success else NO_REASON})
+            store.add(
+                {
+                    **item.record,
+                    "repeat": repeat,
+                    "episode_seed": episode_seed(item.record["context_id"], repeat),
+                    "success": success,
+                    "steps": None,
+                    "duration_s": None,
+                    "policy": policy_name,
+                    "failure_reason": "" if success else NO_REASON,
+                }
+            )
     store.close()
     return Path(output_dir) / "episodes.parquet"
 
@@ -101,7 +130,9 @@ class ConvertConfig:
 
     def __post_init__(self) -> None:
         if not self.eval_info or not Path(self.eval_info).is_file():
-            raise ValueError(f"--eval_info={self.eval_info!r}: no such file (lerobot-eval writes OUT/eval_info.json)")
+            raise ValueError(
+                f"--eval_info={self.eval_info!r}: no such file (lerobot-eval writes OUT/eval_info.json)"
+            )
         if not self.output_dir:
             raise ValueError("--output_dir is required: the RoboView results folder to write")
         if not self.env.benchmark_path:
@@ -110,8 +141,18 @@ class ConvertConfig:
 
 def run(cfg: ConvertConfig) -> Path:
     e = cfg.env
-    return convert(Path(cfg.eval_info), e.benchmark_path, Path(cfg.output_dir), e.n_repeats, e.contexts, e.limit,
-                   e.start_seed, cfg.policy_name, e.max_steps, e.image_size)
+    return convert(
+        Path(cfg.eval_info),
+        e.benchmark_path,
+        Path(cfg.output_dir),
+        e.n_repeats,
+        e.contexts,
+        e.limit,
+        e.start_seed,
+        cfg.policy_name,
+        e.max_steps,
+        e.image_size,
+    )
 
 
 def main(argv: list[str] | None = None) -> Path:

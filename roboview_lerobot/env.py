@@ -9,15 +9,16 @@ import gymnasium as gym
 import numpy as np
 
 from roboview_data.benchmark.format import BenchmarkItem, load_benchmark, select_items
-from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
 from roboview_data.tasks import make_env
+from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
 from roboview_data.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
 
 
-def episode_plan(benchmark_path: str, split: str, n_repeats: int = 1, contexts: int = 0,
-                 limit: int = 0) -> tuple[str, list[tuple[BenchmarkItem, int]]]:
+def episode_plan(
+    benchmark_path: str, split: str, n_repeats: int = 1, contexts: int = 0, limit: int = 0
+) -> tuple[str, list[tuple[BenchmarkItem, int]]]:
     """(benchmark version, [(item, repeat)]) in pipelines.evaluate's order: items × repeats."""
     bench = load_benchmark(benchmark_path, [split])
     items = select_items(bench.splits[split], contexts, limit)
@@ -35,13 +36,26 @@ class RoboViewEvalEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, benchmark_path: str, split: str, cameras: Sequence[str] = ("left_top", "wrist"),
-                 image_size: int = 96, n_repeats: int = 1, contexts: int = 0, limit: int = 0, max_steps: int = 120,
-                 start_seed: int = 1000, fps: int = 10, render_mode: str = "rgb_array") -> None:
+    def __init__(
+        self,
+        benchmark_path: str,
+        split: str,
+        cameras: Sequence[str] = ("left_top", "wrist"),
+        image_size: int = 96,
+        n_repeats: int = 1,
+        contexts: int = 0,
+        limit: int = 0,
+        max_steps: int = 120,
+        start_seed: int = 1000,
+        fps: int = 10,
+        render_mode: str = "rgb_array",
+    ) -> None:
         self.version, self.episodes = episode_plan(benchmark_path, split, n_repeats, contexts, limit)
         if not self.episodes:
-            raise ValueError(f"split {split!r} of {benchmark_path} selects no episodes (contexts={contexts}, "
-                             f"limit={limit})")
+            raise ValueError(
+                f"split {split!r} of {benchmark_path} selects no episodes (contexts={contexts}, "
+                f"limit={limit})"
+            )
         task = self.episodes[0][0].instance.task
         self.env = make_env(task, cameras=tuple(cameras), image_size=image_size, max_steps=max_steps, fps=fps)
         self.cameras = tuple(cameras)
@@ -50,12 +64,17 @@ class RoboViewEvalEnv(gym.Env):
         self.render_mode = render_mode
         self._max_episode_steps = max_steps
         self.index = 0
-        log.info("RoboView split %s: %d episodes (set --eval.n_episodes=%d)", split, len(self.episodes),
-                 len(self.episodes))
+        log.info(
+            "RoboView split %s: %d episodes (set --eval.n_episodes=%d)",
+            split,
+            len(self.episodes),
+            len(self.episodes),
+        )
         self.action_space = self.env.action_space
         pixels = {c: self.env.observation_space[IMAGE_KEY.format(c)] for c in self.cameras}
-        self.observation_space = gym.spaces.Dict({"pixels": gym.spaces.Dict(pixels),
-                                                  "agent_pos": self.env.observation_space[STATE_KEY]})
+        self.observation_space = gym.spaces.Dict(
+            {"pixels": gym.spaces.Dict(pixels), "agent_pos": self.env.observation_space[STATE_KEY]}
+        )
 
     @property
     def task(self) -> str:
@@ -75,12 +94,15 @@ class RoboViewEvalEnv(gym.Env):
         if seed is not None:
             index = seed - self.start_seed
             if index < 0:
-                raise ValueError(f"reset seed {seed} is below --env.start_seed={self.start_seed}: episode i is reset "
-                                 "with seed start_seed + i, so --env.start_seed must equal lerobot-eval's --seed")
+                raise ValueError(
+                    f"reset seed {seed} is below --env.start_seed={self.start_seed}: episode i is reset "
+                    "with seed start_seed + i, so --env.start_seed must equal lerobot-eval's --seed"
+                )
             self.index = index % len(self.episodes)
         item, repeat = self.episodes[self.index]
-        obs, info = self.env.reset(seed=episode_seed(item.record["context_id"], repeat),
-                                   options={"instance": item.instance})
+        obs, info = self.env.reset(
+            seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.instance}
+        )
         return self._convert(obs), info | {"episode_index": self.index}
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:

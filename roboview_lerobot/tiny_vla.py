@@ -28,10 +28,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 # SmolVLM's special tokens, in the roles its processor and SmolVLA's model look them up by.
-SPECIAL_TOKENS = {"pad_token": "<pad>", "unk_token": "<unk>", "bos_token": "<|im_start|>",
-                  "eos_token": "<end_of_utterance>"}
-IMAGE_TOKENS = {"fake_image_token": "<fake_token_around_image>", "image_token": "<image>",
-                "global_image_token": "<global-img>", "end_of_utterance_token": "<end_of_utterance>"}
+SPECIAL_TOKENS = {
+    "pad_token": "<pad>",
+    "unk_token": "<unk>",
+    "bos_token": "<|im_start|>",
+    "eos_token": "<end_of_utterance>",
+}
+IMAGE_TOKENS = {
+    "fake_image_token": "<fake_token_around_image>",
+    "image_token": "<image>",
+    "global_image_token": "<global-img>",
+    "end_of_utterance_token": "<end_of_utterance>",
+}
 # The tiny model: 4 text layers 64 wide, a 2-layer 32-wide vision tower over 64-pixel images in 16-pixel
 # patches (16 patches, 4 image tokens after SmolVLM's 2x pixel shuffle).
 IMAGE_SIZE = 64
@@ -45,8 +53,21 @@ def instruction_words() -> list[str]:
     from roboview_data.variation.colors import CATEGORIES
     from roboview_data.variation.factors import FACTORS
 
-    texts = [*PRIORITY, *CATEGORIES, *GENERIC_NOUNS, "block", "prism", "small", "large", "medium", "big", "left",
-             "right", "front", "back"]
+    texts = [
+        *PRIORITY,
+        *CATEGORIES,
+        *GENERIC_NOUNS,
+        "block",
+        "prism",
+        "small",
+        "large",
+        "medium",
+        "big",
+        "left",
+        "right",
+        "front",
+        "back",
+    ]
     for factor in FACTORS.values():
         if factor.name.endswith(("instruction", "shape")) or factor.name == "color":
             texts += [str(v).replace("_", " ") for v in factor.values]
@@ -59,8 +80,13 @@ def instruction_words() -> list[str]:
 def write_smolvlm(output_dir: str | Path, extra_words: tuple[str, ...] = ()) -> Path:
     """A SmolVLM config + processor (tokenizer, image processor) in `output_dir`; returns the folder."""
     from tokenizers import Tokenizer, models, pre_tokenizers
-    from transformers import (PreTrainedTokenizerFast, SmolVLMConfig, SmolVLMImageProcessor, SmolVLMProcessor,
-                              SmolVLMVideoProcessor)
+    from transformers import (
+        PreTrainedTokenizerFast,
+        SmolVLMConfig,
+        SmolVLMImageProcessor,
+        SmolVLMProcessor,
+        SmolVLMVideoProcessor,
+    )
 
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -69,19 +95,42 @@ def write_smolvlm(output_dir: str | Path, extra_words: tuple[str, ...] = ()) -> 
     vocab = {token: i for i, token in enumerate(special + words)}
     backend = Tokenizer(models.WordLevel(vocab, unk_token=SPECIAL_TOKENS["unk_token"]))
     backend.pre_tokenizer = pre_tokenizers.Whitespace()
-    tokenizer = PreTrainedTokenizerFast(tokenizer_object=backend, extra_special_tokens=IMAGE_TOKENS,
-                                        **SPECIAL_TOKENS)
-    images = SmolVLMImageProcessor(do_resize=True, size={"longest_edge": IMAGE_SIZE},
-                                   max_image_size={"longest_edge": IMAGE_SIZE}, do_image_splitting=False)
-    SmolVLMProcessor(image_processor=images, tokenizer=tokenizer, video_processor=SmolVLMVideoProcessor(),
-                     image_seq_len=4).save_pretrained(out)
+    tokenizer = PreTrainedTokenizerFast(
+        tokenizer_object=backend, extra_special_tokens=IMAGE_TOKENS, **SPECIAL_TOKENS
+    )
+    images = SmolVLMImageProcessor(
+        do_resize=True,
+        size={"longest_edge": IMAGE_SIZE},
+        max_image_size={"longest_edge": IMAGE_SIZE},
+        do_image_splitting=False,
+    )
+    SmolVLMProcessor(
+        image_processor=images, tokenizer=tokenizer, video_processor=SmolVLMVideoProcessor(), image_seq_len=4
+    ).save_pretrained(out)
     config = SmolVLMConfig(
-        text_config=dict(model_type="llama", vocab_size=len(vocab), hidden_size=64, intermediate_size=128,
-                         num_hidden_layers=TEXT_LAYERS, num_attention_heads=4, num_key_value_heads=2, head_dim=16,
-                         max_position_embeddings=512, pad_token_id=vocab[SPECIAL_TOKENS["pad_token"]]),
-        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=2, num_attention_heads=2,
-                           image_size=IMAGE_SIZE, patch_size=16),
-        scale_factor=2, image_token_id=vocab[IMAGE_TOKENS["image_token"]])
+        text_config=dict(
+            model_type="llama",
+            vocab_size=len(vocab),
+            hidden_size=64,
+            intermediate_size=128,
+            num_hidden_layers=TEXT_LAYERS,
+            num_attention_heads=4,
+            num_key_value_heads=2,
+            head_dim=16,
+            max_position_embeddings=512,
+            pad_token_id=vocab[SPECIAL_TOKENS["pad_token"]],
+        ),
+        vision_config=dict(
+            hidden_size=32,
+            intermediate_size=64,
+            num_hidden_layers=2,
+            num_attention_heads=2,
+            image_size=IMAGE_SIZE,
+            patch_size=16,
+        ),
+        scale_factor=2,
+        image_token_id=vocab[IMAGE_TOKENS["image_token"]],
+    )
     config.save_pretrained(out)
     return out.resolve()  # a checkpoint records this path: it must not depend on the working directory
 
@@ -102,10 +151,17 @@ def write_bart_tokenizer(output_dir: str | Path) -> Path:
     vocab = _bart_vocabulary()
     backend = Tokenizer(models.WordLevel(vocab, unk_token="<unk>"))
     backend.pre_tokenizer = pre_tokenizers.Whitespace()
-    backend.post_processor = processors.TemplateProcessing(single="<s> $A </s>",
-                                                           special_tokens=[("<s>", 0), ("</s>", 2)])
-    PreTrainedTokenizerFast(tokenizer_object=backend, bos_token="<s>", eos_token="</s>", unk_token="<unk>",
-                            pad_token="<pad>", mask_token="<mask>").save_pretrained(out)
+    backend.post_processor = processors.TemplateProcessing(
+        single="<s> $A </s>", special_tokens=[("<s>", 0), ("</s>", 2)]
+    )
+    PreTrainedTokenizerFast(
+        tokenizer_object=backend,
+        bos_token="<s>",
+        eos_token="</s>",
+        unk_token="<unk>",
+        pad_token="<pad>",
+        mask_token="<mask>",
+    ).save_pretrained(out)
     return out
 
 
@@ -116,28 +172,72 @@ def xvla_train_flags(tokenizer: str | Path, chunk_size: int = 10) -> list[str]:
 
     vocab_size = len(_bart_vocabulary())
     width = 64  # BART's d_model must equal the vision projection
-    florence = {"vision_config": {"depths": [1, 1, 1, 1], "embed_dim": [16, 32, 48, 64], "num_heads": [1, 2, 2, 4],
-                                  "num_groups": [1, 2, 2, 4], "window_size": 4, "projection_dim": width,
-                                  "drop_path_rate": 0.0, "max_position_embeddings": 16, "max_temporal_embeddings": 4},
-                "text_config": {"model_type": "bart", "vocab_size": vocab_size, "d_model": width, "encoder_layers": 1,
-                                "decoder_layers": 1, "encoder_attention_heads": 2, "decoder_attention_heads": 2,
-                                "encoder_ffn_dim": 128, "decoder_ffn_dim": 128, "max_position_embeddings": 128,
-                                "pad_token_id": 1, "bos_token_id": 0, "eos_token_id": 2},
-                "pad_token_id": 1, "bos_token_id": 0, "eos_token_id": 2,
-                "image_token_id": BART_SPECIAL.index("<image>")}
-    return ["--policy.type=xvla", f"--policy.florence_config={json.dumps(florence)}",
-            f"--policy.tokenizer_name={tokenizer}", "--policy.tokenizer_max_length=24", f"--policy.hidden_size={width}",
-            "--policy.depth=2", "--policy.num_heads=2", "--policy.num_domains=2", "--policy.len_soft_prompts=4",
-            "--policy.dim_time=16", "--policy.max_len_seq=128", "--policy.action_mode=auto",
-            "--policy.max_action_dim=8", "--policy.max_state_dim=8", f"--policy.chunk_size={chunk_size}",
-            f"--policy.n_action_steps={chunk_size}", "--policy.num_denoising_steps=2", "--policy.push_to_hub=false"]
+    florence = {
+        "vision_config": {
+            "depths": [1, 1, 1, 1],
+            "embed_dim": [16, 32, 48, 64],
+            "num_heads": [1, 2, 2, 4],
+            "num_groups": [1, 2, 2, 4],
+            "window_size": 4,
+            "projection_dim": width,
+            "drop_path_rate": 0.0,
+            "max_position_embeddings": 16,
+            "max_temporal_embeddings": 4,
+        },
+        "text_config": {
+            "model_type": "bart",
+            "vocab_size": vocab_size,
+            "d_model": width,
+            "encoder_layers": 1,
+            "decoder_layers": 1,
+            "encoder_attention_heads": 2,
+            "decoder_attention_heads": 2,
+            "encoder_ffn_dim": 128,
+            "decoder_ffn_dim": 128,
+            "max_position_embeddings": 128,
+            "pad_token_id": 1,
+            "bos_token_id": 0,
+            "eos_token_id": 2,
+        },
+        "pad_token_id": 1,
+        "bos_token_id": 0,
+        "eos_token_id": 2,
+        "image_token_id": BART_SPECIAL.index("<image>"),
+    }
+    return [
+        "--policy.type=xvla",
+        f"--policy.florence_config={json.dumps(florence)}",
+        f"--policy.tokenizer_name={tokenizer}",
+        "--policy.tokenizer_max_length=24",
+        f"--policy.hidden_size={width}",
+        "--policy.depth=2",
+        "--policy.num_heads=2",
+        "--policy.num_domains=2",
+        "--policy.len_soft_prompts=4",
+        "--policy.dim_time=16",
+        "--policy.max_len_seq=128",
+        "--policy.action_mode=auto",
+        "--policy.max_action_dim=8",
+        "--policy.max_state_dim=8",
+        f"--policy.chunk_size={chunk_size}",
+        f"--policy.n_action_steps={chunk_size}",
+        "--policy.num_denoising_steps=2",
+        "--policy.push_to_hub=false",
+    ]
 
 
 def smolvla_train_flags(backbone: str | Path, chunk_size: int = 10) -> list[str]:
     """lerobot-train's --policy.* flags for SmolVLA on the tiny backbone (random weights, no download)."""
-    return ["--policy.type=smolvla", f"--policy.vlm_model_name={backbone}", "--policy.load_vlm_weights=false",
-            f"--policy.resize_imgs_with_padding=[{IMAGE_SIZE},{IMAGE_SIZE}]", f"--policy.num_vlm_layers={TEXT_LAYERS}",
-            f"--policy.chunk_size={chunk_size}", f"--policy.n_action_steps={chunk_size}", "--policy.push_to_hub=false"]
+    return [
+        "--policy.type=smolvla",
+        f"--policy.vlm_model_name={backbone}",
+        "--policy.load_vlm_weights=false",
+        f"--policy.resize_imgs_with_padding=[{IMAGE_SIZE},{IMAGE_SIZE}]",
+        f"--policy.num_vlm_layers={TEXT_LAYERS}",
+        f"--policy.chunk_size={chunk_size}",
+        f"--policy.n_action_steps={chunk_size}",
+        "--policy.push_to_hub=false",
+    ]
 
 
 @dataclass
@@ -163,8 +263,10 @@ def run(cfg: TinyVLAConfig) -> list[str]:
 
 
 def _summary(cfg: TinyVLAConfig, flags: list[str]) -> None:
-    print(f"[tiny_vla] {cfg.type} backbone files in {Path(cfg.output_dir).resolve()}; train it with lerobot-train "
-          "--dataset.repo_id=ID --dataset.root=DIR " + " ".join(shlex.quote(flag) for flag in flags))
+    print(
+        f"[tiny_vla] {cfg.type} backbone files in {Path(cfg.output_dir).resolve()}; train it with lerobot-train "
+        "--dataset.repo_id=ID --dataset.root=DIR " + " ".join(shlex.quote(flag) for flag in flags)
+    )
 
 
 def main(args: list[str] | None = None) -> list[str]:

@@ -74,12 +74,18 @@ def _errors(events: list[dict]) -> list[str]:
     for e in events:
         method, params = e.get("method"), e.get("params", {})
         if method == "Runtime.exceptionThrown":
-            found.append("exception: " + params["exceptionDetails"].get("exception", {}).get("description", "")
-                         or params["exceptionDetails"].get("text", ""))
+            found.append(
+                "exception: " + params["exceptionDetails"].get("exception", {}).get("description", "")
+                or params["exceptionDetails"].get("text", "")
+            )
         elif method == "Runtime.consoleAPICalled" and params.get("type") in ("error", "assert"):
-            found.append("console: " + " ".join(str(a.get("value", a.get("description", ""))) for a in params["args"]))
+            found.append(
+                "console: " + " ".join(str(a.get("value", a.get("description", ""))) for a in params["args"])
+            )
         elif method == "Log.entryAdded" and params["entry"]["level"] == "error":
-            found.append(f"{params['entry']['source']}: {params['entry']['text']} {params['entry'].get('url', '')}")
+            found.append(
+                f"{params['entry']['source']}: {params['entry']['text']} {params['entry'].get('url', '')}"
+            )
     return found
 
 
@@ -97,9 +103,20 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
     if binary is None:
         raise FileNotFoundError("no chromium on PATH (make sysdeps installs Debian's chromium)")
     with tempfile.TemporaryDirectory() as profile:
-        proc = subprocess.Popen([binary, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                                 "--remote-debugging-port=0", f"--user-data-dir={profile}", "about:blank"],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen(
+            [
+                binary,
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--hide-scrollbars",
+                "--remote-debugging-port=0",
+                f"--user-data-dir={profile}",
+                "about:blank",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             port_file = Path(profile) / "DevToolsActivePort"
             deadline = time.monotonic() + timeout
@@ -114,17 +131,35 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
                 session = tools.call("Target.attachToTarget", targetId=target, flatten=True)["sessionId"]
                 for domain in ("Page", "Runtime", "Log"):
                     tools.call(f"{domain}.enable", session)
-                tools.call("Emulation.setDeviceMetricsOverride", session, width=width, height=900, deviceScaleFactor=1,
-                           mobile=False)
+                tools.call(
+                    "Emulation.setDeviceMetricsOverride",
+                    session,
+                    width=width,
+                    height=900,
+                    deviceScaleFactor=1,
+                    mobile=False,
+                )
                 tools.call("Page.navigate", session, url=Path(path).resolve().as_uri())
                 tools.wait_for("Page.loadEventFired", timeout)
-                images = json.loads(tools.call("Runtime.evaluate", session, expression=_IMAGES_JS,
-                                               returnByValue=True)["result"]["value"])
-                layout = json.loads(tools.call("Runtime.evaluate", session, expression=_LAYOUT_JS,
-                                               returnByValue=True)["result"]["value"])
+                images = json.loads(
+                    tools.call("Runtime.evaluate", session, expression=_IMAGES_JS, returnByValue=True)[
+                        "result"
+                    ]["value"]
+                )
+                layout = json.loads(
+                    tools.call("Runtime.evaluate", session, expression=_LAYOUT_JS, returnByValue=True)[
+                        "result"
+                    ]["value"]
+                )
                 size = tools.call("Page.getLayoutMetrics", session)["cssContentSize"]
-                shot = tools.call("Page.captureScreenshot", session, timeout, format="png", captureBeyondViewport=True,
-                                  clip={"x": 0, "y": 0, "width": width, "height": size["height"], "scale": 1})
+                shot = tools.call(
+                    "Page.captureScreenshot",
+                    session,
+                    timeout,
+                    format="png",
+                    captureBeyondViewport=True,
+                    clip={"x": 0, "y": 0, "width": width, "height": size["height"], "scale": 1},
+                )
                 time.sleep(0.2)  # late console messages
                 tools.call("Runtime.evaluate", session, expression="1")
                 errors = _errors(tools.events)

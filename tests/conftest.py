@@ -16,9 +16,23 @@ import pytest  # noqa: E402
 # Test tiers. Slow: a test that uses a rendered environment, the built benchmark or a trained checkpoint, or lives
 # in a module that starts simulations, servers, clusters or a browser. `make test-fast` runs the rest.
 SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_checkpoint", "bench"}
-FAST_MODULES = {"test_adaptive", "test_audit", "test_colors", "test_context_stats", "test_factors",
-                "test_folders", "test_imports", "test_isolation", "test_metrics", "test_ranking",
-                "test_report", "test_report_wording", "test_statistics", "test_stable_ids", "test_svgf"}
+FAST_MODULES = {
+    "test_adaptive",
+    "test_audit",
+    "test_colors",
+    "test_context_stats",
+    "test_factors",
+    "test_folders",
+    "test_imports",
+    "test_isolation",
+    "test_metrics",
+    "test_ranking",
+    "test_report",
+    "test_report_wording",
+    "test_statistics",
+    "test_stable_ids",
+    "test_svgf",
+}
 
 
 def pytest_collection_modifyitems(config, items):
@@ -58,16 +72,45 @@ def tiny_checkpoint(tmp_path_factory, tiny_benchmark) -> Path:
     from pipelines.collect import run as collect
 
     root = tmp_path_factory.mktemp("ckpt")
-    collect(CollectConfig(DatasetConfig(repo_id="t/demos", root=str(root / "ds"), num_episodes=2, image_size=64,
-                                        cameras=["left_top", "wrist"]), num_workers=1))
+    collect(
+        CollectConfig(
+            DatasetConfig(
+                repo_id="t/demos",
+                root=str(root / "ds"),
+                num_episodes=2,
+                image_size=64,
+                cameras=["left_top", "wrist"],
+            ),
+            num_workers=1,
+        )
+    )
     # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
-    args = [sys.executable, "-m", "pipelines.train", "--dataset.repo_id=t/demos", f"--dataset.root={root / 'ds'}",
-            f"--output_dir={root / 'train'}", "--batch_size=2", "--save_freq=2", "--device=cpu"]
+    args = [
+        sys.executable,
+        "-m",
+        "pipelines.train",
+        "--dataset.repo_id=t/demos",
+        f"--dataset.root={root / 'ds'}",
+        f"--output_dir={root / 'train'}",
+        "--batch_size=2",
+        "--save_freq=2",
+        "--device=cpu",
+    ]
     # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
-    periodic = [f"--benchmark.path={tiny_benchmark}", "--eval_split=color", "--eval_episodes=2", "--eval_freq=2"]
+    periodic = [
+        f"--benchmark.path={tiny_benchmark}",
+        "--eval_split=color",
+        "--eval_episodes=2",
+        "--eval_freq=2",
+    ]
     proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "'task_group': 'color'" in proc.stdout + proc.stderr and "'n_episodes': 2" in proc.stdout + proc.stderr
+    assert (
+        "'task_group': 'color'" in proc.stdout + proc.stderr
+        and "'n_episodes': 2" in proc.stdout + proc.stderr
+    )
     dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
-    assert "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
+    assert (
+        "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
+    )
     return root / "train" / "checkpoints" / "last" / "pretrained_model"

@@ -54,9 +54,14 @@ def test_an_adaptive_run_stops_splits_resumes_and_is_reported(tiny_benchmark, tm
     from pipelines.report import ReportConfig
     from pipelines.report import run as report
 
-    cfg = EvaluateConfig(BenchmarkConfig(str(tiny_benchmark), "color,color_x_camera_pose"), policy_config("expert"),
-                         EvalConfig(adaptive=True, max_repeats=4, n_repeats=2, num_workers=2, image_size=64,
-                                    max_steps=60, contexts=1), str(tmp_path / "ev"))
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(tiny_benchmark), "color,color_x_camera_pose"),
+        policy_config("expert"),
+        EvalConfig(
+            adaptive=True, max_repeats=4, n_repeats=2, num_workers=2, image_size=64, max_steps=60, contexts=1
+        ),
+        str(tmp_path / "ev"),
+    )
     first = run(cfg)
     record = json.loads((tmp_path / "ev" / "adaptive.json").read_text())
     color = record["splits"]["color"]
@@ -64,10 +69,18 @@ def test_an_adaptive_run_stops_splits_resumes_and_is_reported(tiny_benchmark, tm
     assert color["stopped"] == "no_bias" and color["rounds"] == 2 and color["lrt"] == 0.0
     rows = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
     assert rows.groupby("split")["repeat"].max().to_dict() == {"color": 1, "color_x_camera_pose": 1}
-    assert first.new_episodes == len(rows) == color["episodes"] + (rows["split"] == "color_x_camera_pose").sum()
+    assert (
+        first.new_episodes == len(rows) == color["episodes"] + (rows["split"] == "color_x_camera_pose").sum()
+    )
     assert run(cfg).new_episodes == 0  # a rerun recomputes the same decisions: nothing more to run
-    result = report(ReportConfig(results=str(tmp_path / "ev" / "episodes.parquet"), output_dir=str(tmp_path / "rep"),
-                                 metrics=MetricsConfig(n_perm=50, n_glm=10), plots=False))
+    result = report(
+        ReportConfig(
+            results=str(tmp_path / "ev" / "episodes.parquet"),
+            output_dir=str(tmp_path / "rep"),
+            metrics=MetricsConfig(n_perm=50, n_glm=10),
+            plots=False,
+        )
+    )
     assert result.metrics["splits"]["color"]["adaptive"]["stopped"] == "no_bias"
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "## Adaptive sampling" in text and "The sampling was adaptive" in text

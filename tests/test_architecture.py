@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from policies.base import AgentView, Episode, PolicyConfig
-from policies.types import policy_config
 from policies.factory import make_policy
+from policies.types import policy_config
+from roboview_data.tasks import load_preset, make_env
 from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.tasks.pick_place import PickPlaceEnv
-from roboview_data.tasks import make_env
 from roboview_data.variation.factors import (
     Factor,
     baselines,
@@ -18,7 +18,6 @@ from roboview_data.variation.factors import (
     register_factor,
     unregister_factor,
 )
-from roboview_data.tasks import load_preset
 from roboview_data.variation.instances import SuiteConfig, generate_suite
 
 PAPER_FIRST_ID = "1209193fe4df70d1"  # first instance of the `paper` preset (tests/test_stable_ids.py)
@@ -41,8 +40,16 @@ class TableTint:
 
 @pytest.fixture()
 def table_tint():
-    factor = register_factor(Factor(name="table_tint", kind="visual", values=("plain", "blue", "green"),
-                                    baseline="plain", doc="table color", bind=TableTint))
+    factor = register_factor(
+        Factor(
+            name="table_tint",
+            kind="visual",
+            values=("plain", "blue", "green"),
+            baseline="plain",
+            doc="table color",
+            bind=TableTint,
+        )
+    )
     yield factor
     unregister_factor("table_tint")
 
@@ -51,9 +58,18 @@ def test_a_visual_factor_is_one_module_and_one_registry_line(table_tint):
     # The registry, suites, ids and env all pick it up; published ids do not move.
     assert "table_tint" in factor_names()
     assert generate_suite(load_preset("paper"))[0].instance_id == PAPER_FIRST_ID
-    suite = generate_suite(SuiteConfig(preset="test", splits=("table_tint",), union_mode="dedupe",
-                                       value_subsets=(("initial_position", ("center",)), ("shape", ("cube",)),
-                                                      ("instruction", (baselines()["instruction"],)))))
+    suite = generate_suite(
+        SuiteConfig(
+            preset="test",
+            splits=("table_tint",),
+            union_mode="dedupe",
+            value_subsets=(
+                ("initial_position", ("center",)),
+                ("shape", ("cube",)),
+                ("instruction", (baselines()["instruction"],)),
+            ),
+        )
+    )
     assert [i.value for i in suite] == ["plain", "blue", "green"]
     assert len({i.instance_id for i in suite}) == 3 and len({i.context_id for i in suite}) == 1
     env = PickPlaceEnv(cameras=("front",), image_size=64)
@@ -113,16 +129,31 @@ def test_a_policy_cannot_read_the_instance():
         assert isinstance(view, AgentView) and not isinstance(view, PickPlaceEnv)
         # Its fields are the env's interface only; none is the env, its scene or the instance.
         assert {f.name for f in dataclasses.fields(AgentView)} == {
-            "task", "cameras", "image_size", "depth", "fps", "action_space", "observation_space"}
+            "task",
+            "cameras",
+            "image_size",
+            "depth",
+            "fps",
+            "action_space",
+            "observation_space",
+        }
         assert not hasattr(view, "instance") and not hasattr(view, "env") and not hasattr(view, "scene")
         # The kinematic model is the scene at defaults, not the live one: the object's color is not in it.
         model = view.kinematic_model()
         assert model is not env.model
         geom = env.scene.active_geom
-        assert np.allclose(env.model.geom_rgba[geom][:3], (0, 0, 1)) and not np.allclose(model.geom_rgba[geom][:3], (0, 0, 1))
+        assert np.allclose(env.model.geom_rgba[geom][:3], (0, 0, 1)) and not np.allclose(
+            model.geom_rgba[geom][:3], (0, 0, 1)
+        )
         # The episode names the instruction, seed and calibration: no factor value of the instance.
         episode = Episode.of(env, 7)
-        assert {f.name for f in dataclasses.fields(Episode)} == {"task", "instruction", "seed", "cameras", "image_size"}
+        assert {f.name for f in dataclasses.fields(Episode)} == {
+            "task",
+            "instruction",
+            "seed",
+            "cameras",
+            "image_size",
+        }
         assert "blue" not in repr(episode)
         assert episode.cameras["front"] == env.scene.camera_pose("front")
     finally:
@@ -150,8 +181,13 @@ def test_console_scripts_are_installed_and_answer_help():
     from pathlib import Path
 
     bindir = Path(sys.executable).parent
-    for script, flag in (("roboview-eval", "--eval.envs_per_worker"), ("roboview-collect", "--dataset.task"),
-                         ("roboview-build", "--preset"), ("roboview-report", "--results"),
-                         ("roboview-publish", "--repo_id"), ("roboview-train", "--steps")):
+    for script, flag in (
+        ("roboview-eval", "--eval.envs_per_worker"),
+        ("roboview-collect", "--dataset.task"),
+        ("roboview-build", "--preset"),
+        ("roboview-report", "--results"),
+        ("roboview-publish", "--repo_id"),
+        ("roboview-train", "--steps"),
+    ):
         proc = subprocess.run([str(bindir / script), "--help"], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0 and flag in proc.stdout, (script, proc.stderr[-500:])

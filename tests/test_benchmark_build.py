@@ -17,8 +17,8 @@ from pipelines.publish import PublishConfig, plan
 from roboview_data.benchmark.fairness import FairnessThresholds
 from roboview_data.benchmark.render import InstanceRenderer
 from roboview_data.sim.cameras import WORKSPACE_CENTER, quat_to_mat
-from roboview_data.variation.factors import parse_dist_scale, parse_euler
 from roboview_data.tasks import load_preset
+from roboview_data.variation.factors import parse_dist_scale, parse_euler
 from roboview_data.variation.instances import generate_suite
 
 ROOT = Path(__file__).parents[1]
@@ -59,7 +59,9 @@ def test_building_twice_gives_the_same_bytes(built, tmp_path):
     again = tmp_path / "again"
     run(BuildConfig(output_dir=str(again), preset="tiny", image_size=128))
     for split in ("color", "camera_pose", "color_x_camera_pose"):
-        assert (again / "data" / f"{split}.parquet").read_bytes() == (built / "data" / f"{split}.parquet").read_bytes()
+        assert (again / "data" / f"{split}.parquet").read_bytes() == (
+            built / "data" / f"{split}.parquet"
+        ).read_bytes()
     assert tree_digest(again) == tree_digest(built)
     assert str(tmp_path) not in (again / "README.md").read_text() + (again / "benchmark.json").read_text()
 
@@ -76,12 +78,15 @@ def test_stored_camera_extrinsics_match_the_factor(built):
         yaw, pitch = np.radians(parse_euler(row["camera_euler"]))
         pos, axis = cam(row, "front")
         assert np.degrees(np.arccos(np.clip(axis @ base_axis, -1, 1))) == pytest.approx(
-            np.degrees(np.arccos(np.cos(yaw) * np.cos(pitch))), abs=1e-4)
+            np.degrees(np.arccos(np.cos(yaw) * np.cos(pitch))), abs=1e-4
+        )
         np.testing.assert_allclose(pos, base_front, atol=1e-9)
     for row in datasets.load_dataset(str(built), split="dist_scale"):
         pos, axis = cam(row, "left_top")
         ref_pos, _ = cam(base, "left_top")
-        np.testing.assert_allclose(pos - ref_pos, -0.05 * parse_dist_scale(row["dist_scale"]) * axis, atol=1e-9)
+        np.testing.assert_allclose(
+            pos - ref_pos, -0.05 * parse_dist_scale(row["dist_scale"]) * axis, atol=1e-9
+        )
     for row in datasets.load_dataset(str(built), split="camera_pose"):
         for name in ("front", "left_top"):
             pos, axis = cam(row, name)
@@ -114,8 +119,12 @@ def test_human_decisions_move_instances_to_the_rejected_table(built, tmp_path):
     victim = datasets.load_dataset(str(built), split="dist_scale")[2]["instance_id"]
     decisions = tmp_path / "decisions.csv"
     with decisions.open("w", newline="") as f:
-        csv.writer(f).writerows([["instance_id", "verdict", "reviewer", "note"],
-                                 [victim, "reject", "alice", "object looks like a shadow"]])
+        csv.writer(f).writerows(
+            [
+                ["instance_id", "verdict", "reviewer", "note"],
+                [victim, "reject", "alice", "object looks like a shadow"],
+            ]
+        )
     out = tmp_path / "reviewed"
     run(BuildConfig(output_dir=str(out), preset="tiny", image_size=128, decisions=str(decisions)))
     assert victim not in datasets.load_dataset(str(out), split="dist_scale")["instance_id"]
@@ -127,8 +136,9 @@ def test_human_decisions_move_instances_to_the_rejected_table(built, tmp_path):
 
 def _cli(module: str, *args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
     env = os.environ | {"PYTHONPATH": str(ROOT)} | (env_extra or {})
-    return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=300,
-                          env=env)
+    return subprocess.run(
+        [sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=300, env=env
+    )
 
 
 def _build_main(capsys, *args: str) -> subprocess.CompletedProcess:
@@ -144,7 +154,9 @@ def _build_main(capsys, *args: str) -> subprocess.CompletedProcess:
 def test_bad_input_fails_before_work(tmp_path, built, capsys):
     # The command line itself (exit status 2, the message on stderr); the rest through the same `main`.
     proc = _cli("pipelines.build_benchmark", f"--output_dir={tmp_path / 'x'}", "--preset=huge")
-    assert proc.returncode == 2 and "unknown --preset='huge'; allowed: paper, paper_dedupe, tiny" in proc.stderr
+    assert (
+        proc.returncode == 2 and "unknown --preset='huge'; allowed: paper, paper_dedupe, tiny" in proc.stderr
+    )
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("%")
@@ -162,9 +174,14 @@ def test_bad_input_fails_before_work(tmp_path, built, capsys):
 def test_publish_dry_run_lists_exactly_the_files(built):
     proc = _cli("pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", "--dry_run=true")
     assert proc.returncode == 0, proc.stderr
-    listed = sorted(line.split("roboview/tiny/")[1] for line in proc.stdout.splitlines() if "roboview/tiny/" in line)
-    on_disk = sorted(p.relative_to(built).as_posix() for p in built.rglob("*")
-                     if p.is_file() and not p.relative_to(built).as_posix().startswith("contact_sheet/"))
+    listed = sorted(
+        line.split("roboview/tiny/")[1] for line in proc.stdout.splitlines() if "roboview/tiny/" in line
+    )
+    on_disk = sorted(
+        p.relative_to(built).as_posix()
+        for p in built.rglob("*")
+        if p.is_file() and not p.relative_to(built).as_posix().startswith("contact_sheet/")
+    )
     assert listed == on_disk and "data/color.parquet" in listed
     the_plan = plan(PublishConfig(path=str(built), repo_id="roboview/tiny", dry_run=True))
     assert the_plan.version.startswith("tiny-") and f"tag {the_plan.version}" in proc.stdout

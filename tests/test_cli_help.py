@@ -11,43 +11,81 @@ import typing
 from pathlib import Path
 
 import draccus
-
 import pytest
 
 ROOT = Path(__file__).parents[1]
-ENTRY_POINTS = ("collect", "build_benchmark", "publish", "evaluate", "report", "plan", "train", "coverage", "serve_vlm",
-                "probe_grounding", "export_dataset", "serve_policy", "audit", "merge", "verify")
+ENTRY_POINTS = (
+    "collect",
+    "build_benchmark",
+    "publish",
+    "evaluate",
+    "report",
+    "plan",
+    "train",
+    "coverage",
+    "serve_vlm",
+    "probe_grounding",
+    "export_dataset",
+    "serve_policy",
+    "audit",
+    "merge",
+    "verify",
+)
 
 
 # The LeRobot side's own commands.
 LEROBOT_SIDE = ("roboview_lerobot.convert", "roboview_lerobot.tiny_vla")
 # The measurement harnesses (`make bench` and the figures in docs/performance.md).
-HARNESSES = ("adaptive", "cluster", "collect_rate", "conformance_drift", "gpu", "render_rate", "serving",
-             "stats_calibration", "throughput", "verify_rate")
+HARNESSES = (
+    "adaptive",
+    "cluster",
+    "collect_rate",
+    "conformance_drift",
+    "gpu",
+    "render_rate",
+    "serving",
+    "stats_calibration",
+    "throughput",
+    "verify_rate",
+)
 
 
 @functools.cache
 def help_run(module: str) -> subprocess.CompletedProcess:
     """`python -m module --help`, run once per module (the docs' flag check reads the same text)."""
-    return subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True,
-                          timeout=180, cwd=ROOT, env=os.environ | {"PYTHONPATH": str(ROOT)})
+    return subprocess.run(
+        [sys.executable, "-m", module, "--help"],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        cwd=ROOT,
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+    )
 
 
-@pytest.mark.parametrize("module", [f"pipelines.{name}" for name in ENTRY_POINTS] + list(LEROBOT_SIDE)
-                         + [f"benchmarks.{name}" for name in HARNESSES])
+@pytest.mark.parametrize(
+    "module",
+    [f"pipelines.{name}" for name in ENTRY_POINTS]
+    + list(LEROBOT_SIDE)
+    + [f"benchmarks.{name}" for name in HARNESSES],
+)
 def test_help_documents_the_flags(module):
     proc = help_run(module)
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert "usage:" in proc.stdout and "Traceback" not in proc.stderr
     config = _config_class(module)
     if config is not None:
-        missing = [flag for flag in config_flags(config) if not re.search(rf"{re.escape(flag)}\b", proc.stdout)]
+        missing = [
+            flag for flag in config_flags(config) if not re.search(rf"{re.escape(flag)}\b", proc.stdout)
+        ]
         assert not missing, f"{module} --help lacks {missing}"
     # Every flag shown has its own description and its default (or says it is required), each flag is shown
     # once per section, and the flags shown are exactly those the command accepts.
     shown = help_flags(proc.stdout)
     assert shown, proc.stdout[:500]
-    undocumented = [flag for flag, text in shown if not re.sub(r"\((default: [^)]*|required)\)$", "", text).strip()]
+    undocumented = [
+        flag for flag, text in shown if not re.sub(r"\((default: [^)]*|required)\)$", "", text).strip()
+    ]
     no_default = [flag for flag, text in shown if not re.search(r"\((default: .+|required)\)$", text)]
     assert not undocumented, f"{module} --help: no description for {undocumented}"
     assert not no_default, f"{module} --help: no default for {no_default}"
@@ -77,8 +115,11 @@ def accepted_flags(config: type) -> set[str]:
 
     load_policy_types()  # as a command does before it parses: every --policy.type's flags
     actions = ArgumentParser(config_class=config).parser._option_string_actions
-    return {name for name, action in actions.items()
-            if name not in ("-h", "--help") and not (action.help or "").startswith("Config file for")}
+    return {
+        name
+        for name, action in actions.items()
+        if name not in ("-h", "--help") and not (action.help or "").startswith("Config file for")
+    }
 
 
 def _config_class(module: str) -> type | None:
@@ -109,7 +150,9 @@ def test_config_flags_walks_nested_configs():
     from pipelines.report import ReportConfig
 
     flags = config_flags(EvaluateConfig)
-    assert {"--benchmark.path", "--eval.shard", "--eval.n_repeats", "--policy.type", "--output_dir"} <= set(flags)
+    assert {"--benchmark.path", "--eval.shard", "--eval.n_repeats", "--policy.type", "--output_dir"} <= set(
+        flags
+    )
     assert config_flags(ReportConfig)[:2] == ["--results", "--output_dir"]
 
 
@@ -127,8 +170,22 @@ def test_lists_are_written_comma_separated_everywhere():
     from pipelines.build_benchmark import BuildConfig
 
     cfg = parse(BuildConfig, ["--factorial_colors=red,blue", "--cartesian=[color,shape]"])
-    assert cfg.factorial_colors == ["red", "blue"] and cfg.cartesian == ["color", "shape"]  # brackets still read
-    proc = subprocess.run([sys.executable, "-m", "pipelines.collect", "--dataset.repo_id=t/x",
-                           "--dataset.root=/nonexistent/roboview-test", "--dataset.cameras=left_top,nope"],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert cfg.factorial_colors == ["red", "blue"] and cfg.cartesian == [
+        "color",
+        "shape",
+    ]  # brackets still read
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.collect",
+            "--dataset.repo_id=t/x",
+            "--dataset.root=/nonexistent/roboview-test",
+            "--dataset.cameras=left_top,nope",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert proc.returncode != 0 and "nope" in proc.stderr  # the list was read: its bad entry is named

@@ -18,8 +18,14 @@ ENV = os.environ | {"PYTHONPATH": str(ROOT)}
 
 
 def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=timeout,
-                          cwd=ROOT, env=ENV)
+    return subprocess.run(
+        [sys.executable, "-m", module, *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+        env=ENV,
+    )
 
 
 def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
@@ -27,11 +33,25 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
     from policies.types import policy_config
 
     out = tmp_path / "ev"
-    flags = [f"--benchmark.path={tiny_benchmark}", "--policy.type=expert", "--benchmark.splits=color",
-             "--eval.limit=6", "--eval.n_repeats=2", "--eval.image_size=64", f"--output_dir={out}"]
+    flags = [
+        f"--benchmark.path={tiny_benchmark}",
+        "--policy.type=expert",
+        "--benchmark.splits=color",
+        "--eval.limit=6",
+        "--eval.n_repeats=2",
+        "--eval.image_size=64",
+        f"--output_dir={out}",
+    ]
     # Its own process group, signalled as a terminal's Ctrl-C is: the command and its workers all get SIGINT.
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.evaluate", *flags], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True, cwd=ROOT, env=ENV)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipelines.evaluate", *flags],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        cwd=ROOT,
+        env=ENV,
+    )
     journal = out / "episodes.jsonl"
     deadline = time.time() + 300
     while time.time() < deadline and not (journal.exists() and journal.read_text().count("\n") >= 1):
@@ -43,11 +63,18 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
     saved = len(journal.read_text().splitlines())
     assert 1 <= saved < 12
     last = stderr.strip().splitlines()[-1]
-    assert last == (f"interrupted: {saved} episode{'s' * (saved != 1)} saved in {out}; "
-                    "rerun the same command to resume"), stderr[-2000:]
+    assert last == (
+        f"interrupted: {saved} episode{'s' * (saved != 1)} saved in {out}; rerun the same command to resume"
+    ), stderr[-2000:]
 
-    result = run(EvaluateConfig(BenchmarkConfig(path=str(tiny_benchmark), splits="color"), policy_config("expert"),
-                                EvalConfig(n_repeats=2, limit=6, image_size=64), str(out)))
+    result = run(
+        EvaluateConfig(
+            BenchmarkConfig(path=str(tiny_benchmark), splits="color"),
+            policy_config("expert"),
+            EvalConfig(n_repeats=2, limit=6, image_size=64),
+            str(out),
+        )
+    )
     assert result.new_episodes == 12 - saved, journal.read_text()[-3000:]
     rows = pd.read_parquet(out / "episodes.parquet")
     assert len(rows) == 12 and not rows.duplicated(["instance_id", "repeat"]).any()
@@ -71,8 +98,17 @@ def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monke
     monkeypatch.setattr(collect, "_episodes", three_then_ctrl_c)
     root = tmp_path / "demos"
     with pytest.raises(SystemExit) as exit_:
-        collect.main([f"--dataset.root={root}", "--dataset.repo_id=t/demos", "--dataset.num_episodes=10",
-                      "--dataset.image_size=64", "--dataset.cameras=wrist", "--num_workers=1", "--checkpoint_every=2"])
+        collect.main(
+            [
+                f"--dataset.root={root}",
+                "--dataset.repo_id=t/demos",
+                "--dataset.num_episodes=10",
+                "--dataset.image_size=64",
+                "--dataset.cameras=wrist",
+                "--num_workers=1",
+                "--checkpoint_every=2",
+            ]
+        )
     assert exit_.value.code == 130
     kept = Progress.load(root).episodes_saved  # what a rerun resumes from
     assert 0 < kept <= 3
@@ -111,22 +147,28 @@ def test_ctrl_c_elsewhere_says_to_rerun(capsys):
         try:
             raise KeyboardInterrupt
         except KeyboardInterrupt as exc:
-            raise interrupted(exc, "3 things kept")
+            raise interrupted(exc, "3 things kept") from exc
 
     with pytest.raises(SystemExit):
         cli_main(PlanConfig, run_saying, args=[], on_interrupt=lambda cfg: "unused")
     assert capsys.readouterr().err.strip() == "interrupted: 3 things kept"
 
 
-@pytest.mark.parametrize("module, wrong, right", [
-    ("pipelines.evaluate", "--eval.n_repeat=3", "--eval.n_repeats"),
-    ("pipelines.collect", "--dataset.num_episode=3", "--dataset.num_episodes"),
-])
+@pytest.mark.parametrize(
+    "module, wrong, right",
+    [
+        ("pipelines.evaluate", "--eval.n_repeat=3", "--eval.n_repeats"),
+        ("pipelines.collect", "--dataset.num_episode=3", "--dataset.num_episodes"),
+    ],
+)
 def test_a_misspelled_flag_gets_two_lines_and_the_closest_real_flag(module, wrong, right):
     proc = _cli(module, "--policy.type=expert" if module.endswith("evaluate") else "--seed=1", wrong)
     assert proc.returncode == 2 and not proc.stdout
     lines = proc.stderr.strip().splitlines()
-    assert lines == [f"error: unknown flag {wrong.split('=')[0]}", f"did you mean {right}? (--help lists every flag)"]
+    assert lines == [
+        f"error: unknown flag {wrong.split('=')[0]}",
+        f"did you mean {right}? (--help lists every flag)",
+    ]
 
 
 def test_evaluate_help_puts_the_common_flags_first():
@@ -137,13 +179,17 @@ def test_evaluate_help_puts_the_common_flags_first():
     load_policy_types()
     text = format_help(EvaluateConfig)
     assert text.startswith("usage: ") and text.count("--config_path") == 1 and "Config file" not in text
-    common = [text.index(f"\n  {flag} ") for flag in ("--policy.type", "--benchmark.path", "--eval.n_repeats")]
+    common = [
+        text.index(f"\n  {flag} ") for flag in ("--policy.type", "--benchmark.path", "--eval.n_repeats")
+    ]
     advanced = [text.index(f"\n  {flag} ") for flag in ("--eval.envs_per_worker", "--eval.alpha")]
     per_type = text.index("\n--policy.type=lerobot:")
     assert max(common) < min(advanced) and max(advanced) < per_type
     # With a type named, only that type's own flags are listed.
     one = format_help(EvaluateConfig, ["--policy.type=lerobot"])
-    assert "\n--policy.type=lerobot:" in one and "--policy.type=openpi:" not in one and "--policy.url" not in one
+    assert (
+        "\n--policy.type=lerobot:" in one and "--policy.type=openpi:" not in one and "--policy.url" not in one
+    )
 
 
 def test_build_help_lists_every_preset_with_its_instance_count():
@@ -200,28 +246,49 @@ def test_vlm_endpoint_flags_nest_and_the_flat_spelling_still_works_with_a_warnin
 
     load_policy_types()
     base = ["--benchmark.path=b", "--policy.type=vlm_simple", "--sgl.enable=true"]
-    new = parse(EvaluateConfig, [*base, "--policy.endpoint.base_url=http://h:1/v1",
-                                 "--policy.endpoint.model=m", "--policy.endpoint.max_in_flight=2",
-                                 "--sgl.endpoint.model=s"])
+    new = parse(
+        EvaluateConfig,
+        [
+            *base,
+            "--policy.endpoint.base_url=http://h:1/v1",
+            "--policy.endpoint.model=m",
+            "--policy.endpoint.max_in_flight=2",
+            "--sgl.endpoint.model=s",
+        ],
+    )
     assert capsys.readouterr().err == ""
-    old = parse(EvaluateConfig, [*base, "--policy.base_url=http://h:1/v1", "--policy.model=m",
-                                 "--policy.max_in_flight=2", "--policy.model=m", "--sgl.model=s"])
+    old = parse(
+        EvaluateConfig,
+        [
+            *base,
+            "--policy.base_url=http://h:1/v1",
+            "--policy.model=m",
+            "--policy.max_in_flight=2",
+            "--policy.model=m",
+            "--sgl.model=s",
+        ],
+    )
     assert old.policy.endpoint == new.policy.endpoint and old.sgl.endpoint == new.sgl.endpoint
     assert (new.policy.endpoint.base_url, new.policy.endpoint.model, new.policy.endpoint.max_in_flight) == (
-        "http://h:1/v1", "m", 2)
+        "http://h:1/v1",
+        "m",
+        2,
+    )
     assert new.sgl.endpoint.model == "s" and new.policy.options()["model"] == "m"  # run.json keeps its keys
     assert capsys.readouterr().err.splitlines() == [  # one line per old flag, naming the new one
         "warning: --policy.base_url is deprecated; use --policy.endpoint.base_url",
         "warning: --policy.model is deprecated; use --policy.endpoint.model",
         "warning: --policy.max_in_flight is deprecated; use --policy.endpoint.max_in_flight",
-        "warning: --sgl.model is deprecated; use --sgl.endpoint.model"]
+        "warning: --sgl.model is deprecated; use --sgl.endpoint.model",
+    ]
     # Another policy type's own flag of the same name is left alone (openpi has --policy.timeout_s).
     openpi = ["--policy.type=openpi", "--policy.timeout_s=5"]
     assert "--policy.timeout_s" not in flag_aliases(EvaluateConfig, openpi)
     assert renamed_flags(EvaluateConfig, openpi) == openpi and capsys.readouterr().err == ""
     # The build's screen is an endpoint itself: its flags keep their names.
-    build = parse(BuildConfig, ["--preset=tiny", "--vlm_screen.base_url=http://h:1/v1",
-                                "--vlm_screen.model=g"])
+    build = parse(
+        BuildConfig, ["--preset=tiny", "--vlm_screen.base_url=http://h:1/v1", "--vlm_screen.model=g"]
+    )
     screen = build.vlm_screen
     assert build.screen_enabled and (screen.base_url, screen.model) == ("http://h:1/v1", "g")
     with pytest.raises(SystemExit):

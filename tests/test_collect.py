@@ -19,8 +19,12 @@ SMALL = ["--dataset.image_size=64", "--dataset.fps=10", "--max_steps=100"]
 
 
 def small_cfg(root: Path, n: int, workers: int, checkpoint_every: int = 2) -> CollectConfig:
-    return CollectConfig(dataset=DatasetConfig(repo_id=REPO_ID, root=str(root), num_episodes=n, image_size=64),
-                         num_workers=workers, max_steps=100, checkpoint_every=checkpoint_every)
+    return CollectConfig(
+        dataset=DatasetConfig(repo_id=REPO_ID, root=str(root), num_episodes=n, image_size=64),
+        num_workers=workers,
+        max_steps=100,
+        checkpoint_every=checkpoint_every,
+    )
 
 
 def frames_table(root: Path) -> pd.DataFrame:
@@ -43,15 +47,19 @@ def test_dataset_loads_with_lerobot_and_matches_the_features(reference):
 
     ds = LeRobotDataset(REPO_ID, root=reference)
     assert ds.num_episodes == 4
-    assert set(ds.meta.video_keys) == {f"observation.images.{c}" for c in ("front", "left_top", "right_top", "wrist")}
+    assert set(ds.meta.video_keys) == {
+        f"observation.images.{c}" for c in ("front", "left_top", "right_top", "wrist")
+    }
     assert ds.meta.features["observation.state"]["shape"] == (8,)
     assert ds.meta.features["action"]["names"][-1] == "gripper_close"
     item = ds[0]
     assert tuple(item["observation.images.front"].shape) == (3, 64, 64)
     assert float(item["observation.images.front"].std()) > 0.02  # a decoded, non-blank frame
-    assert item["task"] in {"put the small object into the yellow box",
-                            "pick up the small object and place it in the yellow box",
-                            "move the small object into the yellow box"}
+    assert item["task"] in {
+        "put the small object into the yellow box",
+        "pick up the small object and place it in the yellow box",
+        "move the small object into the yellow box",
+    }
     # Provenance: one row per saved episode with its context and seed.
     prov = pd.read_parquet(reference / "meta/roboview/episodes.parquet")
     assert list(prov["episode_index"]) == [0, 1, 2, 3]
@@ -67,10 +75,23 @@ def test_dataset_loads_with_lerobot_and_matches_the_features(reference):
 
 def test_lerobot_train_runs_two_steps(reference, tmp_path):
     out = tmp_path / "train"
-    cmd = [sys.executable, "-m", "lerobot.scripts.lerobot_train", f"--dataset.repo_id={REPO_ID}",
-           f"--dataset.root={reference}", "--policy.type=act", "--policy.pretrained_backbone_weights=null",
-           "--policy.device=cpu", "--policy.push_to_hub=false", "--steps=2", "--batch_size=2",
-           "--num_workers=0", "--save_freq=2", "--wandb.enable=false", f"--output_dir={out}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "lerobot.scripts.lerobot_train",
+        f"--dataset.repo_id={REPO_ID}",
+        f"--dataset.root={reference}",
+        "--policy.type=act",
+        "--policy.pretrained_backbone_weights=null",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        "--steps=2",
+        "--batch_size=2",
+        "--num_workers=0",
+        "--save_freq=2",
+        "--wandb.enable=false",
+        f"--output_dir={out}",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     model_dir = out / "checkpoints" / "last" / "pretrained_model"
@@ -92,8 +113,17 @@ def test_every_collected_dataset_has_a_dataset_card(reference):
 
 def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
     root = tmp_path / "ds"
-    cmd = [sys.executable, "-m", "pipelines.collect", f"--dataset.repo_id={REPO_ID}", f"--dataset.root={root}",
-           "--dataset.num_episodes=4", "--num_workers=1", "--checkpoint_every=1", *SMALL]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pipelines.collect",
+        f"--dataset.repo_id={REPO_ID}",
+        f"--dataset.root={root}",
+        "--dataset.num_episodes=4",
+        "--num_workers=1",
+        "--checkpoint_every=1",
+        *SMALL,
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     progress = root / "meta/roboview/progress.json"
     deadline = time.time() + 300
@@ -133,8 +163,14 @@ def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
 
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipelines.collect", *args], capture_output=True, text=True,
-                          timeout=120, cwd=cwd, env=os.environ | {"PYTHONPATH": str(Path(__file__).parents[1])})
+    return subprocess.run(
+        [sys.executable, "-m", "pipelines.collect", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+        env=os.environ | {"PYTHONPATH": str(Path(__file__).parents[1])},
+    )
 
 
 def _main(capsys, *args: str) -> subprocess.CompletedProcess:
@@ -147,15 +183,18 @@ def _main(capsys, *args: str) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(args, exit_.value.code, "", capsys.readouterr().err)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--dataset.num_episodes=0"], "--dataset.num_episodes=0 must be a positive count"),
-    (["--num_workers=-1"], "--num_workers=-1 must be a positive count"),
-    (["--dataset.cameras=[front,top_down]"], "['top_down']; allowed: front, left_top, right_top, wrist"),
-    (["--dataset.fps=7"], "--dataset.fps=7 must be a positive divisor of 500"),
-    (["--dataset.vcodec=mjpeg"], "'mjpeg' unknown; allowed: libsvtav1, h264, hevc"),
-    (["--dataset.repo_id=noslash"], "'noslash' must look like ORG/NAME"),
-    (["--dataset.randomize=[color,lighting]"], "factor(s) ['lighting']; allowed: color, camera_pose"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--dataset.num_episodes=0"], "--dataset.num_episodes=0 must be a positive count"),
+        (["--num_workers=-1"], "--num_workers=-1 must be a positive count"),
+        (["--dataset.cameras=[front,top_down]"], "['top_down']; allowed: front, left_top, right_top, wrist"),
+        (["--dataset.fps=7"], "--dataset.fps=7 must be a positive divisor of 500"),
+        (["--dataset.vcodec=mjpeg"], "'mjpeg' unknown; allowed: libsvtav1, h264, hevc"),
+        (["--dataset.repo_id=noslash"], "'noslash' must look like ORG/NAME"),
+        (["--dataset.randomize=[color,lighting]"], "factor(s) ['lighting']; allowed: color, camera_pose"),
+    ],
+)
 def test_cli_rejects_bad_values_before_work(tmp_path, capsys, args, message):
     root = tmp_path / "ds"
     proc = _main(capsys, f"--dataset.root={root}", *args)
@@ -174,11 +213,22 @@ def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path, capsys):
     assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
 
     before = (reference / "meta/info.json").read_text()
-    proc = _main(capsys, f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}",
-                 "--dataset.num_episodes=6", "--dataset.image_size=96")
+    proc = _main(
+        capsys,
+        f"--dataset.root={reference}",
+        f"--dataset.repo_id={REPO_ID}",
+        "--dataset.num_episodes=6",
+        "--dataset.image_size=96",
+    )
     assert proc.returncode == 2 and "image_size: existing 64 vs requested 96" in proc.stderr
-    proc = _main(capsys, f"--dataset.root={reference}", f"--dataset.repo_id={REPO_ID}",
-                 "--dataset.image_size=64", "--max_steps=100", "--dataset.randomize=[color]")
+    proc = _main(
+        capsys,
+        f"--dataset.root={reference}",
+        f"--dataset.repo_id={REPO_ID}",
+        "--dataset.image_size=64",
+        "--max_steps=100",
+        "--dataset.randomize=[color]",
+    )
     assert proc.returncode == 2 and "randomize: existing () vs requested ('color',)" in proc.stderr
     assert (reference / "meta/info.json").read_text() == before
 
@@ -207,7 +257,9 @@ def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_action
     assert all(list(r) == ["color", "camera_pose"] for r in rnd["randomized"])
     rgbs = np.stack(rnd["object_rgb"].to_list())
     assert rgbs.shape == (2, 3) and not np.allclose(rgbs[0], rgbs[1]) and ((rgbs >= 0) & (rgbs <= 1)).all()
-    for front, left, fovy in zip(rnd["camera_front_pos"], rnd["camera_left_top_pos"], rnd["camera_left_top_fovy"]):
+    for front, left, fovy in zip(
+        rnd["camera_front_pos"], rnd["camera_left_top_pos"], rnd["camera_left_top_fovy"]
+    ):
         assert np.allclose(front, left) and 45.0 <= fovy <= 50.0  # the perturbed cameras move together
         rel = np.asarray(left) - WORKSPACE_CENTER
         radius, height = np.hypot(rel[0], rel[1]), rel[2]
@@ -230,8 +282,14 @@ def test_env_shows_the_recorded_visuals(env):
     from roboview_data.variation.randomization import sample_randomization
 
     visuals = sample_randomization(123, ("color", "camera_pose"))
-    env.reset(seed=5, options={"instance": baseline_instance(), "object_rgb": visuals.object_rgb,
-                               "cameras": visuals.cameras})
+    env.reset(
+        seed=5,
+        options={
+            "instance": baseline_instance(),
+            "object_rgb": visuals.object_rgb,
+            "cameras": visuals.cameras,
+        },
+    )
     for name in ("front", "left_top"):
         pose = env.scene.camera_pose(name)
         assert np.allclose(pose.pos, visuals.cameras[name].pos, atol=1e-9)
@@ -251,8 +309,10 @@ def test_every_video_holds_every_frame(reference):
     # collection sizes the queue so that it cannot, and every parquet row has its video frame.
     import av
 
-    episodes = pd.concat([pd.read_parquet(f) for f in sorted((reference / "meta/episodes").rglob("*.parquet"))],
-                         ignore_index=True)
+    episodes = pd.concat(
+        [pd.read_parquet(f) for f in sorted((reference / "meta/episodes").rglob("*.parquet"))],
+        ignore_index=True,
+    )
     for cam in ("front", "left_top", "right_top", "wrist"):
         key = f"videos/observation.images.{cam}"
         for (chunk, file), group in episodes.groupby([f"{key}/chunk_index", f"{key}/file_index"]):

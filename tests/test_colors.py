@@ -74,9 +74,7 @@ def test_delta_e_2000_matches_sharma(lab1, lab2, expected):
 def test_delta_e_2000_vectorized_and_zero_on_identity():
     lab1 = np.array([row[0] for row in SHARMA_ROWS])
     lab2 = np.array([row[1] for row in SHARMA_ROWS])
-    np.testing.assert_allclose(
-        delta_e_2000(lab1, lab2), [row[2] for row in SHARMA_ROWS], atol=1e-4
-    )
+    np.testing.assert_allclose(delta_e_2000(lab1, lab2), [row[2] for row in SHARMA_ROWS], atol=1e-4)
     assert delta_e_2000(COLORS["teal"].lab, COLORS["teal"].lab) == 0.0
 
 

@@ -40,8 +40,13 @@ EDITS = {
     "context_id": lambda v: "0" * 16,
     "seed": lambda v: v + 1,
     "color_hex": lambda v: "#0000ff",
-    "fairness": lambda v: {**v, "cameras": [{**v["cameras"][0], "object_pixels": v["cameras"][0]["object_pixels"] + 1},
-                                            *v["cameras"][1:]]},
+    "fairness": lambda v: {
+        **v,
+        "cameras": [
+            {**v["cameras"][0], "object_pixels": v["cameras"][0]["object_pixels"] + 1},
+            *v["cameras"][1:],
+        ],
+    },
     "preview": lambda v: {**v, "bytes": v["bytes"][:-1] + bytes([v["bytes"][-1] ^ 1])},
     "color": lambda v: "blue",
     "cameras": lambda v: [{**v[0], "fovy": v[0]["fovy"] + 1e-9}, *v[1:]],
@@ -51,7 +56,9 @@ EDITS = {
 @pytest.mark.parametrize("column", sorted(EDITS))
 def test_an_edited_cell_is_refused_naming_its_row_and_column(copy, column):
     _edit_cell(copy / "data" / "color.parquet", 3, column, EDITS[column])
-    with pytest.raises(BenchmarkError, match=rf"'data/color'.*column\(s\) '{column}' of row\(s\) 3 no longer match"):
+    with pytest.raises(
+        BenchmarkError, match=rf"'data/color'.*column\(s\) '{column}' of row\(s\) 3 no longer match"
+    ):
         load_benchmark(copy, ["color"])
     load_benchmark(copy, ["camera_pose"])  # the other splits still load: each is checked on its own
 
@@ -108,7 +115,9 @@ def test_compare_images_tells_edges_from_regions():
     line = conformance.compare_images(ref, edge, tol)
     assert line["verdict"] == "equivalent" and line["region_pixels"] == 0 and line["max_diff"] == 130
     patch = conformance.compare_images(ref, blob, tol)
-    assert patch["verdict"] == "different" and patch["region_pixels"] == 16 and patch["fraction"] == 36 / 64**2
+    assert (
+        patch["verdict"] == "different" and patch["region_pixels"] == 16 and patch["fraction"] == 36 / 64**2
+    )
 
 
 def _inject(monkeypatch, change) -> None:
@@ -129,7 +138,9 @@ def _texture(env):
 
 
 def _color(env):
-    env.model.geom_rgba[env.scene.active_geom][:3] = np.clip(env.model.geom_rgba[env.scene.active_geom][:3] + 0.06, 0, 1)
+    env.model.geom_rgba[env.scene.active_geom][:3] = np.clip(
+        env.model.geom_rgba[env.scene.active_geom][:3] + 0.06, 0, 1
+    )
 
 
 def _camera(env):
@@ -147,8 +158,16 @@ def _friction(env):
     env.model.geom_friction[:, 0] = 0.5 * env._friction
 
 
-@pytest.mark.parametrize("change,kind", [(_texture, "image"), (_color, "image"), (_camera, "image"),
-                                         (_timestep, "physics"), (_friction, "physics")])
+@pytest.mark.parametrize(
+    "change,kind",
+    [
+        (_texture, "image"),
+        (_color, "image"),
+        (_camera, "image"),
+        (_timestep, "physics"),
+        (_friction, "physics"),
+    ],
+)
 def test_an_injected_change_is_different(tiny_benchmark, monkeypatch, change, kind):
     _inject(monkeypatch, change)
     report = conformance.check(tiny_benchmark)
@@ -159,15 +178,23 @@ def test_an_injected_change_is_different(tiny_benchmark, monkeypatch, change, ki
     if kind == "image":
         assert d["region_pixels_max"] > 0 and d["physics_identical"] == d["physics"]
     else:
-        assert d["joint_max"] > conformance.Tolerances().joint_rad or d["object_error_m_max"] > conformance.Tolerances().object_m
+        assert (
+            d["joint_max"] > conformance.Tolerances().joint_rad
+            or d["object_error_m_max"] > conformance.Tolerances().object_m
+        )
         assert d["images_identical"] == d["images"]
 
 
 def test_softpipe_is_equivalent_with_its_drift_reported(tiny_benchmark):
     """Mesa's other software rasterizer draws edges differently: measured, within the tolerances."""
     env = {**os.environ, "GALLIUM_DRIVER": "softpipe", "MUJOCO_GL": "egl"}
-    proc = subprocess.run([sys.executable, "-m", "pipelines.verify", f"--benchmark.path={tiny_benchmark}"],
-                          capture_output=True, text=True, env=env, timeout=600)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pipelines.verify", f"--benchmark.path={tiny_benchmark}"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     last = [line for line in proc.stdout.splitlines() if line.startswith("conformance:")][0]
     assert last.startswith("conformance: equivalent")
@@ -181,11 +208,22 @@ def test_softpipe_is_equivalent_with_its_drift_reported(tiny_benchmark):
 def _evaluate(bench: Path, out: Path, *flags: str) -> None:
     from pipelines.evaluate import main
 
-    main([f"--benchmark.path={bench}", "--policy.type=expert", "--eval.n_repeats=1", "--eval.num_workers=1",
-          "--benchmark.splits=camera_pose,dist_scale", f"--output_dir={out}", *flags])
+    main(
+        [
+            f"--benchmark.path={bench}",
+            "--policy.type=expert",
+            "--eval.n_repeats=1",
+            "--eval.num_workers=1",
+            "--benchmark.splits=camera_pose,dist_scale",
+            f"--output_dir={out}",
+            *flags,
+        ]
+    )
 
 
-def test_a_different_stack_stops_the_run_unless_drift_is_allowed(tiny_benchmark, tmp_path, monkeypatch, capsys):
+def test_a_different_stack_stops_the_run_unless_drift_is_allowed(
+    tiny_benchmark, tmp_path, monkeypatch, capsys
+):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     _inject(monkeypatch, _texture)
     with pytest.raises(SystemExit):
@@ -193,15 +231,21 @@ def test_a_different_stack_stops_the_run_unless_drift_is_allowed(tiny_benchmark,
     err = capsys.readouterr().err
     assert "renders or simulates the benchmark" in err and "--benchmark.allow_drift=true" in err
     assert not (tmp_path / "refused" / "episodes.parquet").exists()  # stopped before any episode
-    _evaluate(tiny_benchmark, tmp_path / "drift", "--benchmark.allow_drift=true", "--benchmark.values=0,orbit_r0_0")
+    _evaluate(
+        tiny_benchmark, tmp_path / "drift", "--benchmark.allow_drift=true", "--benchmark.values=0,orbit_r0_0"
+    )
     rows = pq.read_table(tmp_path / "drift" / "episodes.parquet").to_pylist()
     assert rows and {r["conformance"] for r in rows} == {"different"}
     entry = json.loads((tmp_path / "drift" / "provenance.json").read_text())[-1]["conformance"]
     assert entry["verdict"] == "different" and entry["drift"]["region_pixels_max"] > 0
-    from pipelines.verify import VerifyConfig, run
     from pipelines._cli import BenchmarkPath
+    from pipelines.verify import VerifyConfig, run
 
-    failed = [c for c in run(VerifyConfig(BenchmarkPath(str(tiny_benchmark)), str(tmp_path / "drift"))).checks if not c.passed]
+    failed = [
+        c
+        for c in run(VerifyConfig(BenchmarkPath(str(tiny_benchmark)), str(tmp_path / "drift"))).checks
+        if not c.passed
+    ]
     assert [c.name for c in failed] == ["conformance"] and "rows different" in failed[0].detail
 
 
@@ -217,7 +261,10 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
     rows = pq.read_table(clean / "episodes.parquet")
     assert set(rows.column("conformance").to_pylist()) == {"identical"}
     entry = json.loads((clean / "provenance.json").read_text())[-1]
-    assert entry["conformance"]["verdict"] == "identical" and entry["conformance"]["stack"]["mujoco"] == mujoco.__version__
+    assert (
+        entry["conformance"]["verdict"] == "identical"
+        and entry["conformance"]["stack"]["mujoco"] == mujoco.__version__
+    )
     assert main([f"--results={clean}"]).passed  # the benchmark path comes from provenance
 
     def broken(name: str, edit) -> list[str]:
@@ -225,7 +272,10 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
         shutil.copytree(clean, folder)
         table = pq.read_table(folder / "episodes.parquet")
         out = edit(table.to_pylist())
-        pq.write_table(pa.Table.from_pylist(out).replace_schema_metadata(table.schema.metadata), folder / "episodes.parquet")
+        pq.write_table(
+            pa.Table.from_pylist(out).replace_schema_metadata(table.schema.metadata),
+            folder / "episodes.parquet",
+        )
         with pytest.raises(SystemExit) as exit_:
             main([f"--results={folder}", f"--benchmark.path={tiny_benchmark}"])
         assert exit_.value.code == 1
@@ -238,8 +288,11 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
 
     assert broken("seed", seed) == ["seeds"]
     assert broken("duplicate", lambda rows: rows + [rows[4]]) == ["duplicates"]
-    foreign = next(i for i in generate_suite(load_preset("paper")) if i.split == "dist_scale" and i.value == "3"
-                   and i.get("shape") == "cylinder")
+    foreign = next(
+        i
+        for i in generate_suite(load_preset("paper"))
+        if i.split == "dist_scale" and i.value == "3" and i.get("shape") == "cylinder"
+    )
 
     def other(rows):
         rows[1] |= foreign.to_record()

@@ -15,30 +15,50 @@ def episodes(p_by_instruction, repeats: int, rng: np.random.Generator, shapes=("
     """The color split's instruction subspace (and optionally a shape subspace): success ~ Bernoulli(p[instr])."""
     base = baselines()
     rows = []
-    contexts = [("instruction", i) for i in INSTRUCTIONS] + [("shape", s) for s in shapes if s != base["shape"]]
+    contexts = [("instruction", i) for i in INSTRUCTIONS] + [
+        ("shape", s) for s in shapes if s != base["shape"]
+    ]
     for factor, value in contexts:
         ctx = base | {factor: value}
         p = p_by_instruction[INSTRUCTIONS.index(ctx["instruction"])]
         for color in COLORS:
             for r in range(repeats):
-                rows.append({"policy": "sim", "task": "pick_place", "split": "color", "factor": "color",
-                             "value": color, "context_id": f"{factor}={value}", "instance_id": f"{value}/{color}",
-                             "repeat": r, "success": bool(rng.random() < p), "instruction": ctx["instruction"],
-                             "shape": ctx["shape"], "initial_position": ctx["initial_position"]})
+                rows.append(
+                    {
+                        "policy": "sim",
+                        "task": "pick_place",
+                        "split": "color",
+                        "factor": "color",
+                        "value": color,
+                        "context_id": f"{factor}={value}",
+                        "instance_id": f"{value}/{color}",
+                        "repeat": r,
+                        "success": bool(rng.random() < p),
+                        "instruction": ctx["instruction"],
+                        "shape": ctx["shape"],
+                        "initial_position": ctx["initial_position"],
+                    }
+                )
     return pd.DataFrame(rows)
 
 
 def test_no_instruction_effect_rejects_at_the_nominal_rate():
     rng = np.random.default_rng(7)
     cfg = MetricsConfig(n_glm=20)
-    p_values = [context_factor_metrics(episodes((0.5, 0.5, 0.5), 30, rng), "pick_place", "instruction", cfg)["p_value"]
-                for _ in range(200)]
+    p_values = [
+        context_factor_metrics(episodes((0.5, 0.5, 0.5), 30, rng), "pick_place", "instruction", cfg)[
+            "p_value"
+        ]
+        for _ in range(200)
+    ]
     rate = np.mean(np.array(p_values) < 0.05)
     assert 0.01 <= rate <= 0.09, rate  # 200 draws at α = 0.05: a 99 % binomial band is [0.015, 0.09]
 
 
 def test_a_real_instruction_effect_is_found_and_reported_per_value():
-    m = context_factor_metrics(episodes((0.7, 0.7, 0.3), 30, np.random.default_rng(1)), "pick_place", "instruction")
+    m = context_factor_metrics(
+        episodes((0.7, 0.7, 0.3), 30, np.random.default_rng(1)), "pick_place", "instruction"
+    )
     assert m["p_value"] < 1e-6 and m["p_value_method"] == "asymptotic" and m["n_conditions"] == len(COLORS)
     assert list(m["per_value"]) == list(INSTRUCTIONS)
     sr = [v["sr"] for v in m["per_value"].values()]

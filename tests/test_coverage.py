@@ -22,16 +22,30 @@ def bench(tiny_benchmark) -> Path:
 
 
 def _collect(root: Path, randomize: list[str]) -> Path:
-    collect(CollectConfig(DatasetConfig(repo_id="t/cov", root=str(root), num_episodes=3, image_size=64,
-                                        cameras=["left_top", "wrist"], randomize=randomize),
-                          num_workers=1, max_steps=100))
+    collect(
+        CollectConfig(
+            DatasetConfig(
+                repo_id="t/cov",
+                root=str(root),
+                num_episodes=3,
+                image_size=64,
+                cameras=["left_top", "wrist"],
+                randomize=randomize,
+            ),
+            num_workers=1,
+            max_steps=100,
+        )
+    )
     return root
 
 
 @pytest.fixture(scope="module")
 def datasets(tmp_path_factory) -> dict[str, Path]:
     base = tmp_path_factory.mktemp("cov")
-    return {"context": _collect(base / "context", []), "random": _collect(base / "random", ["color", "camera_pose"])}
+    return {
+        "context": _collect(base / "context", []),
+        "random": _collect(base / "random", ["color", "camera_pose"]),
+    }
 
 
 def _records(bench: Path) -> list[dict]:
@@ -49,17 +63,23 @@ def test_context_only_data_covers_exactly_the_baselines(bench, datasets):
     table = audit(load_training_visuals(datasets["context"]), _records(bench))
     color = _status(table, "color")
     assert color.pop("red") == "exact" and set(color.values()) == {"never"}
-    assert set(_status(table, "camera_pose").values()) == {"never"}  # orbital poses are not the original camera
+    assert set(_status(table, "camera_pose").values()) == {
+        "never"
+    }  # orbital poses are not the original camera
     euler = _status(table, "camera_euler")
-    assert euler.pop("0,0") == "exact" and set(euler.values()) == {"never"}  # (±6°, ±6°) is 8.5° away: beyond the 5° radius
+    assert euler.pop("0,0") == "exact" and set(euler.values()) == {
+        "never"
+    }  # (±6°, ±6°) is 8.5° away: beyond the 5° radius
     dist = table[table["split"] == "dist_scale"].set_index("value")
     assert dist.loc["0", "status"] == "exact"
     assert np.isclose(dist.loc["4", "nearest_pos_m"], 0.20) and dist.loc["4", "status"] == "never"
     assert np.isclose(dist.loc["4", "nearest_angle_deg"], 0.0, atol=1e-3)
     assert (table.loc[table["split"] == "color", "n_nearby"] <= 3).all()
     # A wider radius turns the ±6° Euler values nearby, but never exact.
-    wide = _status(audit(load_training_visuals(datasets["context"]), _records(bench), Radii(pose_deg=9.0)),
-                   "camera_euler")
+    wide = _status(
+        audit(load_training_visuals(datasets["context"]), _records(bench), Radii(pose_deg=9.0)),
+        "camera_euler",
+    )
     assert wide.pop("0,0") == "exact" and set(wide.values()) == {"nearby"}
 
 
@@ -83,15 +103,37 @@ def test_randomized_data_is_never_exact_and_nearby_grows_with_the_radius(bench, 
 def test_cli_writes_json_markdown_and_plot(bench, datasets, tmp_path):
     out = tmp_path / "cov"
     env = os.environ | {"PYTHONPATH": str(ROOT)}
-    proc = subprocess.run([sys.executable, "-m", "pipelines.coverage", f"--dataset.root={datasets['context']}",
-                           f"--benchmark.path={bench}", f"--output_dir={out}"], capture_output=True, text=True,
-                          timeout=300, env=env)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.coverage",
+            f"--dataset.root={datasets['context']}",
+            f"--benchmark.path={bench}",
+            f"--output_dir={out}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "[coverage] color: 1 exact, 0 nearby," in proc.stdout
     payload = json.loads((out / "coverage.json").read_text())
     assert payload["summary"]["color"]["exact"] == 1 and payload["episodes"] == 3
     assert "| color | 1 | 0 |" in (out / "coverage.md").read_text()
     assert (out / "coverage.png").stat().st_size > 10_000
-    bad = subprocess.run([sys.executable, "-m", "pipelines.coverage", f"--dataset.root={tmp_path}",
-                          f"--benchmark.path={bench}"], capture_output=True, text=True, timeout=120, env=env)
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.coverage",
+            f"--dataset.root={tmp_path}",
+            f"--benchmark.path={bench}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
     assert bad.returncode == 2 and "is not a pipelines.collect dataset" in bad.stderr

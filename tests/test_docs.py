@@ -15,9 +15,14 @@ from tests.test_cli_help import help_run
 ROOT = Path(__file__).parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 # Console scripts and the module each stands for (pyproject.toml [project.scripts]).
-SCRIPTS = {"roboview-collect": "pipelines.collect", "roboview-build": "pipelines.build_benchmark",
-           "roboview-eval": "pipelines.evaluate", "roboview-report": "pipelines.report",
-           "roboview-publish": "pipelines.publish", "roboview-train": "pipelines.train"}
+SCRIPTS = {
+    "roboview-collect": "pipelines.collect",
+    "roboview-build": "pipelines.build_benchmark",
+    "roboview-eval": "pipelines.evaluate",
+    "roboview-report": "pipelines.report",
+    "roboview-publish": "pipelines.publish",
+    "roboview-train": "pipelines.train",
+}
 
 
 ASSIGNMENT = re.compile(r"^([A-Za-z_]\w*)=(\"[^\"]*\"|'[^']*'|\S*)$")
@@ -76,10 +81,10 @@ def _module_of(command: str) -> tuple[str, list[str]] | None:
         return None
     for i, word in enumerate(words):
         if word.endswith("python") or word.endswith("python3"):
-            if i + 2 < len(words) + 1 and words[i + 1:i + 2] == ["-m"]:
-                return words[i + 2], words[i + 3:]
+            if i + 2 < len(words) + 1 and words[i + 1 : i + 2] == ["-m"]:
+                return words[i + 2], words[i + 3 :]
         if Path(word).name in SCRIPTS:
-            return SCRIPTS[Path(word).name], words[i + 1:]
+            return SCRIPTS[Path(word).name], words[i + 1 :]
     return None
 
 
@@ -105,7 +110,7 @@ def test_every_documented_flag_exists():
     with ThreadPoolExecutor(4) as pool:  # --help once per module, in parallel
         list(pool.map(help_text, sorted({c[3] for c in commands})))
     wrong = []
-    for page, line, command, module, args in commands:
+    for page, line, _command, module, args in commands:
         for arg in args:
             if arg.startswith("--"):
                 flag = arg.split("=", 1)[0]
@@ -115,9 +120,12 @@ def test_every_documented_flag_exists():
 
 
 def test_bash_blocks_hold_no_placeholders():
-    bad = [f"{page.relative_to(ROOT)}:{line}: {command[:100]}" for page in PAGES
-           for line, command in bash_commands(page)
-           if re.search(r"(\.\.\.|…|\s\[--|=\[|<[A-Z_]+>|=[A-Z](\s|,|/|$))", command)]
+    bad = [
+        f"{page.relative_to(ROOT)}:{line}: {command[:100]}"
+        for page in PAGES
+        for line, command in bash_commands(page)
+        if re.search(r"(\.\.\.|…|\s\[--|=\[|<[A-Z_]+>|=[A-Z](\s|,|/|$))", command)
+    ]
     assert not bad, "placeholders in bash blocks:\n" + "\n".join(bad)
 
 
@@ -142,14 +150,25 @@ def test_links_resolve():
             path = (page.parent / target.split("#")[0]).resolve()
             if not path.exists():
                 broken.append(f"{page.relative_to(ROOT)}: {target}")
-        broken += [f"{page.relative_to(ROOT)}: absolute path {m}" for m in re.findall(r"(?<![\w.])/(?:work|tmp)/\S+", text)]
+        broken += [
+            f"{page.relative_to(ROOT)}: absolute path {m}"
+            for m in re.findall(r"(?<![\w.])/(?:work|tmp)/\S+", text)
+        ]
     assert not broken, "\n".join(broken)
 
 
 # The phrases a product page must not hold, assembled from parts so that this file, which the same rule covers,
 # does not hold them either: words about how the project was made, and files outside the repository.
-_MADE = ("sess" + "ion \\d", "this sess" + "ion", "sess" + "ions?\\b(?! of)", "iss" + "ue \\d+", "was l" + "ent",
-         "withdr" + "awn", "found on the w" + "ay", "is g" + "one")
+_MADE = (
+    "sess" + "ion \\d",
+    "this sess" + "ion",
+    "sess" + "ions?\\b(?! of)",
+    "iss" + "ue \\d+",
+    "was l" + "ent",
+    "withdr" + "awn",
+    "found on the w" + "ay",
+    "is g" + "one",
+)
 HISTORY = re.compile(r"\b(" + "|".join(_MADE) + ")", re.IGNORECASE)
 OUTSIDE = ("DESIGN" + ".md", ".." + "/shared")
 

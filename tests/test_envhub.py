@@ -46,8 +46,10 @@ def test_lerobots_hub_loader_makes_one_vector_env_per_split(hub_cache, tiny_benc
     assert obs["pixels"]["front"].shape == (2, 48, 48, 3) and obs["pixels"]["wrist"].shape == (2, 48, 48, 3)
     assert obs["agent_pos"].shape == (2, 8)
     assert list(vec.call("task")) == ["dist_scale"] * 2 and vec.call("_max_episode_steps")[0] == 30
-    assert list(vec.call("task_description")) == [items[0].instance.get("instruction"),
-                                                  items[1].instance.get("instruction")]
+    assert list(vec.call("task_description")) == [
+        items[0].instance.get("instruction"),
+        items[1].instance.get("instruction"),
+    ]
     assert not np.array_equal(obs["pixels"]["front"][0], obs["pixels"]["front"][1])  # dist 0 vs dist 1
     for groups in envs.values():
         groups[0].close()
@@ -65,9 +67,21 @@ def test_the_hub_env_says_what_it_needs(hub_cache, monkeypatch):
 
 
 def test_publish_dry_run_lists_the_envhub_repo(tiny_benchmark):
-    proc = subprocess.run([sys.executable, "-m", "pipelines.publish", f"--path={tiny_benchmark}",
-                           "--repo_id=org/roboview-bias", "--env_repo_id=org/roboview-env", "--dry_run=true"],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.publish",
+            f"--path={tiny_benchmark}",
+            "--repo_id=org/roboview-bias",
+            "--env_repo_id=org/roboview-env",
+            "--dry_run=true",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
     assert proc.returncode == 0, proc.stderr
     assert f"{len(ENV_PY.read_text().encode()):,}  org/roboview-env/env.py" in proc.stdout
     assert "org/roboview-env/README.md" in proc.stdout

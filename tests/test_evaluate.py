@@ -26,21 +26,52 @@ def bench(tiny_benchmark) -> Path:
     return tiny_benchmark
 
 
-def evaluate(bench: Path, out: Path, policy: str = "expert", splits: str = "", limit: int = 2, repeats: int = 1,
-             backend: str = "local", workers: int = 2, rerun: str = "", path: str | None = None, max_steps: int = 120,
-             image_size: int = 64, envs_per_worker: int = 1, videos: str = "", eager: bool = False,
-             policy_server: bool = False):
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), splits), policy_config(policy, **({"path": path} if path else {})),
-                         EvalConfig(n_repeats=repeats, limit=limit, num_workers=workers, backend=backend,
-                                    rerun=rerun, image_size=image_size, max_steps=max_steps,
-                                    envs_per_worker=envs_per_worker, videos=videos, eager_render=eager,
-                                    policy_server=policy_server), str(out))
+def evaluate(
+    bench: Path,
+    out: Path,
+    policy: str = "expert",
+    splits: str = "",
+    limit: int = 2,
+    repeats: int = 1,
+    backend: str = "local",
+    workers: int = 2,
+    rerun: str = "",
+    path: str | None = None,
+    max_steps: int = 120,
+    image_size: int = 64,
+    envs_per_worker: int = 1,
+    videos: str = "",
+    eager: bool = False,
+    policy_server: bool = False,
+):
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(bench), splits),
+        policy_config(policy, **({"path": path} if path else {})),
+        EvalConfig(
+            n_repeats=repeats,
+            limit=limit,
+            num_workers=workers,
+            backend=backend,
+            rerun=rerun,
+            image_size=image_size,
+            max_steps=max_steps,
+            envs_per_worker=envs_per_worker,
+            videos=videos,
+            eager_render=eager,
+            policy_server=policy_server,
+        ),
+        str(out),
+    )
     return run(cfg)
 
 
 def rows(out: Path) -> pd.DataFrame:
-    return pd.read_parquet(out / "episodes.parquet").drop(columns=["duration_s"]).sort_values(
-        ["instance_id", "repeat"]).reset_index(drop=True)
+    return (
+        pd.read_parquet(out / "episodes.parquet")
+        .drop(columns=["duration_s"])
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
 
 
 def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
@@ -53,6 +84,7 @@ def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
     assert (df["policy"] == "expert").all() and (df["failure_reason"] == "").all()
     # Episode seeds follow the documented derivation (docs/formats.md, "Identity and seeds").
     from roboview_data.variation.instances import episode_seed
+
     assert all(episode_seed(c, r) == s for c, r, s in zip(df["context_id"], df["repeat"], df["episode_seed"]))
 
 
@@ -60,11 +92,25 @@ def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
     ref = tmp_path / "ref"
     evaluate(bench, ref, splits="color,dist_scale", limit=2, repeats=2)
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}", "--policy.type=expert",
-           "--benchmark.splits=color,dist_scale", "--eval.limit=2", "--eval.n_repeats=2",
-           "--eval.image_size=64", f"--output_dir={out}"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-                            env=os.environ | {"PYTHONPATH": str(ROOT)})
+    cmd = [
+        sys.executable,
+        "-m",
+        "pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        "--policy.type=expert",
+        "--benchmark.splits=color,dist_scale",
+        "--eval.limit=2",
+        "--eval.n_repeats=2",
+        "--eval.image_size=64",
+        f"--output_dir={out}",
+    ]
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+    )
     journal = out / "episodes.jsonl"
     deadline = time.time() + 300
     while time.time() < deadline and not (journal.exists() and len(journal.read_text().splitlines()) >= 3):
@@ -87,6 +133,7 @@ def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path):
     evaluate(bench, tmp_path / "local", splits="color,camera_pose", limit=1, repeats=2)
     evaluate(bench, tmp_path / "ray", splits="color,camera_pose", limit=1, repeats=2, backend="ray")
     import ray
+
     ray.shutdown()
     local, remote = rows(tmp_path / "local"), rows(tmp_path / "ray")
     assert len(local) == 4
@@ -96,7 +143,9 @@ def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path):
 def test_rerun_recording_verifies(bench, tmp_path):
     rrd = tmp_path / "eval.rrd"
     evaluate(bench, tmp_path / "ev", splits="color", limit=2, repeats=1, rerun=str(rrd))
-    proc = subprocess.run([str(RERUN), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [str(RERUN), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr
     assert "verified without error" in proc.stdout + proc.stderr
     assert rrd.stat().st_size > 20_000  # frames of two episodes, not an empty shell
@@ -104,8 +153,18 @@ def test_rerun_recording_verifies(bench, tmp_path):
 
 def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_path):
     # No image size given: the env renders the checkpoint's own 64² (its cameras: left_top + wrist).
-    result = evaluate(bench, tmp_path / "ev", policy="lerobot", path=str(tiny_checkpoint), splits="color",
-                      limit=1, repeats=1, workers=1, max_steps=8, image_size=0)
+    result = evaluate(
+        bench,
+        tmp_path / "ev",
+        policy="lerobot",
+        path=str(tiny_checkpoint),
+        splits="color",
+        limit=1,
+        repeats=1,
+        workers=1,
+        max_steps=8,
+        image_size=0,
+    )
     assert json.loads((tmp_path / "ev" / "run.json").read_text())["image_size"] == 64
     df = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
     assert result.episodes == 1 and df["policy"].tolist() == ["lerobot:act"]
@@ -117,8 +176,13 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     """pipelines.evaluate with `args` (the expert unless they name a --policy.type: there is no default)."""
     if not any(a.startswith("--policy.type=") for a in args):
         args = ("--policy.type=expert", *args)
-    return subprocess.run([sys.executable, "-m", "pipelines.evaluate", *args], capture_output=True, text=True,
-                          timeout=300, env=os.environ | {"PYTHONPATH": str(ROOT)})
+    return subprocess.run(
+        [sys.executable, "-m", "pipelines.evaluate", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+    )
 
 
 def _main(capsys, *args: str) -> subprocess.CompletedProcess:
@@ -137,56 +201,105 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path, ca
     out = tmp_path / "out"
     # The command line itself (exit status 2, the message on stderr); the rest through the same `main`.
     proc = _cli(f"--benchmark.path={bench}", "--policy.type=oracle", f"--output_dir={out}")
-    assert proc.returncode == 2 and "unknown policy type 'oracle'; allowed: expert, lerobot, lerobot_async, openpi, random" in proc.stderr
+    assert (
+        proc.returncode == 2
+        and "unknown policy type 'oracle'; allowed: expert, lerobot, lerobot_async, openpi, random"
+        in proc.stderr
+    )
     proc = _main(capsys, f"--benchmark.path={bench}", "--benchmark.splits=colour", f"--output_dir={out}")
     assert proc.returncode == 2 and "unknown split(s) ['colour']" in proc.stderr
-    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={tmp_path}",
-                 f"--output_dir={out}")
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        "--policy.type=lerobot",
+        f"--policy.path={tmp_path}",
+        f"--output_dir={out}",
+    )
     assert proc.returncode == 2 and "holds no LeRobot checkpoint" in proc.stderr
     bad = tmp_path / "bad_ckpt"
     bad.mkdir()
     config = json.loads((tiny_checkpoint / "config.json").read_text())
-    config["input_features"]["observation.images.top_down"] = config["input_features"].pop("observation.images.wrist")
+    config["input_features"]["observation.images.top_down"] = config["input_features"].pop(
+        "observation.images.wrist"
+    )
     (bad / "config.json").write_text(json.dumps(config))
-    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}",
-                 f"--output_dir={out}")
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        "--policy.type=lerobot",
+        f"--policy.path={bad}",
+        f"--output_dir={out}",
+    )
     assert proc.returncode == 2 and "camera 'top_down'" in proc.stderr
     assert not out.exists()
     # Images the env cannot render (non-square): refused before any rollout, naming the shapes.
     config = json.loads((tiny_checkpoint / "config.json").read_text())
     config["input_features"]["observation.images.wrist"]["shape"] = [3, 64, 48]
     (bad / "config.json").write_text(json.dumps(config))
-    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot", f"--policy.path={bad}",
-                 f"--output_dir={out}")
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        "--policy.type=lerobot",
+        f"--policy.path={bad}",
+        f"--output_dir={out}",
+    )
     assert proc.returncode == 2 and "(3, 64, 48)" in proc.stderr and "square" in proc.stderr
     assert not out.exists()
     # An explicit image size that disagrees with the checkpoint's: both sizes named, nothing run.
-    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot",
-                 f"--policy.path={tiny_checkpoint}", "--eval.image_size=96", f"--output_dir={out}")
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        "--policy.type=lerobot",
+        f"--policy.path={tiny_checkpoint}",
+        "--eval.image_size=96",
+        f"--output_dir={out}",
+    )
     assert proc.returncode == 2 and "--eval.image_size=96" in proc.stderr and "64×64" in proc.stderr
     assert not out.exists()
-    proc = _main(capsys, f"--benchmark.path={bench}", "--policy.type=lerobot",
-                 f"--policy.path={tiny_checkpoint}", "--policy.device=tpu", f"--output_dir={out}")
-    assert proc.returncode == 2 and "--policy.device='tpu'" in proc.stderr and "auto, cpu, cuda" in proc.stderr
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        "--policy.type=lerobot",
+        f"--policy.path={tiny_checkpoint}",
+        "--policy.device=tpu",
+        f"--output_dir={out}",
+    )
+    assert (
+        proc.returncode == 2 and "--policy.device='tpu'" in proc.stderr and "auto, cpu, cuda" in proc.stderr
+    )
     # Results from another benchmark version in the output folder: refuse to mix them.
     out.mkdir()
-    (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert",
-                                              "results_format": 2}))
-    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1",
-                 "--eval.n_repeats=1")
+    (out / "run.json").write_text(
+        json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert", "results_format": 2})
+    )
+    proc = _main(
+        capsys, f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1"
+    )
     assert proc.returncode == 2 and "existing 'paper-000000000000' vs requested 'tiny-" in proc.stderr
     assert not (out / "episodes.jsonl").exists()
     # Results written under the old seed rule (no results_format): refuse to resume into them.
     (out / "run.json").write_text(json.dumps({"benchmark_version": "paper-000000000000", "policy": "expert"}))
-    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1",
-                 "--eval.n_repeats=1")
-    assert proc.returncode == 2 and "results of format 1" in proc.stderr and "choose a new folder" in proc.stderr
+    proc = _main(
+        capsys, f"--benchmark.path={bench}", f"--output_dir={out}", "--eval.limit=1", "--eval.n_repeats=1"
+    )
+    assert (
+        proc.returncode == 2 and "results of format 1" in proc.stderr and "choose a new folder" in proc.stderr
+    )
     # Per-split repeats: a typo fails before any rollout, naming the entry.
-    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'z'}",
-                 "--eval.split_repeats=color=two")
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        f"--output_dir={tmp_path / 'z'}",
+        "--eval.split_repeats=color=two",
+    )
     assert proc.returncode == 2 and "'color=two' must be split=N" in proc.stderr
-    proc = _main(capsys, f"--benchmark.path={bench}", f"--output_dir={tmp_path / 'v'}",
-                 "--benchmark.splits=color", "--benchmark.values=red,chartreuse")
+    proc = _main(
+        capsys,
+        f"--benchmark.path={bench}",
+        f"--output_dir={tmp_path / 'v'}",
+        "--benchmark.splits=color",
+        "--benchmark.values=red,chartreuse",
+    )
     assert proc.returncode == 2 and "['chartreuse']" in proc.stderr and "red" in proc.stderr
 
 
@@ -195,14 +308,21 @@ def test_repeats_per_split_and_the_paper_protocol():
     assert (paper.repeats_for("color"), paper.repeats_for("color_x_camera_pose")) == (5, 10)
     mixed = EvalConfig(n_repeats=3, split_repeats="color=2, camera_pose=6")
     assert [mixed.repeats_for(s) for s in ("color", "camera_pose", "dist_scale")] == [2, 6, 3]
-    assert EvalConfig(protocol="paper", split_repeats="color_x_camera_pose=4").repeats_for("color_x_camera_pose") == 4
+    assert (
+        EvalConfig(protocol="paper", split_repeats="color_x_camera_pose=4").repeats_for("color_x_camera_pose")
+        == 4
+    )
     with pytest.raises(ValueError, match="unknown --eval.protocol='pi0'"):
         EvalConfig(protocol="pi0")
 
 
 def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "color", "red"), policy_config("expert"),
-                         EvalConfig(n_repeats=1, num_workers=1, image_size=64), str(tmp_path / "ev"))
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(bench), "color", "red"),
+        policy_config("expert"),
+        EvalConfig(n_repeats=1, num_workers=1, image_size=64),
+        str(tmp_path / "ev"),
+    )
     run(cfg)
     df = rows(tmp_path / "ev")
     assert set(df["value"]) == {"red"} and df["context_id"].nunique() == 3 and df["success"].all()
@@ -212,9 +332,12 @@ def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench
     from roboview_data.benchmark.format import load_benchmark
 
     full = load_benchmark(bench, ["camera_pose", "dist_scale"]).splits
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "camera_pose,dist_scale"), policy_config("random", name="coin"),
-                         EvalConfig(n_repeats=1, contexts=2, num_workers=1, image_size=64, max_steps=2),
-                         str(tmp_path / "ev"))
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(bench), "camera_pose,dist_scale"),
+        policy_config("random", name="coin"),
+        EvalConfig(n_repeats=1, contexts=2, num_workers=1, image_size=64, max_steps=2),
+        str(tmp_path / "ev"),
+    )
     run(cfg)
     df = rows(tmp_path / "ev")
     assert set(df["policy"]) == {"coin"}
@@ -235,16 +358,30 @@ def _children(pid: int) -> set[int]:
 
 
 def _alive(pid: int) -> bool:
-    state = subprocess.run(["ps", "-o", "stat=", "-p", str(pid)], capture_output=True, text=True).stdout.strip()
+    state = subprocess.run(
+        ["ps", "-o", "stat=", "-p", str(pid)], capture_output=True, text=True
+    ).stdout.strip()
     return bool(state) and not state.startswith("Z")
 
 
 def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
     # A SIGKILLed evaluation used to leave its spawned workers (≈ 640 MB each) idle for good.
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}",
-                             "--policy.type=expert", "--eval.image_size=64", "--eval.num_workers=2", f"--output_dir={tmp_path / 'ev'}"],
-                            env=os.environ | {"PYTHONPATH": str(ROOT)}, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.evaluate",
+            f"--benchmark.path={bench}",
+            "--policy.type=expert",
+            "--eval.image_size=64",
+            "--eval.num_workers=2",
+            f"--output_dir={tmp_path / 'ev'}",
+        ],
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         deadline = time.time() + 120
         journal = tmp_path / "ev" / "episodes.jsonl"
@@ -286,15 +423,24 @@ class _Flaky:
         return np.append(observation["observation.state"][:7], 0.0).astype(np.float32)
 
 
-@pytest.mark.parametrize("errors, steps, calls, reason", [
-    ([None, RuntimeError("bad checkpoint output")], 1, 2, "policy error: RuntimeError: bad checkpoint output"),
-    ([TimeoutError("slow"), TimeoutError("slow"), None], 4, 6, "within 4 steps"),  # retried, then fine
-    ([ConnectionError("down")] * 3, 0, 3, "policy error after 2 retries: ConnectionError: down"),
-    ([None, None, "nan"], 2, 3, "policy error: action of shape (8,)"),
-])
+@pytest.mark.parametrize(
+    "errors, steps, calls, reason",
+    [
+        (
+            [None, RuntimeError("bad checkpoint output")],
+            1,
+            2,
+            "policy error: RuntimeError: bad checkpoint output",
+        ),
+        ([TimeoutError("slow"), TimeoutError("slow"), None], 4, 6, "within 4 steps"),  # retried, then fine
+        ([ConnectionError("down")] * 3, 0, 3, "policy error after 2 retries: ConnectionError: down"),
+        ([None, None, "nan"], 2, 3, "policy error: action of shape (8,)"),
+    ],
+)
 def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, errors, steps, calls, reason):
     import eval.running.rollout as rollout
     from roboview_data.benchmark.format import load_benchmark
+
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     policy = _Flaky(errors)
 
@@ -340,7 +486,9 @@ def test_lazy_observations_are_the_eager_pixels_and_render_only_what_is_read(ben
     assert previous.rendered() == ()
     with pytest.raises(StaleObservation, match="read after the env stepped on"):
         previous["observation.images.front"]
-    assert np.array_equal(obs_lazy.materialize()["observation.images.wrist"], obs_eager["observation.images.wrist"])
+    assert np.array_equal(
+        obs_lazy.materialize()["observation.images.wrist"], obs_eager["observation.images.wrist"]
+    )
     lazy.close()
     eager.close()
 
@@ -349,10 +497,12 @@ def test_batched_lockstep_evaluation_agrees_row_for_row_with_one_env_per_worker(
     # 3 envs per worker, 1 worker: episodes of unequal length share the worker, slots refill as they end.
     # camera_euler's first 8 instances span three contexts (three episode seeds, three episode lengths).
     one = evaluate(bench, tmp_path / "one", splits="camera_euler", limit=8, repeats=1, workers=1)
-    three = evaluate(bench, tmp_path / "three", splits="camera_euler", limit=8, repeats=1, workers=1,
-                     envs_per_worker=3)
-    eager = evaluate(bench, tmp_path / "eager", splits="camera_euler", limit=8, repeats=1, workers=1,
-                     eager=True)
+    three = evaluate(
+        bench, tmp_path / "three", splits="camera_euler", limit=8, repeats=1, workers=1, envs_per_worker=3
+    )
+    eager = evaluate(
+        bench, tmp_path / "eager", splits="camera_euler", limit=8, repeats=1, workers=1, eager=True
+    )
     assert one.episodes == three.episodes == eager.episodes == 8
     pd.testing.assert_frame_equal(rows(tmp_path / "one"), rows(tmp_path / "three"))
     pd.testing.assert_frame_equal(rows(tmp_path / "one"), rows(tmp_path / "eager"))
@@ -396,13 +546,28 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     from eval.running.provenance import checkpoint_hash
 
     out = tmp_path / "ev"
-    evaluate(bench, out, policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=2, repeats=1, workers=1,
-             max_steps=5, image_size=0, videos="failures")
+    evaluate(
+        bench,
+        out,
+        policy="lerobot",
+        path=str(tiny_checkpoint),
+        splits="color",
+        limit=2,
+        repeats=1,
+        workers=1,
+        max_steps=5,
+        image_size=0,
+        videos="failures",
+    )
     df = pd.read_parquet(out / "episodes.parquet")
-    assert (~df["success"]).all() and len(df) == 2  # a 2-step checkpoint: every episode fails, every one filmed
+    assert (~df["success"]).all() and len(
+        df
+    ) == 2  # a 2-step checkpoint: every episode fails, every one filmed
     for row in df.itertuples():
         paths = row.video.split(",")
-        assert [Path(p).name for p in paths] == [f"{row.instance_id}_r0_{cam}.mp4" for cam in ("left_top", "wrist")]
+        assert [Path(p).name for p in paths] == [
+            f"{row.instance_id}_r0_{cam}.mp4" for cam in ("left_top", "wrist")
+        ]
         assert all(f"/color/{row.value}/" in f"/{p}" for p in paths)
         with av.open(str(out / paths[0])) as container:
             frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
@@ -420,13 +585,25 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     from eval.reporting.markdown import load_results, write_report
 
     episodes, sources = load_results([out / "episodes.parquet"])
-    report = write_report(episodes, tmp_path / "report", sources=sources, plots=False).output_dir / "report.md"
+    report = (
+        write_report(episodes, tmp_path / "report", sources=sources, plots=False).output_dir / "report.md"
+    )
     text = report.read_text()
     first = df.iloc[0]
     assert f"../ev/videos/color/{first['value']}/{first['instance_id']}_r0_wrist.mp4" in text
     assert "## Provenance" in text and entry["checkpoint"]["sha256"][:16] in text
-    evaluate(bench, out, policy="lerobot", path=str(tiny_checkpoint), splits="color", limit=3, repeats=1, workers=1,
-             max_steps=5, image_size=0)  # a resume adds an entry
+    evaluate(
+        bench,
+        out,
+        policy="lerobot",
+        path=str(tiny_checkpoint),
+        splits="color",
+        limit=3,
+        repeats=1,
+        workers=1,
+        max_steps=5,
+        image_size=0,
+    )  # a resume adds an entry
     assert [e["episodes_run"] for e in json.loads((out / "provenance.json").read_text())] == [2, 1]
     with pytest.raises(ValueError, match="allowed: a count N"):
         EvalConfig(videos="some")
@@ -437,23 +614,51 @@ def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpo
 
     # Two splits by name, as LeRobot's LIBERO integration takes suites; lerobot's default async vector envs.
     lerobot_eval = Path(sys.executable).parent / "lerobot-eval"
-    args = [str(lerobot_eval), "--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
-            f"--env.benchmark_path={bench}", "--env.task=color,dist_scale", "--env.limit=2",
-            "--env.cameras=left_top,wrist", "--env.image_size=64", "--env.max_steps=6", f"--policy.path={tiny_checkpoint}",
-            "--policy.device=cpu", "--eval.n_episodes=2", "--eval.batch_size=2", f"--output_dir={tmp_path / 'le'}"]
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONPATH": str(ROOT)})
+    args = [
+        str(lerobot_eval),
+        "--env.discover_packages_path=roboview_lerobot",
+        "--env.type=roboview",
+        f"--env.benchmark_path={bench}",
+        "--env.task=color,dist_scale",
+        "--env.limit=2",
+        "--env.cameras=left_top,wrist",
+        "--env.image_size=64",
+        "--env.max_steps=6",
+        f"--policy.path={tiny_checkpoint}",
+        "--policy.device=cpu",
+        "--eval.n_episodes=2",
+        "--eval.batch_size=2",
+        f"--output_dir={tmp_path / 'le'}",
+    ]
+    proc = subprocess.run(
+        args, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONPATH": str(ROOT)}
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 4 and set(info["per_group"]) == {"color", "dist_scale"}
     assert [t["task_group"] for t in info["per_task"]] == ["color", "dist_scale"]
-    converted = pd.read_parquet(convert(tmp_path / "le" / "eval_info.json", str(bench), tmp_path / "conv", limit=2))
-    evaluate(bench, tmp_path / "ours", policy="lerobot", path=str(tiny_checkpoint), splits="color,dist_scale",
-             limit=2, repeats=1, workers=1, max_steps=6, image_size=0)
+    converted = pd.read_parquet(
+        convert(tmp_path / "le" / "eval_info.json", str(bench), tmp_path / "conv", limit=2)
+    )
+    evaluate(
+        bench,
+        tmp_path / "ours",
+        policy="lerobot",
+        path=str(tiny_checkpoint),
+        splits="color,dist_scale",
+        limit=2,
+        repeats=1,
+        workers=1,
+        max_steps=6,
+        image_size=0,
+    )
     ours = pd.read_parquet(tmp_path / "ours" / "episodes.parquet")
     cols = ["split", "instance_id", "repeat", "episode_seed", "value", "success"]
     key = ["split", "instance_id", "repeat"]
-    pd.testing.assert_frame_equal(converted[cols].sort_values(key).reset_index(drop=True),
-                                  ours[cols].sort_values(key).reset_index(drop=True))
+    pd.testing.assert_frame_equal(
+        converted[cols].sort_values(key).reset_index(drop=True),
+        ours[cols].sort_values(key).reset_index(drop=True),
+    )
 
 
 def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
@@ -466,8 +671,9 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
     from roboview_data.variation.instances import episode_seed
     from roboview_lerobot import RoboViewEnv
 
-    cfg = RoboViewEnv(benchmark_path=str(bench), task="color", cameras="front", image_size=48, n_repeats=2,
-                      max_steps=50)
+    cfg = RoboViewEnv(
+        benchmark_path=str(bench), task="color", cameras="front", image_size=48, n_repeats=2, max_steps=50
+    )
     vec = lerobot_make_env(cfg, n_envs=2)["color"][0]  # lerobot's own factory: one vector env per split
     assert isinstance(vec, gym.vector.SyncVectorEnv) and vec.call("_max_episode_steps")[0] == 50
     assert list(vec.call("task")) == ["color", "color"]
@@ -477,12 +683,16 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
     assert list(vec.call("task_description")) == [item.instance.get("instruction")] * 2
     env = make_env(cameras=("front",), image_size=48)
     for slot, repeat in enumerate((0, 1)):
-        own, _ = env.reset(seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.instance})
+        own, _ = env.reset(
+            seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.instance}
+        )
         expected = own["observation.images.front"].astype(np.float32) / 255
         assert np.array_equal(batch["observation.images.front"][slot].permute(1, 2, 0).numpy(), expected)
     env.close()
     vec.close()
-    assert list(RoboViewEnv(benchmark_path=str(bench), task="all").splits()) == list(load_benchmark(bench).splits)
+    assert list(RoboViewEnv(benchmark_path=str(bench), task="all").splits()) == list(
+        load_benchmark(bench).splits
+    )
     with pytest.raises(ValueError, match="allowed: front, left_top, right_top, wrist"):
         RoboViewEnv(benchmark_path=str(bench), cameras="top")
     with pytest.raises(ValueError, match="colour"):
@@ -490,8 +700,15 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
 
 
 def test_a_policy_server_feeds_every_worker_from_one_model(bench, tiny_checkpoint, tmp_path):
-    common = dict(policy="lerobot", path=str(tiny_checkpoint), splits="color,camera_pose", limit=3, repeats=1,
-                  max_steps=6, image_size=0)
+    common = dict(
+        policy="lerobot",
+        path=str(tiny_checkpoint),
+        splits="color,camera_pose",
+        limit=3,
+        repeats=1,
+        max_steps=6,
+        image_size=0,
+    )
     served = evaluate(bench, tmp_path / "served", workers=2, envs_per_worker=2, policy_server=True, **common)
     evaluate(bench, tmp_path / "alone", workers=1, **common)
     cols = ["instance_id", "repeat", "episode_seed", "success", "steps", "policy", "failure_reason"]

@@ -4,8 +4,8 @@ import itertools
 
 import numpy as np
 
-from roboview_data.tasks.pick_place import PickPlaceEnv
 from roboview_data.tasks import ScriptedExpert
+from roboview_data.tasks.pick_place import PickPlaceEnv
 from roboview_data.variation.factors import FACTORS, baselines
 from roboview_data.variation.instances import TaskInstance
 
@@ -13,8 +13,11 @@ from roboview_data.variation.instances import TaskInstance
 def test_expert_success_rate_over_all_contexts():
     env = PickPlaceEnv(cameras=("front",), image_size=32, lazy=True)  # the expert reads no image
     expert = ScriptedExpert(env)
-    contexts = list(itertools.product(FACTORS["initial_position"].values, FACTORS["shape"].values,
-                                      FACTORS["instruction"].values))
+    contexts = list(
+        itertools.product(
+            FACTORS["initial_position"].values, FACTORS["shape"].values, FACTORS["instruction"].values
+        )
+    )
     assert len(contexts) == 48
     outcomes, steps = [], []
     for i, (position, shape, instruction) in enumerate(contexts):

@@ -20,8 +20,12 @@ def collected(tmp_path_factory) -> Path:
     from pipelines.collect import run as collect
 
     root = tmp_path_factory.mktemp("export") / "ds"
-    collect(CollectConfig(DatasetConfig(repo_id=REPO_ID, root=str(root), num_episodes=2, image_size=64,
-                                        cameras=CAMERAS), num_workers=1))
+    collect(
+        CollectConfig(
+            DatasetConfig(repo_id=REPO_ID, root=str(root), num_episodes=2, image_size=64, cameras=CAMERAS),
+            num_workers=1,
+        )
+    )
     return root
 
 
@@ -36,15 +40,27 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
     out = tmp_path / "t" / "demos"  # the converter works in place, with siblings demos_old / demos_v30
     result = export.run(export.ExportConfig(root=str(collected), output_dir=str(out)))
     native = LeRobotDataset(REPO_ID, root=collected)
-    assert (result.episodes, result.frames, result.videos, result.repo_id) == (2, native.num_frames, 4, REPO_ID)
+    assert (result.episodes, result.frames, result.videos, result.repo_id) == (
+        2,
+        native.num_frames,
+        4,
+        REPO_ID,
+    )
 
     # The v2.1 layout, with the metadata file names LeRobot's converter reads.
     assert (export.V21_TASKS_PATH, export.V21_EPISODES_PATH, export.V21_EPISODES_STATS_PATH) == (
-        lerobot_utils.LEGACY_TASKS_PATH, lerobot_utils.LEGACY_EPISODES_PATH, lerobot_utils.LEGACY_EPISODES_STATS_PATH)
+        lerobot_utils.LEGACY_TASKS_PATH,
+        lerobot_utils.LEGACY_EPISODES_PATH,
+        lerobot_utils.LEGACY_EPISODES_STATS_PATH,
+    )
     info = json.loads((out / "meta/info.json").read_text())
     assert info["codebase_version"] == "v2.1" and info["data_path"] == export.V21_DATA_PATH
     assert (info["total_episodes"], info["total_frames"], info["total_videos"], info["total_chunks"]) == (
-        2, native.num_frames, 4, 1)
+        2,
+        native.num_frames,
+        4,
+        1,
+    )
     assert "data_files_size_in_mb" not in info and info["splits"] == {"train": "0:2"}
     lengths = [json.loads(line)["length"] for line in (out / "meta/episodes.jsonl").read_text().splitlines()]
     assert lengths == [int(n) for n in native.meta.episodes["length"]]
@@ -62,8 +78,12 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
         timestamps = table["timestamp"].to_pylist()
         assert timestamps == [float(item["timestamp"]) for item in rows]
         for key in images:
-            frames = decode_video_frames(out / f"videos/chunk-000/{key}/episode_{ep:06d}.mp4", timestamps,
-                                         tolerance_s=1e-4, backend="pyav")
+            frames = decode_video_frames(
+                out / f"videos/chunk-000/{key}/episode_{ep:06d}.mp4",
+                timestamps,
+                tolerance_s=1e-4,
+                backend="pyav",
+            )
             assert torch.equal(frames, torch.stack([item[key] for item in rows])), (ep, key)
     stats = [json.loads(line) for line in (out / "meta/episodes_stats.jsonl").read_text().splitlines()]
     assert [s["episode_index"] for s in stats] == [0, 1]
@@ -74,19 +94,32 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
     convert_dataset(REPO_ID, root=out, push_to_hub=False)
     back = LeRobotDataset(REPO_ID, root=out)
     assert back.meta.info.codebase_version == "v3.0"
-    assert (back.num_episodes, back.num_frames) == (native.num_episodes, native.num_frames) == (2, sum(lengths))
+    assert (
+        (back.num_episodes, back.num_frames) == (native.num_episodes, native.num_frames) == (2, sum(lengths))
+    )
     assert list(back.meta.tasks.index) == list(native.meta.tasks.index)
     for i, a in enumerate(items):
         b = back[i]
-        for key in ("action", "observation.state", "timestamp", "episode_index", "frame_index", "index",
-                    "task_index", *images):
+        for key in (
+            "action",
+            "observation.state",
+            "timestamp",
+            "episode_index",
+            "frame_index",
+            "index",
+            "task_index",
+            *images,
+        ):
             assert torch.equal(a[key], b[key]), (i, key)  # images: identical decoded pixels, not close
         assert a["task"] == b["task"]
     # Per-episode statistics (quantiles included) survive the trip: the aggregate is the collection's.
     for key in ("action", "observation.state"):
         for stat in ("mean", "std", "min", "max", "q01", "q99"):
-            assert torch.allclose(torch.as_tensor(back.meta.stats[key][stat]),
-                                  torch.as_tensor(native.meta.stats[key][stat]), atol=1e-6), (key, stat)
+            assert torch.allclose(
+                torch.as_tensor(back.meta.stats[key][stat]),
+                torch.as_tensor(native.meta.stats[key][stat]),
+                atol=1e-6,
+            ), (key, stat)
 
 
 def _fails(capsys, args: list[str]) -> str:
@@ -139,8 +172,9 @@ def test_a_failed_export_removes_what_it_wrote(collected, tmp_path):
     table = pq.read_table(path)
     column = "videos/observation.images.wrist/from_timestamp"
     starts = table[column].to_pylist()
-    table = table.set_column(table.schema.get_field_index(column), column,
-                             pa.array([starts[0], starts[1] + 0.1], pa.float64()))
+    table = table.set_column(
+        table.schema.get_field_index(column), column, pa.array([starts[0], starts[1] + 0.1], pa.float64())
+    )
     pq.write_table(table, path)
     out = tmp_path / "out"
     with pytest.raises(ExportError, match=r"episode 1 of observation.images.wrist .* its video starts at"):

@@ -13,12 +13,10 @@ from roboview_data.benchmark.fairness import (
     FairnessThresholds,
     violations,
 )
+from roboview_data.tasks import ScriptedExpert, load_preset, make_env
 from roboview_data.tasks.env import IMAGE_KEY
-from roboview_data.tasks import ScriptedExpert
-from roboview_data.tasks import make_env
 from roboview_data.variation.factors import FACTORS, baselines
 from roboview_data.variation.factors.distractors import BODIES
-from roboview_data.tasks import load_preset
 from roboview_data.variation.instances import TaskInstance, episode_seed, generate_suite
 
 NEW = ("lighting", "table_texture", "distractors", "object_size")
@@ -61,16 +59,28 @@ def test_every_value_renders_a_frame_that_shows_the_object(env):
 def test_switching_in_place_restores_the_scene_exactly(env):
     base = instance()
     first, _ = env.reset(seed=3, options={"instance": base})
-    model_before = [env.model.geom_rgba.copy(), env.model.geom_size.copy(), env.model.geom_matid.copy(),
-                    env.model.light_diffuse.copy(), env.model.body_pos.copy(), env.model.geom_dataid.copy()]
+    model_before = [
+        env.model.geom_rgba.copy(),
+        env.model.geom_size.copy(),
+        env.model.geom_matid.copy(),
+        env.model.light_diffuse.copy(),
+        env.model.body_pos.copy(),
+        env.model.geom_dataid.copy(),
+    ]
     for factor in NEW:
         for value in FACTORS[factor].values:
             env.reset(seed=3, options={"instance": instance(**{factor: value})})
     again, _ = env.reset(seed=3, options={"instance": base})
     for key in first:
         assert np.array_equal(first[key], again[key]), key
-    model_after = [env.model.geom_rgba, env.model.geom_size, env.model.geom_matid, env.model.light_diffuse,
-                   env.model.body_pos, env.model.geom_dataid]
+    model_after = [
+        env.model.geom_rgba,
+        env.model.geom_size,
+        env.model.geom_matid,
+        env.model.light_diffuse,
+        env.model.body_pos,
+        env.model.geom_dataid,
+    ]
     assert all(np.array_equal(a, b) for a, b in zip(model_before, model_after))
 
 
@@ -131,7 +141,9 @@ def test_the_expert_solves_every_value(factor):
 
 def test_the_gate_judges_a_dim_light_by_contrast_not_by_colour_shift():
     t = FairnessThresholds()
-    shifted = CameraFairness("front", 1.0, 200, True, 1.0, 900, True, delta_e_nominal=60.0, delta_e_table=20.0)
+    shifted = CameraFairness(
+        "front", 1.0, 200, True, 1.0, 900, True, delta_e_nominal=60.0, delta_e_table=20.0
+    )
     assert any("nominal" in r for r in violations(shifted, t, 25, True))
     assert violations(shifted, t, 25, True, judge_nominal=False) == []  # a dim light is not a failure
     hidden = CameraFairness("front", 1.0, 200, True, 1.0, 900, True, delta_e_nominal=60.0, delta_e_table=1.5)
@@ -167,9 +179,12 @@ def test_reports_draw_the_new_factors(tmp_path):
     rows = []
     for inst in suite:
         for repeat in range(2):
-            level = {"distractors": lambda v: 1 - 0.2 * int(v), "object_size": lambda v: 0.9,
-                     "lighting": lambda v: 0.3 if v.startswith("dim") else 0.9,
-                     "table_texture": lambda v: 0.5 if v.startswith("checker") else 0.9}[split_task(inst.split)[1]](inst.value)
+            level = {
+                "distractors": lambda v: 1 - 0.2 * int(v),
+                "object_size": lambda v: 0.9,
+                "lighting": lambda v: 0.3 if v.startswith("dim") else 0.9,
+                "table_texture": lambda v: 0.5 if v.startswith("checker") else 0.9,
+            }[split_task(inst.split)[1]](inst.value)
             success = rng.random() < level
             rows.append({**inst.to_record(), "repeat": repeat, "success": bool(success), "policy": "sim"})
     result = write_report(pd.DataFrame(rows), tmp_path, plots=True)

@@ -19,14 +19,26 @@ from roboview_data.variation.factors import (
 
 def test_factor_names_and_kinds():
     # The paper's four visual factors, then the `extended` preset's four (docs/formats.md, "Factors": names and counts fixed).
-    assert visual_factors() == ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture",
-                                "distractors", "object_size")
+    assert visual_factors() == (
+        "color",
+        "camera_pose",
+        "camera_euler",
+        "dist_scale",
+        "lighting",
+        "table_texture",
+        "distractors",
+        "object_size",
+    )
     assert context_factors() == ("initial_position", "shape", "instruction")
     assert factor_names() == visual_factors() + context_factors()
     assert set(FACTORS) == set(factor_names()) | set(context_factors("push"))
     assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 8 + ["context"] * 3
     assert {n: len(load_factor(n).values) for n in visual_factors()[4:]} == {
-        "lighting": 9, "table_texture": 8, "distractors": 5, "object_size": 7}
+        "lighting": 9,
+        "table_texture": 8,
+        "distractors": 5,
+        "object_size": 7,
+    }
 
 
 def test_baselines():
@@ -71,7 +83,15 @@ def test_camera_pose_values_and_baseline_outside_sweep():
 def test_camera_euler_values_and_parser():
     euler = load_factor("camera_euler")
     assert euler.values == (
-        "-6,-6", "-6,0", "-6,6", "0,-6", "0,0", "0,6", "6,-6", "6,0", "6,6",
+        "-6,-6",
+        "-6,0",
+        "-6,6",
+        "0,-6",
+        "0,0",
+        "0,6",
+        "6,-6",
+        "6,0",
+        "6,6",
     )
     assert parse_euler("-6,6") == (-6, 6)
     assert parse_euler("0,0") == (0, 0)

@@ -20,8 +20,17 @@ FAST_REPORT = ["--plots=false", "--metrics.n_perm=50", "--metrics.n_glm=20"]
 def _evaluate(bench: Path, out: Path, *flags: str) -> None:
     from pipelines.evaluate import main
 
-    main([f"--benchmark.path={bench}", "--policy.type=expert", "--benchmark.splits=dist_scale", "--eval.n_repeats=1",
-          "--eval.num_workers=1", f"--output_dir={out}", *flags])
+    main(
+        [
+            f"--benchmark.path={bench}",
+            "--policy.type=expert",
+            "--benchmark.splits=dist_scale",
+            "--eval.n_repeats=1",
+            "--eval.num_workers=1",
+            f"--output_dir={out}",
+            *flags,
+        ]
+    )
 
 
 def _one_line_error(capsys, call, *args) -> str:
@@ -61,8 +70,9 @@ def test_rerunning_keeps_every_rerun_recording(tiny_benchmark, tmp_path, capsys)
     second = rrd.with_name("vision-2.rrd")
     assert rrd.read_bytes() == first and second.is_file() and len(second.read_bytes()) > 10_000
     summaries.append(capsys.readouterr().out)
-    proc = subprocess.run([str(RERUN), "rrd", "verify", str(rrd), str(second)], capture_output=True, text=True,
-                          timeout=120)
+    proc = subprocess.run(
+        [str(RERUN), "rrd", "verify", str(rrd), str(second)], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     # Each run's summary names every recording of the path, to open together.
     assert f"rerun {rrd}\n" in summaries[0] and f"rerun {rrd}\n" in summaries[1], summaries
@@ -76,16 +86,20 @@ def test_policy_type_is_required(tmp_path, capsys):
     from pipelines.evaluate import main as evaluate
     from pipelines.serve_policy import main as serve
 
-    for call, args in ((evaluate, [f"--benchmark.path={tmp_path}", f"--output_dir={tmp_path / 'out'}"]),
-                       (evaluate, [f"--benchmark.path={tmp_path}", "--policy.name=mine"]),
-                       (serve, ["--port=0"])):
+    for call, args in (
+        (evaluate, [f"--benchmark.path={tmp_path}", f"--output_dir={tmp_path / 'out'}"]),
+        (evaluate, [f"--benchmark.path={tmp_path}", "--policy.name=mine"]),
+        (serve, ["--port=0"]),
+    ):
         err = _one_line_error(capsys, call, *args)
         assert "--policy.type is required" in err and "vision" in err and "lerobot" in err, err
         assert "`expert` is the privileged scripted expert" in err and "simulator state" in err, err
     assert not (tmp_path / "out").exists()
 
 
-def test_the_expert_is_labelled_privileged_in_the_summary_and_the_report(evaluated, tiny_benchmark, tmp_path, capsys):
+def test_the_expert_is_labelled_privileged_in_the_summary_and_the_report(
+    evaluated, tiny_benchmark, tmp_path, capsys
+):
     from pipelines.report import main as report
 
     _evaluate(tiny_benchmark, evaluated, "--eval.limit=2")  # resumes: nothing new, the summary line again
@@ -108,15 +122,28 @@ def not_results(evaluated, tiny_benchmark, tmp_path) -> dict[str, Path]:
     (tmp_path / "random.bin").write_bytes(bytes(range(256)) * 8)
     (tmp_path / "random.parquet").write_bytes(bytes(range(256)) * 8)
     (tmp_path / "empty").mkdir()
-    return {"journal": evaluated / "episodes.jsonl", "benchmark": tiny_benchmark,
-            "table": tiny_benchmark / "data" / "dist_scale.parquet", "csv": tmp_path / "rollouts.csv",
-            "bytes": tmp_path / "random.bin", "fake_parquet": tmp_path / "random.parquet",
-            "folder": tmp_path / "empty", "missing": tmp_path / "nowhere.parquet"}
+    return {
+        "journal": evaluated / "episodes.jsonl",
+        "benchmark": tiny_benchmark,
+        "table": tiny_benchmark / "data" / "dist_scale.parquet",
+        "csv": tmp_path / "rollouts.csv",
+        "bytes": tmp_path / "random.bin",
+        "fake_parquet": tmp_path / "random.parquet",
+        "folder": tmp_path / "empty",
+        "missing": tmp_path / "nowhere.parquet",
+    }
 
 
-REPORT_EXPECTS = {"journal": "the journal", "benchmark": "is a benchmark folder", "table": "a table of the benchmark",
-                  "csv": "is a CSV file", "bytes": "is not a parquet file", "fake_parquet": "bytes are not parquet",
-                  "folder": "holds no results", "missing": "not found"}
+REPORT_EXPECTS = {
+    "journal": "the journal",
+    "benchmark": "is a benchmark folder",
+    "table": "a table of the benchmark",
+    "csv": "is a CSV file",
+    "bytes": "is not a parquet file",
+    "fake_parquet": "bytes are not parquet",
+    "folder": "holds no results",
+    "missing": "not found",
+}
 
 
 def test_report_names_every_input_that_is_not_results(evaluated, not_results, tmp_path, capsys):
@@ -134,34 +161,51 @@ def test_report_names_every_input_that_is_not_results(evaluated, not_results, tm
     assert result.metrics["sources"][0]["path"] == str(evaluated / "episodes.parquet")
 
 
-def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(evaluated, not_results, tiny_benchmark, tmp_path,
-                                                                    capsys):
+def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(
+    evaluated, not_results, tiny_benchmark, tmp_path, capsys
+):
     from pipelines.audit import main as audit
     from pipelines.merge import main as merge
     from pipelines.verify import main as verify
 
-    mapping = ["--map.factor=task", "--map.value=variant", "--map.context=task", "--map.success=success",
-               f"--output_dir={tmp_path / 'audit'}"]
+    mapping = [
+        "--map.factor=task",
+        "--map.value=variant",
+        "--map.context=task",
+        "--map.success=success",
+        f"--output_dir={tmp_path / 'audit'}",
+    ]
     (tmp_path / "bad.csv").write_bytes(bytes(range(256)) * 8)
     (tmp_path / "empty.csv").write_text("")
-    for path, expected in ((tiny_benchmark, "is a benchmark folder"), (evaluated, "pipelines.report"),
-                           (not_results["bytes"], "unknown format '.bin'"), (not_results["folder"], "is a folder"),
-                           (not_results["fake_parquet"], "bytes are not parquet"),
-                           (tmp_path / "bad.csv", "could not be read as CSV"), (tmp_path / "empty.csv", "as CSV"),
-                           (not_results["missing"], "no such file")):
+    for path, expected in (
+        (tiny_benchmark, "is a benchmark folder"),
+        (evaluated, "pipelines.report"),
+        (not_results["bytes"], "unknown format '.bin'"),
+        (not_results["folder"], "is a folder"),
+        (not_results["fake_parquet"], "bytes are not parquet"),
+        (tmp_path / "bad.csv", "could not be read as CSV"),
+        (tmp_path / "empty.csv", "as CSV"),
+        (not_results["missing"], "no such file"),
+    ):
         err = _one_line_error(capsys, audit, f"--results={path}", *mapping)
         assert str(path) in err and expected in err, err
         assert "expected one row per episode" in err or "pipelines.report" in err, err
 
-    for path, expected in ((not_results["journal"], f"pass the folder, {evaluated}"),
-                           (evaluated / "episodes.parquet", f"pass the folder, {evaluated}"),
-                           (tiny_benchmark, f"--benchmark.path={tiny_benchmark}"),
-                           (not_results["csv"], "is a file, not a folder"), (not_results["folder"], "run.json missing"),
-                           (not_results["missing"], "does not exist")):
+    for path, expected in (
+        (not_results["journal"], f"pass the folder, {evaluated}"),
+        (evaluated / "episodes.parquet", f"pass the folder, {evaluated}"),
+        (tiny_benchmark, f"--benchmark.path={tiny_benchmark}"),
+        (not_results["csv"], "is a file, not a folder"),
+        (not_results["folder"], "run.json missing"),
+        (not_results["missing"], "does not exist"),
+    ):
         err = _one_line_error(capsys, verify, f"--results={path}")
         assert str(path) in err and expected in err, err
-    for path, expected in ((evaluated, f"--results={evaluated}"), (not_results["table"], f"folder, {tiny_benchmark}"),
-                           (not_results["folder"], "benchmark.json missing")):
+    for path, expected in (
+        (evaluated, f"--results={evaluated}"),
+        (not_results["table"], f"folder, {tiny_benchmark}"),
+        (not_results["folder"], "benchmark.json missing"),
+    ):
         err = _one_line_error(capsys, verify, f"--benchmark.path={path}")
         assert str(path) in err and expected in err, err
     broken = tmp_path / "broken"
@@ -170,10 +214,16 @@ def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(evaluated, n
     (broken / "episodes.parquet").write_bytes(bytes(range(256)) * 8)
     assert "bytes are not parquet" in _one_line_error(capsys, verify, f"--results={broken}")
 
-    for path, expected in ((evaluated / "episodes.parquet", f"pass the folder, {evaluated}"),
-                           (tiny_benchmark, "is a benchmark folder"), (not_results["csv"], "is a file, not a folder"),
-                           (not_results["folder"], "run.json missing"), (broken, "bytes are not parquet")):
-        err = _one_line_error(capsys, merge, f"--results={path},{evaluated}", f"--output_dir={tmp_path / 'merged'}")
+    for path, expected in (
+        (evaluated / "episodes.parquet", f"pass the folder, {evaluated}"),
+        (tiny_benchmark, "is a benchmark folder"),
+        (not_results["csv"], "is a file, not a folder"),
+        (not_results["folder"], "run.json missing"),
+        (broken, "bytes are not parquet"),
+    ):
+        err = _one_line_error(
+            capsys, merge, f"--results={path},{evaluated}", f"--output_dir={tmp_path / 'merged'}"
+        )
         assert str(path) in err and expected in err, err
     assert not (tmp_path / "merged").exists()
 
@@ -201,8 +251,9 @@ def test_a_training_run_folder_names_the_checkpoint_to_pass(tmp_path, capsys):
     # Through the command line: one line, with the exact path.
     from pipelines.evaluate import main as evaluate
 
-    err = _one_line_error(capsys, evaluate, f"--benchmark.path={tmp_path}", "--policy.type=lerobot",
-                          f"--policy.path={run}")
+    err = _one_line_error(
+        capsys, evaluate, f"--benchmark.path={tmp_path}", "--policy.type=lerobot", f"--policy.path={run}"
+    )
     assert f"--policy.path={last}" in err
 
 

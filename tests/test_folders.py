@@ -9,14 +9,17 @@ from roboview_data.folders import folder_problem
 
 def test_a_folder_being_written_may_be_new_empty_or_marked(tmp_path):
     def problem(path):
-        return folder_problem(path, "benchmark", "benchmark.json", "choose a new folder",
-                              label=f"--out={path}", writing=True)
+        return folder_problem(
+            path, "benchmark", "benchmark.json", "choose a new folder", label=f"--out={path}", writing=True
+        )
 
     assert problem(tmp_path / "new") is None
     assert problem(tmp_path) is None  # empty
     (tmp_path / "other.txt").write_text("x")
-    assert problem(tmp_path) == (f"--out={tmp_path} is not empty and holds no RoboView benchmark "
-                                 "(benchmark.json missing); choose a new folder")
+    assert problem(tmp_path) == (
+        f"--out={tmp_path} is not empty and holds no RoboView benchmark "
+        "(benchmark.json missing); choose a new folder"
+    )
     (tmp_path / "benchmark.json").write_text("{}")
     assert problem(tmp_path) is None  # an earlier build: resumed or replaced
     file = tmp_path / "other.txt"

@@ -44,20 +44,45 @@ def tiny_grounder(tmp_path_factory):
     tokenizer = CLIPTokenizer(str(folder / "vocab.json"), str(folder / "merges.txt"), model_max_length=16)
     torch.manual_seed(0)
     layers = dict(hidden_size=32, intermediate_size=64, num_hidden_layers=2, num_attention_heads=2)
-    owl = Owlv2ForObjectDetection(Owlv2Config(
-        text_config=dict(vocab_size=len(vocab), max_position_embeddings=16, **layers),
-        vision_config=dict(image_size=64, patch_size=16, **layers), projection_dim=32)).eval()
-    owl_processor = Owlv2Processor(image_processor=Owlv2ImageProcessor(size={"height": 64, "width": 64}),
-                                   tokenizer=tokenizer)
-    sam = SamModel(SamConfig(
-        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=2, num_attention_heads=2,
-                           image_size=64, patch_size=16, output_channels=16, global_attn_indexes=[1], mlp_dim=64,
-                           window_size=2, num_pos_feats=8),
-        prompt_encoder_config=dict(hidden_size=16, image_size=64, patch_size=16, mask_input_channels=4),
-        mask_decoder_config=dict(hidden_size=16, mlp_dim=32, num_hidden_layers=2, num_attention_heads=2,
-                                 iou_head_hidden_dim=16))).eval()
-    sam_processor = SamProcessor(SamImageProcessor(size={"longest_edge": 64}, pad_size={"height": 64, "width": 64},
-                                                   mask_size={"longest_edge": 16}, mask_pad_size={"height": 16, "width": 16}))
+    owl = Owlv2ForObjectDetection(
+        Owlv2Config(
+            text_config=dict(vocab_size=len(vocab), max_position_embeddings=16, **layers),
+            vision_config=dict(image_size=64, patch_size=16, **layers),
+            projection_dim=32,
+        )
+    ).eval()
+    owl_processor = Owlv2Processor(
+        image_processor=Owlv2ImageProcessor(size={"height": 64, "width": 64}), tokenizer=tokenizer
+    )
+    sam = SamModel(
+        SamConfig(
+            vision_config=dict(
+                hidden_size=32,
+                intermediate_size=64,
+                num_hidden_layers=2,
+                num_attention_heads=2,
+                image_size=64,
+                patch_size=16,
+                output_channels=16,
+                global_attn_indexes=[1],
+                mlp_dim=64,
+                window_size=2,
+                num_pos_feats=8,
+            ),
+            prompt_encoder_config=dict(hidden_size=16, image_size=64, patch_size=16, mask_input_channels=4),
+            mask_decoder_config=dict(
+                hidden_size=16, mlp_dim=32, num_hidden_layers=2, num_attention_heads=2, iou_head_hidden_dim=16
+            ),
+        )
+    ).eval()
+    sam_processor = SamProcessor(
+        SamImageProcessor(
+            size={"longest_edge": 64},
+            pad_size={"height": 64, "width": 64},
+            mask_size={"longest_edge": 16},
+            mask_pad_size={"height": 16, "width": 16},
+        )
+    )
     return TransformersGrounder("owlv2", owl, owl_processor, sam, sam_processor, threshold=0.0)
 
 
@@ -92,20 +117,57 @@ def test_grounding_dino_grounds_a_description_to_boxes(tmp_path):
         SwinConfig,
     )
 
-    words = ["[PAD]", "[UNK]", "[CLS]", "[SEP]", "[MASK]", ".", *string.ascii_lowercase, "small", "red", "cube"]
+    words = [
+        "[PAD]",
+        "[UNK]",
+        "[CLS]",
+        "[SEP]",
+        "[MASK]",
+        ".",
+        *string.ascii_lowercase,
+        "small",
+        "red",
+        "cube",
+    ]
     (tmp_path / "vocab.txt").write_text("\n".join(words))
     tokenizer = BertTokenizer(str(tmp_path / "vocab.txt"))
     torch.manual_seed(0)
-    model = GroundingDinoForObjectDetection(GroundingDinoConfig(
-        backbone_config=SwinConfig(embed_dim=16, depths=[1, 1], num_heads=[1, 1], window_size=2, image_size=64,
-                                   out_features=["stage1", "stage2"]),
-        text_config=BertConfig(vocab_size=tokenizer.vocab_size, hidden_size=32, num_hidden_layers=1,
-                               num_attention_heads=2, intermediate_size=64, max_position_embeddings=64),
-        d_model=32, encoder_layers=1, decoder_layers=2, encoder_attention_heads=2, decoder_attention_heads=2,
-        encoder_ffn_dim=64, decoder_ffn_dim=64, num_queries=10, num_feature_levels=2, encoder_n_points=2,
-        decoder_n_points=2, max_text_len=32, use_pretrained_backbone=False)).eval()
-    processor = GroundingDinoProcessor(GroundingDinoImageProcessor(size={"shortest_edge": 64, "longest_edge": 96}),
-                                       tokenizer)
+    model = GroundingDinoForObjectDetection(
+        GroundingDinoConfig(
+            backbone_config=SwinConfig(
+                embed_dim=16,
+                depths=[1, 1],
+                num_heads=[1, 1],
+                window_size=2,
+                image_size=64,
+                out_features=["stage1", "stage2"],
+            ),
+            text_config=BertConfig(
+                vocab_size=tokenizer.vocab_size,
+                hidden_size=32,
+                num_hidden_layers=1,
+                num_attention_heads=2,
+                intermediate_size=64,
+                max_position_embeddings=64,
+            ),
+            d_model=32,
+            encoder_layers=1,
+            decoder_layers=2,
+            encoder_attention_heads=2,
+            decoder_attention_heads=2,
+            encoder_ffn_dim=64,
+            decoder_ffn_dim=64,
+            num_queries=10,
+            num_feature_levels=2,
+            encoder_n_points=2,
+            decoder_n_points=2,
+            max_text_len=32,
+            use_pretrained_backbone=False,
+        )
+    ).eval()
+    processor = GroundingDinoProcessor(
+        GroundingDinoImageProcessor(size={"shortest_edge": 64, "longest_edge": 96}), tokenizer
+    )
     grounder = TransformersGrounder("grounding_dino", model, processor, threshold=0.0)
     rgb = (np.random.default_rng(1).random((96, 128, 3)) * 255).astype(np.uint8)
     found = grounder.detect(rgb, "Small red cube")

@@ -33,16 +33,29 @@ def named_modules(tree: ast.AST) -> set[str]:
     them (a module list, an env or expert class, a gymnasium entry point) for a helper to import."""
     docstrings = {id(node.value) for node in ast.walk(tree) if isinstance(node, ast.Expr)}
     # `[python, "-m", "pkg.mod"]` runs a module in another process: no import.
-    run = {id(b) for node in ast.walk(tree) if isinstance(node, (ast.List, ast.Tuple))
-           for a, b in zip(node.elts, node.elts[1:]) if isinstance(a, ast.Constant) and a.value == "-m"}
+    run = {
+        id(b)
+        for node in ast.walk(tree)
+        if isinstance(node, (ast.List, ast.Tuple))
+        for a, b in zip(node.elts, node.elts[1:])
+        if isinstance(a, ast.Constant) and a.value == "-m"
+    }
     found = set()
     for node in ast.walk(tree):
-        if (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
-                and isinstance(node.args[0].value, str)
-                and (getattr(node.func, "attr", None) or getattr(node.func, "id", None)) == "import_module"):
+        if (
+            isinstance(node, ast.Call)
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+            and isinstance(node.args[0].value, str)
+            and (getattr(node.func, "attr", None) or getattr(node.func, "id", None)) == "import_module"
+        ):
             found.add(node.args[0].value)
-        elif (isinstance(node, ast.Constant) and isinstance(node.value, str)
-                and id(node) not in docstrings | run and MODULE_STRING.match(node.value)):
+        elif (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and id(node) not in docstrings | run
+            and MODULE_STRING.match(node.value)
+        ):
             found.add(node.value.partition(":")[0])
     return found
 
@@ -62,8 +75,14 @@ def import_graph() -> dict[str, set[str]]:
             elif isinstance(node, ast.ImportFrom):
                 base = node.module or ""
                 if node.level:
-                    base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base else []))
-                targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base for alias in node.names]
+                    base = ".".join(
+                        package.split(".")[: len(package.split(".")) - node.level + 1]
+                        + ([base] if base else [])
+                    )
+                targets = [
+                    f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base
+                    for alias in node.names
+                ]
             else:
                 continue
             edges |= {t for t in targets if t in modules and t != name}
@@ -131,27 +150,39 @@ def private_imports(name: str, source: str, modules: set[str]) -> list[str]:
 
 def test_no_module_imports_another_modules_private_name():
     modules = _modules((*PACKAGES, "tests"))
-    found = [line for name, path in sorted(modules.items())
-             for line in private_imports(name, path.read_text(), set(modules))]
+    found = [
+        line
+        for name, path in sorted(modules.items())
+        for line in private_imports(name, path.read_text(), set(modules))
+    ]
     assert not found, "private names imported from another module (make them public): " + "; ".join(found)
 
 
 def test_the_private_import_check_flags_a_private_import():
-    modules = {"eval.statistics.metrics", "eval.statistics.context", "pipelines", "pipelines._cli",
-               "pipelines.evaluate"}
+    modules = {
+        "eval.statistics.metrics",
+        "eval.statistics.context",
+        "pipelines",
+        "pipelines._cli",
+        "pipelines.evaluate",
+    }
     old = "from eval.statistics.metrics import _interval, _lrt_fields, compute_metrics, __doc__\n"
     assert private_imports("eval.statistics.context", old, modules) == [
         "eval.statistics.context:1: from eval.statistics.metrics import _interval",
-        "eval.statistics.context:1: from eval.statistics.metrics import _lrt_fields"]
+        "eval.statistics.context:1: from eval.statistics.metrics import _lrt_fields",
+    ]
     lazy = "def f():\n    from .metrics import _Table\n"  # relative and inside a function
     assert private_imports("eval.statistics.context", lazy, modules) == [
-        "eval.statistics.context:2: from eval.statistics.metrics import _Table"]
+        "eval.statistics.context:2: from eval.statistics.metrics import _Table"
+    ]
     # A package's own private module, and third-party private names, are not the project's modules' privates.
-    fine = ("from pipelines import _cli\nfrom pipelines._cli import main\n"
-            "from lerobot.envs.utils import _Lazy\n")
+    fine = (
+        "from pipelines import _cli\nfrom pipelines._cli import main\nfrom lerobot.envs.utils import _Lazy\n"
+    )
     assert private_imports("pipelines.evaluate", fine, modules) == []
     assert private_imports("eval.statistics.context", "from pipelines import _cli\n", modules) == [
-        "eval.statistics.context:1: from pipelines import _cli"]
+        "eval.statistics.context:1: from pipelines import _cli"
+    ]
 
 
 def test_the_project_has_no_import_cycle():
@@ -174,7 +205,9 @@ label = "a plain string, not.a.name:either"
     graph = import_graph()
     assert "policies.vision" in graph["policies.types"] and "policies.vision" not in graph["policies.base"]
     assert {"roboview_data.tasks.pick_place", "roboview_data.tasks.push"} <= graph["roboview_data.tasks"]
-    assert "roboview_data.tasks.env" in graph["roboview_data.tasks.base"]  # the default expert, "module:Class"
+    assert (
+        "roboview_data.tasks.env" in graph["roboview_data.tasks.base"]
+    )  # the default expert, "module:Class"
     assert "roboview_data.variation.factors.color" in graph["roboview_data.variation.factors"]
     assert "pipelines.collect" in graph["pipelines._console"]
     assert "roboview_lerobot.env" in graph["roboview_lerobot"]
@@ -186,8 +219,14 @@ def test_the_cycle_finder_finds_a_cycle():
     assert cycles({"a": {"b"}, "b": set()}) == []
     # The real graph holds the edges the modules declare, lazy ones included.
     graph = import_graph()
-    assert "eval.statistics.tables" in graph["eval.statistics.compare"] and "policies.base" in graph["policies.vlm.sgl"]
-    assert "eval.statistics.metrics" not in graph["eval.statistics.compare"] and "policies.vlm.sgl" not in graph["policies.base"]
+    assert (
+        "eval.statistics.tables" in graph["eval.statistics.compare"]
+        and "policies.base" in graph["policies.vlm.sgl"]
+    )
+    assert (
+        "eval.statistics.metrics" not in graph["eval.statistics.compare"]
+        and "policies.vlm.sgl" not in graph["policies.base"]
+    )
     assert "eval.statistics.adaptive" in graph["pipelines.evaluate"]  # imported inside a method
 
 
@@ -195,8 +234,10 @@ def test_importing_the_package_registers_the_gym_ids():
     import subprocess
     import sys
 
-    code = ("import gymnasium, roboview_data; from roboview_data.tasks import TASKS; "
-            "print(sorted(t.gym_id for t in TASKS.values() if t.gym_id in gymnasium.registry))")
+    code = (
+        "import gymnasium, roboview_data; from roboview_data.tasks import TASKS; "
+        "print(sorted(t.gym_id for t in TASKS.values() if t.gym_id in gymnasium.registry))"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-800:]
     assert proc.stdout.strip() == "['RoboView/PickPlace-v0', 'RoboView/Push-v0']"
@@ -204,8 +245,14 @@ def test_importing_the_package_registers_the_gym_ids():
 
 # The floors, lowest first: a module imports only from its own floor or those below it.
 FLOORS = (
-    ("roboview_data.errors", "roboview_data.files", "roboview_data.folders", "roboview_data.cli",
-     "roboview_data.cli_errors", "roboview_data.workers"),
+    (
+        "roboview_data.errors",
+        "roboview_data.files",
+        "roboview_data.folders",
+        "roboview_data.cli",
+        "roboview_data.cli_errors",
+        "roboview_data.workers",
+    ),
     ("roboview_data.sim",),
     ("roboview_data.variation",),
     ("roboview_data.tasks",),
@@ -231,15 +278,22 @@ def floor_of(module: str) -> int:
 
 
 def upward_imports(graph: dict[str, set[str]]) -> list[str]:
-    return sorted(f"{module} → {target}" for module, targets in graph.items() for target in targets
-                  if floor_of(target) > floor_of(module))
+    return sorted(
+        f"{module} → {target}"
+        for module, targets in graph.items()
+        for target in targets
+        if floor_of(target) > floor_of(module)
+    )
 
 
 def test_no_module_imports_from_a_higher_floor():
     found = upward_imports(import_graph())
     assert not found, "imports from a higher floor: " + "; ".join(found)
-    assert upward_imports({"roboview_lerobot.convert": {"pipelines._cli"}}) == ["roboview_lerobot.convert → pipelines._cli"]
+    assert upward_imports({"roboview_lerobot.convert": {"pipelines._cli"}}) == [
+        "roboview_lerobot.convert → pipelines._cli"
+    ]
     # The world importing the factor registry is an arrow back up; a factor importing the world is not.
     assert upward_imports({"roboview_data.sim.scene": {"roboview_data.variation.factors"}}) == [
-        "roboview_data.sim.scene → roboview_data.variation.factors"]
+        "roboview_data.sim.scene → roboview_data.variation.factors"
+    ]
     assert upward_imports({"roboview_data.variation.factors.object_size": {"roboview_data.sim.scene"}}) == []

@@ -25,12 +25,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.statistics.metrics import MetricsConfig, compute_all_metrics, policy_layouts
 from eval.running.results import INFRA_ERROR, EpisodeStore, read_journal
+from eval.statistics.metrics import MetricsConfig, compute_all_metrics, policy_layouts
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import PolicyConfig, TransientPolicyError
-from policies.types import policy_config
 from policies.errors import InfraError, RenderError
+from policies.types import policy_config
 
 FAST = MetricsConfig(n_perm=50, n_glm=10)
 
@@ -113,14 +113,30 @@ def _item(bench: Path, split: str = "color", index: int = 0):
     return load_benchmark(bench, [split]).splits[split][index]
 
 
-def _cfg(bench: Path, out: Path, policy, splits="color", limit=2, workers=1, max_steps=3, retries=2) -> EvaluateConfig:
-    return EvaluateConfig(BenchmarkConfig(path=str(bench), splits=splits), policy,
-                          EvalConfig(n_repeats=1, limit=limit, num_workers=workers, max_steps=max_steps, image_size=0,
-                                     max_infra_retries=retries), str(out))
+def _cfg(
+    bench: Path, out: Path, policy, splits="color", limit=2, workers=1, max_steps=3, retries=2
+) -> EvaluateConfig:
+    return EvaluateConfig(
+        BenchmarkConfig(path=str(bench), splits=splits),
+        policy,
+        EvalConfig(
+            n_repeats=1,
+            limit=limit,
+            num_workers=workers,
+            max_steps=max_steps,
+            image_size=0,
+            max_infra_retries=retries,
+        ),
+        str(out),
+    )
 
 
 def _rows(out: Path) -> pd.DataFrame:
-    return pd.read_parquet(out / "episodes.parquet").sort_values(["instance_id", "repeat"]).reset_index(drop=True)
+    return (
+        pd.read_parquet(out / "episodes.parquet")
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
 
 
 # -- what is an infrastructure error -----------------------------------------------------------------------------
@@ -135,11 +151,22 @@ def test_an_outage_past_the_retries_is_infra_and_a_policy_bug_is_not(tiny_benchm
     worker = rollout.EvalWorker(rollout.WorkerSpec(config, image_size=32, max_steps=3))
     item = _item(tiny_benchmark)
     cases = [  # (errors, status, steps, calls, reason)
-        ([TransientPolicyError("503 from the endpoint")] * 3, INFRA_ERROR, 0, 3,
-         "policy error after 2 retries: TransientPolicyError: 503 from the endpoint"),
+        (
+            [TransientPolicyError("503 from the endpoint")] * 3,
+            INFRA_ERROR,
+            0,
+            3,
+            "policy error after 2 retries: TransientPolicyError: 503 from the endpoint",
+        ),
         ([ValueError("bad output")], "ok", 0, 1, "policy error: ValueError: bad output"),
         ([InfraError("server lost")], INFRA_ERROR, 0, 1, "infrastructure error: InfraError: server lost"),
-        ([TimeoutError("slow"), None], "ok", 3, 4, "within 3 steps"),  # retried, then the policy's own failure
+        (
+            [TimeoutError("slow"), None],
+            "ok",
+            3,
+            4,
+            "within 3 steps",
+        ),  # retried, then the policy's own failure
     ]
     try:
         for errors, status, steps, calls, reason in cases:
@@ -167,7 +194,9 @@ def test_a_render_failure_is_an_infra_error(tiny_benchmark):
 
         env = worker.envs[0]
         env.renderer.render = lost
-        with pytest.raises(RenderError, match="rendering camera 'front' failed: RuntimeError: GL context lost"):
+        with pytest.raises(
+            RenderError, match="rendering camera 'front' failed: RuntimeError: GL context lost"
+        ):
             env.render_camera("front")
         with pytest.raises(KeyError):  # a wrong camera name is the caller's error, not the renderer's
             env.render_camera("no_such_camera")
@@ -196,8 +225,9 @@ def test_a_worker_that_keeps_dying_becomes_an_infra_row_and_the_run_goes_on(tiny
 # -- re-run in the same run, and by the same command -------------------------------------------------------------
 
 
-def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_row(tiny_benchmark, tmp_path,
-                                                                                  monkeypatch, capsys):
+def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_row(
+    tiny_benchmark, tmp_path, monkeypatch, capsys
+):
     from pipelines.evaluate import summary
 
     monkeypatch.setitem(PolicyConfig.get_known_choices(), "infra_once", OnceConfig)
@@ -239,14 +269,23 @@ def test_adaptive_decisions_never_see_infra_rows(tiny_benchmark, tmp_path, monke
     store = EpisodeStore(tmp_path / "ev", {"benchmark_version": "v", "policy": "still"})
     seen: list[tuple[int, list[dict]]] = []
     decide = adaptive.decide_split
-    monkeypatch.setattr(adaptive, "decide_split", lambda rows, r, design: seen.append((r, rows)) or decide(rows, r, design))
+    monkeypatch.setattr(
+        adaptive, "decide_split", lambda rows, r, design: seen.append((r, rows)) or decide(rows, r, design)
+    )
     ran: list[tuple[str, int]] = []
 
     def execute(works):
         for w in works:  # the first instance's episodes always end by infrastructure
             ran.append(w.key)
-            store.add({**w.item.record, "repeat": w.repeat, "success": True, "policy": "still",
-                       "status": INFRA_ERROR if w.item is items[0] else "ok"})
+            store.add(
+                {
+                    **w.item.record,
+                    "repeat": w.repeat,
+                    "success": True,
+                    "policy": "still",
+                    "status": INFRA_ERROR if w.item is items[0] else "ok",
+                }
+            )
 
     class Bar:
         total = 100
@@ -254,13 +293,18 @@ def test_adaptive_decisions_never_see_infra_rows(tiny_benchmark, tmp_path, monke
         def refresh(self):
             pass
 
-    cfg = EvaluateConfig(policy=policy_config("expert"), eval=EvalConfig(adaptive=True, max_repeats=3),
-                         output_dir=str(tmp_path / "ev"))
+    cfg = EvaluateConfig(
+        policy=policy_config("expert"),
+        eval=EvalConfig(adaptive=True, max_repeats=3),
+        output_dir=str(tmp_path / "ev"),
+    )
     run_rounds(cfg, {"color": items}, {"color": 3}, {"color"}, store, execute, Bar())
     store.close()
     # After round r the decision sees 3 counted instances × r repeats: the infra one never enters it.
     assert [len(rows) for _, rows in seen] == [3 * r for r, _ in seen] and max(r for r, _ in seen) >= 2
-    assert {row["instance_id"] for _, rows in seen for row in rows} == {i.record["instance_id"] for i in items[1:]}
+    assert {row["instance_id"] for _, rows in seen for row in rows} == {
+        i.record["instance_id"] for i in items[1:]
+    }
     rounds = len({key[1] for key in ran})
     assert sum(key[0] == items[0].record["instance_id"] for key in ran) == rounds  # still run every round
 
@@ -277,7 +321,9 @@ def test_metrics_and_report_leave_infra_rows_out_and_count_them(tmp_path):
     ok = ok.assign(success=ok.index % 3 == 0, status="ok")  # SR 1/3
     color = ok[ok["split"] == "color"]
     first = ok.drop_duplicates("instance_id")  # one row per instance, run once more (repeat 3)
-    infra = pd.concat([first[first["split"] == "color"].head(4), first[first["split"] == "color_x_camera_pose"].head(2)])
+    infra = pd.concat(
+        [first[first["split"] == "color"].head(4), first[first["split"] == "color_x_camera_pose"].head(2)]
+    )
     infra = infra.assign(repeat=3)
     infra = infra.assign(success=True, status=INFRA_ERROR, failure_reason="lost the policy server")
     both = pd.concat([ok, infra], ignore_index=True)
@@ -288,9 +334,16 @@ def test_metrics_and_report_leave_infra_rows_out_and_count_them(tmp_path):
     assert mixed["splits"]["color"]["sr"] != both[both["split"] == "color"]["success"].mean()
     assert mixed["splits"]["color"]["n_episodes"] == len(color)
     assert mixed["splits"]["color"]["cv"] == clean["splits"]["color"]["cv"]
-    assert mixed["interactions"]["color_x_camera_pose"]["sr"] == clean["interactions"]["color_x_camera_pose"]["sr"]
-    assert (mixed["splits"]["color"]["n_infra_errors"], mixed["interactions"]["color_x_camera_pose"]["n_infra_errors"],
-            mixed["n_infra_errors"], clean["splits"]["color"]["n_infra_errors"]) == (4, 2, 6, 0)
+    assert (
+        mixed["interactions"]["color_x_camera_pose"]["sr"]
+        == clean["interactions"]["color_x_camera_pose"]["sr"]
+    )
+    assert (
+        mixed["splits"]["color"]["n_infra_errors"],
+        mixed["interactions"]["color_x_camera_pose"]["n_infra_errors"],
+        mixed["n_infra_errors"],
+        clean["splits"]["color"]["n_infra_errors"],
+    ) == (4, 2, 6, 0)
     # Two policies: the paired comparisons pair counted episodes only.
     other = make_episodes("random", 1, splits=("color",), repeats=3).assign(status="ok")
     two_clean = compute_all_metrics(pd.concat([ok, other], ignore_index=True), FAST)
@@ -298,16 +351,28 @@ def test_metrics_and_report_leave_infra_rows_out_and_count_them(tmp_path):
     assert two_mixed["comparisons"] == two_clean["comparisons"]
     assert policy_layouts(two_mixed)["expert"]["n_infra_errors"] == 6
 
-    result = report(ReportConfig(results=str(write(both, tmp_path / "episodes.parquet")),
-                                 output_dir=str(tmp_path / "rep"), metrics=FAST, plots=False))
+    result = report(
+        ReportConfig(
+            results=str(write(both, tmp_path / "episodes.parquet")),
+            output_dir=str(tmp_path / "rep"),
+            metrics=FAST,
+            plots=False,
+        )
+    )
     assert result.metrics["splits"]["color"]["sr"] == color["success"].mean()
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "- expert, color: 4 episode(s) ended by infrastructure, not counted" in md
     assert "- expert, color_x_camera_pose: 2 episode(s) ended by infrastructure, not counted" in md
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "4 episode(s) ended by infrastructure, not counted" in html and 'id="infra"' in html
-    report(ReportConfig(results=str(write(ok, tmp_path / "clean.parquet")), output_dir=str(tmp_path / "clean"),
-                        metrics=FAST, plots=False))
+    report(
+        ReportConfig(
+            results=str(write(ok, tmp_path / "clean.parquet")),
+            output_dir=str(tmp_path / "clean"),
+            metrics=FAST,
+            plots=False,
+        )
+    )
     assert "ended by infrastructure" not in (tmp_path / "clean" / "report.md").read_text()
 
 
@@ -337,7 +402,11 @@ def _kill_and_restart_mid_run(cfg: EvaluateConfig, kill, restart) -> tuple[list,
     thread = threading.Thread(target=go)
     thread.start()
     deadline = time.time() + 180
-    while time.time() < deadline and (not journal.exists() or not journal.read_text().strip()) and thread.is_alive():
+    while (
+        time.time() < deadline
+        and (not journal.exists() or not journal.read_text().strip())
+        and thread.is_alive()
+    ):
         time.sleep(0.02)
     kill()  # SIGKILL: no goodbye
     server = restart()
@@ -354,23 +423,39 @@ def _check_interrupted_then_rerun(cfg: EvaluateConfig, errors: list, where: str,
     assert not errors, errors
     rows = _rows(out)
     # One worker, one connection: exactly the episode the kill cut short is infra_error, the rest the policy's.
-    assert len(rows) == 4 and rows["status"].tolist().count(INFRA_ERROR) == 1, rows[["status", "failure_reason"]]
+    assert len(rows) == 4 and rows["status"].tolist().count(INFRA_ERROR) == 1, rows[
+        ["status", "failure_reason"]
+    ]
     lost = rows[rows["status"] == INFRA_ERROR].iloc[0]
     assert f"lost the {where}" in lost["failure_reason"] and "mid-episode" in lost["failure_reason"]
     assert (rows.loc[rows["status"] == "ok", "failure_reason"].str.contains("within 6 steps")).all()
 
-    rep = report(ReportConfig(results=str(out / "episodes.parquet"), output_dir=str(tmp_path / "rep"), metrics=FAST,
-                              plots=False))
+    rep = report(
+        ReportConfig(
+            results=str(out / "episodes.parquet"), output_dir=str(tmp_path / "rep"), metrics=FAST, plots=False
+        )
+    )
     split = rep.metrics["splits"][lost["split"]]
     assert split["n_infra_errors"] == 1 and split["n_episodes"] == (rows["split"] == lost["split"]).sum() - 1
-    assert f"{lost['split']}: 1 episode(s) ended by infrastructure, not counted" in (tmp_path / "rep" / "report.md").read_text()
+    assert (
+        f"{lost['split']}: 1 episode(s) ended by infrastructure, not counted"
+        in (tmp_path / "rep" / "report.md").read_text()
+    )
 
     again = run(cfg)  # the same command, the server up: the infra one runs again and replaces its row
     rows = _rows(out)
     assert again.new_episodes == 1 and again.infra_errors == 0
-    assert len(rows) == 4 and not rows.duplicated(["instance_id", "repeat"]).any() and (rows["status"] == "ok").all()
+    assert (
+        len(rows) == 4
+        and not rows.duplicated(["instance_id", "repeat"]).any()
+        and (rows["status"] == "ok").all()
+    )
     redone = rows[(rows["instance_id"] == lost["instance_id"]) & (rows["repeat"] == lost["repeat"])].iloc[0]
-    assert redone["episode_seed"] == lost["episode_seed"] and redone["steps"] == 6 and "within 6" in redone["failure_reason"]
+    assert (
+        redone["episode_seed"] == lost["episode_seed"]
+        and redone["steps"] == 6
+        and "within 6" in redone["failure_reason"]
+    )
 
 
 def test_an_openpi_server_killed_and_restarted_mid_run(tiny_benchmark, tiny_checkpoint, tmp_path):
@@ -379,10 +464,17 @@ def test_an_openpi_server_killed_and_restarted_mid_run(tiny_benchmark, tiny_chec
     port = _free_port()
     server = start_server(tiny_checkpoint, port, "--server=openpi")
     servers = [server]
-    policy = policy_config("openpi", url=f"ws://127.0.0.1:{port}", cameras="left_top,wrist", image_size=64,
-                           reconnects=8, reconnect_backoff_s=0.25)
+    policy = policy_config(
+        "openpi",
+        url=f"ws://127.0.0.1:{port}",
+        cameras="left_top,wrist",
+        image_size=64,
+        reconnects=8,
+        reconnect_backoff_s=0.25,
+    )
     cfg = _cfg(tiny_benchmark, tmp_path / "ev", policy, splits="color,camera_pose", max_steps=6, retries=0)
     try:
+
         def restart():
             servers.append(start_server(tiny_checkpoint, port, "--server=openpi"))
 
@@ -407,9 +499,21 @@ class _LeRobotServer:
         self.address = f"127.0.0.1:{port}"
         with (cwd / "server.log").open("a") as log:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "lerobot.async_inference.policy_server", "--host=127.0.0.1", f"--port={port}",
-                 "--fps=10", "--inference_latency=0", "--obs_queue_timeout=2"],
-                cwd=cwd, stdout=log, stderr=subprocess.STDOUT, env=os.environ | {"HF_HUB_OFFLINE": "1"})
+                [
+                    sys.executable,
+                    "-m",
+                    "lerobot.async_inference.policy_server",
+                    "--host=127.0.0.1",
+                    f"--port={port}",
+                    "--fps=10",
+                    "--inference_latency=0",
+                    "--obs_queue_timeout=2",
+                ],
+                cwd=cwd,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=os.environ | {"HF_HUB_OFFLINE": "1"},
+            )
         deadline = time.time() + timeout_s
         while True:
             try:
@@ -418,7 +522,9 @@ class _LeRobotServer:
             except ValueError:
                 if self.proc.poll() is not None or time.time() > deadline:
                     self.stop()
-                    raise RuntimeError(f"policy server did not start: {(cwd / 'server.log').read_text()[-2000:]}")
+                    raise RuntimeError(
+                        f"policy server did not start: {(cwd / 'server.log').read_text()[-2000:]}"
+                    ) from None
                 time.sleep(0.3)
 
     def kill(self) -> None:
@@ -438,12 +544,18 @@ class _LeRobotServer:
 def test_a_lerobot_policy_server_killed_and_restarted_mid_run(tiny_benchmark, tiny_checkpoint, tmp_path):
     port = _free_port()
     servers = [_LeRobotServer(tmp_path, port)]
-    policy = policy_config("lerobot_async", server=servers[0].address, path=str(tiny_checkpoint), reconnects=8,
-                           reconnect_backoff_s=0.25)
+    policy = policy_config(
+        "lerobot_async",
+        server=servers[0].address,
+        path=str(tiny_checkpoint),
+        reconnects=8,
+        reconnect_backoff_s=0.25,
+    )
     cfg = _cfg(tiny_benchmark, tmp_path / "ev", policy, splits="color,camera_pose", max_steps=6, retries=0)
     try:
-        errors, _ = _kill_and_restart_mid_run(cfg, servers[0].kill,
-                                              lambda: servers.append(_LeRobotServer(tmp_path, port)))
+        errors, _ = _kill_and_restart_mid_run(
+            cfg, servers[0].kill, lambda: servers.append(_LeRobotServer(tmp_path, port))
+        )
         _check_interrupted_then_rerun(cfg, errors, f"LeRobot policy server at 127.0.0.1:{port}", tmp_path)
     finally:
         for server in servers:

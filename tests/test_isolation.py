@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from eval.running import isolation
-from eval.statistics.metrics import compute_metrics
 from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+from eval.statistics.metrics import compute_metrics
 from policies.types import policy_config
 from roboview_data.benchmark.format import load_benchmark, select_items
 from roboview_data.tasks.env import TaskEnv
@@ -17,8 +17,12 @@ from roboview_data.tasks.env import TaskEnv
 def run_episodes(bench, splits, contexts=2, repeats=2):
     """Real expert episodes (in this process), every value of the first `contexts` contexts of each split."""
     loaded = load_benchmark(bench, splits)
-    works = [WorkItem(item, r) for items in loaded.splits.values() for item in select_items(items, contexts, 0)
-             for r in range(repeats)]
+    works = [
+        WorkItem(item, r)
+        for items in loaded.splits.values()
+        for item in select_items(items, contexts, 0)
+        for r in range(repeats)
+    ]
     worker = EvalWorker(WorkerSpec(policy_config("expert"), image_size=64, max_steps=4))
     try:
         return pd.DataFrame([result.row for result in worker.run_batch(works)])
@@ -39,8 +43,11 @@ def test_real_episodes_verify_and_camera_factors_may_move_only_their_cameras(cle
     assert report["camera_pose"]["allowed_to_differ"] == ["camera:front", "camera:left_top"]
     assert report["color"]["allowed_to_differ"] == []
     # The camera_pose blocks do differ in the moved cameras (what the exemption is for), never in the others.
-    certs = clean[clean["split"] == "camera_pose"].groupby(["context_id", "repeat"])["isolation"].apply(
-        lambda s: [json.loads(x) for x in s])
+    certs = (
+        clean[clean["split"] == "camera_pose"]
+        .groupby(["context_id", "repeat"])["isolation"]
+        .apply(lambda s: [json.loads(x) for x in s])
+    )
     for block in certs:
         assert len({c["camera:left_top"] for c in block}) > 1
         assert len({c["camera:wrist"] for c in block}) == len({c["camera:right_top"] for c in block}) == 1
@@ -66,9 +73,15 @@ def test_an_instruction_that_depends_on_the_value_is_flagged_and_left_out(tiny_b
     assert report["camera_pose"]["verified"] == 4  # camera_pose keeps the baseline color: no leak there
 
     # The statistics leave the violating blocks out, and say so.
-    mixed = pd.concat([clean[clean["split"] == "camera_pose"], leaky[leaky["split"] == "color"],
-                       clean[clean["split"] == "color"].assign(context_id=lambda d: "c" + d["context_id"],
-                                                                      instance_id=lambda d: "c" + d["instance_id"])])
+    mixed = pd.concat(
+        [
+            clean[clean["split"] == "camera_pose"],
+            leaky[leaky["split"] == "color"],
+            clean[clean["split"] == "color"].assign(
+                context_id=lambda d: "c" + d["context_id"], instance_id=lambda d: "c" + d["instance_id"]
+            ),
+        ]
+    )
     metrics = compute_metrics(mixed)
     color = metrics["splits"]["color"]
     assert color["isolation"]["verified"] == 4 and len(color["isolation"]["violations"]) == 4
@@ -84,4 +97,3 @@ def test_results_without_a_certificate_are_reported_as_not_recorded(clean):
     report = isolation.verify(old)
     assert report["color"] == {"recorded": False, "blocks": 4, "verified": 0, "violations": []}
     assert np.isfinite(compute_metrics(old)["splits"]["color"]["sr"])
-

@@ -18,8 +18,8 @@ import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import AgentView, Episode, PolicyConfig
-from policies.types import policy_config
 from policies.errors import PolicyUnavailable
+from policies.types import policy_config
 
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
 
@@ -40,9 +40,21 @@ class Server:
         self.log = cwd / "server.log"
         with self.log.open("w") as log:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "lerobot.async_inference.policy_server", "--host=127.0.0.1",
-                 f"--port={self.address.split(':')[1]}", "--fps=10", "--inference_latency=0", "--obs_queue_timeout=2"],
-                cwd=cwd, stdout=log, stderr=subprocess.STDOUT, env=os.environ | {"HF_HUB_OFFLINE": "1"})
+                [
+                    sys.executable,
+                    "-m",
+                    "lerobot.async_inference.policy_server",
+                    "--host=127.0.0.1",
+                    f"--port={self.address.split(':')[1]}",
+                    "--fps=10",
+                    "--inference_latency=0",
+                    "--obs_queue_timeout=2",
+                ],
+                cwd=cwd,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=os.environ | {"HF_HUB_OFFLINE": "1"},
+            )
         deadline = time.time() + timeout_s
         while True:
             try:
@@ -51,7 +63,9 @@ class Server:
             except ValueError:
                 if self.proc.poll() is not None or time.time() > deadline:
                     self.stop()
-                    raise RuntimeError(f"policy server did not start: {self.log.read_text()[-2000:]}") from None
+                    raise RuntimeError(
+                        f"policy server did not start: {self.log.read_text()[-2000:]}"
+                    ) from None
                 time.sleep(0.5)
 
     def stop(self) -> None:
@@ -72,13 +86,21 @@ def server(tmp_path_factory):
 
 
 def evaluate(bench: Path, out: Path, policy: PolicyConfig):
-    cfg = EvaluateConfig(BenchmarkConfig(str(bench), "color"), policy,
-                         EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6, image_size=0), str(out))
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(bench), "color"),
+        policy,
+        EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6, image_size=0),
+        str(out),
+    )
     return run(cfg)
 
 
 def rows(out: Path) -> pd.DataFrame:
-    return pd.read_parquet(out / "episodes.parquet").sort_values(["instance_id", "repeat"]).reset_index(drop=True)
+    return (
+        pd.read_parquet(out / "episodes.parquet")
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
 
 
 def test_served_checkpoint_runs_the_in_process_episodes(tiny_benchmark, tiny_checkpoint, server, tmp_path):
@@ -91,9 +113,14 @@ def test_served_checkpoint_runs_the_in_process_episodes(tiny_benchmark, tiny_che
     assert rows(tmp_path / "served")["policy"].tolist() == ["lerobot:act"] * 2
     # Where the policy ran goes into provenance; the server's address is no option a resume must match.
     entry = json.loads((tmp_path / "served" / "provenance.json").read_text())[-1]
-    assert entry["policy_server"] == {"protocol": "lerobot_async", "servers": [server.address], "policy_type": "act",
-                                      "pretrained_name_or_path": str(tiny_checkpoint.absolute()), "device": "cpu",
-                                      "actions_per_chunk": 10}
+    assert entry["policy_server"] == {
+        "protocol": "lerobot_async",
+        "servers": [server.address],
+        "policy_type": "act",
+        "pretrained_name_or_path": str(tiny_checkpoint.absolute()),
+        "device": "cpu",
+        "actions_per_chunk": 10,
+    }
     run_info = json.loads((tmp_path / "served" / "run.json").read_text())
     assert run_info["policy"] == "lerobot_async" and run_info["policy_path"] == str(tiny_checkpoint)
     assert "server" not in run_info["policy_options"] and run_info["image_size"] == 64
@@ -141,30 +168,48 @@ def test_a_server_that_is_down_fails_before_any_rollout(tiny_benchmark, tiny_che
     address = f"127.0.0.1:{free_port()}"
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as exit_:
-        main([f"--benchmark.path={tiny_benchmark}", "--policy.type=lerobot_async", f"--policy.server={address}",
-              f"--policy.path={tiny_checkpoint}", f"--output_dir={out}"])
+        main(
+            [
+                f"--benchmark.path={tiny_benchmark}",
+                "--policy.type=lerobot_async",
+                f"--policy.server={address}",
+                f"--policy.path={tiny_checkpoint}",
+                f"--output_dir={out}",
+            ]
+        )
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and f"policy server at {address} does not answer" in err, err
     assert not out.exists()
     # A checkpoint not readable here needs its facts as flags, named in the error.
-    with pytest.raises(ValueError, match=r"not a folder on this machine.*--policy\.cameras=.*--policy\.image_size="):
+    with pytest.raises(
+        ValueError, match=r"not a folder on this machine.*--policy\.cameras=.*--policy\.image_size="
+    ):
         policy_config("lerobot_async", server=address, path="org/act_model")
 
 
 def test_a_server_gone_mid_run_stops_the_run_naming_it(tiny_checkpoint, server):
     """Last in this file: it stops the module's server."""
-    config = policy_config("lerobot_async", server=server.address, path=str(tiny_checkpoint), reconnects=1,
-                           reconnect_backoff_s=0.1)
+    config = policy_config(
+        "lerobot_async",
+        server=server.address,
+        path=str(tiny_checkpoint),
+        reconnects=1,
+        reconnect_backoff_s=0.1,
+    )
     policy = config.build(None)
-    obs = {"observation.state": np.zeros(8, np.float32),
-           **{f"observation.images.{cam}": np.zeros((64, 64, 3), np.uint8) for cam in ("left_top", "wrist")}}
+    obs = {
+        "observation.state": np.zeros(8, np.float32),
+        **{f"observation.images.{cam}": np.zeros((64, 64, 3), np.uint8) for cam in ("left_top", "wrist")},
+    }
     episode = Episode("pick_place", "put the red cube in the box", 0, {}, 64)
     try:
         policy.reset(episode)
         assert policy.select_action(obs).shape == (8,)
         server.stop()
         policy.reset(episode)  # the next chunk is asked for at once
-        with pytest.raises(PolicyUnavailable, match=rf"{server.address} is unreachable.*rerun the same command"):
+        with pytest.raises(
+            PolicyUnavailable, match=rf"{server.address} is unreachable.*rerun the same command"
+        ):
             policy.select_action(obs)
     finally:
         policy.close()

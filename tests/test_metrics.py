@@ -24,18 +24,38 @@ EPS = 1e-6
 FAST = MetricsConfig(n_perm=200, n_glm=50, max_perm=200)
 
 
-def episodes(cells: dict[tuple[str, str], list[int]], split: str = "color", factor: str = "color",
-             policy: str = "p") -> pd.DataFrame:
+def episodes(
+    cells: dict[tuple[str, str], list[int]], split: str = "color", factor: str = "color", policy: str = "p"
+) -> pd.DataFrame:
     """One instance per (value, context) with the listed outcomes, one row per repeat."""
-    rows = [{"policy": policy, "split": split, "factor": factor, "value": value, "context_id": ctx,
-             "instance_id": f"{split}/{value}/{ctx}", "repeat": r, "success": bool(s)}
-            for (value, ctx), outcomes in cells.items() for r, s in enumerate(outcomes)]
+    rows = [
+        {
+            "policy": policy,
+            "split": split,
+            "factor": factor,
+            "value": value,
+            "context_id": ctx,
+            "instance_id": f"{split}/{value}/{ctx}",
+            "repeat": r,
+            "success": bool(s),
+        }
+        for (value, ctx), outcomes in cells.items()
+        for r, s in enumerate(outcomes)
+    ]
     return pd.DataFrame(rows)
 
 
 # 2 contexts × 3 values × 2 repeats. c1: SR a = 1, b = 0.5, c = 0 (μ 0.5, σ = √(1/6)); c2: all fail.
-HAND = episodes({("a", "c1"): [1, 1], ("b", "c1"): [1, 0], ("c", "c1"): [0, 0],
-                 ("a", "c2"): [0, 0], ("b", "c2"): [0, 0], ("c", "c2"): [0, 0]})
+HAND = episodes(
+    {
+        ("a", "c1"): [1, 1],
+        ("b", "c1"): [1, 0],
+        ("c", "c1"): [0, 0],
+        ("a", "c2"): [0, 0],
+        ("b", "c2"): [0, 0],
+        ("c", "c2"): [0, 0],
+    }
+)
 
 
 def test_single_split_by_hand():
@@ -71,8 +91,11 @@ def test_split_where_everything_fails_has_null_cv():
 
 
 # Factorial 2 × 2 in one context, 2 repeats: SR(a1,b1)=1, SR(a2,b1)=.5, SR(a1,b2)=0, SR(a2,b2)=.5.
-FACTORIAL = episodes({("a1|b1", "c*"): [1, 1], ("a2|b1", "c*"): [1, 0],
-                      ("a1|b2", "c*"): [0, 0], ("a2|b2", "c*"): [0, 1]}, split="A_x_B", factor="A|B")
+FACTORIAL = episodes(
+    {("a1|b1", "c*"): [1, 1], ("a2|b1", "c*"): [1, 0], ("a1|b2", "c*"): [0, 0], ("a2|b2", "c*"): [0, 1]},
+    split="A_x_B",
+    factor="A|B",
+)
 
 
 def test_factorial_cv_and_iec_by_hand():
@@ -106,8 +129,13 @@ def test_wilson_interval_known_values():
 
 def _noisy(seed: int = 0, contexts: int = 3, values: int = 6, repeats: int = 5) -> pd.DataFrame:
     rng = np.random.default_rng(seed)
-    return episodes({(f"v{v}", f"c{c}"): list(rng.random(repeats) < (v + 1) / (values + 1))
-                     for v in range(values) for c in range(contexts)})
+    return episodes(
+        {
+            (f"v{v}", f"c{c}"): list(rng.random(repeats) < (v + 1) / (values + 1))
+            for v in range(values)
+            for c in range(contexts)
+        }
+    )
 
 
 def test_noise_floor_is_seeded_and_explains_a_flat_table():
@@ -136,8 +164,12 @@ def test_p_values_small_for_dependence_large_for_none():
     strong = episodes({(v, c): [int(v in "ab")] * 10 for v in "abcd" for c in ("c1", "c2")})
     m = split_metrics(strong, FAST)
     assert m["p_value_cv"] <= 2 / 201 and m["p_value"] < 1e-3
-    assert {v: s["odds_ratio"] is None or s["q_value"] < 0.05 for v, s in m["per_value"].items()} == dict.fromkeys("abcd", True)
-    flat = episodes({(v, c): list(np.roll([1, 0] * 5, i)) for i, v in enumerate("abcd") for c in ("c1", "c2")})
+    assert {
+        v: s["odds_ratio"] is None or s["q_value"] < 0.05 for v, s in m["per_value"].items()
+    } == dict.fromkeys("abcd", True)
+    flat = episodes(
+        {(v, c): list(np.roll([1, 0] * 5, i)) for i, v in enumerate("abcd") for c in ("c1", "c2")}
+    )
     m = split_metrics(flat, FAST)
     assert m["p_value_cv"] == 1.0 and m["p_value"] > 0.99
     assert all(s["odds_ratio"] == pytest.approx(1.0) and s["q_value"] > 0.99 for s in m["per_value"].values())
@@ -147,15 +179,28 @@ def test_per_value_odds_ratio_by_hand():
     # One context, 4 repeats (blocks). b against {a, c, d}: r0 all succeed (no information);
     # r1, r2: b 1/1 vs rest 1/3 → ad/n = 2/4, bc/n = 0; r3: b 0/1 vs rest 2/3 → ad/n = 0, bc/n = 2/4.
     # Mantel–Haenszel OR = (0.5 + 0.5) / 0.5 = 2.
-    table = episodes({("a", "c"): [1, 0, 0, 0], ("b", "c"): [1, 1, 1, 0], ("c", "c"): [1, 1, 0, 1],
-                      ("d", "c"): [1, 0, 1, 1]})
+    table = episodes(
+        {
+            ("a", "c"): [1, 0, 0, 0],
+            ("b", "c"): [1, 1, 1, 0],
+            ("c", "c"): [1, 1, 0, 1],
+            ("d", "c"): [1, 0, 1, 1],
+        }
+    )
     m = split_metrics(table, FAST)
     assert m["per_value"]["b"]["odds_ratio"] == pytest.approx(2.0)
     assert m["per_value"]["a"]["odds_ratio"] == 0.0 and m["per_value"]["a"]["odds_ratio_ci95"] is None
     assert m["n_contexts"] == 1 and m["n_contexts_all_failed"] == 0
     # A value that fails more often than the rest in every block of two contexts: OR < 1, q < 0.05.
-    weak = episodes({(v, c): list(np.roll([1, 0, 0, 0, 1, 0, 0, 0, 1, 0] if v == "a" else [1, 1, 1, 0, 0, 1, 1, 1, 0, 1], i))
-                     for i, v in enumerate("abcd") for c in ("c1", "c2")})
+    weak = episodes(
+        {
+            (v, c): list(
+                np.roll([1, 0, 0, 0, 1, 0, 0, 0, 1, 0] if v == "a" else [1, 1, 1, 0, 0, 1, 1, 1, 0, 1], i)
+            )
+            for i, v in enumerate("abcd")
+            for c in ("c1", "c2")
+        }
+    )
     a = split_metrics(weak, FAST)["per_value"]["a"]
     assert a["odds_ratio"] < 0.2 and a["odds_ratio_ci95"][0] < a["odds_ratio"] < a["odds_ratio_ci95"][1] < 1
     assert a["q_value"] < 0.05
@@ -189,8 +234,20 @@ def test_layout_and_several_policies():
     single = compute_all_metrics(pd.concat([HAND, FACTORIAL]), FAST)
     assert single["epsilon"] == EPS and single["policy"] == "p"
     assert set(single["splits"]["color"]) >= {
-        "factor", "n_instances", "n_episodes", "sr", "sr_ci95", "cv", "cv_null", "cv_excess", "cv_excess_ci95",
-        "p_value", "p_value_cv", "n_contexts_all_failed", "per_value"}
+        "factor",
+        "n_instances",
+        "n_episodes",
+        "sr",
+        "sr_ci95",
+        "cv",
+        "cv_null",
+        "cv_excess",
+        "cv_excess_ci95",
+        "p_value",
+        "p_value_cv",
+        "n_contexts_all_failed",
+        "per_value",
+    }
     assert set(single["splits"]["color"]["per_value"]["a"]) >= {"odds_ratio", "odds_ratio_ci95", "q_value"}
     assert set(single["interactions"]["A_x_B"]) >= {"iec", "iec_null", "iec_excess", "p_interaction"}
     assert set(single["interactions"]["A_x_B"]["iec"]) == {"A|B", "B|A"}
@@ -238,4 +295,5 @@ def test_per_value_p_value_is_exact_where_the_cmh_chi_square_is_not():
 
     table = [[2, 6], [7, 3]]
     assert exact_stratified_p(np.array([2]), np.array([8]), np.array([9]), np.array([18])) == pytest.approx(
-        fisher_exact(table).pvalue, rel=1e-9)
+        fisher_exact(table).pvalue, rel=1e-9
+    )

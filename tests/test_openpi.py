@@ -24,8 +24,8 @@ import pytest
 
 from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from policies.base import Episode
-from policies.types import policy_config
 from policies.errors import PolicyUnavailable
+from policies.types import policy_config
 
 COLS = ["instance_id", "repeat", "episode_seed", "success", "steps", "policy", "failure_reason"]
 
@@ -38,9 +38,21 @@ def free_port() -> int:
 
 def start_server(checkpoint: Path, port: int, *flags: str) -> subprocess.Popen:
     """pipelines.serve_policy in its own process; returns once /healthz answers."""
-    proc = subprocess.Popen([sys.executable, "-m", "pipelines.serve_policy", "--policy.type=lerobot",
-                             f"--policy.path={checkpoint}", f"--port={port}", "--threads=1", *flags],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.serve_policy",
+            "--policy.type=lerobot",
+            f"--policy.path={checkpoint}",
+            f"--port={port}",
+            "--threads=1",
+            *flags,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     deadline = time.time() + 120
     while time.time() < deadline:
         try:
@@ -61,17 +73,28 @@ def stop(proc: subprocess.Popen) -> str:
 
 
 def evaluate(bench: Path, out: Path, policy, splits="color", limit=2, workers=2, max_steps=6) -> None:
-    run(EvaluateConfig(BenchmarkConfig(str(bench), splits), policy,
-                       EvalConfig(n_repeats=1, limit=limit, num_workers=workers, max_steps=max_steps, image_size=0),
-                       str(out)))
+    run(
+        EvaluateConfig(
+            BenchmarkConfig(str(bench), splits),
+            policy,
+            EvalConfig(n_repeats=1, limit=limit, num_workers=workers, max_steps=max_steps, image_size=0),
+            str(out),
+        )
+    )
 
 
 def rows(out: Path) -> pd.DataFrame:
-    return pd.read_parquet(out / "episodes.parquet").sort_values(["instance_id", "repeat"]).reset_index(drop=True)
+    return (
+        pd.read_parquet(out / "episodes.parquet")
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
 
 
 def client(port: int, **settings):
-    return policy_config("openpi", url=f"ws://127.0.0.1:{port}", cameras="left_top,wrist", image_size=64, **settings)
+    return policy_config(
+        "openpi", url=f"ws://127.0.0.1:{port}", cameras="left_top,wrist", image_size=64, **settings
+    )
 
 
 @pytest.fixture(scope="module")
@@ -87,21 +110,30 @@ def openpi_server(tiny_checkpoint):
 def reference(tiny_benchmark, tiny_checkpoint, tmp_path_factory) -> Path:
     """The same episodes evaluated in-process (2 workers: one torch thread each, as the server's --threads=1)."""
     out = tmp_path_factory.mktemp("inproc")
-    evaluate(tiny_benchmark, out, policy_config("lerobot", path=str(tiny_checkpoint)), splits="color,camera_pose")
+    evaluate(
+        tiny_benchmark, out, policy_config("lerobot", path=str(tiny_checkpoint)), splits="color,camera_pose"
+    )
     return out
 
 
-def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(tiny_benchmark, openpi_server, reference,
-                                                                      tmp_path):
+def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(
+    tiny_benchmark, openpi_server, reference, tmp_path
+):
     evaluate(tiny_benchmark, tmp_path / "served", client(openpi_server), splits="color,camera_pose")
     served, local = rows(tmp_path / "served"), rows(reference)
     assert len(served) == 4
-    pd.testing.assert_frame_equal(served[COLS[:-2] + ["failure_reason"]], local[COLS[:-2] + ["failure_reason"]])
+    pd.testing.assert_frame_equal(
+        served[COLS[:-2] + ["failure_reason"]], local[COLS[:-2] + ["failure_reason"]]
+    )
     assert set(served["policy"]) == {"openpi:droid"}
     entry = json.loads((tmp_path / "served" / "provenance.json").read_text())[-1]
     meta = entry["policy_server"]["metadata"][f"ws://127.0.0.1:{openpi_server}"]["roboview"]
     assert entry["policy_server"]["protocol"] == "openpi"
-    assert meta["policy"] == "lerobot:act" and meta["image_size"] == 64 and meta["cameras"] == ["left_top", "wrist"]
+    assert (
+        meta["policy"] == "lerobot:act"
+        and meta["image_size"] == 64
+        and meta["cameras"] == ["left_top", "wrist"]
+    )
     assert "url" not in json.loads((tmp_path / "served" / "run.json").read_text())["policy_options"]
     # The report says where the policy was served and what the server said.
     from eval.reporting.markdown import provenance_section
@@ -141,7 +173,10 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
     evaluate(tiny_benchmark, tmp_path / "libero", client(openpi_server, obs_format="libero"), limit=2)
     df = rows(tmp_path / "libero")
     assert len(df) == 2 and not df["success"].any()
-    assert all("server error: ValueError: request has no" in r and "observation/exterior_image_1_left" in r for r in df["failure_reason"])
+    assert all(
+        "server error: ValueError: request has no" in r and "observation/exterior_image_1_left" in r
+        for r in df["failure_reason"]
+    )
     assert df["steps"].tolist() == [0, 0]
 
     # A server (openpi-server's own) whose policy answers 7-D actions: wrong shape, named.
@@ -152,8 +187,10 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
             return {"actions": np.zeros((5, 7), np.float32)}
 
     port = free_port()
-    threading.Thread(target=WebsocketPolicyServer(SevenDims(), "127.0.0.1", port, {"name": "seven"}).serve_forever,
-                     daemon=True).start()
+    threading.Thread(
+        target=WebsocketPolicyServer(SevenDims(), "127.0.0.1", port, {"name": "seven"}).serve_forever,
+        daemon=True,
+    ).start()
     for _ in range(50):
         try:
             urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=1)
@@ -172,8 +209,9 @@ def test_every_layout_carries_the_observation_there_and_back(env):
     obs, _ = env.reset(seed=5)
     cams = ("left_top", "wrist")
     custom = "img=camera:left_top,wrist_chw=camera_chw:wrist,q=state[0:7],g=state[7:8],text=instruction"
-    for name, fmt in [(f, wire_format(f, cams)) for f in ("droid", "libero", "aloha")] + \
-            [("custom", wire_format("custom", cams, custom))]:
+    for name, fmt in [(f, wire_format(f, cams)) for f in ("droid", "libero", "aloha")] + [
+        ("custom", wire_format("custom", cams, custom))
+    ]:
         request = fmt.encode(obs, "pick up the red cube")
         back, instruction = fmt.decode(request, env.image_size)
         assert instruction == "pick up the red cube", name
@@ -181,21 +219,27 @@ def test_every_layout_carries_the_observation_there_and_back(env):
         for cam in cams:
             np.testing.assert_array_equal(back[IMAGE_KEY.format(cam)], obs[IMAGE_KEY.format(cam)])
     droid = wire_format("droid", cams).encode(obs, "x")
-    assert droid["observation/joint_position"].shape == (7,) and droid["observation/gripper_position"].shape == (1,)
+    assert droid["observation/joint_position"].shape == (7,) and droid[
+        "observation/gripper_position"
+    ].shape == (1,)
     assert droid["observation/exterior_image_1_left"].shape == (env.image_size, env.image_size, 3)
     aloha = wire_format("aloha", cams).encode(obs, "x")
-    assert set(aloha["images"]) == {"cam_high", "cam_left_wrist"} and aloha["images"]["cam_high"].shape[0] == 3
+    assert (
+        set(aloha["images"]) == {"cam_high", "cam_left_wrist"} and aloha["images"]["cam_high"].shape[0] == 3
+    )
     with pytest.raises(ValueError, match="unset"):  # a layout that leaves the gripper out cannot be decoded
         wire_format("custom", cams, "img=camera:left_top,q=state[0:7],p=instruction").decode(
-            {"img": droid["observation/exterior_image_1_left"], "q": np.zeros(7), "p": "x"}, env.image_size)
+            {"img": droid["observation/exterior_image_1_left"], "q": np.zeros(7), "p": "x"}, env.image_size
+        )
 
 
 def _thread_server(policy, metadata=None) -> int:
     from openpi_server.websocket_policy_server import WebsocketPolicyServer
 
     port = free_port()
-    threading.Thread(target=WebsocketPolicyServer(policy, "127.0.0.1", port, metadata or {}).serve_forever,
-                     daemon=True).start()
+    threading.Thread(
+        target=WebsocketPolicyServer(policy, "127.0.0.1", port, metadata or {}).serve_forever, daemon=True
+    ).start()
     for _ in range(100):
         try:
             urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=1)
@@ -205,7 +249,9 @@ def _thread_server(policy, metadata=None) -> int:
     raise AssertionError("openpi-server did not start")
 
 
-def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_over_urls(tiny_benchmark, env, tmp_path):
+def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_over_urls(
+    tiny_benchmark, env, tmp_path
+):
     from policies.base import AgentView
 
     class Velocity:  # openpi-server's policy interface: a chunk of 3 joint velocities (rad/s) + gripper 0.7
@@ -220,8 +266,14 @@ def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_ove
 
     servers = [Velocity(), Velocity()]
     ports = [_thread_server(s) for s in servers]
-    cfg = policy_config("openpi", url=",".join(f"ws://127.0.0.1:{p}" for p in ports), cameras="left_top,wrist",
-                        image_size=env.image_size, action_space="joint_velocity", gripper="binary")
+    cfg = policy_config(
+        "openpi",
+        url=",".join(f"ws://127.0.0.1:{p}" for p in ports),
+        cameras="left_top,wrist",
+        image_size=env.image_size,
+        action_space="joint_velocity",
+        gripper="binary",
+    )
     obs, _ = env.reset(seed=2)
     policy = cfg.build(AgentView.of(env))
     policy.reset(Episode.of(env, 2))
@@ -250,8 +302,9 @@ def test_server_down_fails_before_any_rollout_naming_the_url():
         policy_config("openpi", url=f"ws://127.0.0.1:{port}", obs_format="custom", key_map="s=state[3:12]")
 
 
-def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(tiny_benchmark, tiny_checkpoint, reference,
-                                                                   tmp_path):
+def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(
+    tiny_benchmark, tiny_checkpoint, reference, tmp_path
+):
     port = free_port()
     server = start_server(tiny_checkpoint, port)
     out = tmp_path / "killed"
@@ -276,7 +329,9 @@ def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(tiny_benchmar
     assert len(errors) == 1 and isinstance(errors[0], PolicyUnavailable), errors
     assert f"ws://127.0.0.1:{port}" in str(errors[0]) and "rerun" in str(errors[0])
     done = [json.loads(line) for line in journal.read_text().splitlines()]
-    assert 1 <= len(done) < 4  # what finished is kept; nothing the kill cut short is recorded as a policy failure
+    assert (
+        1 <= len(done) < 4
+    )  # what finished is kept; nothing the kill cut short is recorded as a policy failure
     assert not any("closed the connection" in r["failure_reason"] for r in done)
 
     server = start_server(tiny_checkpoint, port)  # the same server back: the rerun finishes the rest
@@ -286,7 +341,9 @@ def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(tiny_benchmar
         stop(server)
     resumed = rows(out)
     assert len(resumed) == 4 and not resumed.duplicated(["instance_id", "repeat"]).any()
-    pd.testing.assert_frame_equal(resumed[COLS[:-2] + ["failure_reason"]], rows(reference)[COLS[:-2] + ["failure_reason"]])
+    pd.testing.assert_frame_equal(
+        resumed[COLS[:-2] + ["failure_reason"]], rows(reference)[COLS[:-2] + ["failure_reason"]]
+    )
 
 
 def test_openpi_client_against_serve_policy_batches_connections(tiny_benchmark, tiny_checkpoint):

@@ -6,10 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from roboview_data.tasks import load_task, make_env
-from roboview_data.variation.factors import baselines, context_factors
+from roboview_data.tasks import load_preset, load_task, make_env
 from roboview_data.tasks.push import PUSH_STARTS, ZONE_OFFSETS
-from roboview_data.tasks import load_preset
+from roboview_data.variation.factors import baselines, context_factors
 from roboview_data.variation.instances import TaskInstance, episode_seed, generate_suite
 
 
@@ -22,7 +21,9 @@ def test_the_push_expert_solves_every_context():
     expert = load_task("push").make_expert(env)
     outcomes = []
     try:
-        for start, zone, shape in itertools.product(PUSH_STARTS, ZONE_OFFSETS, ("cube", "cuboid", "hex_prism")):
+        for start, zone, shape in itertools.product(
+            PUSH_STARTS, ZONE_OFFSETS, ("cube", "cuboid", "hex_prism")
+        ):
             inst = push_instance(push_start=start, zone=zone, push_shape=shape)
             # Every context once, at its repeat-0 seed.
             obs, _ = env.reset(seed=episode_seed(inst.context_id, 0), options={"instance": inst})
@@ -72,8 +73,19 @@ def test_collect_push_demos(tmp_path):
     from pipelines.collect import run as collect
 
     root = tmp_path / "push"
-    result = collect(CollectConfig(DatasetConfig(repo_id="t/push", root=str(root), num_episodes=2, image_size=32,
-                                                 cameras=["front"], task="push"), num_workers=1))
+    result = collect(
+        CollectConfig(
+            DatasetConfig(
+                repo_id="t/push",
+                root=str(root),
+                num_episodes=2,
+                image_size=32,
+                cameras=["front"],
+                task="push",
+            ),
+            num_workers=1,
+        )
+    )
     assert result.episodes == 2
     dataset = LeRobotDataset("t/push", root=root)
     assert dataset.num_episodes == 2 and dataset[0]["task"].startswith(("push", "slide"))
@@ -97,7 +109,13 @@ def test_a_two_task_benchmark_builds_loads_and_evaluates(tmp_path):
     push = datasets.load_dataset(str(bench), "push", split="push_distractors")
     assert push.num_rows == 6 and {"push_start", "zone", "distractors"} <= set(push.column_names)
     assert "initial_position" in datasets.load_dataset(str(bench), split="lighting").column_names
-    out = evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "lighting,push_lighting"), policy_config("expert"),
-                                  EvalConfig(n_repeats=1, num_workers=2, image_size=32), str(tmp_path / "eval")))
+    out = evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(bench), "lighting,push_lighting"),
+            policy_config("expert"),
+            EvalConfig(n_repeats=1, num_workers=2, image_size=32),
+            str(tmp_path / "eval"),
+        )
+    )
     rows = pd.read_parquet(tmp_path / "eval" / "episodes.parquet")
     assert out.episodes == 18 and set(rows["task"]) == {"pick_place", "push"} and rows["success"].all()

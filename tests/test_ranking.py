@@ -18,9 +18,18 @@ def policies(rates: dict[str, float], repeats: int, seed: int = 0) -> pd.DataFra
         for v in range(6):
             for c in range(4):
                 for r in range(repeats):
-                    rows.append({"policy": name, "split": "color", "factor": "color", "value": f"v{v}",
-                                 "context_id": f"c{c}", "instance_id": f"{v}/{c}", "repeat": r,
-                                 "success": bool(rng.random() < rate)})
+                    rows.append(
+                        {
+                            "policy": name,
+                            "split": "color",
+                            "factor": "color",
+                            "value": f"v{v}",
+                            "context_id": f"c{c}",
+                            "instance_id": f"{v}/{c}",
+                            "repeat": r,
+                            "success": bool(rng.random() < rate),
+                        }
+                    )
     return pd.DataFrame(rows)
 
 
@@ -42,14 +51,20 @@ def test_rank_ranges_claim_only_what_holm_supports():
     assert holm([0.6, 0.7]).tolist() == [1.0, 1.0] and holm([]).size == 0
     p[frozenset(("x", "y"))] = 0.2  # x and y no longer separable: they share ranks 1–2 and a letter
     ranked = rank_table(values, p, True)
-    assert [(r["policy"], r["group"], r["rank_range"]) for r in ranked] == \
-        [("x", "a", [1, 2]), ("y", "a", [1, 2]), ("z", "b", [3, 3])]
+    assert [(r["policy"], r["group"], r["rank_range"]) for r in ranked] == [
+        ("x", "a", [1, 2]),
+        ("y", "a", [1, 2]),
+        ("z", "b", [3, 3]),
+    ]
 
 
 def test_a_known_order_is_recovered_and_small_samples_claim_no_order():
     big = compute_all_metrics(policies({"p1": 0.95, "p2": 0.93, "p3": 0.55, "p4": 0.1}, repeats=8), FAST)
     by_sr = big["rankings"]["splits"]["color"]["sr"]
-    assert [r["policy"] for r in by_sr][2:] == ["p3", "p4"] and {r["policy"] for r in by_sr[:2]} == {"p1", "p2"}
+    assert [r["policy"] for r in by_sr][2:] == ["p3", "p4"] and {r["policy"] for r in by_sr[:2]} == {
+        "p1",
+        "p2",
+    }
     assert [r["rank_range"] for r in by_sr] == [[1, 2], [1, 2], [3, 3], [4, 4]]
     assert by_sr[0]["group"] == by_sr[1]["group"] != by_sr[2]["group"] != by_sr[3]["group"]
     overall = big["rankings"]["overall"]["sr"]
@@ -70,8 +85,11 @@ def test_equal_policies_are_split_no_more_often_than_alpha():
     sims = 200
     for _ in range(sims):  # three interchangeable policies, 60 paired episodes, SR 0.6
         outcome = {name: rng.random(60) < 0.6 for name in "abc"}
-        p = {frozenset((x, y)): paired_success_test(outcome[x], outcome[y])
-             for i, x in enumerate("abc") for y in "abc"[i + 1:]}
+        p = {
+            frozenset((x, y)): paired_success_test(outcome[x], outcome[y])
+            for i, x in enumerate("abc")
+            for y in "abc"[i + 1 :]
+        }
         ranked = rank_table({n: float(o.mean()) for n, o in outcome.items()}, p, True)
         claimed += any(r["rank_range"] != [1, 3] for r in ranked)
     assert claimed / sims <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / sims)  # Holm: family-wise error ≤ α
@@ -88,8 +106,10 @@ def test_the_report_prints_the_rankings():
     text = render_markdown(metrics, {})
     line = next(x for x in text.splitlines() if x.startswith("| color | SR |"))
     assert "p3" in line and "(b; 3)" in line and "(a; 1–2)" in line
-    assert pytest.approx(metrics["rankings"]["splits"]["color"]["sr"][3]["value"]) == \
-        metrics["policies"]["p4"]["splits"]["color"]["sr"]
+    assert (
+        pytest.approx(metrics["rankings"]["splits"]["color"]["sr"][3]["value"])
+        == metrics["policies"]["p4"]["splits"]["color"]["sr"]
+    )
 
 
 def test_holm_equals_statsmodels_multipletests():

@@ -22,11 +22,20 @@ from benchmarks.cluster import RAY, LocalCluster
 from tests.test_evaluate import evaluate, rows
 
 ROOT = Path(__file__).parents[1]
-pytestmark = pytest.mark.skipif(not RAY.exists(), reason="Ray's `ray` command is not installed next to this Python")
+pytestmark = pytest.mark.skipif(
+    not RAY.exists(), reason="Ray's `ray` command is not installed next to this Python"
+)
 
 SPLITS, LIMIT, REPEATS = "color,camera_pose,camera_euler,dist_scale", 3, 2  # 24 episodes
-ARGS = ["--policy.type=expert", f"--benchmark.splits={SPLITS}", f"--eval.limit={LIMIT}",
-        f"--eval.n_repeats={REPEATS}", "--eval.image_size=64", "--eval.num_workers=2", "--eval.backend=ray"]
+ARGS = [
+    "--policy.type=expert",
+    f"--benchmark.splits={SPLITS}",
+    f"--eval.limit={LIMIT}",
+    f"--eval.n_repeats={REPEATS}",
+    "--eval.image_size=64",
+    "--eval.num_workers=2",
+    "--eval.backend=ray",
+]
 
 
 class Cluster(LocalCluster):
@@ -47,10 +56,18 @@ def reference(tiny_benchmark, tmp_path_factory) -> pd.DataFrame:
 
 
 def _evaluate(bench: Path, out: Path, cluster: Cluster, **popen) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={bench}", *ARGS,
-           f"--eval.ray_address={cluster.address}", f"--output_dir={out}"]
-    return subprocess.Popen(cmd, env=cluster.env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, **popen)
+    cmd = [
+        sys.executable,
+        "-m",
+        "pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        *ARGS,
+        f"--eval.ray_address={cluster.address}",
+        f"--output_dir={out}",
+    ]
+    return subprocess.Popen(
+        cmd, env=cluster.env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen
+    )
 
 
 def _journal_rows(out: Path) -> int:

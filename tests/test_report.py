@@ -13,10 +13,10 @@ import pyarrow.parquet as pq
 import pytest
 from PIL import Image
 
-from eval.statistics.metrics import EpisodesError, MetricsConfig, policy_layouts
 from eval.reporting.markdown import VERSION_KEY, load_results
 from eval.reporting.plots import PLOTS
 from eval.running.results import FORMAT_KEY
+from eval.statistics.metrics import EpisodesError, MetricsConfig, policy_layouts
 from pipelines.report import ReportConfig, main, run
 from roboview_data.tasks import load_preset
 from roboview_data.variation.instances import episode_seed, generate_suite
@@ -24,7 +24,9 @@ from roboview_data.variation.instances import episode_seed, generate_suite
 FAST = {"metrics": MetricsConfig(n_glm=20, n_perm=50)}
 
 
-def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None, repeats: int = 3) -> pd.DataFrame:
+def make_episodes(
+    policy: str, seed: int, splits: tuple[str, ...] | None = None, repeats: int = 3
+) -> pd.DataFrame:
     """Every episode column (docs/formats.md) for the tiny suite's instances; outcomes seeded per policy."""
     rng = np.random.default_rng(seed)
     rows = []
@@ -35,19 +37,33 @@ def make_episodes(policy: str, seed: int, splits: tuple[str, ...] | None = None,
         p = rng.random()
         for r in range(repeats):
             success = bool(rng.random() < p)
-            rows.append({**record, "repeat": r, "episode_seed": episode_seed(record["context_id"], r),
-                         "cameras": [{"name": "front", "pos": [0.0, 0.0, 1.0], "quat": [1.0, 0.0, 0.0, 0.0],
-                                      "fovy": 45.0}],
-                         "success": success, "steps": 10, "duration_s": 0.1, "policy": policy,
-                         "failure_reason": "" if success else "timeout"})
+            rows.append(
+                {
+                    **record,
+                    "repeat": r,
+                    "episode_seed": episode_seed(record["context_id"], r),
+                    "cameras": [
+                        {"name": "front", "pos": [0.0, 0.0, 1.0], "quat": [1.0, 0.0, 0.0, 0.0], "fovy": 45.0}
+                    ],
+                    "success": success,
+                    "steps": 10,
+                    "duration_s": 0.1,
+                    "policy": policy,
+                    "failure_reason": "" if success else "timeout",
+                }
+            )
     return pd.DataFrame(rows)
 
 
-def write(frame: pd.DataFrame, path: Path, version: str | None = "tiny-abc", results_format: bytes = b"2") -> Path:
+def write(
+    frame: pd.DataFrame, path: Path, version: str | None = "tiny-abc", results_format: bytes = b"2"
+) -> Path:
     table = pa.Table.from_pandas(frame)
     table = table.replace_schema_metadata({**table.schema.metadata, FORMAT_KEY: results_format})
     if version is not None:
-        table = table.replace_schema_metadata({**table.schema.metadata, VERSION_KEY.encode(): version.encode()})
+        table = table.replace_schema_metadata(
+            {**table.schema.metadata, VERSION_KEY.encode(): version.encode()}
+        )
     pq.write_table(table, path)
     return path
 
@@ -77,11 +93,20 @@ def test_files_and_plots_are_written(report):
 def test_forest_plots_follow_the_factor_registry():
     from roboview_data.variation.factors import visual_factors
 
-    forests = [split for name, (split, key, _) in PLOTS.items()
-               if name == f"forest_{split}.png" and key == "splits"]
+    forests = [
+        split for name, (split, key, _) in PLOTS.items() if name == f"forest_{split}.png" and key == "splits"
+    ]
     assert forests == list(visual_factors())
-    assert forests[:8] == ["color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture",
-                           "distractors", "object_size"]
+    assert forests[:8] == [
+        "color",
+        "camera_pose",
+        "camera_euler",
+        "dist_scale",
+        "lighting",
+        "table_texture",
+        "distractors",
+        "object_size",
+    ]
 
 
 def test_metrics_json_holds_both_policies(report):
@@ -125,11 +150,24 @@ def test_report_tables_equal_metrics(report):
     markdown = (report.output_dir / "report.md").read_text()
     layouts = policy_layouts(report.metrics)
     header, *table1 = _rows(markdown, "Table 1")
-    assert header == ["Split", "Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes",
-                      "verdict"]
+    assert header == [
+        "Split",
+        "Policy",
+        "SR [95 % CI]",
+        "CV",
+        "noise floor",
+        "cv_excess",
+        "p",
+        "episodes",
+        "verdict",
+    ]
     table1 = {(row[0], row[1]): [c.strip("*") for c in row[2:]] for row in table1}
-    titles = {"color": "Color", "camera_pose": "Camera Pose", "camera_euler": "Camera Euler",
-              "dist_scale": "Dist Scale"}
+    titles = {
+        "color": "Color",
+        "camera_pose": "Camera Pose",
+        "camera_euler": "Camera Euler",
+        "dist_scale": "Dist Scale",
+    }
     assert len(table1) == len(titles) * len(layouts)
     summary = _table_rows(markdown, "Summary")
     table2 = _table_rows(markdown, "Table 2")
@@ -137,14 +175,23 @@ def test_report_tables_equal_metrics(report):
         for split, title in titles.items():
             m = layout["splits"][split]
             p = "N/A" if m["p_value"] is None else f"{m['p_value']:.4f}"
-            expected = [_with_ci(m["sr"], m["sr_ci95"]), _pct(m["cv"]), _pct(m["cv_null"]),
-                        _pct(m["cv_excess"]), p, str(m["n_episodes"])]
+            expected = [
+                _with_ci(m["sr"], m["sr_ci95"]),
+                _pct(m["cv"]),
+                _pct(m["cv_null"]),
+                _pct(m["cv_excess"]),
+                p,
+                str(m["n_episodes"]),
+            ]
             assert table1[title, policy][:6] == expected
         label = "expert (privileged)" if policy == "expert" else policy
         assert summary[label][:3] == [_pct(layout["average"][k]) for k in ("sr", "cv", "cv_excess")]
         f = layout["interactions"]["color_x_camera_pose"]
         assert table2[policy][:2] == [_with_ci(f["sr"], f["sr_ci95"]), _pct(f["cv"]["color"])]
-        assert table2[policy][5:7] == [_pct(f["iec"]["color|camera_pose"]), _pct(f["iec_null"]["color|camera_pose"])]
+        assert table2[policy][5:7] == [
+            _pct(f["iec"]["color|camera_pose"]),
+            _pct(f["iec_null"]["color|camera_pose"]),
+        ]
     assert table1["Color", "random"][1] == "N/A"
     assert table1["Color", "random"][6] == "not testable: every episode failed"
     comparisons = _table_rows(markdown, "Policy comparisons")
@@ -169,9 +216,15 @@ def test_every_number_in_report_tables_comes_from_metrics(report):
     allowed = _numbers(report.metrics)
     markdown = (report.output_dir / "report.md").read_text()
     lines = markdown.splitlines()
-    body = [line for i, line in enumerate(lines)  # table rows below a header's "| --- |" line
-            if line.startswith("| ") and not line.startswith("| ---") and i > 0 and lines[i - 1].startswith("| ")
-            and not (i + 1 < len(lines) and lines[i + 1].startswith("| ---"))]
+    body = [
+        line
+        for i, line in enumerate(lines)  # table rows below a header's "| --- |" line
+        if line.startswith("| ")
+        and not line.startswith("| ---")
+        and i > 0
+        and lines[i - 1].startswith("| ")
+        and not (i + 1 < len(lines) and lines[i + 1].startswith("| ---"))
+    ]
     cells = [cell for line in body for cell in line.split(" | ")[1:]]
     found = [n for cell in cells for n in re.findall(r"-?\d+\.\d+e[+-]\d+|-?\d+\.\d+|-?\d+", cell)]
     assert found and set(found) <= allowed
@@ -184,18 +237,25 @@ def test_missing_split_skips_its_plots(tmp_path):
     assert result.plots["sr_by_color_category.png"] is None
     assert result.plots["sr_camera_pose.png"] == "no policy has the camera_pose split"
     assert not (tmp_path / "rep" / "sr_camera_pose.png").exists()
-    assert "sr_camera_pose.png skipped: no policy has the camera_pose split" in (tmp_path / "rep/report.md").read_text()
+    assert (
+        "sr_camera_pose.png skipped: no policy has the camera_pose split"
+        in (tmp_path / "rep/report.md").read_text()
+    )
 
 
 def test_bad_inputs_name_the_offender(tmp_path, capsys):
     good = write(make_episodes("expert", 0, splits=("color",)), tmp_path / "good.parquet")
     with pytest.raises(FileNotFoundError, match="nowhere.parquet"):
         load_results([good, tmp_path / "nowhere.parquet"])
-    lacking = write(make_episodes("x", 0, splits=("color",)).drop(columns=["context_id", "repeat"]),
-                    tmp_path / "lacking.parquet")
+    lacking = write(
+        make_episodes("x", 0, splits=("color",)).drop(columns=["context_id", "repeat"]),
+        tmp_path / "lacking.parquet",
+    )
     with pytest.raises(EpisodesError, match=r"lacking.parquet lacks column\(s\) context_id, repeat"):
         load_results([lacking])
-    other = write(make_episodes("random", 1, splits=("color",)), tmp_path / "other.parquet", version="paper-999")
+    other = write(
+        make_episodes("random", 1, splits=("color",)), tmp_path / "other.parquet", version="paper-999"
+    )
     with pytest.raises(EpisodesError, match="tiny-abc.*paper-999"):
         load_results([good, other])
     with pytest.raises(EpisodesError, match="occur twice"):
@@ -213,8 +273,15 @@ def test_bad_inputs_name_the_offender(tmp_path, capsys):
 
 def test_cli_without_plots(tmp_path, capsys):
     path = write(make_episodes("expert", 0, splits=("dist_scale",)), tmp_path / "e.parquet", version=None)
-    result = main([f"--results={path}", f"--output_dir={tmp_path / 'rep'}", "--plots=false", "--metrics.n_glm=20",
-                   "--metrics.n_perm=20"])
+    result = main(
+        [
+            f"--results={path}",
+            f"--output_dir={tmp_path / 'rep'}",
+            "--plots=false",
+            "--metrics.n_glm=20",
+            "--metrics.n_perm=20",
+        ]
+    )
     assert sorted(p.name for p in result.output_dir.iterdir()) == ["metrics.json", "report.html", "report.md"]
     assert result.metrics["sources"][0][VERSION_KEY] is None
     assert "[report]" in capsys.readouterr().out
@@ -222,14 +289,25 @@ def test_cli_without_plots(tmp_path, capsys):
 
 def test_named_results_make_one_file_two_policies(tmp_path):
     good = write(make_episodes("lerobot:act", 0, splits=("color",)), tmp_path / "good.parquet")
-    main([f"--results=ref={good},again={good}", f"--output_dir={tmp_path / 'rep'}", "--plots=false",
-          "--metrics.n_perm=50", "--metrics.n_glm=20"])
+    main(
+        [
+            f"--results=ref={good},again={good}",
+            f"--output_dir={tmp_path / 'rep'}",
+            "--plots=false",
+            "--metrics.n_perm=50",
+            "--metrics.n_glm=20",
+        ]
+    )
     metrics = json.loads((tmp_path / "rep" / "metrics.json").read_text())
     assert sorted(metrics["policies"]) == ["again", "ref"]
     pair = metrics["comparisons"][0]
-    assert pair["split"] == "color" and pair["n_pairs"] == 72 and pair["delta_sr"] == 0.0 and pair["p_sr"] == 1.0
-    mixed = write(pd.concat([make_episodes("a", 0, splits=("color",)), make_episodes("b", 1, splits=("color",))]),
-                  tmp_path / "mixed.parquet")
+    assert (
+        pair["split"] == "color" and pair["n_pairs"] == 72 and pair["delta_sr"] == 0.0 and pair["p_sr"] == 1.0
+    )
+    mixed = write(
+        pd.concat([make_episodes("a", 0, splits=("color",)), make_episodes("b", 1, splits=("color",))]),
+        tmp_path / "mixed.parquet",
+    )
     with pytest.raises(EpisodesError, match="holds several policies"):
         load_results([mixed], ["c"])
 
@@ -245,5 +323,5 @@ def test_a_factor_without_figures_of_its_own_gets_its_forest_plot(tmp_path):
     with Image.open(tmp_path / "rep" / "forest_tint.png") as image:
         assert image.size[0] > 200
     page = (tmp_path / "rep" / "report.html").read_text()
-    block = page[page.index('id="split-tint"'):]
-    assert 'alt="forest_tint.png"' in block[:block.index("</section>")]
+    block = page[page.index('id="split-tint"') :]
+    assert 'alt="forest_tint.png"' in block[: block.index("</section>")]

@@ -14,8 +14,9 @@ from pipelines.report import ReportConfig, run
 from tests.browser import chromium_binary, load_page
 from tests.test_report import FAST, make_episodes, write
 
-needs_chromium = pytest.mark.skipif(chromium_binary() is None,
-                                    reason="no chromium on PATH (make sysdeps installs Debian's chromium package)")
+needs_chromium = pytest.mark.skipif(
+    chromium_binary() is None, reason="no chromium on PATH (make sysdeps installs Debian's chromium package)"
+)
 
 
 @pytest.fixture(scope="module")
@@ -28,9 +29,11 @@ def report(tmp_path_factory):
     biased["video"] = None
     filmed = biased.index[color][:2]
     biased.loc[filmed, "video"] = [f"videos/{i}_front.mp4" for i in range(len(filmed))]
-    paths = [write(make_episodes("expert", 0), tmp / "expert.parquet"),
-             write(make_episodes("random", 1).assign(success=False), tmp / "random.parquet"),
-             write(biased, tmp / "biased.parquet")]
+    paths = [
+        write(make_episodes("expert", 0), tmp / "expert.parquet"),
+        write(make_episodes("random", 1).assign(success=False), tmp / "random.parquet"),
+        write(biased, tmp / "biased.parquet"),
+    ]
     result = run(ReportConfig(results=",".join(map(str, paths)), output_dir=str(tmp / "rep"), **FAST))
     return result, (result.output_dir / "report.html").read_text()
 
@@ -82,18 +85,41 @@ def test_split_blocks_print_metrics_json(report):
     assert {f"split-{s}" for s in splits} <= set(parser.tables)
     for split in splits:
         header, *rows = parser.tables[f"split-{split}"][0]
-        assert header == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes", "verdict"]
+        assert header == [
+            "Policy",
+            "SR [95 % CI]",
+            "CV",
+            "noise floor",
+            "cv_excess",
+            "p",
+            "episodes",
+            "verdict",
+        ]
         assert sorted(r[0] for r in rows) == sorted(policies)
         for row in rows:
             m = policies[row[0]]["splits"][split]
-            assert row[1:7] == [pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"]), pct(m["cv_null"]),
-                                pct(m["cv_excess"]), p_fmt(m["p_value"], m["p_value_at_floor"]), str(m["n_episodes"])]
-            expected = ("not testable" if m["p_value"] is None or m["sr"] in (0, 1) else
-                        "bias" if m["p_value"] < 0.05 else "no bias detected")
+            assert row[1:7] == [
+                pct(m["sr"]) + pct_ci(m["sr_ci95"]),
+                pct(m["cv"]),
+                pct(m["cv_null"]),
+                pct(m["cv_excess"]),
+                p_fmt(m["p_value"], m["p_value_at_floor"]),
+                str(m["n_episodes"]),
+            ]
+            expected = (
+                "not testable"
+                if m["p_value"] is None or m["sr"] in (0, 1)
+                else "bias"
+                if m["p_value"] < 0.05
+                else "no bias detected"
+            )
             assert row[7].startswith(expected)
     # The value-dependent policy is flagged on color; the all-failing one is not testable, never "no bias".
     color = {r[0]: r for r in parser.tables["split-color"][0][1:]}
-    assert color["biased"][7].startswith("bias (p") and color["random"][7] == "not testable: every episode failed"
+    assert (
+        color["biased"][7].startswith("bias (p")
+        and color["random"][7] == "not testable: every episode failed"
+    )
     summary = {r[0]: r for r in parser.tables["summary"][0][1:]}
     n = len(policies["random"]["splits"])
     assert summary["random"][4] == "none" and summary["random"][5] == "—"
@@ -110,8 +136,11 @@ def _markdown_tables(markdown: str, heading: str) -> list[list[str]]:
     """Rows (header first) of the table under the section whose title starts with `heading`; links as their
     labels, as the page shows them."""
     section = markdown.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
-    rows = [[re.sub(r"\[([^]]*)\]\([^)]*\)", r"\1", c).strip() for c in line.strip("|").split(" | ")]
-            for line in section.splitlines() if line.startswith("| ")]
+    rows = [
+        [re.sub(r"\[([^]]*)\]\([^)]*\)", r"\1", c).strip() for c in line.strip("|").split(" | ")]
+        for line in section.splitlines()
+        if line.startswith("| ")
+    ]
     return [r for r in rows if r[0] != "---"]
 
 
@@ -132,8 +161,11 @@ def test_report_md_and_html_print_the_same_tables(report):
     seen = 0
     for title, split in splits.items():
         html_header, *html_rows = parser.tables[f"split-{split}"][0]
-        assert header[1:] == html_header == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p",
-                                             "episodes", "verdict"]
+        assert (
+            header[1:]
+            == html_header
+            == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes", "verdict"]
+        )
         md_rows = [r[1:] for r in rows if r[0] == title]
         assert md_rows == html_rows and len(md_rows) == len(policies)
         seen += len(md_rows)
@@ -143,8 +175,15 @@ def test_report_md_and_html_print_the_same_tables(report):
 
     md_summary = _markdown_tables(markdown, "Summary")
     assert md_summary == parser.tables["summary"][0]
-    assert md_summary[0] == ["Policy", "Average SR", "Average CV", "Average cv_excess",
-                             "Splits with bias (p < 0.05)", "No bias detected", "Not testable"]
+    assert md_summary[0] == [
+        "Policy",
+        "Average SR",
+        "Average CV",
+        "Average cv_excess",
+        "Splits with bias (p < 0.05)",
+        "No bias detected",
+        "Not testable",
+    ]
 
     header, *rows = _markdown_tables(markdown, "Episode videos")
     filmed = {r[0] for r in rows}
@@ -172,14 +211,17 @@ def test_page_loads_in_chromium_and_shows_its_figures(report):
     for image in page.images:
         assert image["natural_width"] > 200 and image["width"] > 200, image
         x, y, w, h = (int(round(image[k])) for k in ("x", "y", "width", "height"))
-        crop = page.screenshot[y:y + h, x:x + w].astype(int)
+        crop = page.screenshot[y : y + h, x : x + w].astype(int)
         assert crop.shape[0] > 100, image  # inside the screenshot
         saturated = (crop.max(axis=2) - crop.min(axis=2)) > 80  # colored marks: bars, markers, legend patches
         assert crop.std() > 20 and saturated.sum() > 50, image["alt"]
     # Elsewhere the page is black text on white: the colour sits in the figures.
     mask = np.ones(page.screenshot.shape[:2], bool)
     for image in page.images:
-        mask[int(image["y"]):int(image["y"] + image["height"]), int(image["x"]):int(image["x"] + image["width"])] = False
+        mask[
+            int(image["y"]) : int(image["y"] + image["height"]),
+            int(image["x"]) : int(image["x"] + image["width"]),
+        ] = False
     text = page.screenshot[mask].astype(int)
     assert ((text.max(axis=1) - text.min(axis=1)) > 80).mean() < 0.01
 
@@ -195,8 +237,10 @@ def test_the_page_fits_a_1280_px_window(report):
 @needs_chromium
 def test_the_chromium_check_sees_a_broken_page(tmp_path):
     """The loader reports what a broken page raises, so an empty error list above means something."""
-    (tmp_path / "bad.html").write_text('<!doctype html><html><body><img alt="gone" src="missing.png">'
-                                       "<script>not_defined()</script></body></html>")
+    (tmp_path / "bad.html").write_text(
+        '<!doctype html><html><body><img alt="gone" src="missing.png">'
+        "<script>not_defined()</script></body></html>"
+    )
     page = load_page(tmp_path / "bad.html")
     assert any("not_defined" in e for e in page.errors)
     assert any("missing.png" in e for e in page.errors)

@@ -22,7 +22,7 @@ def test_a_policy_that_fails_everything_is_not_called_unbiased(tmp_path):
     path = write(make_episodes("random", 1).assign(success=False), tmp_path / "random.parquet")
     result = run(ReportConfig(results=str(path), output_dir=str(tmp_path / "rep"), plots=False, **FAST))
     text = (result.output_dir / "report.md").read_text()
-    summary = text[text.index("## Summary"):text.index("## Table 1")]
+    summary = text[text.index("## Summary") : text.index("## Table 1")]
     row = next(line for line in summary.splitlines() if line.startswith("| random"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     n = len(result.metrics["splits"])
@@ -30,12 +30,18 @@ def test_a_policy_that_fails_everything_is_not_called_unbiased(tmp_path):
 
 
 def test_absent_color_categories_are_left_out_not_drawn_as_zero():
-    per = {"a": {"red": {"sr": 0.5, "n_episodes": 4}, "gray": {"sr": 0.0, "n_episodes": 2}},
-           "b": {"red": {"sr": 1.0, "n_episodes": 4}}}
+    per = {
+        "a": {"red": {"sr": 0.5, "n_episodes": 4}, "gray": {"sr": 0.0, "n_episodes": 2}},
+        "b": {"red": {"sr": 1.0, "n_episodes": 4}},
+    }
     table = category_stats(per)
     assert list(table) == ["red", "gray"]  # CATEGORIES order, only those with episodes
     assert table["red"][0] == {"sr": 0.5, "n_episodes": 4} and table["red"][1] == {"sr": 1.0, "n_episodes": 4}
-    assert table["gray"][0]["sr"] == 0.0 and math.isnan(table["gray"][1]["sr"]) and table["gray"][1]["n_episodes"] == 0
+    assert (
+        table["gray"][0]["sr"] == 0.0
+        and math.isnan(table["gray"][1]["sr"])
+        and table["gray"][1]["n_episodes"] == 0
+    )
 
 
 def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
@@ -45,8 +51,10 @@ def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
     from pipelines.collect import summary as collect_summary
     from pipelines.evaluate import EvaluateResult, rate_text
 
-    assert (rate_text(EvaluateResult(Path("o"), 171, 0, 0.877, 3.0))
-            == "already complete, nothing new to run; SR 87.7%")
+    assert (
+        rate_text(EvaluateResult(Path("o"), 171, 0, 0.877, 3.0))
+        == "already complete, nothing new to run; SR 87.7%"
+    )
     assert rate_text(EvaluateResult(Path("o"), 10, 10, 0.5, 36.0)) == "10 new, SR 50.0%, 1000 episodes/h"
     collect_summary(None, CollectResult(Path("ds"), 6, 0, 0, 0, 0.1))
     out = capsys.readouterr().out

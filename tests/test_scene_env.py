@@ -70,8 +70,11 @@ def test_reset_is_deterministic_and_seeded():
     env_a, env_b = PickPlaceEnv(image_size=64), PickPlaceEnv(image_size=64)
     inst = make_instance(color="teal", shape="cylinder")
     rng = np.random.default_rng(0)
-    actions = [env_a.action_space.low + rng.random(8).astype(np.float32)
-               * (env_a.action_space.high - env_a.action_space.low) * 0.1 for _ in range(5)]
+    actions = [
+        env_a.action_space.low
+        + rng.random(8).astype(np.float32) * (env_a.action_space.high - env_a.action_space.low) * 0.1
+        for _ in range(5)
+    ]
     runs = []
     for env in (env_a, env_b, env_a):
         obs, _ = env.reset(seed=123, options={"instance": inst})
@@ -84,13 +87,17 @@ def test_reset_is_deterministic_and_seeded():
             for key in o1:
                 np.testing.assert_array_equal(o1[key], o2[key])
     obs_other_seed, _ = env_a.reset(seed=124, options={"instance": inst})
-    assert not np.array_equal(obs_other_seed[IMAGE_KEY.format("front")], runs[0][0][IMAGE_KEY.format("front")])
+    assert not np.array_equal(
+        obs_other_seed[IMAGE_KEY.format("front")], runs[0][0][IMAGE_KEY.format("front")]
+    )
     env_a.close(), env_b.close()
 
 
 def test_observation_and_action_spaces(env):
     obs, info = env.reset(options={"instance": baseline_instance()})
-    assert set(obs) == {IMAGE_KEY.format(c) for c in ("front", "left_top", "right_top", "wrist")} | {STATE_KEY}
+    assert set(obs) == {IMAGE_KEY.format(c) for c in ("front", "left_top", "right_top", "wrist")} | {
+        STATE_KEY
+    }
     assert obs[STATE_KEY].shape == (8,) and env.action_space.shape == (8,)
     assert info["task"] == baselines()["instruction"]
     # Holding the current joints with the gripper open leaves the arm where it is.
@@ -161,8 +168,11 @@ def test_an_unstable_simulation_ends_the_episode_as_a_failure():
     # reset the state on its own; the env must not carry on as if the episode continued.
     env = PickPlaceEnv(image_size=32, cameras=["front"])
     rng = np.random.default_rng(0)
-    actions = [env.action_space.low + rng.random(8).astype(np.float32)
-               * (env.action_space.high - env.action_space.low) * 0.1 for _ in range(5)]
+    actions = [
+        env.action_space.low
+        + rng.random(8).astype(np.float32) * (env.action_space.high - env.action_space.low) * 0.1
+        for _ in range(5)
+    ]
     env.reset(seed=123, options={"instance": baseline_instance()})
     results = [env.step(a) for a in actions[:3]]
     assert [r[3] for r in results] == [False, False, True] and not any(r[2] for r in results)

@@ -10,8 +10,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from eval.statistics.metrics import MetricsConfig
 from eval.running.results import ResultsError, shard_of
+from eval.statistics.metrics import MetricsConfig
 from pipelines.evaluate import EvalConfig
 from pipelines.merge import MergeConfig
 from pipelines.merge import main as merge_main
@@ -27,8 +27,14 @@ def _evaluate_shard(bench: Path, out: Path, shard: str, policy: str = "expert"):
     from pipelines.evaluate import BenchmarkConfig, EvaluateConfig, run
     from policies.types import policy_config
 
-    return run(EvaluateConfig(BenchmarkConfig(str(bench), SPLITS), policy_config(policy),
-                              EvalConfig(n_repeats=REPEATS, limit=LIMIT, image_size=64, shard=shard), str(out)))
+    return run(
+        EvaluateConfig(
+            BenchmarkConfig(str(bench), SPLITS),
+            policy_config(policy),
+            EvalConfig(n_repeats=REPEATS, limit=LIMIT, image_size=64, shard=shard),
+            str(out),
+        )
+    )
 
 
 @pytest.fixture(scope="module")
@@ -46,16 +52,27 @@ def test_shards_partition_the_work_and_merge_to_the_whole_run(shards, tmp_path):
     assert all(keys) and not (keys[0] & keys[1] or keys[0] & keys[2] or keys[1] & keys[2])
     for i, part in enumerate(parts):  # every repeat of an instance in the instance's own shard
         assert {shard_of(x, 3) for x in part["instance_id"]} == {i}
-    result = merge(MergeConfig(results=",".join(str(shards / f"s{i}") for i in range(3)),
-                               output_dir=str(tmp_path / "merged")))
+    result = merge(
+        MergeConfig(
+            results=",".join(str(shards / f"s{i}") for i in range(3)), output_dir=str(tmp_path / "merged")
+        )
+    )
     assert result.episodes == 12
     pd.testing.assert_frame_equal(rows(tmp_path / "merged"), rows(shards / "whole"))
     entries = json.loads((tmp_path / "merged" / "provenance.json").read_text())
     assert sorted(e["shard"] for e in entries) == ["0/3", "1/3", "2/3"]
     # The merged folder reports like any results folder.
-    out = report(ReportConfig(results=str(tmp_path / "merged" / "episodes.parquet"), output_dir=str(tmp_path / "rep"),
-                              metrics=MetricsConfig(n_perm=20, n_glm=20), plots=False))
-    assert out.metrics["splits"]["color"]["n_episodes"] == len(rows(shards / "whole").query("split == 'color'"))
+    out = report(
+        ReportConfig(
+            results=str(tmp_path / "merged" / "episodes.parquet"),
+            output_dir=str(tmp_path / "rep"),
+            metrics=MetricsConfig(n_perm=20, n_glm=20),
+            plots=False,
+        )
+    )
+    assert out.metrics["splits"]["color"]["n_episodes"] == len(
+        rows(shards / "whole").query("split == 'color'")
+    )
 
 
 def test_shard_of_is_stable_and_balanced():
@@ -63,16 +80,19 @@ def test_shard_of_is_stable_and_balanced():
     assert [shard_of(x, 4) for x in ids[:5]] == [shard_of(x, 4) for x in ids[:5]]
     counts = Counter(shard_of(x, 4) for x in ids)
     assert set(counts) == {0, 1, 2, 3} and min(counts.values()) > 650  # 750 expected each
-    assert shard_of("a3f9c2d1e0b4a5c6", 7) == int.from_bytes(
-        __import__("hashlib").sha256(b"a3f9c2d1e0b4a5c6").digest()[:8], "big") % 7
+    assert (
+        shard_of("a3f9c2d1e0b4a5c6", 7)
+        == int.from_bytes(__import__("hashlib").sha256(b"a3f9c2d1e0b4a5c6").digest()[:8], "big") % 7
+    )
 
 
 def test_merge_refuses_overlaps_missing_shards_and_other_runs(shards, tiny_benchmark, tmp_path, capsys):
     s = [shards / f"s{i}" for i in range(3)]
     with pytest.raises(ResultsError, match=r"shard\(s\) 2/3 missing"):
         merge(MergeConfig(results=f"{s[0]},{s[1]}", output_dir=str(tmp_path / "m1")))
-    assert merge(MergeConfig(results=f"{s[0]},{s[1]}", output_dir=str(tmp_path / "m2"), partial=True)).episodes == \
-        len(rows(s[0])) + len(rows(s[1]))
+    assert merge(
+        MergeConfig(results=f"{s[0]},{s[1]}", output_dir=str(tmp_path / "m2"), partial=True)
+    ).episodes == len(rows(s[0])) + len(rows(s[1]))
     with pytest.raises(ResultsError, match="given twice"):
         merge(MergeConfig(results=f"{s[0]},{s[0]},{s[1]},{s[2]}", output_dir=str(tmp_path / "m3")))
     # An episode in two folders: shard 1's journal also holds one of shard 0's episodes.

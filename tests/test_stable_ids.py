@@ -10,8 +10,8 @@ import hashlib
 import numpy as np
 
 from roboview_data.benchmark.format import suite_hash
-from roboview_data.tasks.pick_place import PickPlaceEnv
 from roboview_data.tasks import load_preset
+from roboview_data.tasks.pick_place import PickPlaceEnv
 from roboview_data.variation.instances import generate_suite
 
 # benchmark_version paper-2ea2d26d1ca1: every candidate passed the gate, so the hash over all
@@ -19,10 +19,16 @@ from roboview_data.variation.instances import generate_suite
 PAPER_SUITE_HASH = "2ea2d26d1ca1d048aa47d1815667e6ab3429823db84e7f53912e09ab9b500718"
 PINNED = {  # preset: (instances, suite hash, SHA-256 over "instance_id context_id seed" lines)
     "paper": (2127, PAPER_SUITE_HASH, "4eb57169b79a1c500c02732d26e52f24a76f51073301016bff9171175943ce5e"),
-    "paper_dedupe": (1767, "2f4f5114a4e2f6bab6f48974966525978d645ec9cae2bbee289727df1776a950",
-                     "09828bf784e7357938f0401bca8dade2d3cfa816c6a9da431701be47173e2bdb"),
-    "tiny": (57, "44685f3ba1b89e7c362efd3546e183f275582bb176729aa8afdcc907ad2c290c",
-             "cac3b642b5a9c36781c0a132f274e79e5f50dc57ced388b9afea8247d9fc9889"),
+    "paper_dedupe": (
+        1767,
+        "2f4f5114a4e2f6bab6f48974966525978d645ec9cae2bbee289727df1776a950",
+        "09828bf784e7357938f0401bca8dade2d3cfa816c6a9da431701be47173e2bdb",
+    ),
+    "tiny": (
+        57,
+        "44685f3ba1b89e7c362efd3546e183f275582bb176729aa8afdcc907ad2c290c",
+        "cac3b642b5a9c36781c0a132f274e79e5f50dc57ced388b9afea8247d9fc9889",
+    ),
 }
 # The scene after reset for every 25th color instance and every camera / factorial instance (named
 # entities; the same state the pre-refactor code produced, pinned then as a6f28961…).
@@ -49,7 +55,7 @@ def _scene_state(env) -> list[np.ndarray]:
     m, d, ids = env.model, env.data, env.scene.ids
     cams = [ids.cameras[c] for c in ("front", "left_top", "right_top")]
     geoms = [*ids.shape_geom.values(), ids.table_geom, *env.target_geoms()]
-    qpos = np.concatenate([d.qpos[a:a + 7] for a in ids.shape_qpos.values()] + [d.qpos[ids.arm_qpos]])
+    qpos = np.concatenate([d.qpos[a : a + 7] for a in ids.shape_qpos.values()] + [d.qpos[ids.arm_qpos]])
     return [m.cam_pos[cams], m.cam_quat[cams], m.cam_fovy[cams], m.geom_rgba[geoms], qpos]
 
 

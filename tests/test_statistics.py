@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 
 from eval.statistics.metrics import MetricsConfig, interaction_metrics, split_metrics
-from eval.statistics.simulate import simulate_additive_factorial, simulate_split
 from eval.statistics.significance import lrt_power, repeats_needed
+from eval.statistics.simulate import simulate_additive_factorial, simulate_split
 from roboview_data.tasks import load_preset
 from roboview_data.variation.instances import episode_seed, generate_suite
 
@@ -28,8 +28,17 @@ def run_many(n_sims: int, seed: int, **design) -> pd.DataFrame:
         table, true_cv = simulate_split(rng, **design)
         m = split_metrics(table, SIM)
         qs = [s["q_value"] for s in m["per_value"].values() if s["q_value"] is not None]
-        rows.append({"p": m["p_value"], "p_cv": m["p_value_cv"], "cv": m["cv"], "cv_excess": m["cv_excess"],
-                     "true_cv": true_cv, "min_q": min(qs, default=1.0), "method": m["p_value_method"]})
+        rows.append(
+            {
+                "p": m["p_value"],
+                "p_cv": m["p_value_cv"],
+                "cv": m["cv"],
+                "cv_excess": m["cv_excess"],
+                "true_cv": true_cv,
+                "min_q": min(qs, default=1.0),
+                "method": m["p_value_method"],
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -115,7 +124,9 @@ def test_common_random_numbers_share_seeds_across_values_and_splits():
     assert len(splits) >= 4
     context = suite[0].context_id
     assert suite[0].seed == episode_seed(context, 0) != episode_seed(context, 1)
-    assert len({i.context_id for i in suite}) >= 3 and len({i.seed for i in suite}) == len({i.context_id for i in suite})
+    assert len({i.context_id for i in suite}) >= 3 and len({i.seed for i in suite}) == len(
+        {i.context_id for i in suite}
+    )
 
 
 def test_plan_cli_prints_repeats_per_split(capsys):
@@ -138,7 +149,12 @@ def test_paired_comparison_of_two_policies():
     table, _ = simulate_split(np.random.default_rng(7), n_values=6, n_contexts=8, repeats=5, tau=0.0, sr=0.99)
     a = table.assign(policy="a", success=True)
     same = compare_policies(pd.concat([a, a.assign(policy="b")]), SIM)[0]
-    assert (same["delta_sr"], same["p_sr"], same["delta_cv_excess"], same["p_cv_excess"]) == (0.0, 1.0, 0.0, 1.0)
+    assert (same["delta_sr"], same["p_sr"], same["delta_cv_excess"], same["p_cv_excess"]) == (
+        0.0,
+        1.0,
+        0.0,
+        1.0,
+    )
     # b fails value v0 in every context and repeat (40 of 240 pairs, all discordant one way).
     b = a.assign(policy="b", success=a["value"] != "v0")
     diff = compare_policies(pd.concat([a, b]), SIM)[0]
@@ -183,8 +199,12 @@ def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_bi
     m = split_metrics(frame)  # default: up to 20,000 permutations
     assert m["p_value_cv"] < 1e-4 and m["p_value_cv_draws"] == 20_000 and m["p_value_cv_at_floor"]
     assert p_fmt(m["p_value_cv"], m["p_value_cv_at_floor"]) == "≤ 5.0e-05"
-    assert m["p_value_method"] == "permutation" and m["p_value_at_floor"]  # the GLM calibration's floor (200 draws)
+    assert (
+        m["p_value_method"] == "permutation" and m["p_value_at_floor"]
+    )  # the GLM calibration's floor (200 draws)
     assert p_fmt(m["p_value"], m["p_value_at_floor"]) == "≤ 0.0050"
     null, _ = simulate_split(np.random.default_rng(4), 9, 4, 5, 0.0, 0.7)
     quiet = split_metrics(null)
-    assert quiet["p_value_cv_draws"] < 1000 and not quiet["p_value_cv_at_floor"]  # stops early when p is large
+    assert (
+        quiet["p_value_cv_draws"] < 1000 and not quiet["p_value_cv_at_floor"]
+    )  # stops early when p is large

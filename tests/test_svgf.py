@@ -7,13 +7,13 @@ from collections import Counter
 import numpy as np
 import pytest
 
+from roboview_data.tasks import PRESETS, load_preset
 from roboview_data.variation.factors import (
     baselines,
     context_factors,
     load_factor,
     visual_factors,
 )
-from roboview_data.tasks import PRESETS, load_preset
 from roboview_data.variation.instances import (
     DEFAULT_FACTORIAL_COLORS,
     SuiteConfig,
@@ -169,10 +169,28 @@ def test_to_record_columns_and_values():
     instance = TaskInstance("color", ("color",), baselines(), "base")
     record = instance.to_record()
     assert list(record) == [
-        "instance_id", "task", "split", "factor", "value", "context_id", "context_subspace", "color", "camera_pose",
-        "camera_euler", "dist_scale", "lighting", "table_texture", "distractors", "object_size",
-        "initial_position", "shape", "instruction", "color_hex",
-        "color_rgb", "color_lab", "seed",
+        "instance_id",
+        "task",
+        "split",
+        "factor",
+        "value",
+        "context_id",
+        "context_subspace",
+        "color",
+        "camera_pose",
+        "camera_euler",
+        "dist_scale",
+        "lighting",
+        "table_texture",
+        "distractors",
+        "object_size",
+        "initial_position",
+        "shape",
+        "instruction",
+        "color_hex",
+        "color_rgb",
+        "color_lab",
+        "seed",
     ]
     assert record["color_hex"] == "#ff0000"
     assert record["color_rgb"] == [1.0, 0.0, 0.0]
@@ -232,9 +250,7 @@ def test_cartesian_product_count_is_product_of_sizes():
 
 def test_recursive_manager_product_union_order_and_checks():
     tree = Union(
-        Product(
-            FactorSampler("shape", ["cube", "cuboid"]), FactorSampler("dist_scale", ["0", "1"])
-        ),
+        Product(FactorSampler("shape", ["cube", "cuboid"]), FactorSampler("dist_scale", ["0", "1"])),
         Product(FixedSampler("shape", "cylinder"), Label("dist_scale", "8")),
     )
     assert list(RecursiveVariantTaskManager(tree).generate()) == [

@@ -71,7 +71,9 @@ def lift_package(tmp_path_factory) -> dict[str, str]:
 
 
 def _run(env: dict[str, str], module: str, *args: str) -> subprocess.CompletedProcess:
-    proc = subprocess.run([sys.executable, "-m", module, *args], env=env, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [sys.executable, "-m", module, *args], env=env, capture_output=True, text=True, timeout=600
+    )
     assert proc.returncode == 0, f"{module} failed:\n{proc.stdout[-1500:]}\n{proc.stderr[-3000:]}"
     return proc
 
@@ -83,8 +85,14 @@ def test_a_third_task_is_one_module_built_collected_and_evaluated(lift_package, 
     assert "lift" in probe.stdout + probe.stderr
 
     bench = tmp_path / "bench"
-    _run(env, "pipelines.build_benchmark", f"--output_dir={bench}", "--preset=lift_demo", "--num_workers=1",
-         "--image_size=64")
+    _run(
+        env,
+        "pipelines.build_benchmark",
+        f"--output_dir={bench}",
+        "--preset=lift_demo",
+        "--num_workers=1",
+        "--image_size=64",
+    )
     manifest = json.loads((bench / "benchmark.json").read_text())
     rows = pq.read_table(next(bench.rglob("lift_color*.parquet"))).to_pylist()
     # 2 colors x 2 contexts (the baseline start, then "left"), every one the lift task's and past the gate.
@@ -93,17 +101,35 @@ def test_a_third_task_is_one_module_built_collected_and_evaluated(lift_package, 
     assert "lift_color" in json.dumps(manifest)
 
     demos = tmp_path / "demos"
-    _run(env, "pipelines.collect", "--dataset.repo_id=t/lift", f"--dataset.root={demos}", "--dataset.task=lift",
-         "--dataset.num_episodes=1", "--dataset.image_size=64", "--dataset.cameras=[front]", "--num_workers=1")
+    _run(
+        env,
+        "pipelines.collect",
+        "--dataset.repo_id=t/lift",
+        f"--dataset.root={demos}",
+        "--dataset.task=lift",
+        "--dataset.num_episodes=1",
+        "--dataset.image_size=64",
+        "--dataset.cameras=[front]",
+        "--num_workers=1",
+    )
     tasks = pq.read_table(demos / "meta" / "tasks.parquet").to_pandas()
     assert "lift the small object" in set(tasks.index) | set(tasks.get("task", []))
 
     out = tmp_path / "eval"
-    _run(env, "pipelines.evaluate", f"--benchmark.path={bench}", "--policy.type=expert", "--eval.n_repeats=1",
-         "--eval.num_workers=1", f"--output_dir={out}")
+    _run(
+        env,
+        "pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        "--policy.type=expert",
+        "--eval.n_repeats=1",
+        "--eval.num_workers=1",
+        f"--output_dir={out}",
+    )
     episodes = pq.read_table(out / "episodes.parquet").to_pandas()
     # The privileged expert lifts the object in every episode, well before the 60-step limit.
-    assert len(episodes) == 4 and set(episodes["split"]) == {"lift_color"} and set(episodes["task"]) == {"lift"}
+    assert (
+        len(episodes) == 4 and set(episodes["split"]) == {"lift_color"} and set(episodes["task"]) == {"lift"}
+    )
     assert episodes["success"].all() and episodes["steps"].max() < 60
 
 

@@ -7,12 +7,11 @@ import numpy as np
 import pytest
 
 from policies.base import Episode
-from policies.types import load_policy_types, policy_config
 from policies.factory import make_policy
 from policies.perception import PerceptionError, perceive
+from policies.types import load_policy_types, policy_config
 from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY
-from roboview_data.tasks.pick_place import PickPlaceEnv
-from roboview_data.tasks.pick_place import BOX_CENTER
+from roboview_data.tasks.pick_place import BOX_CENTER, PickPlaceEnv
 from roboview_data.variation.factors import baselines
 from roboview_data.variation.instances import TaskInstance, episode_seed
 
@@ -33,8 +32,9 @@ def rgbd_env():
 
 def _perceive(env: PickPlaceEnv, instance: TaskInstance, seed: int):
     obs, _ = env.reset(seed=seed, options={"instance": instance})
-    return perceive(obs[IMAGE_KEY.format(CAMERA)], obs[DEPTH_KEY.format(CAMERA)],
-                    env.scene.camera_pose(CAMERA))
+    return perceive(
+        obs[IMAGE_KEY.format(CAMERA)], obs[DEPTH_KEY.format(CAMERA)], env.scene.camera_pose(CAMERA)
+    )
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

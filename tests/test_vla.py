@@ -31,15 +31,32 @@ def demos(tmp_path_factory) -> Path:
     from pipelines.collect import run as collect
 
     root = tmp_path_factory.mktemp("vla_demos") / "ds"
-    collect(CollectConfig(DatasetConfig(repo_id="t/vla", root=str(root), num_episodes=2, image_size=64,
-                                        cameras=list(ALL_CAMERAS)), num_workers=1))
+    collect(
+        CollectConfig(
+            DatasetConfig(
+                repo_id="t/vla", root=str(root), num_episodes=2, image_size=64, cameras=list(ALL_CAMERAS)
+            ),
+            num_workers=1,
+        )
+    )
     return root
 
 
 def _train(demos: Path, out: Path, flags: list[str]) -> Path:
-    cmd = [str(BIN / "lerobot-train"), "--dataset.repo_id=t/vla", f"--dataset.root={demos}", *flags,
-           "--policy.device=cpu", "--batch_size=2", "--steps=2", "--save_freq=2", "--num_workers=0",
-           "--wandb.enable=false", f"--output_dir={out}", "--job_name=tiny_vla"]
+    cmd = [
+        str(BIN / "lerobot-train"),
+        "--dataset.repo_id=t/vla",
+        f"--dataset.root={demos}",
+        *flags,
+        "--policy.device=cpu",
+        "--batch_size=2",
+        "--steps=2",
+        "--save_freq=2",
+        "--num_workers=0",
+        "--wandb.enable=false",
+        f"--output_dir={out}",
+        "--job_name=tiny_vla",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=ENV)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out / "checkpoints" / "last" / "pretrained_model"
@@ -48,7 +65,12 @@ def _train(demos: Path, out: Path, flags: list[str]) -> Path:
 @pytest.fixture(scope="module")
 def tiny_vlas(demos, tmp_path_factory):
     """kind -> (checkpoint, tokenizer folder): a tiny VLA of that type trained 2 steps by lerobot-train, once."""
-    from roboview_lerobot.tiny_vla import smolvla_train_flags, write_bart_tokenizer, write_smolvlm, xvla_train_flags
+    from roboview_lerobot.tiny_vla import (
+        smolvla_train_flags,
+        write_bart_tokenizer,
+        write_smolvlm,
+        xvla_train_flags,
+    )
 
     built: dict[str, tuple[Path, Path]] = {}
 
@@ -82,7 +104,9 @@ def _observation(instruction: str):
     from roboview_data.variation.factors import baselines
     from roboview_data.variation.instances import TaskInstance
 
-    instance = TaskInstance("color", ("color",), baselines() | {"instruction": instruction, "color": "blue"}, "base")
+    instance = TaskInstance(
+        "color", ("color",), baselines() | {"instruction": instruction, "color": "blue"}, "base"
+    )
     env = make_env(cameras=ALL_CAMERAS, image_size=64)
     obs, _ = env.reset(seed=3, options={"instance": instance})
     obs = {k: np.asarray(obs[k]) for k in obs}
@@ -107,11 +131,14 @@ def test_the_instruction_cameras_and_state_reach_the_vla(vla):
     ids = batch["observation.language.tokens"][0][mask].tolist()
     words = [t for t in tokenizer.convert_ids_to_tokens(ids) if t not in tokenizer.all_special_tokens]
     assert words == said.split() and tokenizer.unk_token_id not in ids
-    other = policy._batch([obs], ["move the small object into the yellow box"])["observation.language.tokens"][0]
+    other = policy._batch([obs], ["move the small object into the yellow box"])[
+        "observation.language.tokens"
+    ][0]
     assert not np.array_equal(other.numpy(), batch["observation.language.tokens"][0].numpy())
     # Every camera under the key the checkpoint expects.
-    assert sorted(k for k in batch if k.startswith("observation.images.")) == \
-        sorted(f"observation.images.{c}" for c in ALL_CAMERAS)
+    assert sorted(k for k in batch if k.startswith("observation.images.")) == sorted(
+        f"observation.images.{c}" for c in ALL_CAMERAS
+    )
     if kind == "smolvla":  # the 8-D state padded to SmolVLA's 32 with zeros
         state = policy.policy.prepare_state(batch)
         assert state.shape == (1, policy.policy.config.max_state_dim) == (1, 32)
@@ -125,9 +152,15 @@ def test_the_instruction_cameras_and_state_reach_the_vla(vla):
 
 def _evaluate(bench: Path, out: Path, checkpoint: Path, sgl: SGLConfig | None = None, **policy_fields):
     config = policy_config("lerobot", path=str(checkpoint), device="cpu", **policy_fields)
-    return evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
-                                   EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6), str(out),
-                                   sgl=sgl or SGLConfig()))
+    return evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(bench), "color"),
+            config,
+            EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6),
+            str(out),
+            sgl=sgl or SGLConfig(),
+        )
+    )
 
 
 def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_benchmark, tmp_path):
@@ -138,11 +171,22 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
     ours = pd.read_parquet(tmp_path / "ours" / "episodes.parquet")
     assert result.episodes == 2 and (ours["policy"] == f"lerobot:{kind}").all()
     assert (ours["steps"] == 6).all() and not ours["success"].any()  # random weights: every episode runs out
-    args = [str(BIN / "lerobot-eval"), "--env.discover_packages_path=roboview_lerobot", "--env.type=roboview",
-            f"--env.benchmark_path={tiny_benchmark}", "--env.task=color", "--env.limit=2",
-            f"--env.cameras={','.join(ALL_CAMERAS)}", "--env.image_size=64", "--env.max_steps=6",
-            f"--policy.path={checkpoint}", "--policy.device=cpu", "--eval.n_episodes=2", "--eval.batch_size=2",
-            f"--output_dir={tmp_path / 'le'}"]
+    args = [
+        str(BIN / "lerobot-eval"),
+        "--env.discover_packages_path=roboview_lerobot",
+        "--env.type=roboview",
+        f"--env.benchmark_path={tiny_benchmark}",
+        "--env.task=color",
+        "--env.limit=2",
+        f"--env.cameras={','.join(ALL_CAMERAS)}",
+        "--env.image_size=64",
+        "--env.max_steps=6",
+        f"--policy.path={checkpoint}",
+        "--policy.device=cpu",
+        "--eval.n_episodes=2",
+        "--eval.batch_size=2",
+        f"--output_dir={tmp_path / 'le'}",
+    ]
     proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=ENV)
     if kind == "xvla":
         # lerobot-eval 0.6.1 gives every XVLA policy LIBERO's env processors, whatever the env
@@ -153,8 +197,16 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
     info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
     assert info["per_group"]["color"]["n_episodes"] == 2 and info["per_group"]["color"]["pc_success"] == 0.0
     assert len(info["per_group"]["color"]["video_paths"]) == 2  # lerobot-eval's own episode videos
-    converted = pd.read_parquet(convert(tmp_path / "le" / "eval_info.json", str(tiny_benchmark), tmp_path / "conv",
-                                        limit=2, max_steps=6, image_size=64))
+    converted = pd.read_parquet(
+        convert(
+            tmp_path / "le" / "eval_info.json",
+            str(tiny_benchmark),
+            tmp_path / "conv",
+            limit=2,
+            max_steps=6,
+            image_size=64,
+        )
+    )
     assert converted["instance_id"].tolist() == ours["instance_id"].tolist()
 
 
@@ -207,16 +259,38 @@ def test_a_checkpoint_is_found_by_hub_id_in_the_hub_cache(smolvla, tiny_benchmar
     (cache / "models--org--tiny-smolvla" / "refs").mkdir()
     (cache / "models--org--tiny-smolvla" / "refs" / "main").write_text("ab" * 20)
     env = ENV | {"HF_HUB_CACHE": str(cache), "HF_HUB_OFFLINE": "1"}
-    common = [sys.executable, "-m", "pipelines.evaluate", f"--benchmark.path={tiny_benchmark}", "--policy.type=lerobot",
-              "--policy.device=cpu", "--benchmark.splits=color", "--eval.limit=1", "--eval.n_repeats=1",
-              "--eval.max_steps=3", "--eval.num_workers=1"]
-    proc = subprocess.run([*common, "--policy.path=org/tiny-smolvla", f"--output_dir={tmp_path / 'ev'}"],
-                          capture_output=True, text=True, timeout=600, env=env, cwd=ROOT)
+    common = [
+        sys.executable,
+        "-m",
+        "pipelines.evaluate",
+        f"--benchmark.path={tiny_benchmark}",
+        "--policy.type=lerobot",
+        "--policy.device=cpu",
+        "--benchmark.splits=color",
+        "--eval.limit=1",
+        "--eval.n_repeats=1",
+        "--eval.max_steps=3",
+        "--eval.num_workers=1",
+    ]
+    proc = subprocess.run(
+        [*common, "--policy.path=org/tiny-smolvla", f"--output_dir={tmp_path / 'ev'}"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+        cwd=ROOT,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert pd.read_parquet(tmp_path / "ev" / "episodes.parquet")["policy"].tolist() == ["lerobot:smolvla"]
     provenance = json.loads((tmp_path / "ev" / "provenance.json").read_text())[0]
     assert provenance["checkpoint"]["path"] == str(snapshot.resolve())
-    proc = subprocess.run([*common, "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}"],
-                          capture_output=True, text=True, timeout=600, env=env, cwd=ROOT)
+    proc = subprocess.run(
+        [*common, "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+        cwd=ROOT,
+    )
     assert proc.returncode == 2 and "'org/not-downloaded' is no local folder" in proc.stderr
     assert "not in the hub cache" in proc.stderr and not (tmp_path / "no").exists()

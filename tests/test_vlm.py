@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from policies.base import Episode
-from policies.types import policy_config
-from policies.factory import make_policy
 from policies.errors import TransientPolicyError
+from policies.factory import make_policy
+from policies.types import policy_config
 from policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
 from policies.vlm.common import check_point
 from policies.vlm.sgl import SGLConfig, refine
@@ -63,7 +63,9 @@ IMAGE = np.full((32, 32, 3), 128, np.uint8)
 
 
 def check_points(answer):
-    return check_point(answer["object_point"], "object_point", 64, 64), check_point(answer["target_point"], "target_point", 64, 64)
+    return check_point(answer["object_point"], "object_point", 64, 64), check_point(
+        answer["target_point"], "target_point", 64, 64
+    )
 
 
 def test_answers_are_cached_and_keyed_by_the_image(server, tmp_path):
@@ -99,12 +101,15 @@ def test_prose_gets_one_repair_request(server, tmp_path):
     assert "not JSON" in repair[2]["content"]
 
 
-@pytest.mark.parametrize("script, error", [
-    ([("text", "I cannot help."), ("text", "Still no JSON.")], "not JSON"),
-    ([("text", '{"object_point": [99, 5], "target_point": [1, 1]}')] * 2, "lies outside the 64x64 image"),
-    ([("refusal", "I can't assist with that.")], "refused"),
-    ([("status", 401)], "HTTP 401"),
-])
+@pytest.mark.parametrize(
+    "script, error",
+    [
+        ([("text", "I cannot help."), ("text", "Still no JSON.")], "not JSON"),
+        ([("text", '{"object_point": [99, 5], "target_point": [1, 1]}')] * 2, "lies outside the 64x64 image"),
+        ([("refusal", "I can't assist with that.")], "refused"),
+        ([("status", 401)], "HTTP 401"),
+    ],
+)
 def test_unusable_answers_raise_after_one_repair(server, tmp_path, script, error):
     s = server(script)
     c = client(s.url, tmp_path)
@@ -149,11 +154,18 @@ def test_requests_in_flight_are_bounded(server, tmp_path):
     assert len(s.requests) == 5 and s.max_active == 2
 
 
-@pytest.mark.parametrize("settings, why", [
-    ({"base_url": "http//x", "model": "m"}, r"^--policy.endpoint.base_url='http//x' must be an http\(s\)"),
-    ({"base_url": "http://127.0.0.1:1/v1", "model": ""}, "^--policy.endpoint.model is empty"),
-    ({"model": "m", "max_in_flight": 0}, r"--policy.endpoint.max_in_flight=0: need > 0, ≥ 0 and ≥ 1$"),
-    ({"model": "m", "camera": "ceiling"}, "unknown camera 'ceiling'")])
+@pytest.mark.parametrize(
+    "settings, why",
+    [
+        (
+            {"base_url": "http//x", "model": "m"},
+            r"^--policy.endpoint.base_url='http//x' must be an http\(s\)",
+        ),
+        ({"base_url": "http://127.0.0.1:1/v1", "model": ""}, "^--policy.endpoint.model is empty"),
+        ({"model": "m", "max_in_flight": 0}, r"--policy.endpoint.max_in_flight=0: need > 0, ≥ 0 and ≥ 1$"),
+        ({"model": "m", "camera": "ceiling"}, "unknown camera 'ceiling'"),
+    ],
+)
 def test_bad_endpoints_fail_before_any_work(settings, why):
     camera = {"camera": settings.pop("camera")} if "camera" in settings else {}
     with pytest.raises(ValueError, match=why):
@@ -162,9 +174,17 @@ def test_bad_endpoints_fail_before_any_work(settings, why):
 
 # --- SGL: stages 2 and 3 on parsed scenes ---------------------------------------------------------
 
+
 def obj(kind, name, color, cats=("geometry",), **kw):
-    return {"object_type": kind, "name": name, "color": color, "category": [name, *cats], "state": "solid",
-            "size": "small", "position": "normal"} | kw
+    return {
+        "object_type": kind,
+        "name": name,
+        "color": color,
+        "category": [name, *cats],
+        "state": "solid",
+        "size": "small",
+        "position": "normal",
+    } | kw
 
 
 BOX = obj("receiver object", "box", "yellow", ("container",), state="hollow", size="normal")
@@ -172,12 +192,19 @@ BOX = obj("receiver object", "box", "yellow", ("container",), state="hollow", si
 
 def test_sgl_refines_a_generic_noun_with_the_color():
     g = refine("put the small object into the yellow box", [obj("manipulation object", "cube", "red"), BOX])
-    assert (g.refined, g.ambiguous, g.attribute) == ("put the small red cube into the yellow box", True, "color")
+    assert (g.refined, g.ambiguous, g.attribute) == (
+        "put the small red cube into the yellow box",
+        True,
+        "color",
+    )
 
 
 def test_sgl_follows_the_priority_color_state_size_position():
-    scene = [obj("manipulation object", "cube", "red", size="small", position="left"),
-             obj("other object", "pyramid", "red", size="big", position="right"), BOX]
+    scene = [
+        obj("manipulation object", "cube", "red", size="small", position="left"),
+        obj("other object", "pyramid", "red", size="big", position="right"),
+        BOX,
+    ]
     # Both red and solid: color and state do not tell them apart, size does (and is not said twice).
     g = refine("put the small geometry into the box", scene)
     assert g.attribute == "size" and g.refined == "put the small cube into the box"
@@ -194,6 +221,7 @@ def test_sgl_leaves_an_unambiguous_instruction_alone():
 
 
 # --- the agents against the stand-in over HTTP -----------------------------------------------------
+
 
 def _instance(**values):
     return TaskInstance("color", ("color",), baselines() | values, "base")
@@ -248,11 +276,15 @@ def test_agents_succeed_on_red_and_say_why_they_fail_on_gold(standin, rgbd_env, 
 
 def test_sgl_records_the_refined_instruction(standin, rgbd_env, tmp_path):
     config = policy_config("vlm_simple", endpoint=Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path)))
-    policy = make_policy(SGLConfig(enable=True).wrap(config), rgbd_env)  # the SGL asks the agent's own endpoint
+    policy = make_policy(
+        SGLConfig(enable=True).wrap(config), rgbd_env
+    )  # the SGL asks the agent's own endpoint
     assert policy.name == "vlm_simple+sgl"
     success, record = _run(policy, rgbd_env, _instance(color="blue"))
     assert success
-    assert record["sgl_instruction"] == "put the small blue cube into the yellow box" and record["sgl_ambiguous"]
+    assert (
+        record["sgl_instruction"] == "put the small blue cube into the yellow box" and record["sgl_ambiguous"]
+    )
     assert record["vlm_requests"] == 2  # the scene parse and the points
     prompts = [m["messages"][0]["content"][0]["text"] for m in standin.requests[-2:]]
     assert "manipulation object" in prompts[0] and "small blue cube" in prompts[1]
@@ -272,13 +304,20 @@ def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_noth
     script = [("text", "no"), ("text", "no"), ("refusal", "nope"), *[("status", 500)] * 9]
     s = ScriptedServer(ClassicCVModel(), script)
     try:
+
         def run(out):
-            endpoint = Endpoint(s.url, MODEL_NAME, cache_dir=str(tmp_path / "cache"), max_retries=2,
-                                timeout_s=5.0)
+            endpoint = Endpoint(
+                s.url, MODEL_NAME, cache_dir=str(tmp_path / "cache"), max_retries=2, timeout_s=5.0
+            )
             config = policy_config("vlm_simple", endpoint=endpoint)
-            return evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
-                                           EvalConfig(n_repeats=1, limit=5, num_workers=1, max_steps=8, image_size=128),
-                                           str(out)))
+            return evaluate(
+                EvaluateConfig(
+                    BenchmarkConfig(str(bench), "color"),
+                    config,
+                    EvalConfig(n_repeats=1, limit=5, num_workers=1, max_steps=8, image_size=128),
+                    str(out),
+                )
+            )
 
         result = run(tmp_path / "eval")
         rows = pd.read_json(tmp_path / "eval" / "episodes.jsonl", lines=True)  # in the order they ran
@@ -310,8 +349,15 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
     s = ScriptedServer(ClassicCVModel(), [no] * 3 + [("text", "not json"), ("text", "still not")])
     try:
         out = tmp_path / "bench"
-        build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64, num_workers=1,
-                          vlm_screen=Endpoint(s.url, MODEL_NAME, cache_dir="")))
+        build(
+            BuildConfig(
+                output_dir=str(out),
+                preset="tiny",
+                image_size=64,
+                num_workers=1,
+                vlm_screen=Endpoint(s.url, MODEL_NAME, cache_dir=""),
+            )
+        )
     finally:
         s.close()
     manifest = json.loads((out / "benchmark.json").read_text())
@@ -322,13 +368,19 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
     # The gate passes all 57. The screen said no to the first three (scripted) and to what the stand-in
     # itself cannot make out, and failed on the fourth.
     assert manifest["rejected"] == 0 and screen["screened"] == 56 and screen["errors"] == 1 and n_no >= 3
-    assert screen["table"] == {"gate_pass_vlm_yes": 56 - n_no, "gate_pass_vlm_no": n_no, "gate_fail_vlm_yes": 0,
-                               "gate_fail_vlm_no": 0}
+    assert screen["table"] == {
+        "gate_pass_vlm_yes": 56 - n_no,
+        "gate_pass_vlm_no": n_no,
+        "gate_fail_vlm_yes": 0,
+        "gate_fail_vlm_no": 0,
+    }
     assert screen["pass_rate"] == round((56 - n_no) / 56, 4) and not screen["meets_paper_target"]
     assert screen["cohens_kappa"] == 0.0  # one rater says "pass" to everything: chance-level agreement
     assert len(screen["disagreements"]) == n_no
     assert sum(d["analysis"] == "The object is hard to make out." for d in screen["disagreements"]) == 3
-    color = pd.read_parquet(out / "data" / "color.parquet")["fairness"].map(lambda f: f["vlm_answer"]).tolist()
+    color = (
+        pd.read_parquet(out / "data" / "color.parquet")["fairness"].map(lambda f: f["vlm_answer"]).tolist()
+    )
     assert color[:4] == ["no", "no", "no", "error"]  # one worker: instances in order
     decisions = pd.read_csv(out / "vlm_screen.csv")
     assert len(decisions) == 56 and (decisions["verdict"] == "reject").sum() == n_no
@@ -344,8 +396,14 @@ def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path)
 
     assert color_words("small dark red cube") == ["darkred"] and color_words("small object") == []
     assert head_noun("small gray cube") == "cube"
-    rows = pd.DataFrame({"policy": ["vlm_moka"] * 4, "vlm_requests": [3, 3, 2, 0], "vlm_cache_hits": [0, 0, 1, 3],
-                         "moka_object_description": ["small red cube", "small gray cube", "small object", None]})
+    rows = pd.DataFrame(
+        {
+            "policy": ["vlm_moka"] * 4,
+            "vlm_requests": [3, 3, 2, 0],
+            "vlm_cache_hits": [0, 0, 1, 3],
+            "moka_object_description": ["small red cube", "small gray cube", "small object", None],
+        }
+    )
     agents = describe_agents(rows)["vlm_moka"]
     assert agents["vlm"]["requests"] == 8 and agents["vlm"]["cache_hits"] == 4
     assert agents["descriptions"]["head_nouns"] == {"cube": round(2 / 3, 4), "object": round(1 / 3, 4)}
@@ -358,10 +416,22 @@ def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path)
     bench = tiny_bench
     endpoint = Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path / "c"))
     config = policy_config("vlm_moka", endpoint=endpoint)
-    evaluate(EvaluateConfig(BenchmarkConfig(str(bench), "color"), config,
-                            EvalConfig(n_repeats=1, limit=3, num_workers=1, max_steps=2, image_size=224), str(tmp_path / "e")))
-    result = probe(ProbeConfig(results=str(tmp_path / "e" / "episodes.parquet"), benchmark=BenchmarkPath(str(bench)),
-                               output_dir=str(tmp_path / "p"), neighbours=3))
+    evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(bench), "color"),
+            config,
+            EvalConfig(n_repeats=1, limit=3, num_workers=1, max_steps=2, image_size=224),
+            str(tmp_path / "e"),
+        )
+    )
+    result = probe(
+        ProbeConfig(
+            results=str(tmp_path / "e" / "episodes.parquet"),
+            benchmark=BenchmarkPath(str(bench)),
+            output_dir=str(tmp_path / "p"),
+            neighbours=3,
+        )
+    )
     assert result["episodes"] == 3 and result["cases"] == 9
     assert result["rises"] == sum(c["rise"] > 0.03 for c in result["detail"])
     assert all(c["base"] > 0 for c in result["detail"])  # each description grounded in its own frame

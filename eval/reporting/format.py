@@ -39,9 +39,13 @@ def p_fmt(p: float | None, at_floor: bool | None = False) -> str:
 
 def resampling_line(settings: dict) -> str:
     """The report's one sentence on its resampling, in docs/statistics.md's words."""
-    most = f", up to {settings['max_perm']:,} for a p-value still undecided" if settings.get("max_perm") else ""
-    return (f"noise floor (cv_null) and the CV permutation test: {settings['n_perm']:,} within-block permutations{most}; "
-            f"GLM p-value where cells are sparse: {settings['n_glm']:,} permutation draws; seed {settings['seed']}")
+    most = (
+        f", up to {settings['max_perm']:,} for a p-value still undecided" if settings.get("max_perm") else ""
+    )
+    return (
+        f"noise floor (cv_null) and the CV permutation test: {settings['n_perm']:,} within-block permutations{most}; "
+        f"GLM p-value where cells are sparse: {settings['n_glm']:,} permutation draws; seed {settings['seed']}"
+    )
 
 
 def bias_status(m: dict) -> tuple[str, str]:
@@ -61,8 +65,11 @@ def bias_status(m: dict) -> tuple[str, str]:
 def directions(m: dict) -> tuple[list[tuple[str, float]], list[tuple[str, float]]]:
     """A split's values whose CMH odds ratio against the rest is significant (BH q < ALPHA): those below the
     rest (OR < 1, lowest first) and those above (OR > 1, highest first), each as (value, odds ratio)."""
-    sig = [(v, s["odds_ratio"]) for v, s in m["per_value"].items()
-           if s["q_value"] is not None and s["q_value"] < ALPHA and s["odds_ratio"] is not None]
+    sig = [
+        (v, s["odds_ratio"])
+        for v, s in m["per_value"].items()
+        if s["q_value"] is not None and s["q_value"] < ALPHA and s["odds_ratio"] is not None
+    ]
     low = sorted(((o, v) for v, o in sig if o < 1))
     high = sorted(((o, v) for v, o in sig if o > 1), reverse=True)
     return [(v, o) for o, v in low], [(v, o) for o, v in high]
@@ -81,5 +88,11 @@ def split_order(layouts: dict[str, dict], key: str) -> list[str]:
 
 def task_order(splits: Sequence[str]) -> list[str]:
     """Splits grouped by task (the default task first), each task's in the factor registry's order."""
-    return sorted(splits, key=lambda s: (split_task(s)[0] != DEFAULT_TASK, split_task(s)[0],
-                                         (*visual_factors(), split_task(s)[1]).index(split_task(s)[1])))
+    return sorted(
+        splits,
+        key=lambda s: (
+            split_task(s)[0] != DEFAULT_TASK,
+            split_task(s)[0],
+            (*visual_factors(), split_task(s)[1]).index(split_task(s)[1]),
+        ),
+    )

@@ -73,21 +73,35 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
 
 def _values_line(m: dict[str, Any]) -> str:
     low, high = fmt.directions(m)
-    text = (lambda items: ", ".join(f"<code>{_e(v)}</code> (OR {o:.2g}, SR {fmt.pct(m['per_value'][v]['sr'])})"
-                                    for v, o in items) or "none")
+
+    def text(items):
+        return (
+            ", ".join(
+                f"<code>{_e(v)}</code> (OR {o:.2g}, SR {fmt.pct(m['per_value'][v]['sr'])})" for v, o in items
+            )
+            or "none"
+        )
+
     return f"below the rest: {text(low)}; above the rest: {text(high)}"
 
 
-def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], figures: list[str],
-                 out: Path) -> str:
+def _split_block(
+    split: str, layouts: dict[str, dict], metrics: dict[str, Any], figures: list[str], out: Path
+) -> str:
     task, factor = split_task(split)
     title = fmt.split_title(factor)
-    notes = [f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}{_infra_line(m)}</li>"
-             for name, layout in layouts.items() if (m := layout["splits"].get(split)) is not None]
-    parts = [f'<section class="split" id="split-{_e(split)}"><h3>{_e(title)}'
-             + (f' <span class="note">task {_e(task)}</span>' if task != DEFAULT_TASK else "") + "</h3>",
-             tables.to_html(tables.split_table(metrics, layouts, split)),
-             f"<ul>{''.join(notes)}</ul>"]
+    notes = [
+        f"<li>{_e(name)}: {_values_line(m)}{_stop_line(m)}{_isolation_line(m)}{_infra_line(m)}</li>"
+        for name, layout in layouts.items()
+        if (m := layout["splits"].get(split)) is not None
+    ]
+    parts = [
+        f'<section class="split" id="split-{_e(split)}"><h3>{_e(title)}'
+        + (f' <span class="note">task {_e(task)}</span>' if task != DEFAULT_TASK else "")
+        + "</h3>",
+        tables.to_html(tables.split_table(metrics, layouts, split)),
+        f"<ul>{''.join(notes)}</ul>",
+    ]
     parts += _videos(metrics, layouts, split)
     if figures:
         parts.append('<div class="figures">' + "".join(_image(out / f, f) for f in figures) + "</div>")
@@ -96,7 +110,11 @@ def _split_block(split: str, layouts: dict[str, dict], metrics: dict[str, Any], 
 
 def _stop_line(m: dict[str, Any]) -> str:
     a = m.get("adaptive")
-    return "" if not a else f"; adaptive: stopped <b>{_e(a['stopped'])}</b> after {a['rounds']} round(s), {a['episodes']} episodes"
+    return (
+        ""
+        if not a
+        else f"; adaptive: stopped <b>{_e(a['stopped'])}</b> after {a['rounds']} round(s), {a['episodes']} episodes"
+    )
 
 
 def _infra_line(m: dict[str, Any]) -> str:
@@ -109,8 +127,9 @@ def _isolation_line(m: dict[str, Any]) -> str:
     if not cert or not cert["recorded"]:
         return ""
     bad = len(cert["violations"])
-    return (f"; isolation: {cert['verified']} / {cert['blocks']} blocks verified"
-            + (f', <span class="verdict-bias">{bad} violation(s) left out</span>' if bad else ""))
+    return f"; isolation: {cert['verified']} / {cert['blocks']} blocks verified" + (
+        f', <span class="verdict-bias">{bad} violation(s) left out</span>' if bad else ""
+    )
 
 
 def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> list[str]:
@@ -121,8 +140,9 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> li
     return ["<details><summary>Episode videos (✗ failed)</summary>", tables.to_html(table), "</details>"]
 
 
-def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path,
-                sections_md: dict[str, list[str]]) -> str:
+def render_html(
+    metrics: dict[str, Any], plots: dict[str, str | None], out: Path, sections_md: dict[str, list[str]]
+) -> str:
     """The page for a metrics dict (every number is read from it) and report.md's sections (`sections_md`,
     eval.reporting.markdown.markdown_sections); figures are read from `out` and inlined."""
     layouts = policy_layouts(metrics)
@@ -132,35 +152,65 @@ def render_html(metrics: dict[str, Any], plots: dict[str, str | None], out: Path
     splits = fmt.task_order(fmt.split_order(layouts, "splits"))
     sections: list[tuple[str, str, str]] = []  # (anchor, title, HTML)
     summary = tables.summary_table(layouts)
-    sections.append(("summary", "Summary",
-                     tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>"))
-    legend = (f"<p class=note>{_e(tables.Table(tables.SPLIT_COLUMNS).legend())} The CV permutation p is in "
-              "metrics.json and the calibration section.</p>")
+    sections.append(
+        ("summary", "Summary", tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>")
+    )
+    legend = (
+        f"<p class=note>{_e(tables.Table(tables.SPLIT_COLUMNS).legend())} The CV permutation p is in "
+        "metrics.json and the calibration section.</p>"
+    )
     blocks = [_split_block(s, layouts, metrics, figures.get(s, []), out) for s in splits]
     sections.append(("splits", "Splits", legend + "\n".join(blocks)))
-    titles = {"infra": "Episodes ended by infrastructure", "interactions": "Interactions", "rankings": "Rankings", "comparisons": "Policy comparisons",
-              "context": "Success by task context", "adaptive": "Adaptive sampling", "isolation": "Isolation certificate",
-              "diagnostics": "Sample sizes and calibration", "agents": "VLM agents",
-              "stack": "Simulation stack and conformance", "provenance": "Provenance"}
+    titles = {
+        "infra": "Episodes ended by infrastructure",
+        "interactions": "Interactions",
+        "rankings": "Rankings",
+        "comparisons": "Policy comparisons",
+        "context": "Success by task context",
+        "adaptive": "Adaptive sampling",
+        "isolation": "Isolation certificate",
+        "diagnostics": "Sample sizes and calibration",
+        "agents": "VLM agents",
+        "stack": "Simulation stack and conformance",
+        "provenance": "Provenance",
+    }
     for anchor, title in titles.items():
         lines = sections_md.get(anchor)
         if not lines:
             continue
         body = md_render.render("\n".join(lines))
         if anchor == "interactions":
-            body += "".join('<div class="figures">' + "".join(_image(out / f, f) for f in names) + "</div>"
-                            for split, names in figures.items() if split not in splits)
+            body += "".join(
+                '<div class="figures">' + "".join(_image(out / f, f) for f in names) + "</div>"
+                for split, names in figures.items()
+                if split not in splits
+            )
         sections.append((anchor, title, body))
     skipped = [f"{name}: {reason}" for name, reason in plots.items() if reason is not None]
     if skipped:
-        sections.append(("skipped", "Figures not drawn", "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in skipped) + "</ul>"))
+        sections.append(
+            ("skipped", "Figures not drawn", "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in skipped) + "</ul>")
+        )
     nav = "".join(f'<a href="#{a}">{_e(t)}</a>' for a, t, _ in sections)
-    sources = "".join(f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(VERSION_KEY) or 'not recorded')})</li>"
-                      for s in metrics.get("sources", []))
-    head = (f"<h1>RoboView-Bias report</h1><p>Policies: {_e(', '.join(layouts))}. ε = {metrics['epsilon']:g}; "
-            f"{_e(fmt.resampling_line(settings))}.</p>" + (f"<ul>{sources}</ul>" if sources else "") + f"<nav>{nav}</nav>")
-    body = "".join(f'<section id="{a}">' + (f"<h2>{_e(t)}</h2>" if a in ("summary", "splits", "skipped") else "")
-                   + html_ + "</section>" for a, t, html_ in sections)
-    return (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '
-            f'content="width=device-width,initial-scale=1"><title>RoboView-Bias report — {_e(", ".join(layouts))}</title>'
-            f"<style>{_CSS}</style></head>\n<body><main>{head}{body}</main></body></html>\n")
+    sources = "".join(
+        f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(VERSION_KEY) or 'not recorded')})</li>"
+        for s in metrics.get("sources", [])
+    )
+    head = (
+        f"<h1>RoboView-Bias report</h1><p>Policies: {_e(', '.join(layouts))}. ε = {metrics['epsilon']:g}; "
+        f"{_e(fmt.resampling_line(settings))}.</p>"
+        + (f"<ul>{sources}</ul>" if sources else "")
+        + f"<nav>{nav}</nav>"
+    )
+    body = "".join(
+        f'<section id="{a}">'
+        + (f"<h2>{_e(t)}</h2>" if a in ("summary", "splits", "skipped") else "")
+        + html_
+        + "</section>"
+        for a, t, html_ in sections
+    )
+    return (
+        f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><meta name="viewport" '
+        f'content="width=device-width,initial-scale=1"><title>RoboView-Bias report — {_e(", ".join(layouts))}</title>'
+        f"<style>{_CSS}</style></head>\n<body><main>{head}{body}</main></body></html>\n"
+    )

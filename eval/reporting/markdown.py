@@ -27,15 +27,35 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval.running import inputs, provenance, videos
-from eval.statistics.adaptive import read_record
-from eval.running.agents import agents_markdown, describe_agents
-from eval.statistics.context import context_breakdown
-from eval.reporting.format import (ALPHA, directions, p_fmt, pct, pct_ci, policy_label, resampling_line,
-                                   split_order, split_title)
+from eval.reporting.format import (
+    ALPHA,
+    directions,
+    p_fmt,
+    pct,
+    pct_ci,
+    policy_label,
+    resampling_line,
+    split_order,
+    split_title,
+)
 from eval.reporting.html import HTML_FILE, render_html
-from eval.reporting.tables import (POLICY, SPLIT_COLUMNS, VIDEO_COLUMNS, Table, markdown_table, split_table,
-                                   summary_table, to_markdown, video_splits, videos_table)
+from eval.reporting.tables import (
+    POLICY,
+    SPLIT_COLUMNS,
+    VIDEO_COLUMNS,
+    Table,
+    markdown_table,
+    split_table,
+    summary_table,
+    to_markdown,
+    video_splits,
+    videos_table,
+)
+from eval.running import inputs, provenance, videos
+from eval.running.agents import agents_markdown, describe_agents
+from eval.running.results import VERSION_KEY, ResultsError, counted, read_episodes, read_version
+from eval.statistics.adaptive import read_record
+from eval.statistics.context import context_breakdown
 from eval.statistics.metrics import (
     METRIC_COLUMNS,
     EpisodesError,
@@ -44,7 +64,6 @@ from eval.statistics.metrics import (
     compute_all_metrics,
     policy_layouts,
 )
-from eval.running.results import VERSION_KEY, ResultsError, counted, read_episodes, read_version
 from roboview_data.variation.factors import visual_factors
 from roboview_data.variation.instances import split_task
 
@@ -65,8 +84,9 @@ class ReportResult:
     plots: dict[str, str | None]  # file name → None when written, else why it was skipped
 
 
-def load_results(paths: Sequence[str | Path],
-                 names: Sequence[str | None] | None = None) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
+def load_results(
+    paths: Sequence[str | Path], names: Sequence[str | None] | None = None
+) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
     """Read and validate episode tables; returns their concatenation and per-file provenance.
 
     `names[i]`, when given, renames the one policy of file i (two checkpoints evaluated under the
@@ -81,14 +101,23 @@ def load_results(paths: Sequence[str | Path],
         raise EpisodesError("no results file given")
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
-        raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}; expected the episodes.parquet "
-                                "that pipelines.evaluate writes into its --output_dir")
+        raise FileNotFoundError(
+            f"results file(s) not found: {', '.join(missing)}; expected the episodes.parquet "
+            "that pipelines.evaluate writes into its --output_dir"
+        )
     try:  # a results folder stands for its episodes.parquet; anything else that is not one is named
         paths = [inputs.results_file(p) for p in paths]
     except ValueError as exc:
         raise EpisodesError(str(exc)) from exc
-    sources = [{"path": str(p), VERSION_KEY: read_version(p), "provenance": provenance.read(p.parent),
-                **({"adaptive": rec} if (rec := read_record(p.parent)) else {})} for p in paths]
+    sources = [
+        {
+            "path": str(p),
+            VERSION_KEY: read_version(p),
+            "provenance": provenance.read(p.parent),
+            **({"adaptive": rec} if (rec := read_record(p.parent)) else {}),
+        }
+        for p in paths
+    ]
     tables = []
     for path in paths:
         try:
@@ -101,18 +130,24 @@ def load_results(paths: Sequence[str | Path],
             raise EpisodesError(
                 f"results were evaluated on different benchmark versions: {versioned[0]['path']} has "
                 f"{VERSION_KEY}={versioned[0][VERSION_KEY]!r}, {s['path']} has {s[VERSION_KEY]!r}; "
-                "report runs of one benchmark version together")
+                "report runs of one benchmark version together"
+            )
     frames = []
     for path, name, frame in zip(paths, names, tables):
         check_episodes(frame, REQUIRED_COLUMNS, source=str(path))
         if name:
             if counted(frame)["policy"].nunique() > 1:
-                raise EpisodesError(f"{path} holds several policies ({', '.join(sorted(frame['policy'].unique()))}); "
-                                    f"it cannot be renamed {name!r} as a whole")
+                raise EpisodesError(
+                    f"{path} holds several policies ({', '.join(sorted(frame['policy'].unique()))}); "
+                    f"it cannot be renamed {name!r} as a whole"
+                )
             frame["policy"] = name
         if "video" in frame:  # paths relative to the results folder → absolute (the report links them)
             frame["video"] = frame["video"].map(
-                lambda v, root=path.parent.resolve(): ",".join(str(root / p) for p in v.split(",")) if isinstance(v, str) and v else None)
+                lambda v, root=path.parent.resolve(): (
+                    ",".join(str(root / p) for p in v.split(",")) if isinstance(v, str) and v else None
+                )
+            )
         frames.append(frame)
         source = sources[len(frames) - 1]
         source["policies"] = sorted(map(str, counted(frame)["policy"].unique()))
@@ -120,17 +155,26 @@ def load_results(paths: Sequence[str | Path],
     dup = episodes.duplicated(["policy", "instance_id", "repeat"])
     if dup.any():
         row = episodes[dup].iloc[0]
-        raise EpisodesError(f"{int(dup.sum())} episode(s) occur twice, e.g. policy {row['policy']!r} "
-                         f"instance {row['instance_id']!r} repeat {row['repeat']}; is a file given twice?")
+        raise EpisodesError(
+            f"{int(dup.sum())} episode(s) occur twice, e.g. policy {row['policy']!r} "
+            f"instance {row['instance_id']!r} repeat {row['repeat']}; is a file given twice?"
+        )
     return episodes, sources
 
 
 def _noise_floor_line(layouts: dict[str, dict]) -> list[str]:
-    floor_only = [f"{name}/{split}" for name, layout in layouts.items()
-                  for split, m in layout["splits"].items()
-                  if m["cv_null"] is not None and (m["p_value"] is None or m["p_value"] >= ALPHA)]
-    return ["CVs indistinguishable from their noise floor (p ≥ 0.05): "
-            + (", ".join(floor_only) if floor_only else "none") + ".", ""]
+    floor_only = [
+        f"{name}/{split}"
+        for name, layout in layouts.items()
+        for split, m in layout["splits"].items()
+        if m["cv_null"] is not None and (m["p_value"] is None or m["p_value"] >= ALPHA)
+    ]
+    return [
+        "CVs indistinguishable from their noise floor (p ≥ 0.05): "
+        + (", ".join(floor_only) if floor_only else "none")
+        + ".",
+        "",
+    ]
 
 
 def _average(layout: dict, splits: list[str], key: str) -> float | None:
@@ -140,8 +184,15 @@ def _average(layout: dict, splits: list[str], key: str) -> float | None:
 
 def _privileged_note(layouts: dict[str, dict]) -> list[str]:
     marked = [name for name in layouts if policy_label(name) != name]
-    return [f"{', '.join(marked)}: the privileged scripted expert; it reads the simulator state (object and box "
-            "poses), which no real policy sees: a ceiling, not a policy to compare with.", ""] if marked else []
+    return (
+        [
+            f"{', '.join(marked)}: the privileged scripted expert; it reads the simulator state (object and box "
+            "poses), which no real policy sees: a ceiling, not a policy to compare with.",
+            "",
+        ]
+        if marked
+        else []
+    )
 
 
 def _summary(layouts: dict[str, dict]) -> list[str]:
@@ -158,26 +209,42 @@ def _table1(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
     lines: list[str] = []
     for task in tasks:
         splits = [s for s in all_splits if split_task(s)[0] == task]
-        splits = sorted(splits, key=lambda s: (visual_factors() + (split_task(s)[1],)).index(split_task(s)[1]))
+        splits = sorted(
+            splits, key=lambda s: (visual_factors() + (split_task(s)[1],)).index(split_task(s)[1])
+        )
         lines += _task_table1(metrics, layouts, splits, task if len(tasks) > 1 else None)
     return lines
 
 
-def _task_table1(metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str],
-                 task: str | None) -> list[str]:
+def _task_table1(
+    metrics: dict[str, Any], layouts: dict[str, dict], splits: list[str], task: str | None
+) -> list[str]:
     """A row per split and policy: the columns of each split's block on the page (eval.reporting.tables)."""
     groups = [(split_title(split_task(s)[1]), split_table(metrics, layouts, s)) for s in splits]
     table = Table((POLICY, *SPLIT_COLUMNS)).stacked("Split", groups)
     averages = []
     if task is not None:  # the policy's own averages are the summary's; here those of this task's splits
-        averages = ["Averages over these splits (SR / CV / cv_excess ×100): " + "; ".join(
-            f"{name} " + " / ".join(pct(_average(layout, splits, k)) for k in ("sr", "cv", "cv_excess"))
-            for name, layout in layouts.items()) + ".", ""]
+        averages = [
+            "Averages over these splits (SR / CV / cv_excess ×100): "
+            + "; ".join(
+                f"{name} " + " / ".join(pct(_average(layout, splits, k)) for k in ("sr", "cv", "cv_excess"))
+                for name, layout in layouts.items()
+            )
+            + ".",
+            "",
+        ]
     title = "## Table 1 — success rate and Bias Coefficient (×100)" + (f", task `{task}`" if task else "")
-    return [title, "", *to_markdown(table), Table(SPLIT_COLUMNS).legend(),
-            "SR is weighted by episodes, not averaged over instances as in the paper. No interval is given "
-            "for CV or cv_excess: none has passed the coverage simulation.", "", *averages,
-            *_noise_floor_line(layouts)]
+    return [
+        title,
+        "",
+        *to_markdown(table),
+        Table(SPLIT_COLUMNS).legend(),
+        "SR is weighted by episodes, not averaged over instances as in the paper. No interval is given "
+        "for CV or cv_excess: none has passed the coverage simulation.",
+        "",
+        *averages,
+        *_noise_floor_line(layouts),
+    ]
 
 
 def _table2(layouts: dict[str, dict]) -> list[str]:
@@ -185,20 +252,49 @@ def _table2(layouts: dict[str, dict]) -> list[str]:
     for split in split_order(layouts, "interactions"):
         have = {n: lay["interactions"][split] for n, lay in layouts.items() if split in lay["interactions"]}
         a, b = next(iter(have.values()))["factors"]
-        header = ["Policy", "SR", f"CV({a})", f"p({a})", f"CV({b})", f"p({b})", f"IEC({a}; {b})",
-                  f"IEC({a}; {b}) null", f"IEC({b}; {a})", f"IEC({b}; {a}) null", "p_interaction"]
+        header = [
+            "Policy",
+            "SR",
+            f"CV({a})",
+            f"p({a})",
+            f"CV({b})",
+            f"p({b})",
+            f"IEC({a}; {b})",
+            f"IEC({a}; {b}) null",
+            f"IEC({b}; {a})",
+            f"IEC({b}; {a}) null",
+            "p_interaction",
+        ]
         rows, notes = [], []
         for name, m in have.items():
             ab, ba = f"{a}|{b}", f"{b}|{a}"
-            rows.append([name, pct(m["sr"]) + pct_ci(m["sr_ci95"]), pct(m["cv"][a]), p_fmt(m["p_value"][a]),
-                         pct(m["cv"][b]), p_fmt(m["p_value"][b]), pct(m["iec"][ab]), pct(m["iec_null"][ab]),
-                         pct(m["iec"][ba]), pct(m["iec_null"][ba]), p_fmt(m["p_interaction"])])
+            rows.append(
+                [
+                    name,
+                    pct(m["sr"]) + pct_ci(m["sr_ci95"]),
+                    pct(m["cv"][a]),
+                    p_fmt(m["p_value"][a]),
+                    pct(m["cv"][b]),
+                    p_fmt(m["p_value"][b]),
+                    pct(m["iec"][ab]),
+                    pct(m["iec_null"][ab]),
+                    pct(m["iec"][ba]),
+                    pct(m["iec_null"][ba]),
+                    p_fmt(m["p_interaction"]),
+                ]
+            )
             notes.append(f"- {name}: {_interaction_verdict(m, a, b)}")
-        lines += [f"## Table 2 — {split}: Bias Coefficient and Interaction Effect Coefficient (×100)", "",
-                  *markdown_table(header, rows),
-                  f"IEC({a}; {b}): how much the bias from {a} changes with {b}. Its null is the IEC of tables "
-                  "drawn from the fitted additive (no-interaction) binomial GLM: main effects and noise alone "
-                  "produce it. p_interaction: likelihood-ratio test of A×B against A + B.", "", *notes, ""]
+        lines += [
+            f"## Table 2 — {split}: Bias Coefficient and Interaction Effect Coefficient (×100)",
+            "",
+            *markdown_table(header, rows),
+            f"IEC({a}; {b}): how much the bias from {a} changes with {b}. Its null is the IEC of tables "
+            "drawn from the fitted additive (no-interaction) binomial GLM: main effects and noise alone "
+            "produce it. p_interaction: likelihood-ratio test of A×B against A + B.",
+            "",
+            *notes,
+            "",
+        ]
     return lines
 
 
@@ -208,23 +304,34 @@ def _interaction_verdict(m: dict[str, Any], a: str, b: str) -> str:
     if p is None:
         return "no informative cells: interaction not testable."
     if p >= ALPHA:
-        return (f"no evidence of interaction (p_interaction = {p_fmt(p)}); the IECs are what additive effects "
-                "and noise produce, so no asymmetry is claimed.")
+        return (
+            f"no evidence of interaction (p_interaction = {p_fmt(p)}); the IECs are what additive effects "
+            "and noise produce, so no asymmetry is claimed."
+        )
     beyond = [f"IEC({x}; {y})" for x, y in ((a, b), (b, a)) if (m["p_iec"][f"{x}|{y}"] or 1.0) < ALPHA]
     if len(beyond) == 1:
         return f"interaction (p_interaction = {p_fmt(p)}); asymmetric: only {beyond[0]} exceeds its additive null."
-    return (f"interaction (p_interaction = {p_fmt(p)}); "
-            + ("both IECs exceed their additive nulls." if beyond else "neither IEC alone exceeds its additive null."))
+    return f"interaction (p_interaction = {p_fmt(p)}); " + (
+        "both IECs exceed their additive nulls." if beyond else "neither IEC alone exceeds its additive null."
+    )
 
 
 def _directions(layouts: dict[str, dict]) -> list[str]:
-    lines = ["## Which values differ (CMH odds ratio vs the other values, stratified by context and repeat; "
-             "BH q < 0.05)", ""]
+    lines = [
+        "## Which values differ (CMH odds ratio vs the other values, stratified by context and repeat; "
+        "BH q < 0.05)",
+        "",
+    ]
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():
             low, high = directions(m)
-            text = (lambda items: ", ".join(f"{v} (OR {o:.2g}, SR {pct(m['per_value'][v]['sr'])})"
-                                            for v, o in items) or "none")
+
+            def text(items, m=m):
+                return (
+                    ", ".join(f"{v} (OR {o:.2g}, SR {pct(m['per_value'][v]['sr'])})" for v, o in items)
+                    or "none"
+                )
+
             lines.append(f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}")
     return [*lines, ""]
 
@@ -233,11 +340,35 @@ def _comparisons(metrics: dict[str, Any]) -> list[str]:
     comps = metrics.get("comparisons", [])
     if not comps:
         return []
-    rows = [[c["split"], f"{c['policies'][1]} − {c['policies'][0]}", str(c["n_pairs"]), pct(c["delta_sr"]),
-             p_fmt(c["p_sr"]), pct(c["delta_cv_excess"]), p_fmt(c["p_cv_excess"])] for c in comps]
-    return ["## Policy comparisons (paired within instance and repeat: same seeds)", "",
-            *markdown_table(["Split", "Difference", "Pairs", "ΔSR ×100", "p (McNemar)", "Δcv_excess ×100",
-                     "p (paired permutation)"], rows), ""]
+    rows = [
+        [
+            c["split"],
+            f"{c['policies'][1]} − {c['policies'][0]}",
+            str(c["n_pairs"]),
+            pct(c["delta_sr"]),
+            p_fmt(c["p_sr"]),
+            pct(c["delta_cv_excess"]),
+            p_fmt(c["p_cv_excess"]),
+        ]
+        for c in comps
+    ]
+    return [
+        "## Policy comparisons (paired within instance and repeat: same seeds)",
+        "",
+        *markdown_table(
+            [
+                "Split",
+                "Difference",
+                "Pairs",
+                "ΔSR ×100",
+                "p (McNemar)",
+                "Δcv_excess ×100",
+                "p (paired permutation)",
+            ],
+            rows,
+        ),
+        "",
+    ]
 
 
 def _rankings(metrics: dict[str, Any]) -> list[str]:
@@ -245,19 +376,38 @@ def _rankings(metrics: dict[str, Any]) -> list[str]:
     ranked = metrics.get("rankings")
     if not ranked:
         return []
-    lines = ["## Rankings", "",
-             "Best first. Policies sharing a letter are not significantly different (paired tests, Holm-adjusted "
-             f"over the pairs, α = {ranked['alpha']}); ranks: the range the tests leave possible.", ""]
+    lines = [
+        "## Rankings",
+        "",
+        "Best first. Policies sharing a letter are not significantly different (paired tests, Holm-adjusted "
+        f"over the pairs, α = {ranked['alpha']}); ranks: the range the tests leave possible.",
+        "",
+    ]
     rows = []
     for split, entry in [*ranked["splits"].items(), ("overall", ranked["overall"])]:
         for metric, table in entry.items():
-            label = {"sr": "SR", "cv_excess": "cv_excess", "cv_excess_mean": "mean cv_excess (no overall test)"}[metric]
-            rows.append([split, label, ", ".join(
-                f"{r['policy']} {pct(r['value'])} ({r['group']}; {r['rank_range'][0]}"
-                + (f"–{r['rank_range'][1]}" if r['rank_range'][1] != r['rank_range'][0] else "") + ")"
-                for r in table)])
-    return [*lines, *markdown_table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows),
-            ""]
+            label = {
+                "sr": "SR",
+                "cv_excess": "cv_excess",
+                "cv_excess_mean": "mean cv_excess (no overall test)",
+            }[metric]
+            rows.append(
+                [
+                    split,
+                    label,
+                    ", ".join(
+                        f"{r['policy']} {pct(r['value'])} ({r['group']}; {r['rank_range'][0]}"
+                        + (f"–{r['rank_range'][1]}" if r["rank_range"][1] != r["rank_range"][0] else "")
+                        + ")"
+                        for r in table
+                    ),
+                ]
+            )
+    return [
+        *lines,
+        *markdown_table(["Split", "By", "Policies (value ×100, group, possible ranks)"], rows),
+        "",
+    ]
 
 
 def _context_factors(layouts: dict[str, dict]) -> list[str]:
@@ -265,16 +415,25 @@ def _context_factors(layouts: dict[str, dict]) -> list[str]:
     found = {name: layout.get("context_factors") or {} for name, layout in layouts.items()}
     if not any(found.values()):
         return []
-    lines = ["## Success by task context (SR ×100 per value over the factor's own contexts, every visual "
-             "condition; p: GLM likelihood-ratio test of factor + condition against condition)", ""]
+    lines = [
+        "## Success by task context (SR ×100 per value over the factor's own contexts, every visual "
+        "condition; p: GLM likelihood-ratio test of factor + condition against condition)",
+        "",
+    ]
     rows = []
     for name, factors in found.items():
         for factor, m in factors.items():
-            values = "; ".join(f"{value}: {pct(v['sr'])} (n={v['n_episodes']})" for value, v in m["per_value"].items())
+            values = "; ".join(
+                f"{value}: {pct(v['sr'])} (n={v['n_episodes']})" for value, v in m["per_value"].items()
+            )
             rows.append([name, factor, values, p_fmt(m["p_value"]), m["p_value_method"] or "—"])
     lines += markdown_table(["policy", "context factor", "SR by value", "p", "p method"], rows)
-    lines += ["", "A policy that ignores language (ACT) should show no instruction effect; a language-conditioned one "
-              "(SmolVLA, π0) that does is sensitive to the wording of one goal.", ""]
+    lines += [
+        "",
+        "A policy that ignores language (ACT) should show no instruction effect; a language-conditioned one "
+        "(SmolVLA, π0) that does is sensitive to the wording of one goal.",
+        "",
+    ]
     return lines
 
 
@@ -282,40 +441,89 @@ def _diagnostics(layouts: dict[str, dict]) -> list[str]:
     rows = []
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():
-            rows.append([name, split, str(m["n_instances"]), str(m["n_episodes"]), str(m["n_contexts"]),
-                         str(m["n_contexts_all_failed"]), m["p_value_method"] or "—",
-                         p_fmt(m["p_value_cv"], m.get("p_value_cv_at_floor"))
-                         + (f" ({m['p_value_cv_draws']} draws)" if m.get("p_value_cv_draws") else "")])
-    control = [f"- {name}: baseline instance agrees across splits in {pct(c['agreement'])} % of {c['n_pairs']} "
-               f"(context, repeat) pairs; baseline SR by split: "
-               + ", ".join(f"{s} {pct(v)}" for s, v in c["sr_by_split"].items())
-               for name, layout in layouts.items() if (c := layout.get("control"))]
-    return ["## Sample sizes, calibration and the control arm", "",
-            *markdown_table(["Policy", "Split", "Instances", "Episodes", "Contexts", "Contexts all failed",
-                     "p calibration", "p (CV permutation)"], rows),
-            "Control arm (test–retest): the all-baseline instance of each context runs, with the same seeds, in "
-            "the color, camera_euler and dist_scale splits.", *control, ""]
+            rows.append(
+                [
+                    name,
+                    split,
+                    str(m["n_instances"]),
+                    str(m["n_episodes"]),
+                    str(m["n_contexts"]),
+                    str(m["n_contexts_all_failed"]),
+                    m["p_value_method"] or "—",
+                    p_fmt(m["p_value_cv"], m.get("p_value_cv_at_floor"))
+                    + (f" ({m['p_value_cv_draws']} draws)" if m.get("p_value_cv_draws") else ""),
+                ]
+            )
+    control = [
+        f"- {name}: baseline instance agrees across splits in {pct(c['agreement'])} % of {c['n_pairs']} "
+        f"(context, repeat) pairs; baseline SR by split: "
+        + ", ".join(f"{s} {pct(v)}" for s, v in c["sr_by_split"].items())
+        for name, layout in layouts.items()
+        if (c := layout.get("control"))
+    ]
+    return [
+        "## Sample sizes, calibration and the control arm",
+        "",
+        *markdown_table(
+            [
+                "Policy",
+                "Split",
+                "Instances",
+                "Episodes",
+                "Contexts",
+                "Contexts all failed",
+                "p calibration",
+                "p (CV permutation)",
+            ],
+            rows,
+        ),
+        "Control arm (test–retest): the all-baseline instance of each context runs, with the same seeds, in "
+        "the color, camera_euler and dist_scale splits.",
+        *control,
+        "",
+    ]
 
 
 def _adaptive(layouts: dict[str, dict]) -> list[str]:
     """Splits evaluated adaptively: rounds, episodes and why each stopped."""
-    rows = [[name, split, str(a["rounds"]), str(a["episodes"]), a["stopped"],
-             "—" if a["lrt"] is None else f"{a['lrt']:.2f}",
-             "—" if a["efficacy_boundary"] is None else f"{a['efficacy_boundary']:.2f}",
-             "—" if a["futility_boundary"] is None else f"{a['futility_boundary']:.2f}"]
-            for name, layout in layouts.items() for split, m in layout["splits"].items() if (a := m.get("adaptive"))]
+    rows = [
+        [
+            name,
+            split,
+            str(a["rounds"]),
+            str(a["episodes"]),
+            a["stopped"],
+            "—" if a["lrt"] is None else f"{a['lrt']:.2f}",
+            "—" if a["efficacy_boundary"] is None else f"{a['efficacy_boundary']:.2f}",
+            "—" if a["futility_boundary"] is None else f"{a['futility_boundary']:.2f}",
+        ]
+        for name, layout in layouts.items()
+        for split, m in layout["splits"].items()
+        if (a := m.get("adaptive"))
+    ]
     if not rows:
         return []
-    design = next(m["adaptive"]["design"] for layout in layouts.values() for m in layout["splits"].values()
-                  if m.get("adaptive"))
-    return ["## Adaptive sampling", "",
-            f"Repeats ran in rounds; from round {design['min_rounds']} on, after each round, a group-sequential LRT decided "
-            f"(α = {design['alpha']} over every look, futility against a bias of logit SD τ = {design['tau']} at power "
-            f"{design['power']}, at most {design['max_repeats']} rounds; docs/adaptive.md). The sampling was adaptive: "
-            "the fixed-sample statistics in the tables above treat the episodes run as a fixed sample, and their "
-            "p-values are approximate; the stop below is the sequential test's decision.", "",
-            *markdown_table(["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound",
-                             "futility bound"], rows), ""]
+    design = next(
+        m["adaptive"]["design"]
+        for layout in layouts.values()
+        for m in layout["splits"].values()
+        if m.get("adaptive")
+    )
+    return [
+        "## Adaptive sampling",
+        "",
+        f"Repeats ran in rounds; from round {design['min_rounds']} on, after each round, a group-sequential LRT decided "
+        f"(α = {design['alpha']} over every look, futility against a bias of logit SD τ = {design['tau']} at power "
+        f"{design['power']}, at most {design['max_repeats']} rounds; docs/adaptive.md). The sampling was adaptive: "
+        "the fixed-sample statistics in the tables above treat the episodes run as a fixed sample, and their "
+        "p-values are approximate; the stop below is the sequential test's decision.",
+        "",
+        *markdown_table(
+            ["Policy", "Split", "Rounds", "Episodes", "Stopped", "LRT", "efficacy bound", "futility bound"],
+            rows,
+        ),
+        "",
+    ]
 
 
 def _isolation(layouts: dict[str, dict]) -> list[str]:
@@ -330,18 +538,33 @@ def _isolation(layouts: dict[str, dict]) -> list[str]:
                 rows.append([name, split, str(cert["blocks"]), "not recorded", "—"])
                 continue
             bad = cert["violations"]
-            rows.append([name, split, str(cert["blocks"]), f"{cert['verified']} / {cert['blocks']}",
-                         "none" if not bad else f"{len(bad)} (left out of the tests)"])
-            violations += [f"- {name}, {split}: context {v['context_id']} repeat {v['repeat']} — "
-                           f"{', '.join(v['components'])} differ across {', '.join(v['values'][:6])}"
-                           f"{' …' if len(v['values']) > 6 else ''}" for v in bad[:20]]
+            rows.append(
+                [
+                    name,
+                    split,
+                    str(cert["blocks"]),
+                    f"{cert['verified']} / {cert['blocks']}",
+                    "none" if not bad else f"{len(bad)} (left out of the tests)",
+                ]
+            )
+            violations += [
+                f"- {name}, {split}: context {v['context_id']} repeat {v['repeat']} — "
+                f"{', '.join(v['components'])} differ across {', '.join(v['values'][:6])}"
+                f"{' …' if len(v['values']) > 6 else ''}"
+                for v in bad[:20]
+            ]
     if not rows:
         return []
-    return ["## Isolation certificate", "",
-            "Every value of one (context, repeat) must share the instruction, the initial robot state and object pose, "
-            "the episode seed, every other factor's value and the calibration of the cameras the factor does not move.",
-            "", *markdown_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows),
-            *violations, ""]
+    return [
+        "## Isolation certificate",
+        "",
+        "Every value of one (context, repeat) must share the instruction, the initial robot state and object pose, "
+        "the episode seed, every other factor's value and the calibration of the cameras the factor does not move.",
+        "",
+        *markdown_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows),
+        *violations,
+        "",
+    ]
 
 
 def _infra_errors(layouts: dict[str, dict]) -> list[str]:
@@ -352,17 +575,27 @@ def _infra_errors(layouts: dict[str, dict]) -> list[str]:
         for split, m in {**layout["splits"], **layout.get("interactions", {})}.items():
             if m.get("n_infra_errors"):
                 listed += m["n_infra_errors"]
-                lines.append(f"- {name}, {split}: {m['n_infra_errors']} episode(s) ended by infrastructure, not counted")
+                lines.append(
+                    f"- {name}, {split}: {m['n_infra_errors']} episode(s) ended by infrastructure, not counted"
+                )
         if layout.get("n_infra_errors", 0) > listed:
-            lines.append(f"- {name}: {layout['n_infra_errors'] - listed} more episode(s) ended by infrastructure, not "
-                         "counted, in splits where no episode counts")
+            lines.append(
+                f"- {name}: {layout['n_infra_errors'] - listed} more episode(s) ended by infrastructure, not "
+                "counted, in splits where no episode counts"
+            )
     if not lines:
         return []
-    return ["## Episodes ended by infrastructure", "",
-            "Episodes ended by infrastructure, not by the policy (a policy server lost mid-episode, an endpoint still "
-            "failing after its retries, a worker that died, a render failure; `status` infra_error, the reason in "
-            "`failure_reason`) are left out of every rate and test. Rerunning the evaluation command into the same "
-            "output folder runs them again.", "", *lines, ""]
+    return [
+        "## Episodes ended by infrastructure",
+        "",
+        "Episodes ended by infrastructure, not by the policy (a policy server lost mid-episode, an endpoint still "
+        "failing after its retries, a worker that died, a render failure; `status` infra_error, the reason in "
+        "`failure_reason`) are left out of every rate and test. Rerunning the evaluation command into the same "
+        "output folder runs them again.",
+        "",
+        *lines,
+        "",
+    ]
 
 
 def _extremes(layouts: dict[str, dict]) -> list[str]:
@@ -382,8 +615,11 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict]) -> list[str]:
     groups = [(split, videos_table(metrics, layouts, split)) for split in video_splits(metrics)]
     if not groups:
         return []
-    return ["## Episode videos (per value; `--eval.videos`)", "",
-            *to_markdown(Table(VIDEO_COLUMNS).stacked("Split", groups))]
+    return [
+        "## Episode videos (per value; `--eval.videos`)",
+        "",
+        *to_markdown(Table(VIDEO_COLUMNS).stacked("Split", groups)),
+    ]
 
 
 def _stacks(sources: list[dict[str, Any]]) -> list[str]:
@@ -399,18 +635,24 @@ def _stacks(sources: list[dict[str, Any]]) -> list[str]:
                 lines.append(f"- `{source['path']}` ({entry['started']}): no conformance check recorded")
                 continue
             d = conf["drift"]
-            lines.append(f"- `{source['path']}` ({entry['started']}): **{conf['verdict']}** on "
-                         f"{stack.summary(conf.get('stack'))}; {d['images_identical']}/{d['images']} reference images "
-                         f"and {d['physics_identical']}/{d['physics']} rollouts bit-identical, at most "
-                         f"{d['pixel_fraction_max']:.3%} of an image's pixels differ, joints within {d['joint_max']:.1e} rad")
+            lines.append(
+                f"- `{source['path']}` ({entry['started']}): **{conf['verdict']}** on "
+                f"{stack.summary(conf.get('stack'))}; {d['images_identical']}/{d['images']} reference images "
+                f"and {d['physics_identical']}/{d['physics']} rollouts bit-identical, at most "
+                f"{d['pixel_fraction_max']:.3%} of an image's pixels differ, joints within {d['joint_max']:.1e} rad"
+            )
             if conf.get("stack_differences"):
-                lines.append(f"  - differs from the stack that built the benchmark: {'; '.join(conf['stack_differences'])}")
+                lines.append(
+                    f"  - differs from the stack that built the benchmark: {'; '.join(conf['stack_differences'])}"
+                )
             seen.append((source["path"], conf.get("stack"), conf["verdict"]))
     for path, other, verdict in seen[1:]:
         differences = stack.differences(seen[0][1], other)
         if differences or verdict != seen[0][2]:
-            lines.append(f"- **The runs differ**: `{seen[0][0]}` ({seen[0][2]}) vs `{path}` ({verdict}): "
-                         f"{'; '.join(differences) or 'same stack'}")
+            lines.append(
+                f"- **The runs differ**: `{seen[0][0]}` ({seen[0][2]}) vs `{path}` ({verdict}): "
+                f"{'; '.join(differences) or 'same stack'}"
+            )
     return lines + [""] if len(lines) > 2 else []
 
 
@@ -422,17 +664,21 @@ def provenance_section(sources: list[dict[str, Any]]) -> list[str]:
             ckpt = entry.get("checkpoint") or {}
             packages = ", ".join(f"{k} {v}" for k, v in entry["packages"].items() if v)
             machine = entry["machine"]
-            lines += [f"- `{source['path']}`: {entry['started']} → {entry.get('ended') or 'interrupted'}, "
-                      f"{entry.get('episodes_run', '?')} episodes; roboview commit {entry.get('roboview_commit') or '—'}",
-                      f"  - command: `{entry['command']}`",
-                      f"  - packages: {packages}",
-                      f"  - benchmark {entry['benchmark_version']}; checkpoint "
-                      f"{(ckpt.get('path', '') + ' sha256 ' + ckpt.get('sha256', '')[:16] + '…') if ckpt else '—'}",
-                      f"  - machine: {machine['cpu']} × {machine['cpu_count']}, GPU {machine.get('gpu') or 'none'}; "
-                      f"seeds: {entry['seed_rule']}"]
+            lines += [
+                f"- `{source['path']}`: {entry['started']} → {entry.get('ended') or 'interrupted'}, "
+                f"{entry.get('episodes_run', '?')} episodes; roboview commit {entry.get('roboview_commit') or '—'}",
+                f"  - command: `{entry['command']}`",
+                f"  - packages: {packages}",
+                f"  - benchmark {entry['benchmark_version']}; checkpoint "
+                f"{(ckpt.get('path', '') + ' sha256 ' + ckpt.get('sha256', '')[:16] + '…') if ckpt else '—'}",
+                f"  - machine: {machine['cpu']} × {machine['cpu_count']}, GPU {machine.get('gpu') or 'none'}; "
+                f"seeds: {entry['seed_rule']}",
+            ]
             if entry.get("policy_server"):
-                lines.append(f"  - policy served elsewhere (its randomness is the server's, not the episode seeds'): "
-                             f"{_served(entry['policy_server'])}")
+                lines.append(
+                    f"  - policy served elsewhere (its randomness is the server's, not the episode seeds'): "
+                    f"{_served(entry['policy_server'])}"
+                )
     return lines + [""] if len(lines) > 2 else []
 
 
@@ -440,9 +686,13 @@ def _served(server: dict) -> str:
     """One line for a served policy's provenance: protocol, where, and what the server said about itself."""
     where = server.get("urls") or server.get("servers") or server.get("server") or "?"
     where = ", ".join(where) if isinstance(where, list) else str(where)
-    said = {url: meta.get("roboview", meta) if isinstance(meta, dict) else meta
-            for url, meta in (server.get("metadata") or {}).items()}
-    return f"{server.get('protocol', '?')} at {where}" + (f"; server metadata {json.dumps(said)}" if said else "")
+    said = {
+        url: meta.get("roboview", meta) if isinstance(meta, dict) else meta
+        for url, meta in (server.get("metadata") or {}).items()
+    }
+    return f"{server.get('protocol', '?')} at {where}" + (
+        f"; server metadata {json.dumps(said)}" if said else ""
+    )
 
 
 def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[str, list[dict]]]]:
@@ -450,38 +700,62 @@ def video_index(episodes: pd.DataFrame, out: Path) -> dict[str, dict[str, dict[s
     if "video" not in episodes:
         return {}
     index: dict = {}
-    filmed = episodes[episodes["video"].notna()].sort_values(["policy", "split", "value", "instance_id", "repeat"])
+    filmed = episodes[episodes["video"].notna()].sort_values(
+        ["policy", "split", "value", "instance_id", "repeat"]
+    )
     for row in filmed.itertuples():
         files = row.video.split(",")
         label = f"{row.instance_id[:8]} r{row.repeat}{'' if row.success else ' ✗'}"
         index.setdefault(row.policy, {}).setdefault(row.split, {}).setdefault(str(row.value), []).append(
-            {"label": label, "cameras": [videos.camera_of(f) for f in files],
-             "paths": [os.path.relpath(f, out) for f in files]})
+            {
+                "label": label,
+                "cameras": [videos.camera_of(f) for f in files],
+                "paths": [os.path.relpath(f, out) for f in files],
+            }
+        )
     return index
 
 
 def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
     """report.md's sections in order, each a list of Markdown lines (empty when it has nothing to say)."""
     layouts = policy_layouts(metrics)
-    return {"summary": _summary(layouts), "table1": _table1(metrics, layouts), "infra": _infra_errors(layouts), "directions": _directions(layouts),
-            "interactions": _table2(layouts),
-            "comparisons": _comparisons(metrics), "rankings": _rankings(metrics),
-            "context": _context_factors(layouts), "adaptive": _adaptive(layouts), "diagnostics": _diagnostics(layouts),
-            "isolation": _isolation(layouts), "extremes": _extremes(layouts), "videos": _videos(metrics, layouts),
-            "agents": agents_markdown(metrics.get("agents", {})), "stack": _stacks(metrics.get("sources", [])),
-            "provenance": provenance_section(metrics.get("sources", []))}
+    return {
+        "summary": _summary(layouts),
+        "table1": _table1(metrics, layouts),
+        "infra": _infra_errors(layouts),
+        "directions": _directions(layouts),
+        "interactions": _table2(layouts),
+        "comparisons": _comparisons(metrics),
+        "rankings": _rankings(metrics),
+        "context": _context_factors(layouts),
+        "adaptive": _adaptive(layouts),
+        "diagnostics": _diagnostics(layouts),
+        "isolation": _isolation(layouts),
+        "extremes": _extremes(layouts),
+        "videos": _videos(metrics, layouts),
+        "agents": agents_markdown(metrics.get("agents", {})),
+        "stack": _stacks(metrics.get("sources", [])),
+        "provenance": provenance_section(metrics.get("sources", [])),
+    }
 
 
-def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None],
-                    sections: dict[str, list[str]] | None = None) -> str:
+def render_markdown(
+    metrics: dict[str, Any], plots: dict[str, str | None], sections: dict[str, list[str]] | None = None
+) -> str:
     """report.md from a metrics dict (every number printed is read from it), plot outcomes and, when already
     built, its `markdown_sections`."""
     layouts = policy_layouts(metrics)
     settings = metrics["resampling"]
-    lines = ["# RoboView-Bias report", "",
-             f"Policies: {', '.join(layouts)}. ε = {metrics['epsilon']:g}; {resampling_line(settings)}.", ""]
+    lines = [
+        "# RoboView-Bias report",
+        "",
+        f"Policies: {', '.join(layouts)}. ε = {metrics['epsilon']:g}; {resampling_line(settings)}.",
+        "",
+    ]
     for source in metrics.get("sources", []):
-        lines.append(f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})")
+        lines.append(
+            f"- source `{source['path']}` (benchmark version {source[VERSION_KEY] or 'not recorded'})"
+        )
     lines.append("")
     for section in (sections if sections is not None else markdown_sections(metrics)).values():
         lines += section
@@ -491,8 +765,13 @@ def render_markdown(metrics: dict[str, Any], plots: dict[str, str | None],
     return "\n".join(lines) + "\n"
 
 
-def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsConfig = MetricsConfig(),
-                 sources: list[dict[str, Any]] | None = None, plots: bool = True) -> ReportResult:
+def write_report(
+    episodes: pd.DataFrame,
+    output_dir: str | Path,
+    cfg: MetricsConfig = MetricsConfig(),
+    sources: list[dict[str, Any]] | None = None,
+    plots: bool = True,
+) -> ReportResult:
     """Compute metrics, write metrics.json, the plots and report.md into `output_dir`."""
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -504,7 +783,9 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
                 layout = policy_layouts(metrics).get(source["policies"][0], {})
                 for split, record in source["adaptive"]["splits"].items():
                     if split in layout.get("splits", {}):
-                        layout["splits"][split]["adaptive"] = record | {"design": source["adaptive"]["design"]}
+                        layout["splits"][split]["adaptive"] = record | {
+                            "design": source["adaptive"]["design"]
+                        }
     episodes = counted(episodes)  # what infrastructure ended is in no number (metrics counted it)
     for name, layout in policy_layouts(metrics).items():  # success by instruction, shape, initial position
         layout["context_factors"] = context_breakdown(episodes[episodes["policy"] == name], cfg)
@@ -525,6 +806,12 @@ def write_report(episodes: pd.DataFrame, output_dir: str | Path, cfg: MetricsCon
     sections = markdown_sections(metrics)  # report.md and report.html print the same sections
     (out / REPORT_FILE).write_text(render_markdown(metrics, outcome, sections))
     (out / HTML_FILE).write_text(render_html(metrics, outcome, out, sections))
-    log.info("wrote %s, %s, %s and %d plot(s) to %s", METRICS_FILE, REPORT_FILE, HTML_FILE,
-             sum(r is None for r in outcome.values()), out)
+    log.info(
+        "wrote %s, %s, %s and %d plot(s) to %s",
+        METRICS_FILE,
+        REPORT_FILE,
+        HTML_FILE,
+        sum(r is None for r in outcome.values()),
+        out,
+    )
     return ReportResult(out, metrics, outcome)

@@ -71,8 +71,15 @@ def _heatmap(ax: plt.Axes, grid: np.ndarray, rows: list[str], cols: list[str], t
     ax.set_yticks(range(len(rows)), rows)
     for (i, j), v in np.ndenumerate(grid):
         if not math.isnan(v):
-            ax.text(j, i, f"{100 * v:.0f}", ha="center", va="center", fontsize=7,
-                    color="white" if v < 0.5 else "black")
+            ax.text(
+                j,
+                i,
+                f"{100 * v:.0f}",
+                ha="center",
+                va="center",
+                fontsize=7,
+                color="white" if v < 0.5 else "black",
+            )
     ax.set_title(title)
     return image
 
@@ -109,16 +116,31 @@ def plot_color_categories(layouts: Layouts, path: Path) -> None:
     width = 0.8 / len(per)
     for i, policy in enumerate(per):
         shown = [j for j, c in enumerate(names) if table[c][i]["n_episodes"]]
-        ax.bar(np.array(shown) + (i - (len(per) - 1) / 2) * width, [table[names[j]][i]["sr"] for j in shown], width,
-               yerr=_wilson_err([table[names[j]][i] for j in shown]), capsize=2, label=policy,
-               color=[category_color(names[j]) for j in shown], edgecolor="black", hatch="/" * i)
+        ax.bar(
+            np.array(shown) + (i - (len(per) - 1) / 2) * width,
+            [table[names[j]][i]["sr"] for j in shown],
+            width,
+            yerr=_wilson_err([table[names[j]][i] for j in shown]),
+            capsize=2,
+            label=policy,
+            color=[category_color(names[j]) for j in shown],
+            edgecolor="black",
+            hatch="/" * i,
+        )
     ax.set_xticks(range(len(names)), names)
     absent = [c for c in CATEGORIES if c not in table]
-    ax.set(ylabel="success rate", ylim=(0, 1.05), title="Success rate by basic color category"
-           + (f"\n(no color of the benchmark is {', '.join(absent)})" if absent else ""))
+    ax.set(
+        ylabel="success rate",
+        ylim=(0, 1.05),
+        title="Success rate by basic color category"
+        + (f"\n(no color of the benchmark is {', '.join(absent)})" if absent else ""),
+    )
     if len(per) > 1:  # bars wear their category's color, so the legend shows each policy's hatch
-        ax.legend(handles=[Patch(facecolor="white", edgecolor="black", hatch="/" * i, label=p)
-                           for i, p in enumerate(per)])
+        ax.legend(
+            handles=[
+                Patch(facecolor="white", edgecolor="black", hatch="/" * i, label=p) for i, p in enumerate(per)
+            ]
+        )
     _save(fig, path)
 
 
@@ -131,8 +153,15 @@ def plot_color_lab(layouts: Layouts, path: Path) -> None:
         sr = [s for _, s in known]
         faces = [c.hex for c, _ in known]
         for ax, x in zip(axes, (np.hypot(lab[:, 1], lab[:, 2]), lab[:, 0])):
-            ax.scatter(x, sr, c=faces, edgecolors="black", linewidths=0.4, marker=_MARKERS[i % len(_MARKERS)],
-                       label=policy)
+            ax.scatter(
+                x,
+                sr,
+                c=faces,
+                edgecolors="black",
+                linewidths=0.4,
+                marker=_MARKERS[i % len(_MARKERS)],
+                label=policy,
+            )
     axes[0].set(xlabel="CIELAB chroma C*ab", ylabel="success rate", ylim=(-0.05, 1.05))
     axes[1].set(xlabel="CIELAB lightness L*", ylim=(-0.05, 1.05))
     axes[0].set_title("Success rate vs chroma")
@@ -152,8 +181,13 @@ def plot_camera_pose(layouts: Layouts, path: Path) -> None:
             where = parse_camera_pose(value)
             if where is not None:
                 grid[where] = s["sr"]
-        image = _heatmap(ax, grid, [f"ring {r}" for r in range(N_ORBIT_RINGS)],
-                         [str(k) for k in range(N_ORBIT_POSES_PER_RING)], policy)
+        image = _heatmap(
+            ax,
+            grid,
+            [f"ring {r}" for r in range(N_ORBIT_RINGS)],
+            [str(k) for k in range(N_ORBIT_POSES_PER_RING)],
+            policy,
+        )
         ax.set_xlabel("pose index on ring")
     fig.colorbar(image, ax=axes, label="success rate")
     fig.suptitle("Success rate by orbital camera pose")
@@ -186,8 +220,12 @@ def plot_dist_scale(layouts: Layouts, path: Path) -> None:
         err = _wilson_err([s for _, s in items])
         ax.plot(x, sr, marker=_MARKERS[i % len(_MARKERS)], label=policy)
         ax.fill_between(x, sr - err[0], sr + err[1], alpha=0.2)
-    ax.set(xlabel="camera moved back along its optical axis (m)", ylabel="success rate", ylim=(0, 1.05),
-           title="Success rate vs camera distance")
+    ax.set(
+        xlabel="camera moved back along its optical axis (m)",
+        ylabel="success rate",
+        ylim=(0, 1.05),
+        title="Success rate vs camera distance",
+    )
     ax.legend()
     _save(fig, path)
 
@@ -243,8 +281,11 @@ def plot_forest(split: str) -> Callable[[Layouts, Path], None]:
             ax.set_ylim(len(names) - 0.5, -0.5)  # first value on top, no empty margin
             ax.set_xlabel("odds ratio vs the other values (CMH, 95 % CI)")
             ax.set_title(policy)
-        handles = [Patch(color="tab:red", label="harder, q < 0.05"), Patch(color="tab:blue", label="easier, q < 0.05"),
-                   Patch(color="0.6", label="not significant")]
+        handles = [
+            Patch(color="tab:red", label="harder, q < 0.05"),
+            Patch(color="tab:blue", label="easier, q < 0.05"),
+            Patch(color="0.6", label="not significant"),
+        ]
         fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8)
         fig.suptitle(f"{split}: which values differ from the rest")
         _save(fig, path)
@@ -291,7 +332,9 @@ def plot_table_texture(layouts: Layouts, path: Path) -> None:
     """SR per table texture, Wilson 95 % intervals."""
     from roboview_data.variation.factors import FACTORS
 
-    _bars(layouts, "table_texture", path, "Success rate by table texture", list(FACTORS["table_texture"].values))
+    _bars(
+        layouts, "table_texture", path, "Success rate by table texture", list(FACTORS["table_texture"].values)
+    )
 
 
 def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title: str) -> None:
@@ -302,12 +345,18 @@ def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title:
         sr = np.array([s["sr"] for _, s in items])
         n = np.array([s["n_episodes"] for _, s in items], dtype=float)
         err = _wilson_err([s for _, s in items])
-        line = ax.errorbar(x, sr, yerr=err, marker=_MARKERS[i % len(_MARKERS)], ls="none", capsize=3, label=policy)
+        line = ax.errorbar(
+            x, sr, yerr=err, marker=_MARKERS[i % len(_MARKERS)], ls="none", capsize=3, label=policy
+        )
         trend = logistic_trend(x, np.round(sr * n), n)
         if trend is not None:
             fitted, slope, p = trend
-            ax.plot(np.linspace(x.min(), x.max(), 50), fitted, color=line[0].get_color(),
-                    label=f"{policy}: logistic trend, slope {slope:+.2f}/unit, p {p:.2g}")
+            ax.plot(
+                np.linspace(x.min(), x.max(), 50),
+                fitted,
+                color=line[0].get_color(),
+                label=f"{policy}: logistic trend, slope {slope:+.2f}/unit, p {p:.2g}",
+            )
     ax.set(xlabel=xlabel, ylabel="success rate", ylim=(-0.05, 1.05), title=title)
     ax.legend(fontsize=8)
     _save(fig, path)
@@ -315,7 +364,9 @@ def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title:
 
 def plot_distractors(layouts: Layouts, path: Path) -> None:
     """Dose-response: SR against the number of distractors, with a fitted logistic trend."""
-    _dose_response(layouts, "distractors", path, "distractors on the table", "Success rate vs distractor count")
+    _dose_response(
+        layouts, "distractors", path, "distractors on the table", "Success rate vs distractor count"
+    )
 
 
 def plot_object_size(layouts: Layouts, path: Path) -> None:
@@ -347,7 +398,9 @@ def _task_view(layouts: Layouts, task: str) -> Layouts:
     for policy, layout in layouts.items():
         view[policy] = dict(layout)
         for key in ("splits", "interactions"):
-            view[policy][key] = {split_task(s)[1]: v for s, v in layout.get(key, {}).items() if split_task(s)[0] == task}
+            view[policy][key] = {
+                split_task(s)[1]: v for s, v in layout.get(key, {}).items() if split_task(s)[0] == task
+            }
     return view
 
 
@@ -355,8 +408,15 @@ def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
     """Draw every figure whose split is present, per task (another task's files are prefixed with its
     name: push_sr_distractors.png); file name → None if written, else the reason."""
     outcome: dict[str, str | None] = {}
-    tasks = sorted({split_task(s)[0] for layout in layouts.values() for key in ("splits", "interactions")
-                    for s in layout.get(key, {})} - {DEFAULT_TASK})
+    tasks = sorted(
+        {
+            split_task(s)[0]
+            for layout in layouts.values()
+            for key in ("splits", "interactions")
+            for s in layout.get(key, {})
+        }
+        - {DEFAULT_TASK}
+    )
     for task in [DEFAULT_TASK, *tasks]:
         view, prefix = _task_view(layouts, task), "" if task == DEFAULT_TASK else f"{task}_"
         for name, (split, key, draw) in PLOTS.items():

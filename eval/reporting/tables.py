@@ -71,7 +71,7 @@ class Table:
         return [c.heading for c in self.columns]
 
     def legend(self) -> str:
-        """"heading: meaning" of every column that has one, as one sentence list."""
+        """ "heading: meaning" of every column that has one, as one sentence list."""
         return "; ".join(f"{c.heading}: {c.note}" for c in self.columns if c.note) + "."
 
     def stacked(self, heading: str, groups: Sequence[tuple[str, Table]]) -> Table:
@@ -86,6 +86,7 @@ class Table:
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     """A Markdown pipe table (then a blank line) of cells that are Markdown already."""
+
     def line(cells: Sequence[str]) -> str:
         return "| " + " | ".join(cells) + " |"
 
@@ -122,14 +123,24 @@ def _html_cell(cell: Cell) -> str:
 def to_html(table: Table) -> str:
     """The table as report.html prints it: each heading's meaning as its tooltip, numeric columns
     right-aligned."""
-    head = "".join(f'<th title="{_e(c.note)}">{_e(c.heading)}</th>' if c.note else f"<th>{_e(c.heading)}</th>"
-                   for c in table.columns)
-    body = "".join("<tr>" + "".join(f"<td{' class=num' if col.numeric else ''}>{_html_cell(cell)}</td>"
-                                    for col, cell in zip(table.columns, row)) + "</tr>" for row in table.rows)
+    head = "".join(
+        f'<th title="{_e(c.note)}">{_e(c.heading)}</th>' if c.note else f"<th>{_e(c.heading)}</th>"
+        for c in table.columns
+    )
+    body = "".join(
+        "<tr>"
+        + "".join(
+            f"<td{' class=num' if col.numeric else ''}>{_html_cell(cell)}</td>"
+            for col, cell in zip(table.columns, row)
+        )
+        + "</tr>"
+        for row in table.rows
+    )
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
 # -- per split: Table 1 and the page's split blocks --------------------------------------------------
+
 
 def verdict(m: dict[str, Any]) -> Cell:
     """What the split's test says (`bias_status`): bias with its p, no bias detected, or not testable and
@@ -144,31 +155,58 @@ def verdict(m: dict[str, Any]) -> Cell:
 
 POLICY = Column("Policy", "policy", lambda row: row[0], numeric=False)
 SPLIT_COLUMNS: tuple[Column, ...] = (
-    Column("SR [95 % CI]", "sr", lambda row: pct(row[1]["sr"]) + pct_ci(row[1]["sr_ci95"]),
-           "success rate, successes / episodes of the split, ×100, with its Wilson 95 % interval"),
-    Column("CV", "cv", lambda row: pct(row[1]["cv"]),
-           "the paper's Bias Coefficient, mean over contexts of σ_v SR(v,c) / (μ_v SR(v,c) + ε), ×100; "
-           "a context where everything failed enters as 0; N/A: every episode failed"),
-    Column("noise floor", "cv_null", lambda row: pct(row[1]["cv_null"]),
-           "the CV this table shows when the value does not matter (value labels permuted within context and "
-           "repeat), ×100"),
-    Column("cv_excess", "cv_excess", lambda row: pct(row[1]["cv_excess"]),
-           "√max(0, CV² − noise floor²), the bias beyond binomial noise, ×100: rank policies on it, not on "
-           "CV; bold: the lowest, where it is significantly lower than the next policy's (paired test, "
-           "p < 0.05)"),
-    Column("p", "p_value", lambda row: p_fmt(row[1]["p_value"], row[1].get("p_value_at_floor")),
-           "likelihood-ratio test of a binomial GLM value + context against context (permutation-calibrated "
-           "where cells are sparse); N/A: no context holds both outcomes"),
+    Column(
+        "SR [95 % CI]",
+        "sr",
+        lambda row: pct(row[1]["sr"]) + pct_ci(row[1]["sr_ci95"]),
+        "success rate, successes / episodes of the split, ×100, with its Wilson 95 % interval",
+    ),
+    Column(
+        "CV",
+        "cv",
+        lambda row: pct(row[1]["cv"]),
+        "the paper's Bias Coefficient, mean over contexts of σ_v SR(v,c) / (μ_v SR(v,c) + ε), ×100; "
+        "a context where everything failed enters as 0; N/A: every episode failed",
+    ),
+    Column(
+        "noise floor",
+        "cv_null",
+        lambda row: pct(row[1]["cv_null"]),
+        "the CV this table shows when the value does not matter (value labels permuted within context and "
+        "repeat), ×100",
+    ),
+    Column(
+        "cv_excess",
+        "cv_excess",
+        lambda row: pct(row[1]["cv_excess"]),
+        "√max(0, CV² − noise floor²), the bias beyond binomial noise, ×100: rank policies on it, not on "
+        "CV; bold: the lowest, where it is significantly lower than the next policy's (paired test, "
+        "p < 0.05)",
+    ),
+    Column(
+        "p",
+        "p_value",
+        lambda row: p_fmt(row[1]["p_value"], row[1].get("p_value_at_floor")),
+        "likelihood-ratio test of a binomial GLM value + context against context (permutation-calibrated "
+        "where cells are sparse); N/A: no context holds both outcomes",
+    ),
     Column("episodes", "n_episodes", lambda row: str(row[1]["n_episodes"]), "episodes counted"),
-    Column("verdict", None, lambda row: verdict(row[1]),
-           "bias where p < 0.05; not testable where every episode failed or succeeded, or too few ran",
-           numeric=False),
+    Column(
+        "verdict",
+        None,
+        lambda row: verdict(row[1]),
+        "bias where p < 0.05; not testable where every episode failed or succeeded, or too few ran",
+        numeric=False,
+    ),
 )
 
 
 def _significant_pairs(metrics: dict[str, Any], split: str) -> dict[frozenset[str], float | None]:
-    return {frozenset(c["policies"]): c["p_cv_excess"]
-            for c in metrics.get("comparisons", []) if c["split"] == split}
+    return {
+        frozenset(c["policies"]): c["p_cv_excess"]
+        for c in metrics.get("comparisons", [])
+        if c["split"] == split
+    }
 
 
 def _best(metrics: dict[str, Any], split: str, values: dict[str, float | None]) -> str | None:
@@ -197,6 +235,7 @@ def split_table(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -
 
 # -- per policy: the summary ----------------------------------------------------------------------
 
+
 def _splits_by_status(layout: dict[str, Any], wanted: str) -> list[str]:
     status = {s: bias_status(m) for s, m in layout["splits"].items()}
     return [f"{s} ({why})" if why else s for s, (v, why) in status.items() if v == wanted]
@@ -204,16 +243,35 @@ def _splits_by_status(layout: dict[str, Any], wanted: str) -> list[str]:
 
 SUMMARY_COLUMNS: tuple[Column, ...] = (
     Column("Policy", "policy", lambda row: policy_label(row[0]), numeric=False),
-    *(Column(f"Average {label}", key, lambda row, key=key: pct((row[1].get("average") or {}).get(key)),
-             f"mean {label} over the policy's single-factor splits, ×100")
-      for key, label in (("sr", "SR"), ("cv", "CV"), ("cv_excess", "cv_excess"))),
-    Column("Splits with bias (p < 0.05)", None,
-           lambda row: ", ".join(_splits_by_status(row[1], "bias")) or "none", numeric=False),
-    Column("No bias detected", None,
-           lambda row: ", ".join(_splits_by_status(row[1], "no bias detected")) or "—", numeric=False),
-    Column("Not testable", None, lambda row: ", ".join(_splits_by_status(row[1], "not testable")) or "—",
-           "every episode failed or succeeded, or too few ran: a policy that fails everything is not called "
-           "unbiased", numeric=False),
+    *(
+        Column(
+            f"Average {label}",
+            key,
+            lambda row, key=key: pct((row[1].get("average") or {}).get(key)),
+            f"mean {label} over the policy's single-factor splits, ×100",
+        )
+        for key, label in (("sr", "SR"), ("cv", "CV"), ("cv_excess", "cv_excess"))
+    ),
+    Column(
+        "Splits with bias (p < 0.05)",
+        None,
+        lambda row: ", ".join(_splits_by_status(row[1], "bias")) or "none",
+        numeric=False,
+    ),
+    Column(
+        "No bias detected",
+        None,
+        lambda row: ", ".join(_splits_by_status(row[1], "no bias detected")) or "—",
+        numeric=False,
+    ),
+    Column(
+        "Not testable",
+        None,
+        lambda row: ", ".join(_splits_by_status(row[1], "not testable")) or "—",
+        "every episode failed or succeeded, or too few ran: a policy that fails everything is not called "
+        "unbiased",
+        numeric=False,
+    ),
 )
 
 
@@ -229,9 +287,19 @@ VIDEO_COLUMNS: tuple[Column, ...] = (
     Column("Policy", "policy", lambda row: row[0], numeric=False),
     Column("Value", "value", lambda row: Cell(row[1], code=True), numeric=False),
     Column("SR", "sr", lambda row: pct(row[2])),
-    Column("Videos (instance, repeat, camera; ✗ failed)", "video", lambda row: Cell("", links=tuple(
-        (f"{e['label']} {camera}", path) for e in row[3] for camera, path in zip(e["cameras"], e["paths"]))),
-        numeric=False),
+    Column(
+        "Videos (instance, repeat, camera; ✗ failed)",
+        "video",
+        lambda row: Cell(
+            "",
+            links=tuple(
+                (f"{e['label']} {camera}", path)
+                for e in row[3]
+                for camera, path in zip(e["cameras"], e["paths"])
+            ),
+        ),
+        numeric=False,
+    ),
 )
 
 

@@ -18,7 +18,13 @@ import pandas as pd
 
 from roboview_data.variation.colors import CATEGORIES, COLORS
 
-VLM_COLUMNS = ("vlm_requests", "vlm_cache_hits", "vlm_prompt_tokens", "vlm_completion_tokens", "vlm_latency_s")
+VLM_COLUMNS = (
+    "vlm_requests",
+    "vlm_cache_hits",
+    "vlm_prompt_tokens",
+    "vlm_completion_tokens",
+    "vlm_latency_s",
+)
 COLOR_WORDS = frozenset([*COLORS, *CATEGORIES, "grey"])
 
 
@@ -51,8 +57,11 @@ def describe_agents(episodes: pd.DataFrame) -> dict[str, Any]:
         present = [c for c in VLM_COLUMNS if c in rows and rows[c].notna().any()]
         if present:
             sums = {c.removeprefix("vlm_"): round(float(rows[c].fillna(0).sum()), 3) for c in present}
-            entry["vlm"] = {**sums, "episodes": len(rows),
-                            "requests_per_episode": round(sums.get("requests", 0) / len(rows), 3)}
+            entry["vlm"] = {
+                **sums,
+                "episodes": len(rows),
+                "requests_per_episode": round(sums.get("requests", 0) / len(rows), 3),
+            }
         if "moka_object_description" in rows and rows["moka_object_description"].notna().any():
             texts = rows["moka_object_description"].dropna().astype(str)
             nouns = Counter(head_noun(t) for t in texts)
@@ -66,8 +75,11 @@ def describe_agents(episodes: pd.DataFrame) -> dict[str, Any]:
         if "sgl_instruction" in rows and rows["sgl_instruction"].notna().any():
             grounded = rows[rows["sgl_instruction"].notna()]
             attributes = Counter(a for a in grounded["sgl_attribute"].fillna("") if a)
-            entry["sgl"] = {"n": len(grounded), "ambiguous": round(float(grounded["sgl_ambiguous"].astype(bool).mean()), 4),
-                            "attributes": {k: round(v / len(grounded), 4) for k, v in attributes.most_common()}}
+            entry["sgl"] = {
+                "n": len(grounded),
+                "ambiguous": round(float(grounded["sgl_ambiguous"].astype(bool).mean()), 4),
+                "attributes": {k: round(v / len(grounded), 4) for k, v in attributes.most_common()},
+            }
         if entry:
             out[str(policy)] = entry
     return out
@@ -79,22 +91,31 @@ def agents_markdown(agents: dict[str, Any]) -> list[str]:
     lines = ["## VLM agents", ""]
     usage = {p: a["vlm"] for p, a in agents.items() if "vlm" in a}
     if usage:
-        lines += ["| policy | episodes | requests | per episode | cache hits | prompt tokens | completion tokens | "
-                  "seconds waiting |", "|---|---|---|---|---|---|---|---|"]
+        lines += [
+            "| policy | episodes | requests | per episode | cache hits | prompt tokens | completion tokens | "
+            "seconds waiting |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         for p, u in usage.items():
-            lines.append(f"| {p} | {u['episodes']} | {u.get('requests', 0):g} | {u['requests_per_episode']:g} | "
-                         f"{u.get('cache_hits', 0):g} | {u.get('prompt_tokens', 0):g} | {u.get('completion_tokens', 0):g} | "
-                         f"{u.get('latency_s', 0):.1f} |")
+            lines.append(
+                f"| {p} | {u['episodes']} | {u.get('requests', 0):g} | {u['requests_per_episode']:g} | "
+                f"{u.get('cache_hits', 0):g} | {u.get('prompt_tokens', 0):g} | {u.get('completion_tokens', 0):g} | "
+                f"{u.get('latency_s', 0):.1f} |"
+            )
         lines.append("")
     for p, a in agents.items():
         d = a.get("descriptions")
         if d:
             nouns = ", ".join(f"`{k}` {v:.1%}" for k, v in list(d["head_nouns"].items())[:6])
             colors = ", ".join(f"`{k}` {v:.1%}" for k, v in list(d["color_words"].items())[:8])
-            lines += [f"- {p}: object descriptions ({d['n']}) end in {nouns}; colour words {colors or 'none'}; "
-                      f"{d['without_color']:.1%} name no colour."]
+            lines += [
+                f"- {p}: object descriptions ({d['n']}) end in {nouns}; colour words {colors or 'none'}; "
+                f"{d['without_color']:.1%} name no colour."
+            ]
         s = a.get("sgl")
         if s:
             attrs = ", ".join(f"{k} {v:.1%}" for k, v in s["attributes"].items()) or "none"
-            lines += [f"- {p}: SGL found {s['ambiguous']:.1%} of {s['n']} instructions ambiguous; attribute chosen: {attrs}."]
+            lines += [
+                f"- {p}: SGL found {s['ambiguous']:.1%} of {s['n']} instructions ambiguous; attribute chosen: {attrs}."
+            ]
     return [*lines, ""]

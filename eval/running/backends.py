@@ -64,15 +64,22 @@ def _retry(work: WorkItem, tries: dict, max_retries: int, why: str) -> bool:
     `max_retries` times (the episode is then recorded as ended by infrastructure: `_lost`)."""
     tries[work.key] = tries.get(work.key, 0) + 1
     if tries[work.key] > max_retries:
-        log.error("worker died running %s repeat %d (%s) %d times: recorded as an infrastructure error", *work.key,
-                  why, tries[work.key])
+        log.error(
+            "worker died running %s repeat %d (%s) %d times: recorded as an infrastructure error",
+            *work.key,
+            why,
+            tries[work.key],
+        )
         return False
-    log.warning("worker died running %s repeat %d (%s); retry %d/%d", *work.key, why, tries[work.key], max_retries)
+    log.warning(
+        "worker died running %s repeat %d (%s); retry %d/%d", *work.key, why, tries[work.key], max_retries
+    )
     return True
 
 
-def _lost(spec: WorkerSpec, chunk: tuple[WorkItem, ...], tries: dict,
-          why: str) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+def _lost(
+    spec: WorkerSpec, chunk: tuple[WorkItem, ...], tries: dict, why: str
+) -> Iterator[tuple[WorkItem, EpisodeResult]]:
     """infra_error rows for the episodes of a chunk whose worker kept dying."""
     reason = f"infrastructure error: the worker died {tries[chunk[0].key]} times running this episode ({why})"
     for work in chunk:
@@ -83,19 +90,27 @@ def chunks(spec: WorkerSpec, items: Iterable[WorkItem]) -> list[tuple[WorkItem, 
     """What one worker call runs: one episode, or with K envs per worker 2K (slots refill as episodes end)."""
     items = list(items)
     size = 1 if spec.envs_per_worker == 1 else 2 * spec.envs_per_worker
-    return [tuple(items[i:i + size]) for i in range(0, len(items), size)]
+    return [tuple(items[i : i + size]) for i in range(0, len(items), size)]
 
 
-def run_local(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int,
-              max_retries: int = 2) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+def run_local(
+    spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, max_retries: int = 2
+) -> Iterator[tuple[WorkItem, EpisodeResult]]:
     queue = chunks(spec, items)[::-1]
     tries: dict = {}
     while queue:
         # With a policy server: one server per pool (a replaced pool gets a fresh one, worker ids and all).
-        server = (PolicyServer(spec.policy, spec.task, spec.image_size, num_workers, spec.envs_per_worker)
-                  if spec.policy_server else None)
-        pool = WorkerPool(num_workers, EvalWorker, (spec if server is None else replace(spec, server=server.handle),),
-                          method="run_batch")
+        server = (
+            PolicyServer(spec.policy, spec.task, spec.image_size, num_workers, spec.envs_per_worker)
+            if spec.policy_server
+            else None
+        )
+        pool = WorkerPool(
+            num_workers,
+            EvalWorker,
+            (spec if server is None else replace(spec, server=server.handle),),
+            method="run_batch",
+        )
         in_flight: dict = {}
         broken = False
         try:
@@ -137,9 +152,15 @@ def _gcs_address(address: str | None) -> str | None:
     return found or (address if address and ":" in address and not address.startswith("ray://") else None)
 
 
-def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, address: str | None = None,
-            max_retries: int = 2, stats: dict | None = None,
-            place_timeout_s: float = 60.0) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+def run_ray(
+    spec: WorkerSpec,
+    items: Iterable[WorkItem],
+    num_workers: int,
+    address: str | None = None,
+    max_retries: int = 2,
+    stats: dict | None = None,
+    place_timeout_s: float = 60.0,
+) -> Iterator[tuple[WorkItem, EpisodeResult]]:
     """Episodes on Ray actors (`num_workers` of them, spread over the cluster's nodes); `stats`, when given,
     receives the cluster address, episodes per node id and the actors lost. A replacement actor that no node
     takes within `place_timeout_s` (the cluster lost the CPU it ran on) is dropped: the run goes on with fewer."""
@@ -158,18 +179,27 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
             try:
                 ray.init(address=address, log_to_driver=False, runtime_env=env)
             except ConnectionError as exc:
-                raise ClusterLost(f"no Ray cluster answers at --eval.ray_address={address} ({exc}); start one "
-                                  "(ray start --head) or drop the flag to run a local Ray instance") from None
+                raise ClusterLost(
+                    f"no Ray cluster answers at --eval.ray_address={address} ({exc}); start one "
+                    "(ray start --head) or drop the flag to run a local Ray instance"
+                ) from None
         else:
             # "local": a new instance of our own, never a cluster `ray start` left on this machine.
-            ray.init(address="local", num_cpus=num_workers, include_dashboard=False, log_to_driver=False,
-                     runtime_env=env)
+            ray.init(
+                address="local",
+                num_cpus=num_workers,
+                include_dashboard=False,
+                log_to_driver=False,
+                runtime_env=env,
+            )
     watch = None
     if address and (gcs := _gcs_address(address)):
         watch = _HeadWatch(gcs)
         watch.start()
     stats = stats if stats is not None else {}
-    stats.setdefault("nodes", {})  # accumulated over the calls of one run (adaptive rounds call once per round)
+    stats.setdefault(
+        "nodes", {}
+    )  # accumulated over the calls of one run (adaptive rounds call once per round)
     stats.setdefault("lost_actors", 0)
     stats["address"] = address or "local"
     actor_cls = ray.remote(num_cpus=1)(EvalWorker).options(scheduling_strategy="SPREAD")
@@ -192,8 +222,10 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
                     del starting[slot]
                     idle.append(slot)
                 elif time.monotonic() - since > place_timeout_s:
-                    log.warning("no Ray node took a replacement worker in %.0f s: continuing with fewer workers",
-                                place_timeout_s)
+                    log.warning(
+                        "no Ray node took a replacement worker in %.0f s: continuing with fewer workers",
+                        place_timeout_s,
+                    )
                     ray.kill(actors.pop(slot)[0])
                     del starting[slot]
             while queue and idle:
@@ -201,14 +233,18 @@ def run_ray(spec: WorkerSpec, items: Iterable[WorkItem], num_workers: int, addre
                 work = queue.pop()
                 in_flight[actors[slot][0].run_batch.remote(list(work))] = (slot, work)
             if not in_flight and not starting:
-                raise ClusterLost(f"every Ray worker was lost and no node took a new one; {sum(map(len, queue))} "
-                                  "episode(s) left: rerun the same command on a cluster to finish them")
+                raise ClusterLost(
+                    f"every Ray worker was lost and no node took a new one; {sum(map(len, queue))} "
+                    "episode(s) left: rerun the same command on a cluster to finish them"
+                )
             ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0) if in_flight else ([], [])
             if watch is not None and watch.lost:
                 lost = True
-                raise ClusterLost(f"the Ray head at {watch.target[0]}:{watch.target[1]} stopped answering; the "
-                                  "episodes already written are kept: start a cluster and rerun the same command "
-                                  "(with its --eval.ray_address) to resume")
+                raise ClusterLost(
+                    f"the Ray head at {watch.target[0]}:{watch.target[1]} stopped answering; the "
+                    "episodes already written are kept: start a cluster and rerun the same command "
+                    "(with its --eval.ray_address) to resume"
+                )
             if not ready:
                 if not in_flight:
                     time.sleep(0.5)

@@ -18,7 +18,9 @@ from roboview_data.folders import folder_problem
 PARQUET_MAGIC = b"PAR1"
 RESULTS_COLUMNS = ("instance_id", "repeat", "split", "value", "success")  # columns every results table holds
 EXPECTED_FILE = "expected the episodes.parquet that pipelines.evaluate writes into its --output_dir"
-EXPECTED_FOLDER = "expected a results folder (pipelines.evaluate's --output_dir, holding run.json and episodes.parquet)"
+EXPECTED_FOLDER = (
+    "expected a results folder (pipelines.evaluate's --output_dir, holding run.json and episodes.parquet)"
+)
 
 
 def benchmark_root(path: Path) -> Path | None:
@@ -47,8 +49,10 @@ def is_parquet(path: Path) -> bool:
 
 
 def _benchmark_hint(root: Path) -> str:
-    return (f"evaluate a policy on it (python -m pipelines.evaluate --benchmark.path={root} --policy.type=NAME "
-            "--output_dir=OUT) and pass OUT/episodes.parquet")
+    return (
+        f"evaluate a policy on it (python -m pipelines.evaluate --benchmark.path={root} --policy.type=NAME "
+        "--output_dir=OUT) and pass OUT/episodes.parquet"
+    )
 
 
 def results_file(path: str | Path) -> Path:
@@ -58,8 +62,10 @@ def results_file(path: str | Path) -> Path:
     if is_results_folder(path):
         file = path / PARQUET
         if not file.is_file():
-            raise ValueError(f"{path} is a results folder without {PARQUET} yet (it is written while "
-                             "pipelines.evaluate runs and when it ends); rerun the same evaluate command to finish it")
+            raise ValueError(
+                f"{path} is a results folder without {PARQUET} yet (it is written while "
+                "pipelines.evaluate runs and when it ends); rerun the same evaluate command to finish it"
+            )
         path = file
     problem = results_file_problem(path)
     if problem:
@@ -78,18 +84,31 @@ def results_file_problem(path: Path) -> str | None:
             return f"{path} is a benchmark folder (pipelines.build_benchmark), not results: {_benchmark_hint(path)}"
         return f"{path} is a folder that holds no results ({RUN_FILE}, {PARQUET}); {EXPECTED_FILE}"
     if root is not None:
-        return (f"{path} is a table of the benchmark {root} (its instances), not results: {_benchmark_hint(root)}")
+        return (
+            f"{path} is a table of the benchmark {root} (its instances), not results: {_benchmark_hint(root)}"
+        )
     if path.name == JOURNAL or (path.suffix == ".jsonl" and is_results_folder(path.parent)):
         finished = path.parent / PARQUET
-        return (f"{path} is the journal pipelines.evaluate appends to while it runs, not the results table: pass "
-                + (f"{finished}" if finished.is_file() else f"{finished} (not written yet: rerun the same evaluate "
-                                                             "command to finish the run)"))
+        return (
+            f"{path} is the journal pipelines.evaluate appends to while it runs, not the results table: pass "
+            + (
+                f"{finished}"
+                if finished.is_file()
+                else f"{finished} (not written yet: rerun the same evaluate command to finish the run)"
+            )
+        )
     if not is_parquet(path):
-        kind = {".csv": "a CSV file", ".jsonl": "a JSON-lines file", ".json": "a JSON file",
-                ".parquet": "a file named .parquet whose bytes are not parquet"}.get(path.suffix.lower(),
-                                                                                        "not a parquet file")
-        other = " (another benchmark's per-episode CSV or JSON lines: pipelines.audit)" if path.suffix.lower() in (
-            ".csv", ".jsonl", ".json") else ""
+        kind = {
+            ".csv": "a CSV file",
+            ".jsonl": "a JSON-lines file",
+            ".json": "a JSON file",
+            ".parquet": "a file named .parquet whose bytes are not parquet",
+        }.get(path.suffix.lower(), "not a parquet file")
+        other = (
+            " (another benchmark's per-episode CSV or JSON lines: pipelines.audit)"
+            if path.suffix.lower() in (".csv", ".jsonl", ".json")
+            else ""
+        )
         return f"{path} is {kind}; {EXPECTED_FILE}{other}"
     try:
         schema = pq.read_schema(path)
@@ -98,8 +117,10 @@ def results_file_problem(path: Path) -> str | None:
     if (schema.metadata or {}).get(FORMAT_KEY) is None:
         missing = [c for c in RESULTS_COLUMNS if c not in schema.names]
         if missing:
-            return (f"{path} is a parquet file but not RoboView results (no column(s) {', '.join(missing)}); "
-                    f"{EXPECTED_FILE}")
+            return (
+                f"{path} is a parquet file but not RoboView results (no column(s) {', '.join(missing)}); "
+                f"{EXPECTED_FILE}"
+            )
     return None
 
 
@@ -128,7 +149,9 @@ def results_folder_problem(path: Path, benchmark_hint: str = "") -> str | None:
 
 def benchmark_folder_problem(path: Path) -> str | None:
     """Why `path` is not a benchmark folder, in one line; None when it holds a benchmark manifest."""
-    expected = "expected a benchmark folder (pipelines.build_benchmark's --output_dir, holding benchmark.json)"
+    expected = (
+        "expected a benchmark folder (pipelines.build_benchmark's --output_dir, holding benchmark.json)"
+    )
     root = benchmark_root(path.parent) if path.is_file() else None
     if not (path / MANIFEST).is_file() and is_results_folder(path):
         return f"{path} is a results folder (pipelines.evaluate), not a benchmark: verify it with --results={path}"

@@ -51,10 +51,15 @@ def components(env, seed: int) -> dict[str, str]:
     instance = env.instance
     position, quat = env.object_pose()
     quat = np.asarray(quat) * (1 if quat[0] >= 0 else -1)  # q and -q are one orientation
-    out = {"instruction": _digest(env.instruction), "robot": _digest(env.state()),
-           "object_xy": _digest(position[:2]), "object_height": _digest(position[2:]),
-           "object_rotation": _digest(quat), "seed": _digest(int(seed)),
-           "context": _digest({k: v for k, v in instance.factors if k not in instance.varied})}
+    out = {
+        "instruction": _digest(env.instruction),
+        "robot": _digest(env.state()),
+        "object_xy": _digest(position[:2]),
+        "object_height": _digest(position[2:]),
+        "object_rotation": _digest(quat),
+        "seed": _digest(int(seed)),
+        "context": _digest({k: v for k, v in instance.factors if k not in instance.varied}),
+    }
     for name in sorted(env.scene.ids.cameras):
         pose = env.scene.camera_pose(name)
         out[f"camera:{name}"] = _digest([*pose.pos, *pose.quat, pose.fovy])
@@ -83,8 +88,12 @@ def verify(episodes: pd.DataFrame) -> dict[str, dict[str, Any]]:
     for split, rows in episodes.groupby("split", sort=False):
         rows = rows.reset_index(drop=True)  # concatenated results repeat index labels
         if COLUMN not in rows or rows[COLUMN].isna().any():
-            out[str(split)] = {"recorded": False, "blocks": int(rows.groupby(list(BLOCK)).ngroups),
-                               "verified": 0, "violations": []}
+            out[str(split)] = {
+                "recorded": False,
+                "blocks": int(rows.groupby(list(BLOCK)).ngroups),
+                "verified": 0,
+                "violations": [],
+            }
             continue
         varied = _varied(rows)
         free = allowed_to_differ(varied)
@@ -97,10 +106,22 @@ def verify(episodes: pd.DataFrame) -> dict[str, dict[str, Any]]:
             keys = sorted(set().union(*certs.map(set)) - free)
             differing = [k for k in keys if len({c.get(k) for c in certs}) > 1]
             if differing:
-                violations.append({"context_id": str(context), "repeat": int(repeat), "components": differing,
-                                   "values": sorted(map(str, rows.loc[index, "value"]))})
-        out[str(split)] = {"recorded": True, "blocks": blocks, "verified": blocks - len(violations),
-                           "violations": violations, "varied": list(varied), "allowed_to_differ": sorted(free)}
+                violations.append(
+                    {
+                        "context_id": str(context),
+                        "repeat": int(repeat),
+                        "components": differing,
+                        "values": sorted(map(str, rows.loc[index, "value"])),
+                    }
+                )
+        out[str(split)] = {
+            "recorded": True,
+            "blocks": blocks,
+            "verified": blocks - len(violations),
+            "violations": violations,
+            "varied": list(varied),
+            "allowed_to_differ": sorted(free),
+        }
     return out
 
 
@@ -123,7 +144,13 @@ def drop_violations(episodes: pd.DataFrame, report: dict[str, dict[str, Any]]) -
         block = list(zip(episodes["context_id"].astype(str), episodes["repeat"].astype(int)))
         drop = in_split & np.array([b in bad for b in block])
         keep &= ~drop
-        log.warning("split %s: %d of %d blocks failed the isolation certificate (%s differ across values); "
-                    "their %d episodes are left out of the statistics", split, len(bad), result["blocks"],
-                    ", ".join(sorted({c for v in result["violations"] for c in v["components"]})), int(drop.sum()))
+        log.warning(
+            "split %s: %d of %d blocks failed the isolation certificate (%s differ across values); "
+            "their %d episodes are left out of the statistics",
+            split,
+            len(bad),
+            result["blocks"],
+            ", ".join(sorted({c for v in result["violations"] for c in v["components"]})),
+            int(drop.sum()),
+        )
     return episodes[keep]

@@ -68,8 +68,10 @@ class RemotePolicy:
         try:
             status, payload = self._reply.get(timeout=REPLY_TIMEOUT_S)
         except queue.Empty:
-            raise RuntimeError(f"policy server did not answer within {REPLY_TIMEOUT_S:.0f} s (did it fail to load "
-                               "the model? its error is in the log above)") from None
+            raise RuntimeError(
+                f"policy server did not answer within {REPLY_TIMEOUT_S:.0f} s (did it fail to load "
+                "the model? its error is in the log above)"
+            ) from None
         if status == "error":
             raise RuntimeError(f"policy server: {payload}")
         return payload
@@ -101,8 +103,16 @@ class RemotePolicy:
         pass
 
 
-def serve(config: PolicyConfig, task: str, cameras: tuple[str, ...], image_size: int, slots: int,
-          requests: mp.Queue, replies: list, num_workers: int) -> None:
+def serve(
+    config: PolicyConfig,
+    task: str,
+    cameras: tuple[str, ...],
+    image_size: int,
+    slots: int,
+    requests: mp.Queue,
+    replies: list,
+    num_workers: int,
+) -> None:
     """The server process: build the batched policy once, then answer requests until ("stop",)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     policy = config.build_batched(AgentView.of_task(task, cameras, image_size), slots)
@@ -131,7 +141,9 @@ def serve(config: PolicyConfig, task: str, cameras: tuple[str, ...], image_size:
             except Exception as exc:  # the worker records it as the episode's failure
                 replies[worker].put(("error", f"{type(exc).__name__}: {exc}"))
         if chunk_requests:
-            merged = {slot: obs for _, _, observations in chunk_requests for slot, obs in observations.items()}
+            merged = {
+                slot: obs for _, _, observations in chunk_requests for slot, obs in observations.items()
+            }
             try:
                 chunks = policy.predict_chunks(merged)
                 for _, worker, observations in chunk_requests:
@@ -146,7 +158,9 @@ class PolicyServer:
     """Start the server process for `num_workers` workers of `envs_per_worker` envs each; `handle` goes into
     every worker's spec."""
 
-    def __init__(self, config: PolicyConfig, task: str, image_size: int, num_workers: int, envs_per_worker: int):
+    def __init__(
+        self, config: PolicyConfig, task: str, image_size: int, num_workers: int, envs_per_worker: int
+    ):
         ctx = mp.get_context("spawn")
         self.requests = ctx.Queue()
         self.replies = [ctx.Queue() for _ in range(num_workers)]
@@ -154,9 +168,21 @@ class PolicyServer:
         for worker in range(num_workers):
             self.ids.put(worker)
         self.handle = ServerHandle(self.requests, self.replies, self.ids, envs_per_worker)
-        self.process = ctx.Process(target=serve, name="roboview-policy-server", daemon=True,
-                                   args=(config, task, config.observed_cameras(), image_size, num_workers * envs_per_worker,
-                                         self.requests, self.replies, num_workers))
+        self.process = ctx.Process(
+            target=serve,
+            name="roboview-policy-server",
+            daemon=True,
+            args=(
+                config,
+                task,
+                config.observed_cameras(),
+                image_size,
+                num_workers * envs_per_worker,
+                self.requests,
+                self.replies,
+                num_workers,
+            ),
+        )
         self.process.start()
 
     def close(self) -> None:

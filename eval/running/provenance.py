@@ -14,7 +14,7 @@ import os
 import platform
 import subprocess
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 from policies.checkpoints import checkpoint_dir
@@ -22,12 +22,14 @@ from roboview_data.files import files_sha256
 
 FILE = "provenance.json"
 PACKAGES = ("roboview", "lerobot", "mujoco", "torch", "gymnasium", "datasets", "numpy", "openai")
-SEED_RULE = ("episode_seed = first 8 bytes of SHA-256(f'{context_id}:{repeat}') mod 2**31 (common random numbers: "
-             "every value of a context runs repeat r with the same seed)")
+SEED_RULE = (
+    "episode_seed = first 8 bytes of SHA-256(f'{context_id}:{repeat}') mod 2**31 (common random numbers: "
+    "every value of a context runs repeat r with the same seed)"
+)
 
 
 def now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def package_versions() -> dict[str, str | None]:
@@ -43,10 +45,19 @@ def package_versions() -> dict[str, str | None]:
 def git_commit(root: Path = Path(__file__).resolve().parents[1]) -> str | None:
     """The roboview checkout's commit (with `+dirty` when it has uncommitted changes); None outside git."""
     try:
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        commit = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return None
     return commit + ("+dirty" if dirty else "")
@@ -63,8 +74,14 @@ def cpu_model() -> str:
 
 
 def machine() -> dict:
-    info = {"hostname": platform.node(), "platform": platform.platform(), "python": platform.python_version(),
-            "cpu": cpu_model(), "cpu_count": os.cpu_count(), "gpu": None}
+    info = {
+        "hostname": platform.node(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "gpu": None,
+    }
     torch = sys.modules.get("torch")  # only when a torch policy is in play: importing torch costs seconds
     if torch is not None and torch.cuda.is_available():
         info["gpu"] = [torch.cuda.get_device_name(i) for i in range(torch.cuda.device_count())]
@@ -84,15 +101,26 @@ def checkpoint_info(path: str | None) -> dict | None:
         return None
     root = checkpoint_dir(path)
     config = root / "config.json"
-    return {"path": str(root.resolve()), "sha256": checkpoint_hash(root),
-            "config": json.loads(config.read_text()) if config.is_file() else None}
+    return {
+        "path": str(root.resolve()),
+        "sha256": checkpoint_hash(root),
+        "config": json.loads(config.read_text()) if config.is_file() else None,
+    }
 
 
 def start_entry(benchmark_version: str, checkpoint: str | None, argv: list[str] | None = None) -> dict:
-    return {"started": now(), "ended": None, "command": " ".join(getattr(sys, "orig_argv", sys.argv) if argv is None else argv),
-            "cwd": os.getcwd(), "roboview_commit": git_commit(), "packages": package_versions(),
-            "benchmark_version": benchmark_version, "checkpoint": checkpoint_info(checkpoint),
-            "seed_rule": SEED_RULE, "machine": machine()}
+    return {
+        "started": now(),
+        "ended": None,
+        "command": " ".join(getattr(sys, "orig_argv", sys.argv) if argv is None else argv),
+        "cwd": os.getcwd(),
+        "roboview_commit": git_commit(),
+        "packages": package_versions(),
+        "benchmark_version": benchmark_version,
+        "checkpoint": checkpoint_info(checkpoint),
+        "seed_rule": SEED_RULE,
+        "machine": machine(),
+    }
 
 
 def record(folder: Path, entry: dict) -> None:

@@ -75,19 +75,34 @@ class RerunLogger:
 
     def log_episode(self, result: EpisodeResult) -> None:
         row = result.row
-        base = (f"episodes/{_safe(row['split'])}/{_safe(row['factor'] + '=' + row['value'])}/"
-                f"{row['instance_id']}/r{row['repeat']}")
+        base = (
+            f"episodes/{_safe(row['split'])}/{_safe(row['factor'] + '=' + row['value'])}/"
+            f"{row['instance_id']}/r{row['repeat']}"
+        )
         rec = self._open()
         facts = "\n".join(f"{name}: {row[name]}" for name in factor_names())
-        rec.log(f"{base}/instance", rr.TextDocument(
-            f"{facts}\nepisode_seed: {row['episode_seed']}\npolicy: {row['policy']}"), static=True)
+        rec.log(
+            f"{base}/instance",
+            rr.TextDocument(f"{facts}\nepisode_seed: {row['episode_seed']}\npolicy: {row['policy']}"),
+            static=True,
+        )
         for step in range(len(result.ee_path)):
             rec.set_time("step", sequence=step)
             for cam, frames in result.frames.items():
-                rec.log(f"{base}/camera/{cam}", rr.EncodedImage(contents=frames[step], media_type="image/jpeg"))
-            rec.log(f"{base}/ee", rr.Points3D(result.ee_path[step:step + 1], radii=0.01, colors=[40, 120, 255]))
-            rec.log(f"{base}/object", rr.Points3D(result.object_path[step:step + 1], radii=0.012,
-                                                  colors=[int(255 * c) for c in row["color_rgb"]]))
+                rec.log(
+                    f"{base}/camera/{cam}", rr.EncodedImage(contents=frames[step], media_type="image/jpeg")
+                )
+            rec.log(
+                f"{base}/ee", rr.Points3D(result.ee_path[step : step + 1], radii=0.01, colors=[40, 120, 255])
+            )
+            rec.log(
+                f"{base}/object",
+                rr.Points3D(
+                    result.object_path[step : step + 1],
+                    radii=0.012,
+                    colors=[int(255 * c) for c in row["color_rgb"]],
+                ),
+            )
         rec.log(f"{base}/ee_path", rr.LineStrips3D([result.ee_path], colors=[40, 120, 255]), static=True)
         rec.log(f"{base}/object_path", rr.LineStrips3D([result.object_path]), static=True)
         rec.set_time("step", sequence=max(len(result.ee_path) - 1, 0))
@@ -102,8 +117,15 @@ class RerunLogger:
             values = sorted(by_value)
             srs = np.array([np.mean(by_value[v]) for v in values])
             self.rec.log(f"summary/{_safe(split)}/sr_by_value", rr.BarChart(srs), static=True)
-            self.rec.log(f"summary/{_safe(split)}/values", rr.TextDocument(
-                "\n".join(f"{i}: {v} — SR {sr:.2f} ({len(by_value[v])} episodes)"
-                          for i, (v, sr) in enumerate(zip(values, srs)))), static=True)
+            self.rec.log(
+                f"summary/{_safe(split)}/values",
+                rr.TextDocument(
+                    "\n".join(
+                        f"{i}: {v} — SR {sr:.2f} ({len(by_value[v])} episodes)"
+                        for i, (v, sr) in enumerate(zip(values, srs))
+                    )
+                ),
+                static=True,
+            )
         self.rec.flush()
         rr.disconnect(recording=self.rec)

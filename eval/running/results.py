@@ -65,8 +65,9 @@ class EpisodeStore:
 
     def _check_and_load(self) -> None:
         out = self.out
-        problem = folder_problem(out, "evaluation", RUN_FILE, "choose a new folder",
-                                 label=f"results folder {out}", writing=True)
+        problem = folder_problem(
+            out, "evaluation", RUN_FILE, "choose a new folder", label=f"results folder {out}", writing=True
+        )
         if problem:
             raise ResultsError(problem)
         run_file = out / RUN_FILE
@@ -76,12 +77,18 @@ class EpisodeStore:
                 raise ResultsError(
                     f"results folder {out} holds results of format {previous.get('results_format', 1)} (episode seeds "
                     f"hashed from instance_id); this version writes format {RESULTS_FORMAT} (seeds shared per "
-                    "context and repeat) and never mixes the two: choose a new folder")
-            diffs = [f"{k}: existing {previous.get(k)!r} vs requested {v!r}"
-                     for k, v in self.run_info.items() if previous.get(k) != v]
+                    "context and repeat) and never mixes the two: choose a new folder"
+                )
+            diffs = [
+                f"{k}: existing {previous.get(k)!r} vs requested {v!r}"
+                for k, v in self.run_info.items()
+                if previous.get(k) != v
+            ]
             if diffs:
-                raise ResultsError(f"results folder {out} holds results of a different run ({'; '.join(diffs)}); "
-                                   "rerun the same command to resume, or choose a new folder")
+                raise ResultsError(
+                    f"results folder {out} holds results of a different run ({'; '.join(diffs)}); "
+                    "rerun the same command to resume, or choose a new folder"
+                )
         out.mkdir(parents=True, exist_ok=True)
         run_file.write_text(json.dumps(self.run_info, indent=2, sort_keys=True))
         journal = out / JOURNAL
@@ -129,9 +136,14 @@ class EpisodeStore:
         # Every row gets every column (a policy's own columns may be missing from some rows, e.g.
         # those journalled before a resume); pyarrow would take the first row's keys only.
         columns = list(dict.fromkeys(k for row in rows for k in row))
-        table = pa.Table.from_pylist([{k: row.get(k) for k in columns} for row in rows]) if rows else pa.table({})
-        meta = {VERSION_KEY.encode(): self.run_info["benchmark_version"].encode(),
-                b"roboview_policy": self.run_info["policy"].encode(), FORMAT_KEY: str(RESULTS_FORMAT).encode()}
+        table = (
+            pa.Table.from_pylist([{k: row.get(k) for k in columns} for row in rows]) if rows else pa.table({})
+        )
+        meta = {
+            VERSION_KEY.encode(): self.run_info["benchmark_version"].encode(),
+            b"roboview_policy": self.run_info["policy"].encode(),
+            FORMAT_KEY: str(RESULTS_FORMAT).encode(),
+        }
         table = table.replace_schema_metadata({**(table.schema.metadata or {}), **meta})
         path = self.out / PARQUET
         tmp = path.with_suffix(".parquet.tmp")
@@ -184,7 +196,8 @@ def check_format(path: str | Path) -> None:
         raise ResultsError(
             f"{path} was written with results format {found}, whose episode seeds hashed instance_id; "
             f"this version reads format {RESULTS_FORMAT} only (seeds shared per context and repeat, the "
-            "pairing its statistics rely on). Re-run pipelines.evaluate into a new output folder")
+            "pairing its statistics rely on). Re-run pipelines.evaluate into a new output folder"
+        )
 
 
 def shard_of(instance_id: str, n: int) -> int:
@@ -206,7 +219,9 @@ def read_journal(folder: Path) -> list[dict]:
     return list(rows.values())
 
 
-def merge_folders(folders: list[Path], out: Path, partial: bool = False) -> tuple[EpisodeStore, dict[str, int]]:
+def merge_folders(
+    folders: list[Path], out: Path, partial: bool = False
+) -> tuple[EpisodeStore, dict[str, int]]:
     """Join the results folders of one sharded run (`--eval.shard=i/N`) into `out`.
 
     Refused, before anything is written: folders of different runs (benchmark version, policy, its options,
@@ -224,14 +239,19 @@ def merge_folders(folders: list[Path], out: Path, partial: bool = False) -> tupl
         infos.append(json.loads(run_file.read_text()))
     base = {k: v for k, v in infos[0].items() if k != "shard"}
     for folder, info in zip(folders[1:], infos[1:]):
-        diffs = [f"{k}: {base.get(k)!r} in {folders[0]} vs {info.get(k)!r}" for k in sorted(set(base) | set(info) - {"shard"})
-                 if k != "shard" and base.get(k) != info.get(k)]
+        diffs = [
+            f"{k}: {base.get(k)!r} in {folders[0]} vs {info.get(k)!r}"
+            for k in sorted(set(base) | set(info) - {"shard"})
+            if k != "shard" and base.get(k) != info.get(k)
+        ]
         if diffs:
             raise ResultsError(f"{folder} is not a shard of the same run as {folders[0]}: {'; '.join(diffs)}")
     shards = [info.get("shard") for info in infos]
     if any(s is None for s in shards):
-        raise ResultsError("only shards of one run merge (folders written with --eval.shard=i/N); "
-                           f"{folders[shards.index(None)]} was not sharded")
+        raise ResultsError(
+            "only shards of one run merge (folders written with --eval.shard=i/N); "
+            f"{folders[shards.index(None)]} was not sharded"
+        )
     counts = {int(s.split("/")[1]) for s in shards}
     if len(counts) > 1:
         raise ResultsError(f"the folders are shards of different counts: {', '.join(sorted(set(shards)))}")
@@ -243,8 +263,10 @@ def merge_folders(folders: list[Path], out: Path, partial: bool = False) -> tupl
         seen[shard] = folder
     missing = [f"{i}/{n}" for i in range(n) if f"{i}/{n}" not in seen]
     if missing and not partial:
-        raise ResultsError(f"shard(s) {', '.join(missing)} missing: give every shard of the run, or pass "
-                           "--partial=true to merge what there is")
+        raise ResultsError(
+            f"shard(s) {', '.join(missing)} missing: give every shard of the run, or pass "
+            "--partial=true to merge what there is"
+        )
     owner: dict[tuple[str, int], Path] = {}
     per_folder: dict[str, list[dict]] = {}
     for folder in folders:
@@ -252,8 +274,10 @@ def merge_folders(folders: list[Path], out: Path, partial: bool = False) -> tupl
         for row in rows:
             key = (row["instance_id"], row["repeat"])
             if key in owner:
-                raise ResultsError(f"episode {key[0]} repeat {key[1]} is in both {owner[key]} and {folder}: "
-                                   "these folders overlap; merge shards of one run only")
+                raise ResultsError(
+                    f"episode {key[0]} repeat {key[1]} is in both {owner[key]} and {folder}: "
+                    "these folders overlap; merge shards of one run only"
+                )
             owner[key] = folder
         per_folder[str(folder)] = rows
     if any(Path(out).resolve() == Path(f).resolve() for f in folders):

@@ -25,11 +25,11 @@ from eval.running import isolation
 from eval.running.policy_server import RemotePolicy, ServerHandle
 from eval.running.results import INFRA_ERROR
 from policies.base import Episode, PolicyConfig, TransientPolicyError
-from policies.factory import make_policy_batch
 from policies.errors import InfraError, PolicyUnavailable
+from policies.factory import make_policy_batch
 from roboview_data.benchmark.format import BenchmarkItem
-from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.tasks import DEFAULT_TASK, load_task, make_env
+from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.variation.instances import episode_seed
 from roboview_data.workers import set_worker_rank
 
@@ -157,10 +157,22 @@ class EvalWorker:
         if rank is not None:  # Ray actors are told their rank; pool workers take theirs at start
             set_worker_rank(rank)
         self.spec = spec
-        self.envs = [make_env(spec.task, cameras=spec.policy.observed_cameras(), image_size=spec.image_size,
-                              max_steps=spec.max_steps, depth=spec.policy.depth, lazy=not spec.eager)
-                     for _ in range(spec.envs_per_worker)]
-        self.batch = RemotePolicy(spec.server) if spec.server is not None else make_policy_batch(spec.policy, self.envs)
+        self.envs = [
+            make_env(
+                spec.task,
+                cameras=spec.policy.observed_cameras(),
+                image_size=spec.image_size,
+                max_steps=spec.max_steps,
+                depth=spec.policy.depth,
+                lazy=not spec.eager,
+            )
+            for _ in range(spec.envs_per_worker)
+        ]
+        self.batch = (
+            RemotePolicy(spec.server)
+            if spec.server is not None
+            else make_policy_batch(spec.policy, self.envs)
+        )
         self.env, self.policy = self.envs[0], self.batch.policy(0)
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)
@@ -178,10 +190,18 @@ class EvalWorker:
                 raise PolicyFailed(_infra_reason(exc), infra=True) from exc
             except TRANSIENT_ERRORS as exc:
                 if attempt == POLICY_RETRIES:
-                    raise PolicyFailed(f"policy error after {POLICY_RETRIES} retries: "
-                                       f"{type(exc).__name__}: {exc}", infra=True) from exc
-                log.warning("policy %s raised %s (%s); retry %d/%d", fn.__name__, type(exc).__name__, exc,
-                            attempt + 1, POLICY_RETRIES)
+                    raise PolicyFailed(
+                        f"policy error after {POLICY_RETRIES} retries: {type(exc).__name__}: {exc}",
+                        infra=True,
+                    ) from exc
+                log.warning(
+                    "policy %s raised %s (%s); retry %d/%d",
+                    fn.__name__,
+                    type(exc).__name__,
+                    exc,
+                    attempt + 1,
+                    POLICY_RETRIES,
+                )
                 time.sleep(RETRY_BACKOFF_S * 2**attempt)
             except Exception as exc:
                 cause = _infra_cause(exc)  # a policy that wrapped a render failure in its own error
@@ -232,8 +252,15 @@ class EvalWorker:
         instance, record = work.item.instance, work.item.record
         seed = episode_seed(record["context_id"], work.repeat)
         start = time.perf_counter()
-        ep = _Running(index, work, seed, start, {}, {c: [] for c in env.cameras} if self.spec.record_media else {},
-                      {c: [] for c in env.cameras} if work.video else {})
+        ep = _Running(
+            index,
+            work,
+            seed,
+            start,
+            {},
+            {c: [] for c in env.cameras} if self.spec.record_media else {},
+            {c: [] for c in env.cameras} if work.video else {},
+        )
         try:
             ep.obs, _ = env.reset(seed=seed, options={"instance": instance})
         except InfraError as exc:  # an eager env renders in its reset
@@ -273,19 +300,37 @@ class EvalWorker:
         env = self.envs[slot]
         action = np.asarray(action, dtype=np.float32)
         if action.shape != env.action_space.shape or not np.all(np.isfinite(action)):
-            ep.error = (f"policy error: action of shape {action.shape} with values {action.ravel()[:8]} "
-                        f"(the env takes {env.action_space.shape[0]} finite values)")
+            ep.error = (
+                f"policy error: action of shape {action.shape} with values {action.ravel()[:8]} "
+                f"(the env takes {env.action_space.shape[0]} finite values)"
+            )
             return
         ep.obs, _, ep.success, _, ep.info = env.step(action)
 
     def _finish(self, slot: int, ep: _Running) -> EpisodeResult:
         env, record = self.envs[slot], ep.work.item.record
-        reason = "" if ep.success else (ep.error or ep.info.get("failure_reason") or self.batch.failure_reason(slot)
-                                        or f"{load_task(self.spec.task).timeout_reason} within {env.max_steps} steps")
-        row = {**record, "repeat": ep.work.repeat, "episode_seed": ep.seed, "success": bool(ep.success),
-               "steps": env.steps, "duration_s": time.perf_counter() - ep.start,
-               "policy": self.spec.policy.name or self.batch.name, "failure_reason": reason,
-               "isolation": ep.isolation, "status": STATUS_INFRA if ep.infra else STATUS_OK}
+        reason = (
+            ""
+            if ep.success
+            else (
+                ep.error
+                or ep.info.get("failure_reason")
+                or self.batch.failure_reason(slot)
+                or f"{load_task(self.spec.task).timeout_reason} within {env.max_steps} steps"
+            )
+        )
+        row = {
+            **record,
+            "repeat": ep.work.repeat,
+            "episode_seed": ep.seed,
+            "success": bool(ep.success),
+            "steps": env.steps,
+            "duration_s": time.perf_counter() - ep.start,
+            "policy": self.spec.policy.name or self.batch.name,
+            "failure_reason": reason,
+            "isolation": ep.isolation,
+            "status": STATUS_INFRA if ep.infra else STATUS_OK,
+        }
         # A policy's own columns (VLM usage, the refined instruction, ...).
         row |= {k: v for k, v in self.batch.episode_record(slot).items() if k not in row}
         result = EpisodeResult(row)
@@ -310,6 +355,15 @@ def lost_row(work: WorkItem, reason: str, policy: str | None) -> dict:
     """The row of an episode whose worker died (no worker is left to say more): status infra_error, `policy`
     the run's policy name where known (else None: the evaluator fills it in)."""
     record = work.item.record
-    return {**record, "repeat": work.repeat, "episode_seed": episode_seed(record["context_id"], work.repeat),
-            "success": False, "steps": 0, "duration_s": 0.0, "policy": policy, "failure_reason": reason,
-            "isolation": None, "status": STATUS_INFRA}
+    return {
+        **record,
+        "repeat": work.repeat,
+        "episode_seed": episode_seed(record["context_id"], work.repeat),
+        "success": False,
+        "steps": 0,
+        "duration_s": 0.0,
+        "policy": policy,
+        "failure_reason": reason,
+        "isolation": None,
+        "status": STATUS_INFRA,
+    }

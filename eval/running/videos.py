@@ -23,8 +23,10 @@ def parse(spec: str) -> str | int:
         return spec
     if spec.isdigit() and int(spec) > 0:
         return int(spec)
-    raise ValueError(f"videos={spec!r} is not allowed; allowed: a count N ≥ 1 (the first N episodes), "
-                     f"{' or '.join(MODES)}, or empty for none")
+    raise ValueError(
+        f"videos={spec!r} is not allowed; allowed: a count N ≥ 1 (the first N episodes), "
+        f"{' or '.join(MODES)}, or empty for none"
+    )
 
 
 def _safe(text: str) -> str:
@@ -33,8 +35,10 @@ def _safe(text: str) -> str:
 
 def relative_path(row: dict, camera: str) -> str:
     """Where an episode's video of `camera` goes, relative to the results folder."""
-    return (f"videos/{_safe(row['split'])}/{_safe(row['value'])}/"
-            f"{_safe(row['instance_id'])}_r{row['repeat']}_{_safe(camera)}.mp4")
+    return (
+        f"videos/{_safe(row['split'])}/{_safe(row['value'])}/"
+        f"{_safe(row['instance_id'])}_r{row['repeat']}_{_safe(camera)}.mp4"
+    )
 
 
 def camera_of(path: str) -> str:

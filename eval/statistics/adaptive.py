@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 from eval.statistics.significance import factor_lrt, informative, is_sparse
 
 STOP_REASONS = ("bias", "no_bias", "max_repeats")
@@ -65,11 +64,15 @@ class Design:
         if not 0 < self.alpha < 1:
             raise ValueError(f"--eval.alpha={self.alpha} must lie in (0, 1)")
         if not self.tau > 0:
-            raise ValueError(f"--eval.tau={self.tau} must be > 0 (logit SD of the value effects, as pipelines.plan)")
+            raise ValueError(
+                f"--eval.tau={self.tau} must be > 0 (logit SD of the value effects, as pipelines.plan)"
+            )
         if not 0 < self.power < 1:
             raise ValueError(f"--eval.power={self.power} must lie in (0, 1)")
         if not 1 <= self.min_rounds <= self.max_repeats:
-            raise ValueError(f"--eval.max_repeats={self.max_repeats} must be ≥ the first look ({self.min_rounds} rounds)")
+            raise ValueError(
+                f"--eval.max_repeats={self.max_repeats} must be ≥ the first look ({self.min_rounds} rounds)"
+            )
 
     @property
     def looks(self) -> list[int]:
@@ -134,8 +137,16 @@ def _sparse(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray
     return is_sparse(n[keep], p_ctx[context][keep])
 
 
-def permutation_confirms(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray, observed: float,
-                         level: float, seed: int = 0, max_draws: int = 4000) -> bool:
+def permutation_confirms(
+    k: np.ndarray,
+    n: np.ndarray,
+    value: np.ndarray,
+    context: np.ndarray,
+    observed: float,
+    level: float,
+    seed: int = 0,
+    max_draws: int = 4000,
+) -> bool:
     """Whether the within-context permutation p-value of the LRT is ≤ `level`.
 
     Under "no bias" the successes of a context are exchangeable across its episodes, so a permuted table
@@ -173,12 +184,19 @@ class Decision:
     stopped: str | None  # None: run another round
 
     def record(self, episodes: int) -> dict:
-        return {"rounds": self.rounds, "episodes": episodes, "stopped": self.stopped, "lrt": self.statistic,
-                "efficacy_boundary": self.efficacy, "futility_boundary": self.futility}
+        return {
+            "rounds": self.rounds,
+            "episodes": episodes,
+            "stopped": self.stopped,
+            "lrt": self.statistic,
+            "efficacy_boundary": self.efficacy,
+            "futility_boundary": self.futility,
+        }
 
 
-def decide(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray, rounds: int,
-           design: Design) -> Decision:
+def decide(
+    k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray, rounds: int, design: Design
+) -> Decision:
     """What to do after `rounds` rounds of a split whose cells hold k successes of n episodes."""
     if rounds < design.min_rounds:
         return Decision(rounds, None, None, None, None)
@@ -196,8 +214,11 @@ def decide(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray,
         # the error it spends alone, α·(s_k − s_{k−1}): by the union bound these looks cost at most what
         # they spend, whatever their correlation. (χ² p above ten times that level cannot cross: not tested.)
         level = design.alpha * (design.spent(i + 1) - design.spent(i))
-        crossed = (test is not None and test.p_value <= 10 * level
-                   and permutation_confirms(k, n, value, context, statistic, level, seed=rounds))
+        crossed = (
+            test is not None
+            and test.p_value <= 10 * level
+            and permutation_confirms(k, n, value, context, statistic, level, seed=rounds)
+        )
     else:
         crossed = statistic >= c[i]
     if crossed:
@@ -211,8 +232,9 @@ def decide(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray,
     return Decision(rounds, statistic, float(c[i]), float(f[i]), stop)
 
 
-def simulate(n_values: int, n_contexts: int, sr: float, tau: float, design: Design, sims: int,
-             seed: int = 0) -> dict[str, float]:
+def simulate(
+    n_values: int, n_contexts: int, sr: float, tau: float, design: Design, sims: int, seed: int = 0
+) -> dict[str, float]:
     """Adaptive runs of simulated splits with a known bias of logit SD `tau` (0: none), every context at
     `sr`: how often each stop happens, mean rounds and episodes (real binomial tables, the real test)."""
     rng = np.random.default_rng(seed)
@@ -221,7 +243,11 @@ def simulate(n_values: int, n_contexts: int, sr: float, tau: float, design: Desi
     logit = math.log(sr / (1 - sr))
     rounds, stops = [], []
     for _ in range(sims):
-        p = 1 / (1 + np.exp(-(logit + rng.normal(0, tau, n_values))))[value] if tau > 0 else np.full(len(value), sr)
+        p = (
+            1 / (1 + np.exp(-(logit + rng.normal(0, tau, n_values))))[value]
+            if tau > 0
+            else np.full(len(value), sr)
+        )
         x = rng.random((design.max_repeats, len(value))) < p
         for t in range(1, design.max_repeats + 1):
             decision = decide(x[:t].sum(axis=0), np.full(len(value), t), value, context, t, design)
@@ -230,9 +256,12 @@ def simulate(n_values: int, n_contexts: int, sr: float, tau: float, design: Desi
         rounds.append(decision.rounds)
         stops.append(decision.stopped)
     stops_a = np.array(stops)
-    return {"rejection_rate": float(np.mean(stops_a == "bias")), "mean_rounds": float(np.mean(rounds)),
-            "mean_episodes": float(np.mean(rounds)) * len(value),
-            **{f"stopped_{s}": float(np.mean(stops_a == s)) for s in STOP_REASONS}}
+    return {
+        "rejection_rate": float(np.mean(stops_a == "bias")),
+        "mean_rounds": float(np.mean(rounds)),
+        "mean_episodes": float(np.mean(rounds)) * len(value),
+        **{f"stopped_{s}": float(np.mean(stops_a == s)) for s in STOP_REASONS},
+    }
 
 
 RECORD_FILE = "adaptive.json"

@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from eval.statistics.tables import MetricsConfig, codes, conditional_cv, excess, group_sum
 from eval.statistics.significance import paired_success_test
+from eval.statistics.tables import MetricsConfig, codes, conditional_cv, excess, group_sum
 
 N_INNER = 100  # permutations behind each swap's noise floor
 N_SWAPS = 200  # swaps behind p_cv_excess
@@ -46,7 +46,9 @@ class _Paired:
         n_cell = np.bincount(self.cell) * n_rep
         if not success.any():
             return None
-        cv = conditional_cv(group_sum(success.sum(axis=1), self.cell) / n_cell, self.context, self.epsilon).mean()
+        cv = conditional_cv(
+            group_sum(success.sum(axis=1), self.cell) / n_cell, self.context, self.epsilon
+        ).mean()
         rng = np.random.default_rng(seed)
         inst_ctx = self.context[self.cell]
         perm_k = np.zeros((N_INNER, len(self.cell)))
@@ -59,30 +61,48 @@ class _Paired:
 
 
 def _paired(rows: pd.DataFrame, name_a: str, name_b: str, epsilon: float) -> _Paired | None:
-    wide = rows.pivot_table(index=["instance_id", "repeat"], columns="policy", values="success", aggfunc="first")
+    wide = rows.pivot_table(
+        index=["instance_id", "repeat"], columns="policy", values="success", aggfunc="first"
+    )
     wide = wide.dropna()
     if wide.empty:
         return None
     counts = wide.groupby(level="instance_id").size()
     n_rep = int(counts.min())
     wide = wide.groupby(level="instance_id").head(n_rep)  # the same number of pairs per instance
-    inst = rows.drop_duplicates("instance_id").set_index("instance_id").loc[counts.index, ["value", "context_id"]]
+    inst = (
+        rows.drop_duplicates("instance_id")
+        .set_index("instance_id")
+        .loc[counts.index, ["value", "context_id"]]
+    )
     cell = codes(inst, ["value", "context_id"])
     context = codes(inst.assign(cell=cell).groupby("cell").first(), ["context_id"])
     shape = (len(counts), n_rep)
-    return _Paired(wide[name_a].to_numpy(bool).reshape(shape), wide[name_b].to_numpy(bool).reshape(shape),
-                   cell, context, epsilon)
+    return _Paired(
+        wide[name_a].to_numpy(bool).reshape(shape),
+        wide[name_b].to_numpy(bool).reshape(shape),
+        cell,
+        context,
+        epsilon,
+    )
 
 
-def compare_pair(rows: pd.DataFrame, name_a: str, name_b: str, cfg: MetricsConfig, split: str) -> dict[str, Any] | None:
+def compare_pair(
+    rows: pd.DataFrame, name_a: str, name_b: str, cfg: MetricsConfig, split: str
+) -> dict[str, Any] | None:
     """B against A on one split (rows hold both policies' episodes of it)."""
     paired = _paired(rows, name_a, name_b, cfg.epsilon)
     if paired is None:
         return None
-    out: dict[str, Any] = {"split": split, "policies": [name_a, name_b], "n_pairs": int(paired.a.size),
-                           "delta_sr": float(paired.b.mean() - paired.a.mean()),
-                           "p_sr": paired_success_test(paired.a.ravel(), paired.b.ravel()),
-                           "delta_cv_excess": None, "p_cv_excess": None}
+    out: dict[str, Any] = {
+        "split": split,
+        "policies": [name_a, name_b],
+        "n_pairs": int(paired.a.size),
+        "delta_sr": float(paired.b.mean() - paired.a.mean()),
+        "p_sr": paired_success_test(paired.a.ravel(), paired.b.ravel()),
+        "delta_cv_excess": None,
+        "p_cv_excess": None,
+    }
     if "|" in str(rows["factor"].iloc[0]):
         return out  # factorial splits: paired SR only (their CV is per factor)
     seed = zlib.crc32(f"{cfg.seed}:{split}:{name_a}:{name_b}".encode())
@@ -90,15 +110,24 @@ def compare_pair(rows: pd.DataFrame, name_a: str, name_b: str, cfg: MetricsConfi
     stacked = np.concatenate([paired.a, paired.b])  # row i: A's instance i; row n + i: B's
 
     def delta(x: np.ndarray, y: np.ndarray) -> float:
-        ex, ey = paired.cv_excess(stacked[x.astype(int)], seed), paired.cv_excess(stacked[y.astype(int)], seed)
+        ex, ey = (
+            paired.cv_excess(stacked[x.astype(int)], seed),
+            paired.cv_excess(stacked[y.astype(int)], seed),
+        )
         return np.nan if ex is None or ey is None else ey - ex
 
     observed = delta(np.arange(n), np.arange(n, 2 * n))
     if np.isnan(observed):
         return out
-    result = sps.permutation_test((np.arange(n), np.arange(n, 2 * n)), delta, permutation_type="samples",
-                                  vectorized=False, n_resamples=N_SWAPS, alternative="two-sided",
-                                  rng=np.random.default_rng(seed))
+    result = sps.permutation_test(
+        (np.arange(n), np.arange(n, 2 * n)),
+        delta,
+        permutation_type="samples",
+        vectorized=False,
+        n_resamples=N_SWAPS,
+        alternative="two-sided",
+        rng=np.random.default_rng(seed),
+    )
     null = result.null_distribution
     null = null[~np.isnan(null)]
     out["delta_cv_excess"] = float(observed)
@@ -142,5 +171,8 @@ def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
     if spread.empty:
         return None
     sr = base.groupby("split")["success"].mean()
-    return {"n_pairs": int(len(spread)), "agreement": float(np.mean(spread["nunique"] == 1)),
-            "sr_by_split": {str(s): float(v) for s, v in sr.items()}}
+    return {
+        "n_pairs": int(len(spread)),
+        "agreement": float(np.mean(spread["nunique"] == 1)),
+        "sr_by_split": {str(s): float(v) for s, v in sr.items()},
+    }

@@ -40,8 +40,9 @@ def _subspace(episodes: pd.DataFrame, task: str, factor: str) -> pd.DataFrame:
     return rows
 
 
-def context_factor_metrics(episodes: pd.DataFrame, task: str, factor: str,
-                           cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any] | None:
+def context_factor_metrics(
+    episodes: pd.DataFrame, task: str, factor: str, cfg: MetricsConfig = MetricsConfig()
+) -> dict[str, Any] | None:
     """SR per value of one context factor over its subspace, and the test; None with fewer than 2 values."""
     rows = _subspace(episodes, task, factor)
     if factor not in rows or rows[factor].nunique() < 2:
@@ -50,14 +51,21 @@ def context_factor_metrics(episodes: pd.DataFrame, task: str, factor: str,
     eps["success"] = eps["success"].astype(np.int64)
     table = CellTable.build(eps, (factor,), [factor, "split", "value"])
     permuted = table.permuted_k(["split", "value"], cfg.n_glm, cfg.rng(f"{task}:{factor}", "context"))
-    test = stats.factor_lrt(table.k, table.n, table.codes([factor]), table.codes(["split", "value"]), permuted)
+    test = stats.factor_lrt(
+        table.k, table.n, table.codes([factor]), table.codes(["split", "value"]), permuted
+    )
     per_value = {}
     for value in value_order(factor, eps[factor].unique()):
         mine = eps[eps[factor] == value]
         k, n = int(mine["success"].sum()), len(mine)
         per_value[value] = {"sr": k / n, "sr_ci95": wilson_ci95(k, n), "n_episodes": n}
-    return {"task": task, "n_episodes": len(eps), "n_conditions": int(eps.groupby(["split", "value"]).ngroups),
-            **stats.lrt_fields(test), "per_value": per_value}
+    return {
+        "task": task,
+        "n_episodes": len(eps),
+        "n_conditions": int(eps.groupby(["split", "value"]).ngroups),
+        **stats.lrt_fields(test),
+        "per_value": per_value,
+    }
 
 
 def context_breakdown(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:

@@ -26,10 +26,10 @@ import numpy as np
 import pandas as pd
 
 from eval.running import isolation
+from eval.running.results import counted, infra_mask
 from eval.statistics import ranking
 from eval.statistics import significance as stats
 from eval.statistics.compare import baseline_retest, compare_policies
-from eval.running.results import counted, infra_mask
 from eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
     EPSILON,
     SEQUENTIAL_H,
@@ -92,18 +92,34 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     for value in value_order(factor, list(grouped.groups)):
         rows = grouped.get_group(value)
         test = tests.get(value, stats.ValueTest(None, None, None))
-        per_value[value] = {"sr": float(rows["k"].sum() / rows["n"].sum()), "n_episodes": int(rows["n"].sum()),
-                            "signed_dev": float(rows["dev"].mean()), "odds_ratio": test.odds_ratio,
-                            "odds_ratio_ci95": test.odds_ratio_ci95, "p_value": test.p_value}
+        per_value[value] = {
+            "sr": float(rows["k"].sum() / rows["n"].sum()),
+            "n_episodes": int(rows["n"].sum()),
+            "signed_dev": float(rows["dev"].mean()),
+            "odds_ratio": test.odds_ratio,
+            "odds_ratio_ci95": test.odds_ratio_ci95,
+            "p_value": test.p_value,
+        }
     for value, q in zip(per_value, stats.benjamini_hochberg([m["p_value"] for m in per_value.values()])):
         per_value[value]["q_value"] = q
-    out: dict[str, Any] = {"factor": factor, "n_instances": int(episodes["instance_id"].nunique()),
-                           "n_episodes": n, "n_contexts": int(ctx.max() + 1),
-                           "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
-                           "sr": k / n, "sr_ci95": wilson_ci95(k, n), "cv": None, "cv_null": None,
-                           "cv_excess": None, "cv_excess_ci95": None, **stats.lrt_fields(None),
-                           "p_value_cv": None,
-                           "p_value_cv_draws": None, "p_value_cv_at_floor": None, "per_value": per_value}
+    out: dict[str, Any] = {
+        "factor": factor,
+        "n_instances": int(episodes["instance_id"].nunique()),
+        "n_episodes": n,
+        "n_contexts": int(ctx.max() + 1),
+        "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
+        "sr": k / n,
+        "sr_ci95": wilson_ci95(k, n),
+        "cv": None,
+        "cv_null": None,
+        "cv_excess": None,
+        "cv_excess_ci95": None,
+        **stats.lrt_fields(None),
+        "p_value_cv": None,
+        "p_value_cv_draws": None,
+        "p_value_cv_at_floor": None,
+        "per_value": per_value,
+    }
     if k == 0:
         return out
 
@@ -116,8 +132,13 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     out["cv"] = float(statistic(sr_cell))
     out["cv_null"] = float(null.mean())
     out["cv_excess"] = excess(out["cv"], out["cv_null"])
-    mc = stats.sequential_p(out["cv"], null, lambda b: statistic(table.permuted_k(["context_id"], b, rng) / table.n),
-                            SEQUENTIAL_H, cfg.max_perm)
+    mc = stats.sequential_p(
+        out["cv"],
+        null,
+        lambda b: statistic(table.permuted_k(["context_id"], b, rng) / table.n),
+        SEQUENTIAL_H,
+        cfg.max_perm,
+    )
     out |= {"p_value_cv": mc.p_value, "p_value_cv_draws": mc.draws, "p_value_cv_at_floor": mc.at_floor}
     value_codes = table.codes([factor])
     out |= stats.lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
@@ -151,15 +172,29 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     pooled = table.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
     order = {f: {v: i for i, v in enumerate(value_order(f, table.cells[f].unique()))} for f in (a, b)}
     keys = sorted(pooled.index, key=lambda ab: (order[a][ab[0]], order[b][ab[1]]))
-    per_value = {f"{va}|{vb}": {"sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
-                                "n_episodes": int(pooled.loc[(va, vb), "n"])} for va, vb in keys}
+    per_value = {
+        f"{va}|{vb}": {
+            "sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
+            "n_episodes": int(pooled.loc[(va, vb), "n"]),
+        }
+        for va, vb in keys
+    }
     iec_names = (f"{a}|{b}", f"{b}|{a}")
-    out: dict[str, Any] = {"factors": [a, b], "n_instances": int(episodes["instance_id"].nunique()), "sr": k / n,
-                           "sr_ci95": wilson_ci95(k, n), "n_episodes": n,
-                           **{key: dict.fromkeys((a, b)) for key in
-                              ("cv", "cv_null", "cv_excess", "p_value", "p_value_method", "p_value_cv")},
-                           **{key: dict.fromkeys(iec_names) for key in ("iec", "iec_null", "iec_excess", "p_iec")},
-                           "p_interaction": None, "p_interaction_method": None, "per_value": per_value}
+    out: dict[str, Any] = {
+        "factors": [a, b],
+        "n_instances": int(episodes["instance_id"].nunique()),
+        "sr": k / n,
+        "sr_ci95": wilson_ci95(k, n),
+        "n_episodes": n,
+        **{
+            key: dict.fromkeys((a, b))
+            for key in ("cv", "cv_null", "cv_excess", "p_value", "p_value_method", "p_value_cv")
+        },
+        **{key: dict.fromkeys(iec_names) for key in ("iec", "iec_null", "iec_excess", "p_iec")},
+        "p_interaction": None,
+        "p_interaction_method": None,
+        "per_value": per_value,
+    }
     if k == 0:
         return out
     statistics, by = _factorial_statistics(table, cfg.epsilon)
@@ -174,8 +209,15 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
         test = stats.factor_lrt(table.k, table.n, table.codes([f]), by[f], permuted[: cfg.n_glm])
         out["p_value"][f] = None if test is None else test.p_value
         out["p_value_method"][f] = None if test is None else test.method
-    test, draws = stats.interaction_lrt(table.k, table.n, table.codes([a]), table.codes([b]),
-                                        table.codes(["context_id"]), cfg.n_glm, cfg.rng(split, "additive"))
+    test, draws = stats.interaction_lrt(
+        table.k,
+        table.n,
+        table.codes([a]),
+        table.codes([b]),
+        table.codes(["context_id"]),
+        cfg.n_glm,
+        cfg.rng(split, "additive"),
+    )
     if test is not None:
         out["p_interaction"], out["p_interaction_method"] = test.p_value, test.method
     null_iec = statistics(draws / table.n) if draws is not None else None
@@ -192,7 +234,9 @@ class EpisodesError(ValueError):
     """An episodes table the metrics cannot be computed from; the message names what is wrong."""
 
 
-def check_episodes(episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLUMNS, source: str = "episodes") -> None:
+def check_episodes(
+    episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLUMNS, source: str = "episodes"
+) -> None:
     """Raise EpisodesError unless every metric's assumption about the table holds.
 
     Required columns present and non-null, success boolean, one factor per split with values of
@@ -200,7 +244,9 @@ def check_episodes(episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLU
     """
     missing = [c for c in required if c not in episodes.columns]
     if missing:
-        raise EpisodesError(f"{source} lacks column(s) {', '.join(missing)} (docs/formats.md, 'Episode records')")
+        raise EpisodesError(
+            f"{source} lacks column(s) {', '.join(missing)} (docs/formats.md, 'Episode records')"
+        )
     nulls = [c for c in required if episodes[c].isna().any()]
     if nulls:
         raise EpisodesError(f"{source} has null values in column(s) {', '.join(nulls)}")
@@ -208,20 +254,26 @@ def check_episodes(episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLU
         raise EpisodesError(f"{source} holds no episodes")
     bad = ~episodes["success"].isin([0, 1])
     if bad.any():
-        raise EpisodesError(f"{source}: column success must be boolean; found {episodes['success'][bad].iloc[0]!r}")
+        raise EpisodesError(
+            f"{source}: column success must be boolean; found {episodes['success'][bad].iloc[0]!r}"
+        )
     factors = episodes.groupby("split")["factor"].unique()
     for split, names in factors.items():
         if len(names) != 1:
             raise EpisodesError(f"{source}: split {split!r} mixes factors {sorted(map(str, names))}")
         n_parts = episodes.loc[episodes["split"] == split, "value"].astype(str).str.count(r"\|") + 1
         if (n_parts != len(str(names[0]).split("|"))).any():
-            raise EpisodesError(f"{source}: split {split!r} has values that do not match factor {names[0]!r} "
-                                "('|'-joined, one part per factor)")
+            raise EpisodesError(
+                f"{source}: split {split!r} has values that do not match factor {names[0]!r} "
+                "('|'-joined, one part per factor)"
+            )
     per_instance = episodes.groupby(["policy", "instance_id"])[["split", "value", "context_id"]].nunique()
     mixed = per_instance.index[(per_instance > 1).any(axis=1)]
     if len(mixed):
-        raise EpisodesError(f"{source}: instance {mixed[0][1]!r} of policy {mixed[0][0]!r} has episodes with "
-                            "different split, value or context_id; an instance fixes all three")
+        raise EpisodesError(
+            f"{source}: instance {mixed[0][1]!r} of policy {mixed[0][0]!r} has episodes with "
+            "different split, value or context_id; an instance fixes all three"
+        )
 
 
 def _counted_episodes(episodes: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
@@ -229,8 +281,10 @@ def _counted_episodes(episodes: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, i
     infra = episodes.loc[infra_mask(episodes), "split"].astype(str).value_counts()
     kept = counted(episodes)
     if kept.empty:
-        raise EpisodesError(f"all {len(episodes)} episode(s) ended by infrastructure (status infra_error), not by "
-                            "the policy: nothing to measure; rerun the evaluation command to run them again")
+        raise EpisodesError(
+            f"all {len(episodes)} episode(s) ended by infrastructure (status infra_error), not by "
+            "the policy: nothing to measure; rerun the evaluation command to run them again"
+        )
     return kept, {str(split): int(n) for split, n in infra.items()}
 
 
@@ -241,8 +295,9 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     episodes, infra = _counted_episodes(episodes)
     policies = episodes["policy"].unique()
     if len(policies) != 1:
-        raise ValueError(f"compute_metrics takes one policy, got {sorted(map(str, policies))}; "
-                         "use compute_all_metrics")
+        raise ValueError(
+            f"compute_metrics takes one policy, got {sorted(map(str, policies))}; use compute_all_metrics"
+        )
     # The isolation certificate first: blocks in which more than the factor changed leave the tests.
     certificate = isolation.verify(episodes)
     episodes = isolation.drop_violations(episodes, certificate)
@@ -262,10 +317,16 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     for key in average:
         values = [s[key] for s in splits.values()]
         average[key] = float(np.mean(values)) if values and None not in values else None
-    return {"epsilon": cfg.epsilon, "policy": str(policies[0]), "resampling": _resampling(cfg),
-            "control": baseline_retest(episodes),
-            "splits": splits, "interactions": interactions, "average": average,
-            "n_infra_errors": sum(infra.values())}
+    return {
+        "epsilon": cfg.epsilon,
+        "policy": str(policies[0]),
+        "resampling": _resampling(cfg),
+        "control": baseline_retest(episodes),
+        "splits": splits,
+        "interactions": interactions,
+        "average": average,
+        "n_infra_errors": sum(infra.values()),
+    }
 
 
 def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
@@ -277,11 +338,18 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     if len(names) == 1:
         return compute_metrics(episodes, cfg)
     # Paired comparisons see only the blocks each policy's certificate verified.
-    certified = pd.concat([isolation.drop_violations(rows, isolation.verify(rows))
-                           for _, rows in kept.groupby("policy", sort=False)])
-    out = {"epsilon": cfg.epsilon, "resampling": _resampling(cfg),
-           "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
-           "comparisons": compare_policies(certified, cfg)}
+    certified = pd.concat(
+        [
+            isolation.drop_violations(rows, isolation.verify(rows))
+            for _, rows in kept.groupby("policy", sort=False)
+        ]
+    )
+    out = {
+        "epsilon": cfg.epsilon,
+        "resampling": _resampling(cfg),
+        "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
+        "comparisons": compare_policies(certified, cfg),
+    }
     ranked = ranking.rankings(out, certified)
     if ranked is not None:  # three or more policies
         out["rankings"] = ranked

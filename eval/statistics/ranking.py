@@ -59,8 +59,9 @@ def compact_letters(order: list[str], different: set[frozenset[str]]) -> dict[st
     return {name: "".join(sorted(letters[name])) for name in order}
 
 
-def rank_table(values: dict[str, float], pvalues: dict[frozenset[str], float], higher_better: bool,
-               alpha: float = ALPHA) -> list[dict[str, Any]]:
+def rank_table(
+    values: dict[str, float], pvalues: dict[frozenset[str], float], higher_better: bool, alpha: float = ALPHA
+) -> list[dict[str, Any]]:
     """One ranking: policies best first, each with its value, letters and rank range."""
     names = sorted(values, key=lambda n: (-values[n] if higher_better else values[n], n))
     pairs = [p for p in pvalues if pvalues[p] is not None and p <= set(names)]
@@ -69,17 +70,33 @@ def rank_table(values: dict[str, float], pvalues: dict[frozenset[str], float], h
     letters = compact_letters(names, different)
     out = []
     for name in names:
-        better = sum(1 for other in names if frozenset((name, other)) in different and
-                     (values[other] > values[name]) == higher_better and values[other] != values[name])
+        better = sum(
+            1
+            for other in names
+            if frozenset((name, other)) in different
+            and (values[other] > values[name]) == higher_better
+            and values[other] != values[name]
+        )
         worse = sum(1 for other in names if frozenset((name, other)) in different) - better
-        out.append({"policy": name, "value": values[name], "group": letters[name],
-                    "rank_range": [1 + better, len(names) - worse]})
+        out.append(
+            {
+                "policy": name,
+                "value": values[name],
+                "group": letters[name],
+                "rank_range": [1 + better, len(names) - worse],
+            }
+        )
     return out
 
 
 def _pooled_p_sr(episodes: pd.DataFrame, a: str, b: str) -> float | None:
-    wide = episodes[episodes["policy"].isin([a, b])].pivot_table(
-        index=["split", "instance_id", "repeat"], columns="policy", values="success", aggfunc="first").dropna()
+    wide = (
+        episodes[episodes["policy"].isin([a, b])]
+        .pivot_table(
+            index=["split", "instance_id", "repeat"], columns="policy", values="success", aggfunc="first"
+        )
+        .dropna()
+    )
     if wide.empty:
         return None
     return paired_success_test(wide[a].to_numpy(bool), wide[b].to_numpy(bool))
@@ -96,8 +113,11 @@ def rankings(metrics: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any] 
         comps = {frozenset(c["policies"]): c for c in metrics["comparisons"] if c["split"] == split}
         entry = {}
         for metric, (p_key, higher) in METRICS.items():
-            values = {name: layout["splits"][split][metric] for name, layout in layouts.items()
-                      if split in layout["splits"] and layout["splits"][split][metric] is not None}
+            values = {
+                name: layout["splits"][split][metric]
+                for name, layout in layouts.items()
+                if split in layout["splits"] and layout["splits"][split][metric] is not None
+            }
             if len(values) >= 3:
                 entry[metric] = rank_table(values, {pair: c[p_key] for pair, c in comps.items()}, higher)
         if entry:
@@ -105,8 +125,11 @@ def rankings(metrics: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any] 
     names = sorted(layouts)
     overall_sr = {name: float(episodes.loc[episodes["policy"] == name, "success"].mean()) for name in names}
     pooled = {frozenset((a, b)): _pooled_p_sr(episodes, a, b) for a, b in itertools.combinations(names, 2)}
-    mean_cv = {name: float(np.mean(v)) for name in names
-               if (v := [m["cv_excess"] for m in layouts[name]["splits"].values() if m["cv_excess"] is not None])}
+    mean_cv = {
+        name: float(np.mean(v))
+        for name in names
+        if (v := [m["cv_excess"] for m in layouts[name]["splits"].values() if m["cv_excess"] is not None])
+    }
     overall = {"sr": rank_table(overall_sr, pooled, True)}
     if len(mean_cv) >= 3:
         overall["cv_excess_mean"] = rank_table(mean_cv, {}, False)  # no overall test: one group, full ranges

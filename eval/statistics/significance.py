@@ -46,8 +46,9 @@ def interaction_codes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.unique(np.stack([a, b], axis=1), axis=0, return_inverse=True)[1].ravel()
 
 
-def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray,
-                 start: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+def binomial_llf(
+    k: np.ndarray, n: np.ndarray, exog: np.ndarray, start: np.ndarray | None = None
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Log-likelihood and fitted probabilities of a binomial GLM (logit link) of k successes in n.
 
     Separated data (a cell or level with every episode failing) sends coefficients to ±∞; the
@@ -56,7 +57,8 @@ def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # perfect-separation and convergence chatter, see above
         result = sm.GLM(np.column_stack([k, n - k]), exog, family=sm.families.Binomial()).fit(
-            maxiter=100, start_params=start)
+            maxiter=100, start_params=start
+        )
         # llf and fitted values are lazy: computed here, inside the quiet block.
         return float(result.llf), np.asarray(result.fittedvalues), np.asarray(result.params)
 
@@ -97,13 +99,18 @@ def lrt_fields(test: LRT | None) -> dict[str, Any]:
     every field None without a test."""
     if test is None:
         return {"p_value": None, "p_value_method": None, "p_value_at_floor": None, "lrt": None}
-    return {"p_value": test.p_value, "p_value_method": test.method, "p_value_at_floor": test.at_floor,
-            "lrt": {"statistic": test.statistic, "df": test.df}}
+    return {
+        "p_value": test.p_value,
+        "p_value_method": test.method,
+        "p_value_at_floor": test.at_floor,
+        "lrt": {"statistic": test.statistic, "df": test.df},
+    }
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")  # hundreds of small refits: threads only contend
-def factor_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarray,
-               permuted_k: np.ndarray | None) -> LRT | None:
+def factor_lrt(
+    k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarray, permuted_k: np.ndarray | None
+) -> LRT | None:
     """Does success depend on `value`? Binomial GLM `value + strata` against `strata`.
 
     `permuted_k` (n_perm, n_cells): success counts with value labels shuffled within blocks; used
@@ -126,9 +133,19 @@ def factor_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarr
     # the same for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit
     # starts from them (value dummies at zero), which halves its iterations.
     start = np.concatenate([null_params, np.zeros(df)])
-    null = np.array([max(0.0, 2.0 * (binomial_llf(kp[keep], n[keep], full, start)[0]
-                                     - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]))
-                     for kp in permuted_k])
+    null = np.array(
+        [
+            max(
+                0.0,
+                2.0
+                * (
+                    binomial_llf(kp[keep], n[keep], full, start)[0]
+                    - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]
+                ),
+            )
+            for kp in permuted_k
+        ]
+    )
     return LRT(observed, df, permutation_p(observed, null), "permutation", not _reaches(observed, null).any())
 
 
@@ -155,7 +172,9 @@ class MonteCarloP:
         return self.exceedances == 0
 
 
-def sequential_p(observed: float, first: np.ndarray, more, h: int = 20, max_draws: int = 100_000) -> MonteCarloP:
+def sequential_p(
+    observed: float, first: np.ndarray, more, h: int = 20, max_draws: int = 100_000
+) -> MonteCarloP:
     """Besag & Clifford's (1991) sequential Monte Carlo p-value.
 
     Null statistics are drawn a batch at a time (`first`, then `more(size)`, each batch as large as all before
@@ -179,8 +198,15 @@ def sequential_p(observed: float, first: np.ndarray, more, h: int = 20, max_draw
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")
-def interaction_lrt(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray, strata: np.ndarray,
-                    n_boot: int, rng: np.random.Generator) -> tuple[LRT | None, np.ndarray | None]:
+def interaction_lrt(
+    k: np.ndarray,
+    n: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    strata: np.ndarray,
+    n_boot: int,
+    rng: np.random.Generator,
+) -> tuple[LRT | None, np.ndarray | None]:
     """A×B against A + B (both + strata), and parametric-bootstrap tables from the additive fit.
 
     Returns the test and (n_boot, n_cells) success counts drawn from the fitted additive model: the
@@ -204,8 +230,13 @@ def interaction_lrt(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray, 
     if not is_sparse(n[keep], p_add):
         return LRT(observed, int(df), float(stats.chi2.sf(observed, df)), "asymptotic"), draws
     null = np.array([lrt_statistic(d[keep], n[keep], full, additive) for d in draws])
-    return LRT(observed, int(df), permutation_p(observed, null), "parametric_bootstrap",
-               not _reaches(observed, null).any()), draws
+    return LRT(
+        observed,
+        int(df),
+        permutation_p(observed, null),
+        "parametric_bootstrap",
+        not _reaches(observed, null).any(),
+    ), draws
 
 
 @dataclass(frozen=True)
@@ -217,7 +248,9 @@ class ValueTest:
     p_value: float | None
 
 
-def value_vs_rest(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray) -> ValueTest:
+def value_vs_rest(
+    k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray
+) -> ValueTest:
     """Cochran–Mantel–Haenszel: a value's episodes against the other values', per stratum.
 
     Arrays run over strata: the value's successes / episodes and everyone's. Strata without both
@@ -240,7 +273,9 @@ def value_vs_rest(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n
     return ValueTest(odds, None if None in ci else ci, p)
 
 
-def exact_stratified_p(k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray) -> float:
+def exact_stratified_p(
+    k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray
+) -> float:
     """Exact conditional test of "common odds ratio 1" over strata of 2×2 tables.
 
     Given every stratum's margins, the value's successes in a stratum are hypergeometric (scipy); their
@@ -283,8 +318,15 @@ def paired_success_test(a: np.ndarray, b: np.ndarray) -> float:
     return float(mcnemar(table, exact=discordant < 25, correction=True).pvalue)
 
 
-def lrt_power(n_values: int, n_contexts: int, repeats: int, tau: float, sr: float, alpha: float = 0.05,
-              draws: int = 2000) -> float:
+def lrt_power(
+    n_values: int,
+    n_contexts: int,
+    repeats: int,
+    tau: float,
+    sr: float,
+    alpha: float = 0.05,
+    draws: int = 2000,
+) -> float:
     """Power of the `value + context` LRT against value effects β_v ~ N(0, τ²) on the logit scale.
 
     For given effects the LRT is non-central χ² with df = |V| − 1 and non-centrality
@@ -303,8 +345,15 @@ def lrt_power(n_values: int, n_contexts: int, repeats: int, tau: float, sr: floa
     return float(stats.ncx2.sf(stats.chi2.ppf(1 - alpha, df), df, lam).mean())
 
 
-def repeats_needed(n_values: int, n_contexts: int, tau: float, sr: float, power: float = 0.8,
-                   alpha: float = 0.05, max_repeats: int = 1000) -> int | None:
+def repeats_needed(
+    n_values: int,
+    n_contexts: int,
+    tau: float,
+    sr: float,
+    power: float = 0.8,
+    alpha: float = 0.05,
+    max_repeats: int = 1000,
+) -> int | None:
     """Fewest repeats per instance reaching `power`; None if even `max_repeats` does not."""
     for repeats in range(1, max_repeats + 1):
         if lrt_power(n_values, n_contexts, repeats, tau, sr, alpha) >= power:
@@ -312,15 +361,17 @@ def repeats_needed(n_values: int, n_contexts: int, tau: float, sr: float, power:
     return None
 
 
-def logistic_trend(xs: np.ndarray, successes: np.ndarray,
-                   n: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+def logistic_trend(
+    xs: np.ndarray, successes: np.ndarray, n: np.ndarray
+) -> tuple[np.ndarray, float, float] | None:
     """Binomial GLM (logit) success ~ x fitted to per-value counts at numeric values `xs`: (fitted SR on 50
     points from min to max of xs, slope per unit of x, its Wald p). None with fewer than 3 values, no episode,
     or no failure or no success (nothing to fit)."""
     if len(xs) < 3 or n.sum() == 0 or successes.sum() in (0, n.sum()):
         return None
-    model = sm.GLM(np.column_stack([successes, n - successes]), sm.add_constant(xs),
-                   family=sm.families.Binomial())
+    model = sm.GLM(
+        np.column_stack([successes, n - successes]), sm.add_constant(xs), family=sm.families.Binomial()
+    )
     fit = model.fit()
     grid = np.linspace(xs.min(), xs.max(), 50)
     return fit.predict(sm.add_constant(grid)), float(fit.params[1]), float(fit.pvalues[1])

@@ -128,12 +128,15 @@ class CellTable:
         """Cells of `episodes` by `keys` (sorted); `episodes` holds the key columns, repeat and success."""
         missing = [c for c in (*keys, "repeat", "success") if c not in episodes.columns]
         if missing:
-            raise ValueError(f"episodes lack column(s) {', '.join(missing)}; a cell table needs the keys "
-                             f"{list(keys)}, repeat and success")
+            raise ValueError(
+                f"episodes lack column(s) {', '.join(missing)}; a cell table needs the keys "
+                f"{list(keys)}, repeat and success"
+            )
         eps = episodes.copy()
         eps["cell"] = codes(eps, keys)
         cells = eps.groupby("cell", sort=True).agg(
-            n=("success", "size"), k=("success", "sum"), **{key: (key, "first") for key in keys})
+            n=("success", "size"), k=("success", "sum"), **{key: (key, "first") for key in keys}
+        )
         return cls(tuple(factors), cells.reset_index(drop=True), eps.reset_index(drop=True))
 
     @property

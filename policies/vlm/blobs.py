@@ -45,7 +45,13 @@ def find_box(rgb: np.ndarray) -> Blob | None:
     best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     x, y, w, h = (int(v) for v in stats[best, :4])
     mean = rgb[labels == best].mean(axis=0) / 255.0
-    return Blob((x + w / 2, y + h / 2), int(stats[best, cv2.CC_STAT_AREA]), tuple(mean.tolist()), (x, y, w, h), labels == best)
+    return Blob(
+        (x + w / 2, y + h / 2),
+        int(stats[best, cv2.CC_STAT_AREA]),
+        tuple(mean.tolist()),
+        (x, y, w, h),
+        labels == best,
+    )
 
 
 def find_objects(rgb: np.ndarray) -> list[Blob]:

@@ -39,8 +39,10 @@ from policies.errors import TransientPolicyError
 from roboview_data.files import cache_dir
 
 STAT_KEYS = ("vlm_requests", "vlm_cache_hits", "vlm_prompt_tokens", "vlm_completion_tokens", "vlm_latency_s")
-REPAIR = ("Your previous reply could not be used: {error}. Reply again with only the JSON value the "
-          "instructions ask for, nothing before or after it.")
+REPAIR = (
+    "Your previous reply could not be used: {error}. Reply again with only the JSON value the "
+    "instructions ask for, nothing before or after it."
+)
 
 
 class VLMAnswerError(RuntimeError):
@@ -77,15 +79,20 @@ class Endpoint:
     def validate(self, flag: str = "") -> None:
         """ValueError naming the bad setting (as `flag` + its name, e.g. `--policy.endpoint.model`)."""
         if not re.match(r"^https?://", self.base_url):
-            raise ValueError(f"{flag}base_url={self.base_url!r} must be an http(s) URL of an "
-                             "OpenAI-compatible API (e.g. https://api.openai.com/v1 or "
-                             "http://127.0.0.1:8000/v1)")
+            raise ValueError(
+                f"{flag}base_url={self.base_url!r} must be an http(s) URL of an "
+                "OpenAI-compatible API (e.g. https://api.openai.com/v1 or "
+                "http://127.0.0.1:8000/v1)"
+            )
         if not self.model:
-            raise ValueError(f"{flag}model is empty: name the model to ask (e.g. gpt-4o, "
-                             "Qwen/Qwen2.5-VL-7B-Instruct)")
+            raise ValueError(
+                f"{flag}model is empty: name the model to ask (e.g. gpt-4o, Qwen/Qwen2.5-VL-7B-Instruct)"
+            )
         if self.timeout_s <= 0 or self.max_retries < 0 or self.max_in_flight < 1:
-            raise ValueError(f"{flag}timeout_s={self.timeout_s}, {flag}max_retries={self.max_retries}, "
-                             f"{flag}max_in_flight={self.max_in_flight}: need > 0, ≥ 0 and ≥ 1")
+            raise ValueError(
+                f"{flag}timeout_s={self.timeout_s}, {flag}max_retries={self.max_retries}, "
+                f"{flag}max_in_flight={self.max_in_flight}: need > 0, ≥ 0 and ≥ 1"
+            )
 
 
 # The fields of an Endpoint, which configs that once declared them flat still accept flat on the command
@@ -135,7 +142,10 @@ class _Slots:
     """At most n holders across processes: n lock files under the temp dir, one per slot."""
 
     def __init__(self, key: str, n: int) -> None:
-        folder = Path(tempfile.gettempdir()) / f"roboview-vlm-slots-{hashlib.sha256(key.encode()).hexdigest()[:12]}"
+        folder = (
+            Path(tempfile.gettempdir())
+            / f"roboview-vlm-slots-{hashlib.sha256(key.encode()).hexdigest()[:12]}"
+        )
         folder.mkdir(parents=True, exist_ok=True)
         self.paths = [folder / f"slot{i}.lock" for i in range(n)]
 
@@ -167,8 +177,12 @@ class VLMClient:
         endpoint.validate()
         self.endpoint = endpoint
         self._openai = openai
-        self._client = openai.OpenAI(base_url=endpoint.base_url, api_key=os.environ.get(endpoint.api_key_env) or "EMPTY",
-                                     timeout=endpoint.timeout_s, max_retries=endpoint.max_retries)
+        self._client = openai.OpenAI(
+            base_url=endpoint.base_url,
+            api_key=os.environ.get(endpoint.api_key_env) or "EMPTY",
+            timeout=endpoint.timeout_s,
+            max_retries=endpoint.max_retries,
+        )
         self._slots = _Slots(endpoint.base_url, endpoint.max_in_flight)
         self._cache = Path(endpoint.cache_dir) if endpoint.cache_dir else None
         self.stats = dict.fromkeys(STAT_KEYS, 0)
@@ -211,12 +225,15 @@ class VLMClient:
         start = time.perf_counter()
         try:
             with self._slots.hold():
-                response = self._client.chat.completions.create(model=self.endpoint.model, messages=messages,
-                                                                temperature=0)
+                response = self._client.chat.completions.create(
+                    model=self.endpoint.model, messages=messages, temperature=0
+                )
         except (o.RateLimitError, o.InternalServerError, o.APITimeoutError, o.APIConnectionError) as exc:
             raise TransientPolicyError(f"{self.endpoint.base_url}: {type(exc).__name__}: {exc}") from exc
         except o.APIStatusError as exc:  # 400, 401, 404, ...: asking again will not help
-            raise VLMAnswerError(f"{self.endpoint.base_url} answered HTTP {exc.status_code}: {exc.message}") from exc
+            raise VLMAnswerError(
+                f"{self.endpoint.base_url} answered HTTP {exc.status_code}: {exc.message}"
+            ) from exc
         finally:
             self.stats["vlm_latency_s"] += time.perf_counter() - start
         self.stats["vlm_requests"] += 1
@@ -232,7 +249,9 @@ class VLMClient:
             raise VLMAnswerError(f"the model refused: {refusal}")
         return choice.message.content or ""
 
-    def ask_json(self, prompt: str, images: list[np.ndarray], check: Callable[[Any], Any] | None = None) -> Any:
+    def ask_json(
+        self, prompt: str, images: list[np.ndarray], check: Callable[[Any], Any] | None = None
+    ) -> Any:
         """The checked JSON answer to `prompt` about `images` (`check` returns the value or raises ValueError)."""
         messages = [user_message(prompt, images)]
         key = self._key(messages)
@@ -245,8 +264,11 @@ class VLMClient:
             answer = parse_json(text)
             value = check(answer) if check else answer
         except ValueError as first:
-            repair = [*messages, {"role": "assistant", "content": text},
-                      {"role": "user", "content": REPAIR.format(error=first)}]
+            repair = [
+                *messages,
+                {"role": "assistant", "content": text},
+                {"role": "user", "content": REPAIR.format(error=first)},
+            ]
             text = self._complete(repair)
             try:
                 answer = parse_json(text)

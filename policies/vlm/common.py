@@ -58,7 +58,11 @@ def check_point(value: Any, key: str, width: int, height: int) -> tuple[float, f
     """A VLM's [x, y] pixel point (None: the model says it sees none); anything else raises ValueError."""
     if value is None:
         return None
-    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(v, (int, float)) for v in value)):
+    if not (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(isinstance(v, (int, float)) for v in value)
+    ):
         raise ValueError(f"{key} must be [x, y] in pixels (or null), got {value!r}")
     x, y = float(value[0]), float(value[1])
     if not (0 <= x < width and 0 <= y < height):
@@ -66,8 +70,9 @@ def check_point(value: Any, key: str, width: int, height: int) -> tuple[float, f
     return x, y
 
 
-def object_from_point(point: tuple[float, float], depth: np.ndarray, camera: CameraPose
-                      ) -> tuple[np.ndarray, float, float] | None:
+def object_from_point(
+    point: tuple[float, float], depth: np.ndarray, camera: CameraPose
+) -> tuple[np.ndarray, float, float] | None:
     """(center, yaw, symmetry) of the solid under an image point, from depth alone; None if it hits no solid.
 
     The point is back-projected; the object's surface is every point within OBJECT_RADIUS_M of it in

@@ -95,7 +95,9 @@ class ClassicGrounder:
 class TransformersGrounder:
     """OWLv2 or Grounding DINO through `transformers`, optionally SAM masks, on a loaded model."""
 
-    def __init__(self, kind: str, model, processor, sam_model=None, sam_processor=None, threshold: float = 0.1) -> None:
+    def __init__(
+        self, kind: str, model, processor, sam_model=None, sam_processor=None, threshold: float = 0.1
+    ) -> None:
         if kind not in ("owlv2", "grounding_dino"):
             raise ValueError(f"unknown grounding backend {kind!r}; allowed: owlv2, grounding_dino")
         self.kind, self.model, self.processor = kind, model, processor
@@ -103,7 +105,9 @@ class TransformersGrounder:
         self.threshold = threshold
 
     @classmethod
-    def from_pretrained(cls, kind: str, model_id: str, sam_id: str = "", threshold: float = 0.1) -> TransformersGrounder:
+    def from_pretrained(
+        cls, kind: str, model_id: str, sam_id: str = "", threshold: float = 0.1
+    ) -> TransformersGrounder:
         from transformers import (
             AutoModelForZeroShotObjectDetection,
             AutoProcessor,
@@ -113,7 +117,11 @@ class TransformersGrounder:
 
         model = AutoModelForZeroShotObjectDetection.from_pretrained(model_id).eval()
         processor = AutoProcessor.from_pretrained(model_id)
-        sam = (SamModel.from_pretrained(sam_id).eval(), SamProcessor.from_pretrained(sam_id)) if sam_id else (None, None)
+        sam = (
+            (SamModel.from_pretrained(sam_id).eval(), SamProcessor.from_pretrained(sam_id))
+            if sam_id
+            else (None, None)
+        )
         return cls(kind, model, processor, *sam, threshold=threshold)
 
     def detect(self, rgb: np.ndarray, description: str) -> list[Detection]:
@@ -127,18 +135,27 @@ class TransformersGrounder:
             # OWLv2 pads images to a square: boxes are relative to the padded side.
             side = max(h, w)
             result = self.processor.post_process_grounded_object_detection(
-                outputs, threshold=self.threshold, target_sizes=torch.tensor([[side, side]]))[0]
+                outputs, threshold=self.threshold, target_sizes=torch.tensor([[side, side]])
+            )[0]
         else:
-            inputs = self.processor(images=rgb, text=description.lower().rstrip(".") + ".", return_tensors="pt")
+            inputs = self.processor(
+                images=rgb, text=description.lower().rstrip(".") + ".", return_tensors="pt"
+            )
             with torch.inference_mode():
                 outputs = self.model(**inputs)
             result = self.processor.post_process_grounded_object_detection(
-                outputs, inputs["input_ids"], threshold=self.threshold, text_threshold=self.threshold,
-                target_sizes=[(h, w)])[0]
+                outputs,
+                inputs["input_ids"],
+                threshold=self.threshold,
+                text_threshold=self.threshold,
+                target_sizes=[(h, w)],
+            )[0]
         # Clip to the image; a box wholly inside OWLv2's padding holds nothing of the image: dropped.
-        kept = [((max(0.0, x0), max(0.0, y0), min(float(w), x1), min(float(h), y1)), float(s))
-                for (x0, y0, x1, y1), s in zip(result["boxes"].tolist(), result["scores"].tolist())
-                if min(float(w), x1) > max(0.0, x0) and min(float(h), y1) > max(0.0, y0)]
+        kept = [
+            ((max(0.0, x0), max(0.0, y0), min(float(w), x1), min(float(h), y1)), float(s))
+            for (x0, y0, x1, y1), s in zip(result["boxes"].tolist(), result["scores"].tolist())
+            if min(float(w), x1) > max(0.0, x0) and min(float(h), y1) > max(0.0, y0)
+        ]
         boxes, scores = [b for b, _ in kept], [s for _, s in kept]
         masks = self._segment(rgb, boxes) if boxes else []
         detections = [Detection(b, s, m) for b, s, m in zip(boxes, scores, masks or [None] * len(boxes))]
@@ -153,5 +170,6 @@ class TransformersGrounder:
         with torch.inference_mode():
             outputs = self.sam_model(**inputs, multimask_output=False)
         masks = self.sam_processor.image_processor.post_process_masks(
-            outputs.pred_masks, inputs["original_sizes"], inputs["reshaped_input_sizes"])[0]
+            outputs.pred_masks, inputs["original_sizes"], inputs["reshaped_input_sizes"]
+        )[0]
         return [m[0].numpy().astype(bool) for m in masks]

@@ -23,6 +23,14 @@ def draw_marks(rgb: np.ndarray, points: list[tuple[float, float]]) -> np.ndarray
         cv2.circle(out, (cx, cy), MARK_RADIUS, MARK_RGB, -1, cv2.LINE_8)
         text = str(i)
         (tw, th), _ = cv2.getTextSize(text, FONT, FONT_SCALE, FONT_THICKNESS)
-        cv2.putText(out, text, (cx - tw // 2, cy + th // 2), FONT, FONT_SCALE, (255, 255, 255), FONT_THICKNESS,
-                    cv2.LINE_8)
+        cv2.putText(
+            out,
+            text,
+            (cx - tw // 2, cy + th // 2),
+            FONT,
+            FONT_SCALE,
+            (255, 255, 255),
+            FONT_THICKNESS,
+            cv2.LINE_8,
+        )
     return out

@@ -31,9 +31,9 @@ from policies.vlm.grounding import (
 )
 from policies.vlm.marks import draw_marks
 from policies.vlm.prompts import MOKA_MARKS, MOKA_PLAN
+from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
 from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
-from roboview_data.sim.motion import PickPlacePlanner
 
 # Keypoints along each principal axis of a mask, as a fraction of its half-extent, and at least this
 # many pixels from the centroid (so the drawn marks never merge; see policies.vlm.marks).
@@ -57,14 +57,17 @@ class MokaConfig(VLMConfig):
 
     def __post_init__(self) -> None:
         if self.grounding not in GROUNDING_BACKENDS:
-            raise ValueError(f"unknown grounding backend {self.grounding!r}; allowed: {', '.join(GROUNDING_BACKENDS)}")
+            raise ValueError(
+                f"unknown grounding backend {self.grounding!r}; allowed: {', '.join(GROUNDING_BACKENDS)}"
+            )
         super().__post_init__()
 
     def grounder(self) -> Grounder:
         if self.grounding == "classic":
             return ClassicGrounder()
-        return TransformersGrounder.from_pretrained(self.grounding, self.detector_model, self.sam_model,
-                                                    self.detector_threshold)
+        return TransformersGrounder.from_pretrained(
+            self.grounding, self.detector_model, self.sam_model, self.detector_threshold
+        )
 
     def build(self, view: AgentView) -> MokaAgent:
         return MokaAgent(view, self, self.grounder())
@@ -108,8 +111,15 @@ class MokaAgent:
         self.failure_reason = ""
         self._hold = None
         self._planned = False
-        self._record = dict.fromkeys(("moka_object_description", "moka_target_description", "moka_grounding_score",
-                                      "moka_grasp_mark", "moka_place_mark"))
+        self._record = dict.fromkeys(
+            (
+                "moka_object_description",
+                "moka_target_description",
+                "moka_grounding_score",
+                "moka_grasp_mark",
+                "moka_place_mark",
+            )
+        )
 
     def select_action(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         if not self._planned:
@@ -135,7 +145,9 @@ class MokaAgent:
                 raise ValueError("object_description and target_description must be non-empty strings")
             return obj.strip(), target.strip()
 
-        obj_desc, target_desc = self.client.ask_json(MOKA_PLAN.format(instruction=instruction), [rgb], check_plan)
+        obj_desc, target_desc = self.client.ask_json(
+            MOKA_PLAN.format(instruction=instruction), [rgb], check_plan
+        )
         self._record |= {"moka_object_description": obj_desc, "moka_target_description": target_desc}
         objects, targets = self.grounder.detect(rgb, obj_desc), self.grounder.detect(rgb, target_desc)
         if not objects:
@@ -159,9 +171,13 @@ class MokaAgent:
                 raise ValueError(f"place_mark must be one of {target_marks}, got {place!r}")
             return grasp, place
 
-        prompt = MOKA_MARKS.format(instruction=instruction, object_marks=_span(obj_marks),
-                                   target_marks=_span(target_marks), object_description=obj_desc,
-                                   target_description=target_desc)
+        prompt = MOKA_MARKS.format(
+            instruction=instruction,
+            object_marks=_span(obj_marks),
+            target_marks=_span(target_marks),
+            object_description=obj_desc,
+            target_description=target_desc,
+        )
         grasp, place = self.client.ask_json(prompt, [marked], check_marks)
         self._record |= {"moka_grasp_mark": grasp, "moka_place_mark": place}
         h, w = rgb.shape[:2]
@@ -174,8 +190,9 @@ class MokaAgent:
         center, yaw, symmetry = solid
         box_xy = world_point(place_px, depth, calibration)[:2]
         # The task's own scripted solution through the points the VLM gave.
-        load_task(self._episode.task).env_class().plan(self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy,
-                                                       arm_q)
+        load_task(self._episode.task).env_class().plan(
+            self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy, arm_q
+        )
 
     def episode_record(self) -> dict:
         return {**self.client.take_stats(), **self._record}
@@ -190,4 +207,3 @@ def _span(marks: list[int]) -> str:
 
 def _clip(point: tuple[float, float], w: int, h: int) -> tuple[float, float]:
     return min(max(point[0], 0.0), w - 1.0), min(max(point[1], 0.0), h - 1.0)
-

@@ -59,11 +59,18 @@ def last_user_turn(messages: list[dict]) -> tuple[str, list[np.ndarray]]:
 
 def completion(model: str, text: str, prompt_tokens: int) -> dict[str, Any]:
     completion_tokens = len(text.split())
-    return {"id": f"chatcmpl-{uuid.uuid4().hex[:12]}", "object": "chat.completion", "created": int(time.time()),
-            "model": model, "choices": [{"index": 0, "finish_reason": "stop",
-                                         "message": {"role": "assistant", "content": text}}],
-            "usage": {"prompt_tokens": prompt_tokens, "completion_tokens": completion_tokens,
-                      "total_tokens": prompt_tokens + completion_tokens}}
+    return {
+        "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
+        "object": "chat.completion",
+        "created": int(time.time()),
+        "model": model,
+        "choices": [{"index": 0, "finish_reason": "stop", "message": {"role": "assistant", "content": text}}],
+        "usage": {
+            "prompt_tokens": prompt_tokens,
+            "completion_tokens": completion_tokens,
+            "total_tokens": prompt_tokens + completion_tokens,
+        },
+    }
 
 
 def make_handler(model: Model) -> type[BaseHTTPRequestHandler]:
@@ -83,8 +90,13 @@ def make_handler(model: Model) -> type[BaseHTTPRequestHandler]:
 
         def do_GET(self) -> None:
             if self.path.rstrip("/").endswith("/models"):
-                self._send(200, {"object": "list", "data": [{"id": model.name, "object": "model",
-                                                             "owned_by": "roboview"}]})
+                self._send(
+                    200,
+                    {
+                        "object": "list",
+                        "data": [{"id": model.name, "object": "model", "owned_by": "roboview"}],
+                    },
+                )
             else:
                 self._send(404, {"error": {"message": f"no route {self.path}", "type": "not_found"}})
 
@@ -96,11 +108,17 @@ def make_handler(model: Model) -> type[BaseHTTPRequestHandler]:
                 body = json.loads(self.rfile.read(int(self.headers.get("Content-Length", 0))))
                 prompt, images = last_user_turn(body["messages"])
             except (ValueError, KeyError, TypeError) as exc:
-                self._send(400, {"error": {"message": f"bad request: {exc}", "type": "invalid_request_error"}})
+                self._send(
+                    400, {"error": {"message": f"bad request: {exc}", "type": "invalid_request_error"}}
+                )
                 return
             text = model.answer(prompt, images)
-            self._send(200, completion(body.get("model", model.name), text,
-                                       len(prompt.split()) + IMAGE_TOKENS * len(images)))
+            self._send(
+                200,
+                completion(
+                    body.get("model", model.name), text, len(prompt.split()) + IMAGE_TOKENS * len(images)
+                ),
+            )
 
     return Handler
 

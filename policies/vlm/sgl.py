@@ -59,7 +59,9 @@ def check_scene(answer: Any) -> list[dict]:
 
 def _categories(obj: dict) -> set[str]:
     cats = obj.get("category") or []
-    return {str(c).lower() for c in (cats if isinstance(cats, list) else [cats])} | {str(obj.get("name", "")).lower()}
+    return {str(c).lower() for c in (cats if isinstance(cats, list) else [cats])} | {
+        str(obj.get("name", "")).lower()
+    }
 
 
 def refine(instruction: str, objects: list[dict]) -> Grounding:
@@ -82,10 +84,10 @@ def refine(instruction: str, objects: list[dict]) -> Grounding:
             chosen = attribute
             break
     name = str(manipulated.get("name") or "object")
-    said = instruction[:noun.start()].split()[-3:] if noun is not None else []
+    said = instruction[: noun.start()].split()[-3:] if noun is not None else []
     phrase = f"{manipulated[chosen]} {name}" if chosen and str(manipulated[chosen]) not in said else name
     if noun is not None:
-        refined = instruction[:noun.start()] + phrase + instruction[noun.end():]
+        refined = instruction[: noun.start()] + phrase + instruction[noun.end() :]
     else:  # named by its own noun but shared a category: put the attribute in front of that noun
         refined = re.sub(rf"\b{re.escape(name)}\b", phrase, instruction, count=1)
     return Grounding(instruction, refined, True, chosen)
@@ -126,12 +128,14 @@ class SemanticGroundingLayer:
         for key, value in self.client.take_stats().items():
             record[key] = record.get(key, 0) + value
         g = self._grounding
-        return record | {"sgl_instruction": g.refined if g else None, "sgl_ambiguous": g.ambiguous if g else None,
-                         "sgl_attribute": g.attribute if g else None}
+        return record | {
+            "sgl_instruction": g.refined if g else None,
+            "sgl_ambiguous": g.ambiguous if g else None,
+            "sgl_attribute": g.attribute if g else None,
+        }
 
     def close(self) -> None:
         self.inner.close()
-
 
 
 @dataclass
@@ -162,9 +166,11 @@ class SGLConfig:
         if not self.enable:
             return policy
         if self.own_endpoint and self.endpoint.base_url != Endpoint.base_url:
-            raise ValueError(f"--sgl.endpoint.base_url={self.endpoint.base_url!r} without "
-                             "--sgl.endpoint.model: name the model on it, or drop the URL to ask the VLM "
-                             "agent's own endpoint")
+            raise ValueError(
+                f"--sgl.endpoint.base_url={self.endpoint.base_url!r} without "
+                "--sgl.endpoint.model: name the model on it, or drop the URL to ask the VLM "
+                "agent's own endpoint"
+            )
         endpoint = self.endpoint_for(policy)
         endpoint.validate("--policy.endpoint." if endpoint is not self.endpoint else "--sgl.endpoint.")
         return GroundedConfig(policy, self)
@@ -199,9 +205,15 @@ class GroundedConfig:
         # endpoint.
         e = self.sgl.endpoint
         url = "" if self.sgl.own_endpoint else e.base_url
-        return {**self.inner.options(), "sgl": True, "sgl_base_url": url, "sgl_model": e.model,
-                "sgl_api_key_env": e.api_key_env}
+        return {
+            **self.inner.options(),
+            "sgl": True,
+            "sgl_base_url": url,
+            "sgl_model": e.model,
+            "sgl_api_key_env": e.api_key_env,
+        }
 
     def build(self, view) -> Policy:
-        return SemanticGroundingLayer(self.inner.build(view), self.sgl.endpoint_for(self.inner),
-                                      self.inner.observed_cameras()[0])
+        return SemanticGroundingLayer(
+            self.inner.build(view), self.sgl.endpoint_for(self.inner), self.inner.observed_cameras()[0]
+        )

@@ -17,16 +17,18 @@ from policies.base import AgentView, Episode, PolicyConfig
 from policies.vlm.client import VLMClient
 from policies.vlm.common import VLMConfig, check_point, object_from_point, world_point
 from policies.vlm.prompts import SIMPLE_POINTS
+from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
 from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
-from roboview_data.sim.motion import PickPlacePlanner
 
 
 @PolicyConfig.register_subclass("vlm_simple")
 @dataclass
 class SimpleAgentConfig(VLMConfig):
-    doc = ("SimpleAgent: a VLM names image points, depth + calibration turn them into a grasp "
-           "(--policy.endpoint.base_url/model)")
+    doc = (
+        "SimpleAgent: a VLM names image points, depth + calibration turn them into a grasp "
+        "(--policy.endpoint.base_url/model)"
+    )
 
     def build(self, view: AgentView) -> SimpleAgent:
         return SimpleAgent(view, self)
@@ -67,26 +69,38 @@ class SimpleAgent:
 
         def check(answer):
             if not isinstance(answer, dict):
-                raise ValueError(f"expected a JSON object with object_point and target_point, got {type(answer).__name__}")
-            return (check_point(answer.get("object_point"), "object_point", w, h),
-                    check_point(answer.get("target_point"), "target_point", w, h))
+                raise ValueError(
+                    f"expected a JSON object with object_point and target_point, got {type(answer).__name__}"
+                )
+            return (
+                check_point(answer.get("object_point"), "object_point", w, h),
+                check_point(answer.get("target_point"), "target_point", w, h),
+            )
 
         prompt = SIMPLE_POINTS.format(width=w, height=h, instruction=episode.instruction)
         obj_px, target_px = self.client.ask_json(prompt, [rgb], check)
-        self._answer = {"vlm_object_point": list(obj_px) if obj_px else None,
-                        "vlm_target_point": list(target_px) if target_px else None}
+        self._answer = {
+            "vlm_object_point": list(obj_px) if obj_px else None,
+            "vlm_target_point": list(target_px) if target_px else None,
+        }
         calibration = episode.cameras[self.camera]
         grasp = object_from_point(obj_px, depth, calibration) if obj_px else None
         if obj_px is None or target_px is None or grasp is None:
-            self.failure_reason = ("VLM: no object point" if obj_px is None else "VLM: no target point"
-                                   if target_px is None else "VLM point hits no graspable solid")
+            self.failure_reason = (
+                "VLM: no object point"
+                if obj_px is None
+                else "VLM: no target point"
+                if target_px is None
+                else "VLM point hits no graspable solid"
+            )
             self._hold = np.append(arm_q, 0.0).astype(np.float32)
             return
         center, yaw, symmetry = grasp
         box_xy = world_point(target_px, depth, calibration)[:2]
         # The task's own scripted solution through the points the VLM gave.
-        load_task(episode.task).env_class().plan(self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy,
-                                                 arm_q)
+        load_task(episode.task).env_class().plan(
+            self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy, arm_q
+        )
 
     def episode_record(self) -> dict:
         """Columns this agent adds to the episode row: its VLM usage and the points it was given."""

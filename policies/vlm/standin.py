@@ -40,7 +40,7 @@ def read_marks(rgb: np.ndarray) -> dict[int, tuple[float, float]]:
     marks = {}
     for i in range(1, n):
         x, y, w, h = (int(v) for v in stats[i, :4])
-        crop = rgb[y:y + h, x:x + w]
+        crop = rgb[y : y + h, x : x + w]
         white = np.all(crop > 200, axis=-1).astype(np.uint8)
         number = _match_number(white)
         if number is not None:
@@ -60,7 +60,7 @@ def _digit_templates() -> dict[int, np.ndarray]:
         canvas = np.zeros((th + 8, tw + 8), np.uint8)
         cv2.putText(canvas, text, (4, th + 4), FONT, FONT_SCALE, 1, FONT_THICKNESS, cv2.LINE_8)
         cy, cx = np.nonzero(canvas)
-        out[number] = canvas[cy.min():cy.max() + 1, cx.min():cx.max() + 1]
+        out[number] = canvas[cy.min() : cy.max() + 1, cx.min() : cx.max() + 1]
     return out
 
 
@@ -68,7 +68,7 @@ def _match_number(white: np.ndarray) -> int | None:
     if white.sum() == 0:
         return None
     ys, xs = np.nonzero(white)
-    glyph = white[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    glyph = white[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1]
     best, best_score = None, -1.0
     for number, template in _digit_templates().items():
         if abs(template.shape[1] - glyph.shape[1]) > 2 or abs(template.shape[0] - glyph.shape[0]) > 2:
@@ -107,14 +107,18 @@ class ClassicCVModel:
     def answer(self, prompt: str, images: list[np.ndarray]) -> str:
         kind = kind_of(prompt)
         if kind is None or not images:
-            return ("I am RoboView's classic-CV stand-in and only answer the RoboView agents' own prompts "
-                    "about one attached image.")
+            return (
+                "I am RoboView's classic-CV stand-in and only answer the RoboView agents' own prompts "
+                "about one attached image."
+            )
         return json.dumps(getattr(self, f"_{kind}")(prompt, images[0]))
 
     def _points(self, prompt: str, rgb: np.ndarray) -> dict:
         box, objects = find_box(rgb), _as_instructed(prompt, find_objects(rgb))
-        return {"object_point": [round(v, 1) for v in objects[0].center] if objects else None,
-                "target_point": [round(v, 1) for v in box.center] if box else None}
+        return {
+            "object_point": [round(v, 1) for v in objects[0].center] if objects else None,
+            "target_point": [round(v, 1) for v in box.center] if box else None,
+        }
 
     def _plan(self, prompt: str, rgb: np.ndarray) -> dict:
         objects = _as_instructed(prompt, find_objects(rgb))
@@ -145,14 +149,32 @@ class ClassicCVModel:
         out = []
         objects = find_objects(rgb)
         for i, blob in enumerate(objects[:3]):
-            out.append({"ID": len(out) + 1, "object_type": "manipulation object" if i == 0 else "other object",
-                        "name": shape_word(blob), "category": [shape_word(blob), "geometry"], "state": "solid",
-                        "color": color_word(blob.rgb), "size": "small", "position": position_word(blob, rgb.shape[1])})
+            out.append(
+                {
+                    "ID": len(out) + 1,
+                    "object_type": "manipulation object" if i == 0 else "other object",
+                    "name": shape_word(blob),
+                    "category": [shape_word(blob), "geometry"],
+                    "state": "solid",
+                    "color": color_word(blob.rgb),
+                    "size": "small",
+                    "position": position_word(blob, rgb.shape[1]),
+                }
+            )
         box = find_box(rgb)
         if box is not None:
-            out.append({"ID": len(out) + 1, "object_type": "receiver object", "name": "box",
-                        "category": ["box", "container", "rectangular shape"], "state": "hollow",
-                        "color": "yellow", "size": "normal", "position": position_word(box, rgb.shape[1])})
+            out.append(
+                {
+                    "ID": len(out) + 1,
+                    "object_type": "receiver object",
+                    "name": "box",
+                    "category": ["box", "container", "rectangular shape"],
+                    "state": "hollow",
+                    "color": "yellow",
+                    "size": "normal",
+                    "position": position_word(box, rgb.shape[1]),
+                }
+            )
         return out
 
     def _fairness(self, prompt: str, rgb: np.ndarray) -> dict:
@@ -160,8 +182,12 @@ class ClassicCVModel:
         if box is None:
             return {"analysis": "No yellow box is visible.", "final_answer": "no"}
         if not objects:
-            return {"analysis": "A yellow box is visible but no small solid object stands out from the table.",
-                    "final_answer": "no"}
+            return {
+                "analysis": "A yellow box is visible but no small solid object stands out from the table.",
+                "final_answer": "no",
+            }
         word = color_word(objects[0].rgb)
-        return {"analysis": f"A small {word} object ({objects[0].pixels} px) and a yellow box are clearly visible.",
-                "final_answer": "yes"}
+        return {
+            "analysis": f"A small {word} object ({objects[0].pixels} px) and a yellow box are clearly visible.",
+            "final_answer": "yes",
+        }

@@ -36,8 +36,8 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
-from roboview_data.benchmark.format import CONFORMANCE as FOLDER
 from roboview_data import files
+from roboview_data.benchmark.format import CONFORMANCE as FOLDER
 from roboview_data.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
 from roboview_data.files import files_sha256
 from roboview_data.variation.factors import DEFAULT_TASK
@@ -45,10 +45,10 @@ from roboview_data.variation.factors import DEFAULT_TASK
 log = logging.getLogger(__name__)
 
 FORMAT = 1
-SAMPLE_SIZE = 24       # instances whose reset images are compared
-PHYSICS_SAMPLE = 12    # of those, instances whose expert rollout is compared
-ROLLOUT_STEPS = 40     # control steps: approach, grasp and lift (the object is in the air by step 30)
-STORED_SIDE = 112      # stored images are box-downsampled by an integer factor to at most this side
+SAMPLE_SIZE = 24  # instances whose reset images are compared
+PHYSICS_SAMPLE = 12  # of those, instances whose expert rollout is compared
+ROLLOUT_STEPS = 40  # control steps: approach, grasp and lift (the object is in the air by step 30)
+STORED_SIDE = 112  # stored images are box-downsampled by an integer factor to at most this side
 CAMERAS = ("front", "left_top", "wrist")
 VERDICTS = ("identical", "equivalent", "different")
 
@@ -108,7 +108,9 @@ def sample(by_split: dict[str, list[dict]], size: int = SAMPLE_SIZE) -> list[dic
     for split in splits:
         rows = by_split[split]
         k = min(per_split, len(rows))
-        idx = sorted({round(i * (len(rows) - 1) / max(1, k - 1)) for i in range(k)}, reverse=True) if k else []
+        idx = (
+            sorted({round(i * (len(rows) - 1) / max(1, k - 1)) for i in range(k)}, reverse=True) if k else []
+        )
         picks[split] = [rows[i] for i in idx]
     out: list[dict] = []
     while len(out) < size and any(picks.values()):
@@ -132,8 +134,11 @@ def observe(env, expert, instance, steps: int = 0) -> tuple[list[np.ndarray], di
     for _ in range(steps):
         env.step(expert.select_action(None))
     pos, quat = env.object_pose()
-    return images, {"state": env.state().astype(float).tolist(), "object_pos": pos.tolist(),
-                    "object_quat": quat.tolist()}
+    return images, {
+        "state": env.state().astype(float).tolist(),
+        "object_pos": pos.tolist(),
+        "object_quat": quat.tolist(),
+    }
 
 
 class _Envs:
@@ -163,8 +168,9 @@ class _Envs:
 # --- building the reference -----------------------------------------------------------------------------
 
 
-def write_reference(out: Path, by_split: dict[str, list[dict]], image_size: int,
-                    tolerances: Tolerances = Tolerances()) -> dict:
+def write_reference(
+    out: Path, by_split: dict[str, list[dict]], image_size: int, tolerances: Tolerances = Tolerances()
+) -> dict:
     """Store the reference sample of the rows `by_split` (accepted rows, as written) under out/conformance;
     returns the simulation stack that rendered it (roboview_data.sim.stack)."""
     folder = Path(out) / FOLDER
@@ -182,9 +188,16 @@ def write_reference(out: Path, by_split: dict[str, list[dict]], image_size: int,
                 physics[row["instance_id"]] = state
     finally:
         envs.close()
-    reference = {"format": FORMAT, "cameras": list(CAMERAS), "image_size": image_size, "stored_side": STORED_SIDE,
-                 "rollout_steps": ROLLOUT_STEPS, "tolerances": asdict(tolerances), "instances": entries,
-                 "physics": physics}
+    reference = {
+        "format": FORMAT,
+        "cameras": list(CAMERAS),
+        "image_size": image_size,
+        "stored_side": STORED_SIDE,
+        "rollout_steps": ROLLOUT_STEPS,
+        "tolerances": asdict(tolerances),
+        "instances": entries,
+        "physics": physics,
+    }
     (folder / REFERENCE).write_text(json.dumps(reference, indent=2, sort_keys=True) + "\n")
     return envs.stack
 
@@ -196,8 +209,14 @@ def compare_images(ref: np.ndarray, new: np.ndarray, tol: Tolerances) -> dict[st
     """Pixels that differ (share), largest level difference, PSNR (dB; null when identical), pixels of
     differing regions, and the verdict."""
     if ref.shape != new.shape:
-        return {"fraction": 1.0, "max_diff": 255, "psnr": 0.0, "region_pixels": int(np.prod(ref.shape[:2])),
-                "verdict": "different", "note": f"shape {new.shape} vs {ref.shape}"}
+        return {
+            "fraction": 1.0,
+            "max_diff": 255,
+            "psnr": 0.0,
+            "region_pixels": int(np.prod(ref.shape[:2])),
+            "verdict": "different",
+            "note": f"shape {new.shape} vs {ref.shape}",
+        }
     diff = np.abs(ref.astype(np.int16) - new.astype(np.int16))
     mask = diff.max(axis=-1) > 0
     fraction = float(mask.mean())
@@ -209,9 +228,13 @@ def compare_images(ref: np.ndarray, new: np.ndarray, tol: Tolerances) -> dict[st
         verdict = "equivalent"
     else:
         verdict = "different"
-    return {"fraction": fraction, "max_diff": int(diff.max()),
-            "psnr": None if mse == 0 else float(10 * np.log10(255.0**2 / mse)), "region_pixels": regions,
-            "verdict": verdict}
+    return {
+        "fraction": fraction,
+        "max_diff": int(diff.max()),
+        "psnr": None if mse == 0 else float(10 * np.log10(255.0**2 / mse)),
+        "region_pixels": regions,
+        "verdict": verdict,
+    }
 
 
 def compare_physics(ref: dict, new: dict, tol: Tolerances) -> dict[str, Any]:
@@ -219,8 +242,13 @@ def compare_physics(ref: dict, new: dict, tol: Tolerances) -> dict[str, Any]:
     joint = float(np.max(np.abs(np.subtract(ref["state"], new["state"]))))
     obj = float(np.linalg.norm(np.subtract(ref["object_pos"], new["object_pos"])))
     same = ref == new
-    verdict = ("identical" if same else "equivalent" if joint <= tol.joint_rad and obj <= tol.object_m
-               else "different")
+    verdict = (
+        "identical"
+        if same
+        else "equivalent"
+        if joint <= tol.joint_rad and obj <= tol.object_m
+        else "different"
+    )
     return {"joint_max": joint, "object_error_m": obj, "verdict": verdict}
 
 
@@ -242,19 +270,28 @@ class Report:
         images = [c for c in self.checks if c["check"] == "image"]
         physics = [c for c in self.checks if c["check"] == "physics"]
         psnrs = [c["psnr"] for c in images if c["psnr"] is not None]
-        return {"images": len(images), "images_identical": sum(c["verdict"] == "identical" for c in images),
-                "pixel_fraction_max": max((c["fraction"] for c in images), default=0.0),
-                "max_level_diff": max((c["max_diff"] for c in images), default=0),
-                "psnr_min": min(psnrs) if psnrs else None,
-                "region_pixels_max": max((c["region_pixels"] for c in images), default=0),
-                "physics": len(physics), "physics_identical": sum(c["verdict"] == "identical" for c in physics),
-                "joint_max": max((c["joint_max"] for c in physics), default=0.0),
-                "object_error_m_max": max((c["object_error_m"] for c in physics), default=0.0)}
+        return {
+            "images": len(images),
+            "images_identical": sum(c["verdict"] == "identical" for c in images),
+            "pixel_fraction_max": max((c["fraction"] for c in images), default=0.0),
+            "max_level_diff": max((c["max_diff"] for c in images), default=0),
+            "psnr_min": min(psnrs) if psnrs else None,
+            "region_pixels_max": max((c["region_pixels"] for c in images), default=0),
+            "physics": len(physics),
+            "physics_identical": sum(c["verdict"] == "identical" for c in physics),
+            "joint_max": max((c["joint_max"] for c in physics), default=0.0),
+            "object_error_m_max": max((c["object_error_m"] for c in physics), default=0.0),
+        }
 
     def record(self) -> dict[str, Any]:
         """What provenance and results record: verdict, drift, seconds."""
-        return {"verdict": self.verdict, "drift": self.drift, "seconds": round(self.seconds, 2), "stack": self.stack,
-                "stack_differences": self.stack_differences}
+        return {
+            "verdict": self.verdict,
+            "drift": self.drift,
+            "seconds": round(self.seconds, 2),
+            "stack": self.stack,
+            "stack_differences": self.stack_differences,
+        }
 
     def lines(self) -> list[str]:
         """One line per check with its measured figures, then the verdict."""
@@ -263,25 +300,33 @@ class Report:
             where = f"{c['split']}={c['value']}"
             if c["check"] == "image":
                 psnr = "inf" if c["psnr"] is None else f"{c['psnr']:.1f}"
-                out.append(f"{c['verdict']:<10}  image    {c['camera']:<8} {where:<34} differing {c['fraction']:7.3%}  "
-                           f"max Δ {c['max_diff']:3d}  PSNR {psnr:>5} dB  region px {c['region_pixels']}")
+                out.append(
+                    f"{c['verdict']:<10}  image    {c['camera']:<8} {where:<34} differing {c['fraction']:7.3%}  "
+                    f"max Δ {c['max_diff']:3d}  PSNR {psnr:>5} dB  region px {c['region_pixels']}"
+                )
             else:
-                out.append(f"{c['verdict']:<10}  physics  {'':<8} {where:<34} max |Δq| {c['joint_max']:.2e} rad  "
-                           f"object Δ {c['object_error_m']:.2e} m")
+                out.append(
+                    f"{c['verdict']:<10}  physics  {'':<8} {where:<34} max |Δq| {c['joint_max']:.2e} rad  "
+                    f"object Δ {c['object_error_m']:.2e} m"
+                )
         d = self.drift
-        out.append(f"conformance: {self.verdict} — {d['images_identical']}/{d['images']} images and "
-                   f"{d['physics_identical']}/{d['physics']} rollouts bit-identical; at most "
-                   f"{d['pixel_fraction_max']:.3%} of an image's pixels differ (max Δ {d['max_level_diff']}, region px "
-                   f"{d['region_pixels_max']}), joints within {d['joint_max']:.1e} rad, object within "
-                   f"{d['object_error_m_max']:.1e} m ({self.seconds:.1f} s)")
+        out.append(
+            f"conformance: {self.verdict} — {d['images_identical']}/{d['images']} images and "
+            f"{d['physics_identical']}/{d['physics']} rollouts bit-identical; at most "
+            f"{d['pixel_fraction_max']:.3%} of an image's pixels differ (max Δ {d['max_level_diff']}, region px "
+            f"{d['region_pixels_max']}), joints within {d['joint_max']:.1e} rad, object within "
+            f"{d['object_error_m_max']:.1e} m ({self.seconds:.1f} s)"
+        )
         return out
 
 
 def read_reference(root: Path) -> dict:
     path = Path(root) / FOLDER / REFERENCE
     if not path.is_file():
-        raise BenchmarkError(f"{root} holds no conformance reference ({FOLDER}/{REFERENCE} missing); rebuild the "
-                             "benchmark with `python -m pipelines.build_benchmark`")
+        raise BenchmarkError(
+            f"{root} holds no conformance reference ({FOLDER}/{REFERENCE} missing); rebuild the "
+            "benchmark with `python -m pipelines.build_benchmark`"
+        )
     return json.loads(path.read_text())
 
 
@@ -302,14 +347,35 @@ def check(root: Path, tolerances: Tolerances | None = None, envs: _Envs | None =
             images, state = observe(*envs(instance.task), instance, steps)
             stored = _unpng((Path(root) / FOLDER / f"{iid}.png").read_bytes(), len(reference["cameras"]))
             for camera, ref, new in zip(reference["cameras"], stored, images):
-                checks.append({"check": "image", "instance_id": iid, "split": entry["split"], "value": entry["value"],
-                               "camera": camera, **compare_images(ref, new, tol)})
+                checks.append(
+                    {
+                        "check": "image",
+                        "instance_id": iid,
+                        "split": entry["split"],
+                        "value": entry["value"],
+                        "camera": camera,
+                        **compare_images(ref, new, tol),
+                    }
+                )
             if ref_state is not None:
-                checks.append({"check": "physics", "instance_id": iid, "split": entry["split"],
-                               "value": entry["value"], **compare_physics(ref_state, state, tol)})
+                checks.append(
+                    {
+                        "check": "physics",
+                        "instance_id": iid,
+                        "split": entry["split"],
+                        "value": entry["value"],
+                        **compare_physics(ref_state, state, tol),
+                    }
+                )
     finally:
         envs.close()
-    return Report(worst(c["verdict"] for c in checks), checks, time.perf_counter() - start, asdict(tol), envs.stack or {})
+    return Report(
+        worst(c["verdict"] for c in checks),
+        checks,
+        time.perf_counter() - start,
+        asdict(tol),
+        envs.stack or {},
+    )
 
 
 def _code_hash() -> str:
@@ -326,8 +392,9 @@ def at_start(root: Path, version: str, cache_dir: Path | None = None) -> Report:
     envs = _Envs(reference["image_size"])
     first = reference["instances"][0].get("task") or DEFAULT_TASK
     envs(first)
-    key = hashlib.sha256(json.dumps({"version": version, "stack": envs.stack, "code": _code_hash()},
-                                    sort_keys=True).encode()).hexdigest()[:32]
+    key = hashlib.sha256(
+        json.dumps({"version": version, "stack": envs.stack, "code": _code_hash()}, sort_keys=True).encode()
+    ).hexdigest()[:32]
     path = Path(cache_dir or files.cache_dir("conformance")) / f"{key}.json"
     if path.is_file():
         envs.close()
@@ -351,13 +418,20 @@ def gate(root: Path, version: str, allow_drift: bool, flag: str) -> Report:
 
     report = at_start(root, version)
     report.stack_differences = stack.differences(read_manifest(root).get("stack"), report.stack)
-    log.info("conformance with the benchmark's stack: %s (%s)%s", report.verdict, stack.summary(report.stack),
-             f"; stack differs: {'; '.join(report.stack_differences)}" if report.stack_differences else "")
+    log.info(
+        "conformance with the benchmark's stack: %s (%s)%s",
+        report.verdict,
+        stack.summary(report.stack),
+        f"; stack differs: {'; '.join(report.stack_differences)}" if report.stack_differences else "",
+    )
     if report.verdict == "different":
         if not allow_drift:
             raise ConformanceError(refusal(report, root, flag))
-        log.warning("running on a stack whose conformance is `different` (%s=true): every row is marked; these "
-                    "results do not compare with others on this benchmark", flag)
+        log.warning(
+            "running on a stack whose conformance is `different` (%s=true): every row is marked; these "
+            "results do not compare with others on this benchmark",
+            flag,
+        )
     return report
 
 
@@ -366,11 +440,13 @@ def refusal(report: Report, root: Path, flag: str = "--benchmark.allow_drift") -
     bad = [c for c in report.checks if c["verdict"] == "different"]
     kinds = sorted({c["check"] for c in bad})
     d = report.drift
-    return (f"this machine renders or simulates the benchmark at {root} differently from the machine that built it "
-            f"({len(bad)} of {len(report.checks)} reference checks different: {', '.join(kinds)}; up to "
-            f"{d['pixel_fraction_max']:.2%} of an image's pixels differ with {d['region_pixels_max']} pixels of "
-            f"differing regions, joints up to {d['joint_max']:.1e} rad, object up to {d['object_error_m_max']:.1e} m). "
-            f"Results from this stack would not compare with others on this benchmark. See each check with "
-            f"`python -m pipelines.verify --benchmark.path={root}`; run on the stack the benchmark records "
-            f"(benchmark.json, \"stack\"), or pass {flag}=true to run anyway with every row marked "
-            f"`different`")
+    return (
+        f"this machine renders or simulates the benchmark at {root} differently from the machine that built it "
+        f"({len(bad)} of {len(report.checks)} reference checks different: {', '.join(kinds)}; up to "
+        f"{d['pixel_fraction_max']:.2%} of an image's pixels differ with {d['region_pixels_max']} pixels of "
+        f"differing regions, joints up to {d['joint_max']:.1e} rad, object up to {d['object_error_m_max']:.1e} m). "
+        f"Results from this stack would not compare with others on this benchmark. See each check with "
+        f"`python -m pipelines.verify --benchmark.path={root}`; run on the stack the benchmark records "
+        f'(benchmark.json, "stack"), or pass {flag}=true to run anyway with every row marked '
+        f"`different`"
+    )

@@ -55,21 +55,30 @@ def _card(record: dict, accepted: bool, rejected_by: str) -> str:
         f"{c['camera']}: obj {c['object_visible']:.2f} ({c['object_pixels']} px, "
         f"{'in' if c['object_in_frame'] else 'OUT of'} frame), box {c['box_visible']:.2f}, "
         f"ΔE table {c['delta_e_table']:.1f}, ΔE nominal {c['delta_e_nominal']:.1f}"
-        for c in fair["cameras"])
+        for c in fair["cameras"]
+    )
     status = "passed" if accepted else "rejected"
-    reason = "" if accepted else f"<br><b>rejected by {html.escape(rejected_by)}</b>: {html.escape(fair['reject_reason'])}"
+    reason = (
+        ""
+        if accepted
+        else f"<br><b>rejected by {html.escape(rejected_by)}</b>: {html.escape(fair['reject_reason'])}"
+    )
     vlm = fair.get("vlm_answer") or ""
     if vlm:
         disagree = vlm in ("yes", "no") and (vlm == "yes") != fair["passed"]
         status += " disagree" if disagree else ""
         flag = " <b>DISAGREES with the gate</b>" if disagree else ""
-        reason += f"<br>VLM screen: <b>{html.escape(vlm)}</b>{flag} — {html.escape(fair.get('vlm_analysis') or '')}"
-    return (f'<div class="card {status}" data-split="{record["split"]}" data-status="{status}">'
-            f'<img loading="lazy" src="previews/{record["instance_id"]}.png" alt="preview">'
-            f'<br><code>{record["instance_id"]}</code> {html.escape(record["split"])}: '
-            f'{html.escape(record["factor"])} = <b>{html.escape(record["value"])}</b>'
-            f'<br>{html.escape(record.get("task", DEFAULT_TASK))}: {html.escape(context_text(record))}'
-            f'<br>{numbers}{reason}</div>')
+        reason += (
+            f"<br>VLM screen: <b>{html.escape(vlm)}</b>{flag} — {html.escape(fair.get('vlm_analysis') or '')}"
+        )
+    return (
+        f'<div class="card {status}" data-split="{record["split"]}" data-status="{status}">'
+        f'<img loading="lazy" src="previews/{record["instance_id"]}.png" alt="preview">'
+        f"<br><code>{record['instance_id']}</code> {html.escape(record['split'])}: "
+        f"{html.escape(record['factor'])} = <b>{html.escape(record['value'])}</b>"
+        f"<br>{html.escape(record.get('task', DEFAULT_TASK))}: {html.escape(context_text(record))}"
+        f"<br>{numbers}{reason}</div>"
+    )
 
 
 def context_text(record: dict) -> str:
@@ -85,7 +94,10 @@ def write_contact_sheet(out: Path, records: list[dict], accepted: list[bool], re
     for record in records:
         (previews / f"{record['instance_id']}.png").write_bytes(record["preview"]["bytes"])
     splits = sorted({r["split"] for r in records})
-    page = PAGE.format(n=len(records), split_options="".join(f"<option>{s}</option>" for s in splits),
-                       cards="\n".join(_card(r, a, w) for r, a, w in zip(records, accepted, rejected_by)))
+    page = PAGE.format(
+        n=len(records),
+        split_options="".join(f"<option>{s}</option>" for s in splits),
+        cards="\n".join(_card(r, a, w) for r, a, w in zip(records, accepted, rejected_by)),
+    )
     (sheet / "index.html").write_text(page)
     return sheet / "index.html"

@@ -68,8 +68,11 @@ class FairnessReport:
     reject_reason: str
 
     def to_record(self) -> dict:
-        return {"cameras": [asdict(c) for c in self.cameras], "passed": self.passed,
-                "reject_reason": self.reject_reason}
+        return {
+            "cameras": [asdict(c) for c in self.cameras],
+            "passed": self.passed,
+            "reject_reason": self.reject_reason,
+        }
 
 
 class FairnessProbe:
@@ -108,8 +111,10 @@ class FairnessProbe:
         nominal_lab = np.asarray(get_color(self.env.instance.get("color")).lab)
         # Under a non-default light the rendered colour moves away from the nominal one by design: only
         # the object-table contrast (which a light that hides the object still fails) is judged.
-        judge_nominal = all(FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
-                            for name, value in self.env.instance.factors)
+        judge_nominal = all(
+            FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
+            for name, value in self.env.instance.factors
+        )
         results, reasons = [], []
         for cam in self.cameras:
             seg = self._segment(cam)
@@ -131,8 +136,9 @@ class FairnessProbe:
             )
             results.append(result)
             min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
-            reasons += violations(result, thresholds, min_pixels, scene_camera=cam != "wrist",
-                                   judge_nominal=judge_nominal)
+            reasons += violations(
+                result, thresholds, min_pixels, scene_camera=cam != "wrist", judge_nominal=judge_nominal
+            )
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
 
@@ -157,8 +163,13 @@ def _delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
     return float(delta_e_2000(a, b)) if a is not None and b is not None else float("nan")
 
 
-def violations(r: CameraFairness, t: FairnessThresholds, min_pixels: float, scene_camera: bool,
-               judge_nominal: bool = True) -> list[str]:
+def violations(
+    r: CameraFairness,
+    t: FairnessThresholds,
+    min_pixels: float,
+    scene_camera: bool,
+    judge_nominal: bool = True,
+) -> list[str]:
     """Why one camera's measurements fail the thresholds, one reason each (empty when they pass); the box is
     judged only by a `scene_camera`, the object's colour shift only with `judge_nominal`."""
     out = []

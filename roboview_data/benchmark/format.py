@@ -49,13 +49,23 @@ READABLE_FORMATS = (4,)
 # Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
 NOT_IN_EPISODES = ("fairness", "preview")
 
-_CAMERA = {"name": datasets.Value("string"), "pos": datasets.List(datasets.Value("float64")),
-           "quat": datasets.List(datasets.Value("float64")), "fovy": datasets.Value("float64")}
-_FAIR_CAMERA = {"camera": datasets.Value("string"), "object_visible": datasets.Value("float64"),
-                "object_pixels": datasets.Value("int64"), "object_in_frame": datasets.Value("bool"),
-                "box_visible": datasets.Value("float64"), "box_pixels": datasets.Value("int64"),
-                "box_in_frame": datasets.Value("bool"), "delta_e_nominal": datasets.Value("float64"),
-                "delta_e_table": datasets.Value("float64")}
+_CAMERA = {
+    "name": datasets.Value("string"),
+    "pos": datasets.List(datasets.Value("float64")),
+    "quat": datasets.List(datasets.Value("float64")),
+    "fovy": datasets.Value("float64"),
+}
+_FAIR_CAMERA = {
+    "camera": datasets.Value("string"),
+    "object_visible": datasets.Value("float64"),
+    "object_pixels": datasets.Value("int64"),
+    "object_in_frame": datasets.Value("bool"),
+    "box_visible": datasets.Value("float64"),
+    "box_pixels": datasets.Value("int64"),
+    "box_in_frame": datasets.Value("bool"),
+    "delta_e_nominal": datasets.Value("float64"),
+    "delta_e_table": datasets.Value("float64"),
+}
 
 
 class BenchmarkError(ValueError):
@@ -76,16 +86,34 @@ def _feature(example: Any) -> Any:
 
 def instance_features(task: str, rejected: bool = False) -> datasets.Features:
     """The instance record's schema for `task`: ids, every factor, each factor's extra columns."""
-    cols = {name: datasets.Value("string") for name in ("instance_id", "task", "split", "factor", "value",
-                                                         "context_id", "context_subspace", *factor_names(task))}
+    cols = {
+        name: datasets.Value("string")
+        for name in (
+            "instance_id",
+            "task",
+            "split",
+            "factor",
+            "value",
+            "context_id",
+            "context_subspace",
+            *factor_names(task),
+        )
+    }
     examples = record_columns({name: FACTORS[name].baseline for name in factor_names(task)})
     cols |= {name: _feature(value) for name, value in examples.items()}
-    cols |= {"cameras": datasets.List(_CAMERA), "seed": datasets.Value("int64"),
-             "fairness": {"cameras": datasets.List(_FAIR_CAMERA), "passed": datasets.Value("bool"),
-                          "reject_reason": datasets.Value("string"),
-                          # stage 1b (optional): the VLM screen's yes / no / error and its analysis
-                          "vlm_answer": datasets.Value("string"), "vlm_analysis": datasets.Value("string")},
-             "preview": datasets.Image()}
+    cols |= {
+        "cameras": datasets.List(_CAMERA),
+        "seed": datasets.Value("int64"),
+        "fairness": {
+            "cameras": datasets.List(_FAIR_CAMERA),
+            "passed": datasets.Value("bool"),
+            "reject_reason": datasets.Value("string"),
+            # stage 1b (optional): the VLM screen's yes / no / error and its analysis
+            "vlm_answer": datasets.Value("string"),
+            "vlm_analysis": datasets.Value("string"),
+        },
+        "preview": datasets.Image(),
+    }
     if rejected:
         cols["rejected_by"] = datasets.Value("string")
     return datasets.Features(cols)
@@ -179,7 +207,9 @@ def reference_hash(root: Path) -> str | None:
 
 def benchmark_version(preset: str, content: dict[str, str], conformance: str | None) -> str:
     """`<preset>-<12 hex>`: SHA-256 over every table's content hash and the conformance reference's."""
-    digest = hashlib.sha256(canonical_json({"content": content, "conformance": conformance}).encode()).hexdigest()
+    digest = hashlib.sha256(
+        canonical_json({"content": content, "conformance": conformance}).encode()
+    ).hexdigest()
     return f"{preset}-{digest[:12]}"
 
 
@@ -198,8 +228,10 @@ def _edited(root: Path, table: str, found: dict, stored: dict | None) -> str:
     rows = [i for i, (a, b) in enumerate(zip(found["rows"], stored["rows"])) if a != b]
     if not columns and not rows:
         return f"{where}: {CHECKSUMS} itself no longer matches the manifest"
-    return (f"{where} was edited after it was built: column(s) {', '.join(map(repr, columns))} of row(s) "
-            f"{', '.join(map(str, rows[:10]))}{' …' if len(rows) > 10 else ''} no longer match their checksums")
+    return (
+        f"{where} was edited after it was built: column(s) {', '.join(map(repr, columns))} of row(s) "
+        f"{', '.join(map(str, rows[:10]))}{' …' if len(rows) > 10 else ''} no longer match their checksums"
+    )
 
 
 def verify_table(root: Path, path: Path, manifest: dict) -> list[dict]:
@@ -210,13 +242,17 @@ def verify_table(root: Path, path: Path, manifest: dict) -> list[dict]:
     if found["sha256"] != manifest.get("content", {}).get(name):
         sums_path = root / CHECKSUMS
         stored = json.loads(sums_path.read_text()).get(name) if sums_path.is_file() else None
-        raise BenchmarkError(_edited(root, name, found, stored) + "; rebuild it with `python -m pipelines.build_benchmark` "
-                             "or download the published benchmark again")
+        raise BenchmarkError(
+            _edited(root, name, found, stored) + "; rebuild it with `python -m pipelines.build_benchmark` "
+            "or download the published benchmark again"
+        )
     return rows
 
 
 def write_manifest(out: Path, manifest: dict) -> None:
-    (out / MANIFEST).write_text(json.dumps({**manifest, "format": FORMAT_VERSION}, indent=2, sort_keys=True) + "\n")
+    (out / MANIFEST).write_text(
+        json.dumps({**manifest, "format": FORMAT_VERSION}, indent=2, sort_keys=True) + "\n"
+    )
 
 
 def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[str]) -> dict[str, dict]:
@@ -250,23 +286,30 @@ class Benchmark:
 
 def read_manifest(root: Path) -> dict:
     """The manifest of a finished, readable benchmark folder (else BenchmarkError saying what to do)."""
-    problem = folder_problem(Path(root), "benchmark", MANIFEST,
-                             "build one with `python -m pipelines.build_benchmark`")
+    problem = folder_problem(
+        Path(root), "benchmark", MANIFEST, "build one with `python -m pipelines.build_benchmark`"
+    )
     if problem:
         raise BenchmarkError(problem)
     path = Path(root) / MANIFEST
     manifest = json.loads(path.read_text())
     if manifest.get("format") not in READABLE_FORMATS:
-        raise BenchmarkError(f"{root} has benchmark format {manifest.get('format')!r}; this version reads formats "
-                             f"{', '.join(map(str, READABLE_FORMATS))} (episode seeds shared per context and repeat); "
-                             "rebuild it with `python -m pipelines.build_benchmark`")
+        raise BenchmarkError(
+            f"{root} has benchmark format {manifest.get('format')!r}; this version reads formats "
+            f"{', '.join(map(str, READABLE_FORMATS))} (episode seeds shared per context and repeat); "
+            "rebuild it with `python -m pipelines.build_benchmark`"
+        )
     if manifest.get("status") != "ok":
         raise BenchmarkError(f"{root} is a failed build; rebuild it")
-    expected = benchmark_version(manifest["suite"]["preset"], manifest.get("content", {}), reference_hash(root))
+    expected = benchmark_version(
+        manifest["suite"]["preset"], manifest.get("content", {}), reference_hash(root)
+    )
     if manifest.get("benchmark_version") != expected:
-        raise BenchmarkError(f"{root}/{MANIFEST} names version {manifest.get('benchmark_version')!r} but its content "
-                             f"hashes and conformance reference give {expected!r}: the manifest or the conformance "
-                             "folder was edited after the build; rebuild it or download it again")
+        raise BenchmarkError(
+            f"{root}/{MANIFEST} names version {manifest.get('benchmark_version')!r} but its content "
+            f"hashes and conformance reference give {expected!r}: the manifest or the conformance "
+            "folder was edited after the build; rebuild it or download it again"
+        )
     return manifest
 
 
@@ -281,26 +324,35 @@ def instance_from_record(record: dict) -> TaskInstance:
     task = record.get("task") or DEFAULT_TASK
     factors = {name: record[name] for name in factor_names(task) if name in record}
     try:
-        instance = TaskInstance(record["split"], tuple(record["factor"].split("|")), factors,
-                                record["context_subspace"], task)
+        instance = TaskInstance(
+            record["split"], tuple(record["factor"].split("|")), factors, record["context_subspace"], task
+        )
     except (KeyError, ValueError) as exc:
-        raise BenchmarkError(f"benchmark row {record.get('instance_id')} is not a valid instance ({exc}); "
-                             "rebuild the benchmark with pipelines.build_benchmark") from None
+        raise BenchmarkError(
+            f"benchmark row {record.get('instance_id')} is not a valid instance ({exc}); "
+            "rebuild the benchmark with pipelines.build_benchmark"
+        ) from None
     if instance.instance_id != record["instance_id"]:
-        raise BenchmarkError(f"benchmark row {record['instance_id']} does not hash to its id: its factor columns "
-                             "were modified after it was built; rebuild it with pipelines.build_benchmark")
+        raise BenchmarkError(
+            f"benchmark row {record['instance_id']} does not hash to its id: its factor columns "
+            "were modified after it was built; rebuild it with pipelines.build_benchmark"
+        )
     for column in DERIVED:
         if column in record and record[column] != getattr(instance, column):
-            raise BenchmarkError(f"benchmark row {record['instance_id']}: column {column!r} holds "
-                                 f"{record[column]!r} but the instance's parameters give {getattr(instance, column)!r}; "
-                                 "the row was edited after it was built: rebuild it with pipelines.build_benchmark")
+            raise BenchmarkError(
+                f"benchmark row {record['instance_id']}: column {column!r} holds "
+                f"{record[column]!r} but the instance's parameters give {getattr(instance, column)!r}; "
+                "the row was edited after it was built: rebuild it with pipelines.build_benchmark"
+            )
     return instance
 
 
 def available_splits(path: str | Path, manifest: dict | None = None) -> list[str]:
     """The splits the benchmark folder at `path` holds, in its manifest's order (`manifest`: already read)."""
     root = Path(path)
-    return [s for s in (manifest or read_manifest(root))["splits"] if (root / "data" / f"{s}.parquet").is_file()]
+    return [
+        s for s in (manifest or read_manifest(root))["splits"] if (root / "data" / f"{s}.parquet").is_file()
+    ]
 
 
 def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchmark:
@@ -311,12 +363,18 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
     chosen = splits or available
     unknown = [s for s in chosen if s not in available]
     if unknown:
-        raise BenchmarkError(f"unknown split(s) {unknown}; the benchmark at {root} has: {', '.join(available)}")
+        raise BenchmarkError(
+            f"unknown split(s) {unknown}; the benchmark at {root} has: {', '.join(available)}"
+        )
     out: dict[str, list[BenchmarkItem]] = {}
     for split in chosen:
         rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
-        out[split] = [BenchmarkItem(instance_from_record(row), {k: v for k, v in row.items() if k not in NOT_IN_EPISODES})
-                      for row in rows]
+        out[split] = [
+            BenchmarkItem(
+                instance_from_record(row), {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
+            )
+            for row in rows
+        ]
     return Benchmark(root, manifest["benchmark_version"], out)
 
 

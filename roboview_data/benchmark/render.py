@@ -19,8 +19,8 @@ from roboview_data.benchmark.fairness import (
 )
 from roboview_data.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_image
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.tasks import DEFAULT_TASK, make_env
+from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.variation.instances import TaskInstance
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
@@ -40,8 +40,13 @@ def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
 class InstanceRenderer:
     """One env (and fairness probe) per task, made on first use; every instance applied in place."""
 
-    def __init__(self, image_size: int, thresholds: FairnessThresholds, task: str = DEFAULT_TASK,
-                 screen: tuple[Any, Any] | None = None) -> None:
+    def __init__(
+        self,
+        image_size: int,
+        thresholds: FairnessThresholds,
+        task: str = DEFAULT_TASK,
+        screen: tuple[Any, Any] | None = None,
+    ) -> None:
         """`screen`: (client class, endpoint) of the stage-1b VLM fairness screen, built here in the worker."""
         self.image_size = image_size
         self.envs: dict[str, Any] = {}
@@ -61,7 +66,9 @@ class InstanceRenderer:
         obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
         rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in OBSERVED_CAMERAS}
         fairness = self.probe.measure(rgb, self.thresholds).to_record()
-        vlm = screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
+        vlm = (
+            screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
+        )
         fairness |= {"vlm_answer": vlm.get("answer", ""), "vlm_analysis": vlm.get("analysis", "")}
         return {
             **instance.to_record(),

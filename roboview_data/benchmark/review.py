@@ -30,18 +30,26 @@ def read_decisions(path: Path, known_ids: set[str]) -> dict[str, Decision]:
         reader = csv.DictReader(f)
         missing = {"instance_id", "verdict"} - set(reader.fieldnames or [])
         if missing:
-            raise ValueError(f"decisions file {path} lacks column(s) {sorted(missing)}; "
-                             "expected: instance_id, verdict, reviewer, note")
+            raise ValueError(
+                f"decisions file {path} lacks column(s) {sorted(missing)}; "
+                "expected: instance_id, verdict, reviewer, note"
+            )
         rows = list(reader)
     unknown = sorted({r["instance_id"] for r in rows} - known_ids)
     if unknown:
-        raise ValueError(f"decisions file {path} names {len(unknown)} instance id(s) not in this suite: "
-                         f"{', '.join(unknown[:5])}{' …' if len(unknown) > 5 else ''}")
+        raise ValueError(
+            f"decisions file {path} names {len(unknown)} instance id(s) not in this suite: "
+            f"{', '.join(unknown[:5])}{' …' if len(unknown) > 5 else ''}"
+        )
     bad = sorted({r["verdict"] for r in rows} - set(VERDICTS))
     if bad:
         raise ValueError(f"decisions file {path}: unknown verdict(s) {bad}; allowed: {', '.join(VERDICTS)}")
-    return {r["instance_id"]: Decision(r["instance_id"], r["verdict"], r.get("reviewer") or "human",
-                                       r.get("note") or "") for r in rows}
+    return {
+        r["instance_id"]: Decision(
+            r["instance_id"], r["verdict"], r.get("reviewer") or "human", r.get("note") or ""
+        )
+        for r in rows
+    }
 
 
 def adjudicate(record: dict, decision: Decision | None) -> tuple[bool, str]:

@@ -59,7 +59,7 @@ def check_answer(answer: Any) -> tuple[str, str]:
         raise ValueError("expected a JSON object with analysis and final_answer")
     final = str(answer.get("final_answer", "")).strip().lower()
     if final not in ANSWERS:
-        raise ValueError(f"final_answer must be \"yes\" or \"no\", got {answer.get('final_answer')!r}")
+        raise ValueError(f'final_answer must be "yes" or "no", got {answer.get("final_answer")!r}')
     return final, str(answer.get("analysis", ""))
 
 
@@ -81,25 +81,42 @@ def agreement(records: list[dict]) -> dict[str, Any]:
         gate, vlm = r["fairness"]["passed"], r["fairness"]["vlm_answer"] == "yes"
         table[0 if gate else 1, 0 if vlm else 1] += 1
         if gate != vlm:
-            disagree.append({"instance_id": r["instance_id"], "split": r["split"], "value": r["value"],
-                             "gate": "pass" if gate else "fail", "vlm": r["fairness"]["vlm_answer"],
-                             "analysis": r["fairness"]["vlm_analysis"]})
+            disagree.append(
+                {
+                    "instance_id": r["instance_id"],
+                    "split": r["split"],
+                    "value": r["value"],
+                    "gate": "pass" if gate else "fail",
+                    "vlm": r["fairness"]["vlm_answer"],
+                    "analysis": r["fairness"]["vlm_analysis"],
+                }
+            )
     n = int(table.sum())
     observed = (table[0, 0] + table[1, 1]) / n if n else math.nan
     kappa = float(cohens_kappa(table, return_results=False)) if n and _informative(table) else None
     pass_rate = float(table[:, 0].sum() / n) if n else math.nan
-    return {"screened": n, "errors": len(records) - n, "pass_rate": round(pass_rate, 4),
-            "meets_paper_target": bool(pass_rate >= PAPER_TARGET) if n else False,
-            "table": {"gate_pass_vlm_yes": int(table[0, 0]), "gate_pass_vlm_no": int(table[0, 1]),
-                      "gate_fail_vlm_yes": int(table[1, 0]), "gate_fail_vlm_no": int(table[1, 1])},
-            "observed_agreement": round(float(observed), 4), "cohens_kappa": None if kappa is None else round(kappa, 4),
-            "disagreements": disagree}
+    return {
+        "screened": n,
+        "errors": len(records) - n,
+        "pass_rate": round(pass_rate, 4),
+        "meets_paper_target": bool(pass_rate >= PAPER_TARGET) if n else False,
+        "table": {
+            "gate_pass_vlm_yes": int(table[0, 0]),
+            "gate_pass_vlm_no": int(table[0, 1]),
+            "gate_fail_vlm_yes": int(table[1, 0]),
+            "gate_fail_vlm_no": int(table[1, 1]),
+        },
+        "observed_agreement": round(float(observed), 4),
+        "cohens_kappa": None if kappa is None else round(kappa, 4),
+        "disagreements": disagree,
+    }
 
 
 def _informative(table: np.ndarray) -> bool:
     # κ is undefined when either rater gives one answer to everything (expected agreement = 1).
     return bool(table.sum(axis=0).min() > 0 or table.sum(axis=1).min() > 0) and not (
-        (table.sum(axis=0) == table.sum()).any() and (table.sum(axis=1) == table.sum()).any())
+        (table.sum(axis=0) == table.sum()).any() and (table.sum(axis=1) == table.sum()).any()
+    )
 
 
 def write_decisions(path: Path, records: list[dict], reviewer: str) -> None:
@@ -110,5 +127,11 @@ def write_decisions(path: Path, records: list[dict], reviewer: str) -> None:
         for r in records:
             answer = r["fairness"]["vlm_answer"]
             if answer in ANSWERS:
-                writer.writerow([r["instance_id"], "accept" if answer == "yes" else "reject", reviewer,
-                                 r["fairness"]["vlm_analysis"]])
+                writer.writerow(
+                    [
+                        r["instance_id"],
+                        "accept" if answer == "yes" else "reject",
+                        reviewer,
+                        r["fairness"]["vlm_analysis"],
+                    ]
+                )

@@ -130,14 +130,18 @@ def audit(visuals: TrainingVisuals, records: list[dict], radii: Radii = Radii())
             best = int(np.argmin(dist / radii.pose_m + angle / radii.pose_deg)) if len(dist) else None
             row["nearest_pos_m"] = float(dist[best]) if best is not None else float("nan")
             row["nearest_angle_deg"] = float(angle[best]) if best is not None else float("nan")
-            camera_ok = ((dist <= EXACT_POS_M) & (angle <= EXACT_ANGLE_DEG) & (dfovy <= EXACT_FOVY_DEG),
-                         (dist <= radii.pose_m) & (angle <= radii.pose_deg))
+            camera_ok = (
+                (dist <= EXACT_POS_M) & (angle <= EXACT_ANGLE_DEG) & (dfovy <= EXACT_FOVY_DEG),
+                (dist <= radii.pose_m) & (angle <= radii.pose_deg),
+            )
         exact, near = color_ok[0] & camera_ok[0], color_ok[1] & camera_ok[1]
         row["status"] = _status(exact, near)
         row["n_nearby"] = int(near.sum())
         rows.append(row)
     table = pd.DataFrame(rows)
-    table["contexts_in_training"] = [float(np.mean(contexts[(s, v)])) for s, v in zip(table["split"], table["value"])]
+    table["contexts_in_training"] = [
+        float(np.mean(contexts[(s, v)])) for s, v in zip(table["split"], table["value"])
+    ]
     return table
 
 

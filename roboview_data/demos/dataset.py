@@ -60,8 +60,11 @@ class CollectionSignature:
 def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
     """LeRobot features: one video per camera, 8-d state and 8-d action (docs/benchmark.md, "The task and its interfaces")."""
     features = {
-        IMAGE_KEY.format(cam): {"dtype": "video", "shape": (image_size, image_size, 3),
-                                "names": ["height", "width", "channels"]}
+        IMAGE_KEY.format(cam): {
+            "dtype": "video",
+            "shape": (image_size, image_size, 3),
+            "names": ["height", "width", "channels"],
+        }
         for cam in cameras
     }
     features[STATE_KEY] = {"dtype": "float32", "shape": (len(STATE_NAMES),), "names": list(STATE_NAMES)}
@@ -83,8 +86,10 @@ class Progress:
     def load(cls, root: Path) -> Progress:
         raw = json.loads((root / PROGRESS_FILE).read_text())
         if raw.get("format") != PROGRESS_FORMAT:
-            raise DatasetRootError(f"{root / PROGRESS_FILE} has format {raw.get('format')!r}; "
-                                   f"this version reads format {PROGRESS_FORMAT}")
+            raise DatasetRootError(
+                f"{root / PROGRESS_FILE} has format {raw.get('format')!r}; "
+                f"this version reads format {PROGRESS_FORMAT}"
+            )
         sig = raw.pop("signature")
         sig["cameras"] = tuple(sig["cameras"])
         sig["randomize"] = tuple(sig.get("randomize", ()))
@@ -100,26 +105,41 @@ class Progress:
 
 def check_root(root: Path, signature: CollectionSignature) -> Progress | None:
     """Validate `root` before any work: None = start fresh, else the checkpoint to resume from."""
-    problem = folder_problem(root, "collection", PROGRESS_FILE, "choose a new folder (or one from an earlier "
-                             "run) or delete this one", label=f"dataset root {root}", writing=True)
+    problem = folder_problem(
+        root,
+        "collection",
+        PROGRESS_FILE,
+        "choose a new folder (or one from an earlier run) or delete this one",
+        label=f"dataset root {root}",
+        writing=True,
+    )
     if problem:
         raise DatasetRootError(problem)
     if not (root / PROGRESS_FILE).is_file():
         return None  # new or empty
     progress = Progress.load(root)
     if progress.signature != signature:
-        diffs = {k: (v, getattr(signature, k)) for k, v in asdict(progress.signature).items()
-                 if (tuple(v) if isinstance(v, list) else v) != getattr(signature, k)}
+        diffs = {
+            k: (v, getattr(signature, k))
+            for k, v in asdict(progress.signature).items()
+            if (tuple(v) if isinstance(v, list) else v) != getattr(signature, k)
+        }
         detail = ", ".join(f"{k}: existing {old!r} vs requested {new!r}" for k, (old, new) in diffs.items())
         raise DatasetRootError(
             f"dataset root {root} holds a collection made with different settings ({detail}); "
-            "rerun with the same settings to resume, or choose a new root")
+            "rerun with the same settings to resume, or choose a new root"
+        )
     return progress
 
 
 def _append_only_files(root: Path) -> list[str]:
-    return sorted(str(p.relative_to(root)) for d in APPEND_ONLY_DIRS if (root / d).exists()
-                  for p in (root / d).rglob("*") if p.is_file())
+    return sorted(
+        str(p.relative_to(root))
+        for d in APPEND_ONLY_DIRS
+        if (root / d).exists()
+        for p in (root / d).rglob("*")
+        if p.is_file()
+    )
 
 
 CARD = "README.md"
@@ -132,7 +152,9 @@ def write_card(root: Path, repo_id: str, task: str, provenance_rows: int) -> Pat
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
     info = json.loads((root / "meta" / "info.json").read_text())
-    cameras = [k.removeprefix(IMAGE_KEY.format("")) for k in info["features"] if k.startswith(IMAGE_KEY.format(""))]
+    cameras = [
+        k.removeprefix(IMAGE_KEY.format("")) for k in info["features"] if k.startswith(IMAGE_KEY.format(""))
+    ]
     description = (
         f"Scripted expert demonstrations of the RoboView `{task}` task (Franka Panda + Robotiq 2F-85 in MuJoCo), "
         f"collected with context-only randomization: object position, shape and instruction vary; every visual "
@@ -142,9 +164,15 @@ def write_card(root: Path, repo_id: str, task: str, provenance_rows: int) -> Pat
         f"- Cameras: {', '.join(cameras)} ({info['features'][IMAGE_KEY.format(cameras[0])]['shape'][0]} px square)\n"
         f"- `observation.state`: {', '.join(STATE_NAMES)}; `action`: {', '.join(ACTION_NAMES)}\n"
         f"- Per-episode provenance (instance, context, seed): `{PROVENANCE_FILE.as_posix()}` "
-        f"({provenance_rows} rows)")
-    card = create_lerobot_dataset_card(tags=["roboview", "visual-bias", task], dataset_info=load_info(root),
-                                       license="apache-2.0", repo_id=repo_id, dataset_description=description)
+        f"({provenance_rows} rows)"
+    )
+    card = create_lerobot_dataset_card(
+        tags=["roboview", "visual-bias", task],
+        dataset_info=load_info(root),
+        license="apache-2.0",
+        repo_id=repo_id,
+        dataset_description=description,
+    )
     card.save(root / CARD)
     return root / CARD
 
@@ -175,12 +203,20 @@ def read_provenance(root: str | Path) -> tuple[pd.DataFrame, list[str]]:
     """A finished collection's per-episode provenance and its camera names (from meta/info.json)."""
     root = Path(root)
     info_path = root / "meta" / "info.json"
-    if not info_path.is_file() or not (root / PROVENANCE_FILE).is_file() or not (root / PROGRESS_FILE).is_file():
-        raise DatasetRootError(f"{root} is not a pipelines.collect dataset (meta/info.json, {PROVENANCE_FILE} or "
-                               f"{PROGRESS_FILE} missing)")
+    if (
+        not info_path.is_file()
+        or not (root / PROVENANCE_FILE).is_file()
+        or not (root / PROGRESS_FILE).is_file()
+    ):
+        raise DatasetRootError(
+            f"{root} is not a pipelines.collect dataset (meta/info.json, {PROVENANCE_FILE} or "
+            f"{PROGRESS_FILE} missing)"
+        )
     Progress.load(root)  # checks the format version
     prefix = IMAGE_KEY.format("")
-    cameras = [k[len(prefix):] for k in json.loads(info_path.read_text())["features"] if k.startswith(prefix)]
+    cameras = [
+        k[len(prefix) :] for k in json.loads(info_path.read_text())["features"] if k.startswith(prefix)
+    ]
     return pd.read_parquet(root / PROVENANCE_FILE), cameras
 
 
@@ -199,15 +235,20 @@ def roll_back(root: Path, progress: Progress) -> int:
         if (snap / rel.name).exists():
             shutil.copy2(snap / rel.name, root / rel)
     if removed:
-        log.warning("rolled back %d file(s) written after the last checkpoint (%d episodes kept)",
-                    removed, progress.episodes_saved)
+        log.warning(
+            "rolled back %d file(s) written after the last checkpoint (%d episodes kept)",
+            removed,
+            progress.episodes_saved,
+        )
     return removed
 
 
 def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRobotDataset
     """Append one successful expert episode through lerobot's add_frame / save_episode."""
     values = episode.instance.factor_values
-    task = next(values[name] for name in values if name.endswith("instruction"))  # instruction / push_instruction
+    task = next(
+        values[name] for name in values if name.endswith("instruction")
+    )  # instruction / push_instruction
     for t in range(episode.steps):
         frame = {IMAGE_KEY.format(cam): frames[t] for cam, frames in episode.images.items()}
         frame[STATE_KEY] = episode.states[t]

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
 from roboview_data.tasks import DEFAULT_TASK, load_task, make_env
+from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
 from roboview_data.variation.factors import context_factors
 from roboview_data.variation.instances import TaskInstance, seed_from_text
 from roboview_data.variation.randomization import Randomization, sample_randomization
@@ -28,8 +28,9 @@ def attempt_seed(seed: int, attempt: int) -> int:
 def training_instance(rng: np.random.Generator, task: str = DEFAULT_TASK) -> TaskInstance:
     """Context-only randomization: the task's context factors drawn at random, visual factors at baseline."""
     values = ContextSampler(task=task).sample_context(rng)
-    return TaskInstance(split="train", varied=context_factors(task), factors=values, context_subspace="cartesian",
-                        task=task)
+    return TaskInstance(
+        split="train", varied=context_factors(task), factors=values, context_subspace="cartesian", task=task
+    )
 
 
 @dataclass
@@ -49,17 +50,30 @@ class DemoEpisode:
     randomized: tuple[str, ...] = ()
 
     def provenance(self) -> dict:
-        row = {"attempt": self.attempt, "episode_seed": self.episode_seed,
-               "instance_id": self.instance.instance_id, **self.instance.context, "steps": self.steps,
-               "randomized": list(self.randomized)}
+        row = {
+            "attempt": self.attempt,
+            "episode_seed": self.episode_seed,
+            "instance_id": self.instance.instance_id,
+            **self.instance.context,
+            "steps": self.steps,
+            "randomized": list(self.randomized),
+        }
         return row | (self.visuals.record() if self.visuals is not None else {})
 
 
 class DemoCollector:
     """Owns one env + expert (one renderer) per process; reused for every attempt it runs."""
 
-    def __init__(self, seed: int, cameras: tuple[str, ...], image_size: int, fps: int, max_steps: int,
-                 randomize: tuple[str, ...] = (), task: str = DEFAULT_TASK) -> None:
+    def __init__(
+        self,
+        seed: int,
+        cameras: tuple[str, ...],
+        image_size: int,
+        fps: int,
+        max_steps: int,
+        randomize: tuple[str, ...] = (),
+        task: str = DEFAULT_TASK,
+    ) -> None:
         self.seed = seed
         self.randomize = randomize
         self.task = task
@@ -88,8 +102,16 @@ class DemoCollector:
             obs, _, success, truncated, _ = self.env.step(action)
             if success or truncated:
                 break
-        episode = DemoEpisode(attempt, ep_seed, instance, success, len(actions), time.perf_counter() - start,
-                              visuals=visuals, randomized=self.randomize)
+        episode = DemoEpisode(
+            attempt,
+            ep_seed,
+            instance,
+            success,
+            len(actions),
+            time.perf_counter() - start,
+            visuals=visuals,
+            randomized=self.randomize,
+        )
         if success:  # failures are only counted, so their frames never cross the process boundary
             episode.images = {c: np.stack(v) for c, v in frames.items()}
             episode.states = np.stack(states).astype(np.float32)

@@ -22,8 +22,9 @@ IMAGE_SIZE_MIN = 16
 IMAGE_SIZE_MAX = 640
 
 
-def check_image_size(size: int, name: str = "image_size", minimum: int = IMAGE_SIZE_MIN,
-                     why: str = "") -> None:
+def check_image_size(
+    size: int, name: str = "image_size", minimum: int = IMAGE_SIZE_MIN, why: str = ""
+) -> None:
     """ValueError naming `name`={size} and the allowed range unless minimum ≤ size ≤ IMAGE_SIZE_MAX; `why`
     (appended in parentheses) says why a caller's minimum lies above IMAGE_SIZE_MIN."""
     if not minimum <= size <= IMAGE_SIZE_MAX:
@@ -58,17 +59,23 @@ class CameraPose:
         return -self.rotation[:, 2]
 
     def to_record(self) -> dict:
-        return {"name": self.name, "pos": [float(v) for v in self.pos],
-                "quat": [float(v) for v in self.quat], "fovy": float(self.fovy)}
+        return {
+            "name": self.name,
+            "pos": [float(v) for v in self.pos],
+            "quat": [float(v) for v in self.quat],
+            "fovy": float(self.fovy),
+        }
 
 
 def quat_to_mat(quat: np.ndarray) -> np.ndarray:
     w, x, y, z = quat / np.linalg.norm(quat)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def mat_to_quat(mat: np.ndarray) -> np.ndarray:
@@ -91,8 +98,9 @@ def mat_to_quat(mat: np.ndarray) -> np.ndarray:
     return q if q[0] >= 0 else -q
 
 
-def look_at(name: str, eye: np.ndarray, target: np.ndarray = WORKSPACE_CENTER,
-            fovy: float = DEFAULT_FOVY_DEG) -> CameraPose:
+def look_at(
+    name: str, eye: np.ndarray, target: np.ndarray = WORKSPACE_CENTER, fovy: float = DEFAULT_FOVY_DEG
+) -> CameraPose:
     """Pose at `eye` looking at `target` with world +z projected as image up."""
     eye, target = np.asarray(eye, float), np.asarray(target, float)
     backward = eye - target

@@ -42,7 +42,7 @@ def yaw_of(quat: np.ndarray) -> float:
 
 
 def _min_jerk(s: float) -> float:
-    return s ** 3 * (10 - 15 * s + 6 * s * s)
+    return s**3 * (10 - 15 * s + 6 * s * s)
 
 
 class PickPlacePlanner:
@@ -66,8 +66,16 @@ class PickPlacePlanner:
         self._t = 0
         self._q = HOME_QPOS.copy()
 
-    def plan(self, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, arm_qpos: np.ndarray,
-             box_xy: np.ndarray, release_z: float, ee_pos: np.ndarray | None = None) -> None:
+    def plan(
+        self,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        arm_qpos: np.ndarray,
+        box_xy: np.ndarray,
+        release_z: float,
+        ee_pos: np.ndarray | None = None,
+    ) -> None:
         """Plan the pick-and-place for an object at `obj_pos` (its center) with heading `obj_yaw`.
 
         `arm_qpos` is the arm's joint reading now; `ee_pos` the pinch point's position, computed from

@@ -27,8 +27,12 @@ class LazyObservation(dict):
     `current()` says whether the env is still at the step this observation was taken at.
     """
 
-    def __init__(self, eager: dict[str, np.ndarray], lazy: dict[str, Callable[[], np.ndarray]],
-                 current: Callable[[], bool]) -> None:
+    def __init__(
+        self,
+        eager: dict[str, np.ndarray],
+        lazy: dict[str, Callable[[], np.ndarray]],
+        current: Callable[[], bool],
+    ) -> None:
         super().__init__(eager)
         self._lazy = dict(lazy)
         self._order = tuple(lazy) + tuple(k for k in eager if k not in lazy)
@@ -39,8 +43,10 @@ class LazyObservation(dict):
         if render is None:
             raise KeyError(key)
         if not self._current():
-            raise StaleObservation(f"observation key {key!r} was read after the env stepped on; read images before "
-                                   "the next env.step()/reset() (or make the env with lazy=False)")
+            raise StaleObservation(
+                f"observation key {key!r} was read after the env stepped on; read images before "
+                "the next env.step()/reset() (or make the env with lazy=False)"
+            )
         value = render()
         dict.__setitem__(self, key, value)
         return value

@@ -84,7 +84,8 @@ def _panda_xml() -> str:
     path = resources.files("gym_hil") / "assets" / "panda.xml"
     if not path.is_file():
         raise FileNotFoundError(
-            f"Panda model not found at {path}; install gym-hil (`make install`), which ships it.")
+            f"Panda model not found at {path}; install gym-hil (`make install`), which ships it."
+        )
     return str(path)
 
 
@@ -108,8 +109,9 @@ def _position_servos(spec: mujoco.MjSpec) -> None:
 SpecAddition = Callable[[mujoco.MjSpec], None]
 
 
-def build_spec(quality: RenderQuality = "fast", target: SpecAddition | None = None,
-               extras: Sequence[SpecAddition] = ()) -> mujoco.MjSpec:
+def build_spec(
+    quality: RenderQuality = "fast", target: SpecAddition | None = None, extras: Sequence[SpecAddition] = ()
+) -> mujoco.MjSpec:
     """The full scene spec: Panda + 2F-85, table, four shape bodies, cameras, plus what others add.
 
     `target` is the task's addition (made before the shapes), `extras` the visual factors' (after
@@ -129,15 +131,31 @@ def build_spec(quality: RenderQuality = "fast", target: SpecAddition | None = No
     spec.visual.quality.shadowsize = 0 if quality == "fast" else 2048
 
     world = spec.worldbody
-    world.add_light(name="top", pos=[0.4, 0.0, 2.0], dir=[0, 0, -1], diffuse=[0.45, 0.45, 0.45],
-                    castshadow=quality == "high")
-    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[4, 4, 0.01],
-                   pos=[0, 0, -0.75], rgba=FLOOR_RGBA)
-    world.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.75, 0.7, 0.02],
-                   pos=[0.4, 0.0, -0.02], rgba=TABLE_RGBA)
+    world.add_light(
+        name="top",
+        pos=[0.4, 0.0, 2.0],
+        dir=[0, 0, -1],
+        diffuse=[0.45, 0.45, 0.45],
+        castshadow=quality == "high",
+    )
+    world.add_geom(
+        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[4, 4, 0.01], pos=[0, 0, -0.75], rgba=FLOOR_RGBA
+    )
+    world.add_geom(
+        name="table",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[0.75, 0.7, 0.02],
+        pos=[0.4, 0.0, -0.02],
+        rgba=TABLE_RGBA,
+    )
     # Parking lot for unused shapes: a slab far from the table, never in view.
-    world.add_geom(name="parking", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.3, 0.5, 0.02],
-                   pos=[PARK_XY[0], PARK_XY[1], -0.02], rgba=FLOOR_RGBA)
+    world.add_geom(
+        name="parking",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[0.3, 0.5, 0.02],
+        pos=[PARK_XY[0], PARK_XY[1], -0.02],
+        rgba=FLOOR_RGBA,
+    )
 
     if target is not None:
         target(spec)
@@ -160,12 +178,20 @@ def build_spec(quality: RenderQuality = "fast", target: SpecAddition | None = No
 
 
 def _add_shapes(spec: mujoco.MjSpec, world: mujoco.MjsBody) -> None:
-    spec.add_mesh(name="hex_prism", uservert=hex_prism_vertices(HEX_CIRCUMRADIUS, SHAPES["hex_prism"].half_height))
+    spec.add_mesh(
+        name="hex_prism", uservert=hex_prism_vertices(HEX_CIRCUMRADIUS, SHAPES["hex_prism"].half_height)
+    )
     for i, (name, shape) in enumerate(SHAPES.items()):
         body = world.add_body(name=f"obj_{name}", pos=[PARK_XY[0], PARK_XY[1] + 0.1 * i, shape.half_height])
         body.add_freejoint(name=f"obj_{name}")
-        geom = body.add_geom(name=f"obj_{name}", type=shape.geom_type, mass=OBJECT_MASS,
-                             friction=list(OBJECT_FRICTION), rgba=[1, 0, 0, 1], condim=4)
+        geom = body.add_geom(
+            name=f"obj_{name}",
+            type=shape.geom_type,
+            mass=OBJECT_MASS,
+            friction=list(OBJECT_FRICTION),
+            rgba=[1, 0, 0, 1],
+            condim=4,
+        )
         if shape.geom_type == mujoco.mjtGeom.mjGEOM_MESH:
             geom.meshname = "hex_prism"
         else:
@@ -205,8 +231,10 @@ class SceneIds:
             pinch_site=model.site(PINCH_SITE).id,
             pad_geoms=frozenset(model.geom(g).id for g in PAD_GEOMS),
             table_geom=model.geom("table").id,
-            cameras={name: model.camera(name if name != "wrist" else f"{PANDA_PREFIX}wrist").id
-                     for name in ALL_CAMERAS},
+            cameras={
+                name: model.camera(name if name != "wrist" else f"{PANDA_PREFIX}wrist").id
+                for name in ALL_CAMERAS
+            },
             shape_body={s: model.body(f"obj_{s}").id for s in SHAPES},
             shape_geom={s: model.geom(f"obj_{s}").id for s in SHAPES},
             shape_qpos={s: int(model.joint(f"obj_{s}").qposadr[0]) for s in SHAPES},
@@ -218,8 +246,12 @@ class SceneIds:
 class Scene:
     """A compiled scene plus in-place setters for everything an instance varies."""
 
-    def __init__(self, quality: RenderQuality = "fast", target: SpecAddition | None = None,
-                 extras: Sequence[SpecAddition] = ()) -> None:
+    def __init__(
+        self,
+        quality: RenderQuality = "fast",
+        target: SpecAddition | None = None,
+        extras: Sequence[SpecAddition] = (),
+    ) -> None:
         if quality not in ("fast", "high"):
             raise ValueError(f"unknown render quality {quality!r}; allowed: 'fast', 'high'")
         self.quality = quality
@@ -238,8 +270,12 @@ class Scene:
     def model_camera_pose(self, name: str) -> CameraPose:
         """The pose a scene camera is compiled with now (its model pos/quat/fovy; world frame)."""
         cam = self.ids.cameras[name]
-        return CameraPose(name, tuple(self.model.cam_pos[cam].tolist()), tuple(self.model.cam_quat[cam].tolist()),
-                          float(self.model.cam_fovy[cam]))
+        return CameraPose(
+            name,
+            tuple(self.model.cam_pos[cam].tolist()),
+            tuple(self.model.cam_quat[cam].tolist()),
+            float(self.model.cam_fovy[cam]),
+        )
 
     def camera_pose(self, name: str) -> CameraPose:
         """Current world pose of any camera (including the wrist camera, after mj_forward)."""
@@ -248,8 +284,12 @@ class Scene:
         mujoco.mju_mat2Quat(quat, self.data.cam_xmat[cam])
         if quat[0] < 0:
             quat = -quat
-        return CameraPose(name, tuple(self.data.cam_xpos[cam].tolist()), tuple(quat.tolist()),
-                          float(self.model.cam_fovy[cam]))
+        return CameraPose(
+            name,
+            tuple(self.data.cam_xpos[cam].tolist()),
+            tuple(quat.tolist()),
+            float(self.model.cam_fovy[cam]),
+        )
 
     @property
     def active_geom(self) -> int:
@@ -267,10 +307,10 @@ class Scene:
             else:
                 pos = [PARK_XY[0], PARK_XY[1] + 0.1 * i, spec.half_height]
                 quat = [1.0, 0.0, 0.0, 0.0]
-            self.data.qpos[adr:adr + 3] = pos
-            self.data.qpos[adr + 3:adr + 7] = quat
+            self.data.qpos[adr : adr + 3] = pos
+            self.data.qpos[adr + 3 : adr + 7] = quat
             dof = self.ids.shape_dof[name]
-            self.data.qvel[dof:dof + 6] = 0.0
+            self.data.qvel[dof : dof + 6] = 0.0
 
     def reset_robot(self, qpos: np.ndarray = HOME_QPOS) -> None:
         self.data.qpos[self.ids.arm_qpos] = qpos

@@ -28,8 +28,19 @@ import mujoco
 import numpy as np
 
 # Compiled-model arrays that carry the robot's and the scene's assets.
-ASSET_ARRAYS = ("mesh_vert", "mesh_face", "mesh_normal", "tex_data", "tex_height", "tex_width", "mat_rgba",
-                "geom_size", "geom_rgba", "body_mass", "geom_friction")
+ASSET_ARRAYS = (
+    "mesh_vert",
+    "mesh_face",
+    "mesh_normal",
+    "tex_data",
+    "tex_height",
+    "tex_width",
+    "mat_rgba",
+    "geom_size",
+    "geom_rgba",
+    "body_mass",
+    "geom_friction",
+)
 
 
 def _version(dist: str) -> str:
@@ -66,8 +77,14 @@ def gl_strings(env) -> dict[str, str]:
     try:
         from OpenGL import GL
 
-        return {key: (GL.glGetString(name) or b"").decode(errors="replace")
-                for key, name in (("vendor", GL.GL_VENDOR), ("renderer", GL.GL_RENDERER), ("version", GL.GL_VERSION))}
+        return {
+            key: (GL.glGetString(name) or b"").decode(errors="replace")
+            for key, name in (
+                ("vendor", GL.GL_VENDOR),
+                ("renderer", GL.GL_RENDERER),
+                ("version", GL.GL_VERSION),
+            )
+        }
     except Exception as exc:  # noqa: BLE001 — a renderer that cannot be named is recorded as such
         return {"vendor": "unknown", "renderer": f"unknown ({type(exc).__name__})", "version": "unknown"}
 
@@ -80,10 +97,17 @@ def describe(env) -> dict[str, Any]:
         "assets": {"gym_hil": _version("gym-hil"), "sha256": assets_hash(model)},
         "scene": {"task": env.task, "sha256": hashlib.sha256(env.scene.spec.to_xml().encode()).hexdigest()},
         "physics": physics_options(model),
-        "renderer": {**gl_strings(env), "mujoco_gl": os.environ.get("MUJOCO_GL", ""),
-                     "gallium_driver": os.environ.get("GALLIUM_DRIVER", "")},
+        "renderer": {
+            **gl_strings(env),
+            "mujoco_gl": os.environ.get("MUJOCO_GL", ""),
+            "gallium_driver": os.environ.get("GALLIUM_DRIVER", ""),
+        },
         "image_size": env.image_size,
-        "platform": {"python": platform.python_version(), "machine": platform.machine(), "numpy": np.__version__},
+        "platform": {
+            "python": platform.python_version(),
+            "machine": platform.machine(),
+            "numpy": np.__version__,
+        },
     }
 
 
@@ -92,8 +116,10 @@ def summary(stack: dict[str, Any] | None) -> str:
     if not stack:
         return "not recorded"
     renderer = stack.get("renderer", {})
-    return (f"MuJoCo {stack.get('mujoco', '?')}, {renderer.get('renderer', '?')} ({renderer.get('version', '?')}), "
-            f"{stack.get('image_size', '?')} px")
+    return (
+        f"MuJoCo {stack.get('mujoco', '?')}, {renderer.get('renderer', '?')} ({renderer.get('version', '?')}), "
+        f"{stack.get('image_size', '?')} px"
+    )
 
 
 def differences(a: dict[str, Any] | None, b: dict[str, Any] | None) -> list[str]:
@@ -101,13 +127,15 @@ def differences(a: dict[str, Any] | None, b: dict[str, Any] | None) -> list[str]
     if not a or not b:
         return [] if a == b else ["stack: not recorded on one side"]
     out = []
-    for label, get in (("mujoco", lambda s: s.get("mujoco")),
-                       ("robot assets", lambda s: s.get("assets", {}).get("sha256", "")[:12]),
-                       ("gym-hil", lambda s: s.get("assets", {}).get("gym_hil")),
-                       ("scene", lambda s: s.get("scene", {}).get("sha256", "")[:12]),
-                       ("renderer", lambda s: s.get("renderer", {}).get("renderer")),
-                       ("OpenGL", lambda s: s.get("renderer", {}).get("version")),
-                       ("image size", lambda s: s.get("image_size"))):
+    for label, get in (
+        ("mujoco", lambda s: s.get("mujoco")),
+        ("robot assets", lambda s: s.get("assets", {}).get("sha256", "")[:12]),
+        ("gym-hil", lambda s: s.get("assets", {}).get("gym_hil")),
+        ("scene", lambda s: s.get("scene", {}).get("sha256", "")[:12]),
+        ("renderer", lambda s: s.get("renderer", {}).get("renderer")),
+        ("OpenGL", lambda s: s.get("renderer", {}).get("version")),
+        ("image size", lambda s: s.get("image_size")),
+    ):
         if get(a) != get(b):
             out.append(f"{label}: {get(a)} vs {get(b)}")
     pa, pb = a.get("physics", {}), b.get("physics", {})

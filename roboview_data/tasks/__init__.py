@@ -45,7 +45,20 @@ for _entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
 from roboview_data.tasks.presets import PRESETS, load_preset, register_preset  # noqa: E402  (after the tasks)
 
 __all__ = [
-    "BUILTIN_MODULES", "DEFAULT_MAX_STEPS", "DEFAULT_TASK", "ENTRY_POINT_GROUP", "PRESETS", "TASKS", "ScriptedExpert",
-    "Task", "TaskEnv", "load_preset", "load_task", "make_env", "register_preset", "register_task", "resolve",
+    "BUILTIN_MODULES",
+    "DEFAULT_MAX_STEPS",
+    "DEFAULT_TASK",
+    "ENTRY_POINT_GROUP",
+    "PRESETS",
+    "TASKS",
+    "ScriptedExpert",
+    "Task",
+    "TaskEnv",
+    "load_preset",
+    "load_task",
+    "make_env",
+    "register_preset",
+    "register_task",
+    "resolve",
     "unregister_task",
 ]

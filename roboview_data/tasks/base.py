@@ -69,8 +69,10 @@ def register_task(task: Task) -> Task:
     if task.name in TASKS:
         raise ValueError(f"task {task.name!r} is already registered")
     if not context_factors(task.name):
-        raise ValueError(f"task {task.name!r} has no context factors: register them first with "
-                         f"register_factor(Factor(..., kind='context', task={task.name!r}))")
+        raise ValueError(
+            f"task {task.name!r} has no context factors: register them first with "
+            f"register_factor(Factor(..., kind='context', task={task.name!r}))"
+        )
     TASKS[task.name] = task
     if task.gym_id not in gym.registry:
         gym.register(id=task.gym_id, entry_point=task.env, max_episode_steps=task.max_episode_steps)

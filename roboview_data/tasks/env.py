@@ -22,8 +22,8 @@ import numpy as np
 
 from roboview_data.errors import RenderError
 from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, check_image_size
-from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.motion import PickPlacePlanner, yaw_of
+from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.scene import (
     GRIPPER_DRIVER_CLOSED,
     HOME_QPOS,
@@ -64,8 +64,9 @@ RELEASED_GRIPPER = 0.25
 
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
     """Every factor at its baseline: the scene the expert demos are rendered in."""
-    return TaskInstance(split="baseline", varied=("color",), factors=baselines(task), context_subspace="base",
-                        task=task)
+    return TaskInstance(
+        split="baseline", varied=("color",), factors=baselines(task), context_subspace="base", task=task
+    )
 
 
 class TaskEnv(gym.Env):
@@ -127,8 +128,16 @@ class TaskEnv(gym.Env):
         return None
 
     @staticmethod
-    def plan(planner: PickPlacePlanner, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, reach: float,
-             target_xy: np.ndarray | None, arm_qpos: np.ndarray, ee_pos: np.ndarray | None = None) -> None:
+    def plan(
+        planner: PickPlacePlanner,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        reach: float,
+        target_xy: np.ndarray | None,
+        arm_qpos: np.ndarray,
+        ee_pos: np.ndarray | None = None,
+    ) -> None:
         """Lay out the task's scripted solution on `planner` from an object pose and the target's xy.
 
         `reach` is the object's extent across the gripper (m); `ee_pos` the pinch point now (computed
@@ -136,16 +145,28 @@ class TaskEnv(gym.Env):
         """
         raise NotImplementedError("this task has no scripted solution")
 
-    def __init__(self, cameras: Sequence[str] = ALL_CAMERAS, image_size: int = 224, fps: int = 10,
-                 max_steps: int = DEFAULT_MAX_STEPS, depth: bool = False, quality: RenderQuality = "fast",
-                 render_mode: str | None = "rgb_array", lazy: bool = False) -> None:
+    def __init__(
+        self,
+        cameras: Sequence[str] = ALL_CAMERAS,
+        image_size: int = 224,
+        fps: int = 10,
+        max_steps: int = DEFAULT_MAX_STEPS,
+        depth: bool = False,
+        quality: RenderQuality = "fast",
+        render_mode: str | None = "rgb_array",
+        lazy: bool = False,
+    ) -> None:
         if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(f"render_mode={render_mode!r} unsupported; allowed: None, "
-                             f"{', '.join(map(repr, self.metadata['render_modes']))}")
+            raise ValueError(
+                f"render_mode={render_mode!r} unsupported; allowed: None, "
+                f"{', '.join(map(repr, self.metadata['render_modes']))}"
+            )
         self.render_mode = render_mode
         unknown = [c for c in cameras if c not in ALL_CAMERAS]
         if unknown or not cameras:
-            raise ValueError(f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}")
+            raise ValueError(
+                f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}"
+            )
         check_image_size(image_size)
         if fps <= 0 or 500 % fps:
             raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
@@ -177,11 +198,15 @@ class TaskEnv(gym.Env):
         low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
         high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
         self.action_space = gym.spaces.Box(low, high, dtype=np.float32)
-        spaces = {IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
-                  for c in self.cameras}
+        spaces = {
+            IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
+            for c in self.cameras
+        }
         if depth:
-            spaces |= {DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
-                       for c in self.cameras}
+            spaces |= {
+                DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
+                for c in self.cameras
+            }
         spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
         self.observation_space = gym.spaces.Dict(spaces)
 
@@ -208,7 +233,9 @@ class TaskEnv(gym.Env):
     def render_camera(self, camera: str, depth: bool = False) -> np.ndarray:
         """One camera's image (or depth map) now. A renderer that fails (a lost GL context, out of GPU memory)
         raises `RenderError`: the evaluator records that episode as ended by infrastructure."""
-        camera_id = self.scene.ids.cameras[camera]  # an unknown camera is the caller's error, not a render failure
+        camera_id = self.scene.ids.cameras[
+            camera
+        ]  # an unknown camera is the caller's error, not a render failure
         try:
             if depth:
                 if self._depth_renderer is None:
@@ -220,8 +247,10 @@ class TaskEnv(gym.Env):
             renderer.update_scene(self.data, camera=camera_id)
             return renderer.render()
         except Exception as exc:
-            raise RenderError(f"rendering camera {camera!r}{' (depth)' if depth else ''} failed: "
-                              f"{type(exc).__name__}: {exc}") from exc
+            raise RenderError(
+                f"rendering camera {camera!r}{' (depth)' if depth else ''} failed: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
 
     def render(self) -> np.ndarray:
         return self.render_camera(self.cameras[0])
@@ -236,8 +265,10 @@ class TaskEnv(gym.Env):
         super().reset(seed=episode_seed)
         rng = np.random.default_rng(episode_seed)
         if instance.task != self.task:
-            raise ValueError(f"instance {instance.instance_id} is a {instance.task!r} instance; this env runs "
-                             f"{self.task!r} (make the env with make_env({instance.task!r}))")
+            raise ValueError(
+                f"instance {instance.instance_id} is a {instance.task!r} instance; this env runs "
+                f"{self.task!r} (make the env with make_env({instance.task!r}))"
+            )
         self.instance = instance
         self.instruction = instance.get(self.instruction_factor)
         self.steps = 0
@@ -245,11 +276,15 @@ class TaskEnv(gym.Env):
         cameras = options.get("cameras", {})
         for name, pose in cameras.items():
             if name not in BASE_CAMERAS or pose.name != name:
-                raise ValueError(f"options['cameras'][{name!r}]: only the scene cameras {sorted(BASE_CAMERAS)} can "
-                                 f"be posed (pose named {pose.name!r})")
+                raise ValueError(
+                    f"options['cameras'][{name!r}]: only the scene cameras {sorted(BASE_CAMERAS)} can "
+                    f"be posed (pose named {pose.name!r})"
+                )
         rgb = np.asarray(options.get("object_rgb", (0.0, 0.0, 0.0)), dtype=float)
         if rgb.shape != (3,) or not np.all((rgb >= 0) & (rgb <= 1)):
-            raise ValueError(f"options['object_rgb']={options['object_rgb']!r} must be 3 sRGB values in [0, 1]")
+            raise ValueError(
+                f"options['object_rgb']={options['object_rgb']!r} must be 3 sRGB values in [0, 1]"
+            )
 
         mujoco.mj_resetData(self.model, self.data)
         values = instance.factor_values
@@ -331,7 +366,7 @@ class TaskEnv(gym.Env):
     def object_speed(self) -> float:
         """Privileged: the active object's linear speed (m/s)."""
         dof = self.scene.ids.shape_dof[self.shape]
-        return float(np.linalg.norm(self.data.qvel[dof:dof + 3]))
+        return float(np.linalg.norm(self.data.qvel[dof : dof + 3]))
 
     def _observation(self) -> dict[str, np.ndarray]:
         renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}
@@ -347,8 +382,12 @@ class TaskEnv(gym.Env):
         return self.render_camera(camera, depth=True).astype(np.float32)
 
     def _info(self, success: bool = False) -> dict:
-        return {"is_success": success, "instance_id": self.instance.instance_id,
-                "task": self.instruction, "steps": self.steps}
+        return {
+            "is_success": success,
+            "instance_id": self.instance.instance_id,
+            "task": self.instruction,
+            "steps": self.steps,
+        }
 
     @staticmethod
     def _close_renderers(renderers: list[mujoco.Renderer]) -> None:
@@ -358,7 +397,6 @@ class TaskEnv(gym.Env):
     def close(self) -> None:
         self._close_renderers(self._open_renderers)
         self._renderer = self._depth_renderer = None
-
 
 
 class ScriptedExpert:
@@ -378,8 +416,16 @@ class ScriptedExpert:
         env = self.env
         obj_pos, obj_quat = env.object_pose()
         shape = SHAPES[env.shape]
-        env.plan(self.planner, obj_pos, yaw_of(obj_quat), shape.symmetry, shape.grasp_width, env.target_xy(),
-                 env.data.qpos[env.scene.ids.arm_qpos], ee_pos=env.ee_position())
+        env.plan(
+            self.planner,
+            obj_pos,
+            yaw_of(obj_quat),
+            shape.symmetry,
+            shape.grasp_width,
+            env.target_xy(),
+            env.data.qpos[env.scene.ids.arm_qpos],
+            ee_pos=env.ee_position(),
+        )
 
     def select_action(self, observation: dict | None = None) -> np.ndarray:
         return self.planner.next_action()

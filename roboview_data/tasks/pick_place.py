@@ -26,26 +26,46 @@ OBJECT_POSITIONS: dict[str, tuple[float, float]] = {
     "near": (0.38, 0.10),
 }
 
-INITIAL_POSITION = register_factor(Factor(
-    name="initial_position", kind="context", task=TASK, always_in_id=True,
-    values=tuple(OBJECT_POSITIONS), baseline="center",
-    doc="Named initial xy of the object on the table (OBJECT_POSITIONS).", title="Initial position",
-))
-SHAPE = register_factor(Factor(
-    name="shape", kind="context", task=TASK, always_in_id=True,
-    values=("cube", "cylinder", "hex_prism", "cuboid"), baseline="cube",
-    doc="Solid of the manipulated object, each graspable by the 2F-85 gripper.", title="Shape",
-))
-INSTRUCTION = register_factor(Factor(
-    name="instruction", kind="context", task=TASK, always_in_id=True,
-    values=(
-        "put the small object into the yellow box",
-        "pick up the small object and place it in the yellow box",
-        "move the small object into the yellow box",
-    ),
-    baseline="put the small object into the yellow box",
-    doc="Language goal: paraphrases of one task naming neither color nor shape.", title="Instruction",
-))
+INITIAL_POSITION = register_factor(
+    Factor(
+        name="initial_position",
+        kind="context",
+        task=TASK,
+        always_in_id=True,
+        values=tuple(OBJECT_POSITIONS),
+        baseline="center",
+        doc="Named initial xy of the object on the table (OBJECT_POSITIONS).",
+        title="Initial position",
+    )
+)
+SHAPE = register_factor(
+    Factor(
+        name="shape",
+        kind="context",
+        task=TASK,
+        always_in_id=True,
+        values=("cube", "cylinder", "hex_prism", "cuboid"),
+        baseline="cube",
+        doc="Solid of the manipulated object, each graspable by the 2F-85 gripper.",
+        title="Shape",
+    )
+)
+INSTRUCTION = register_factor(
+    Factor(
+        name="instruction",
+        kind="context",
+        task=TASK,
+        always_in_id=True,
+        values=(
+            "put the small object into the yellow box",
+            "pick up the small object and place it in the yellow box",
+            "move the small object into the yellow box",
+        ),
+        baseline="put the small object into the yellow box",
+        doc="Language goal: paraphrases of one task naming neither color nor shape.",
+        title="Instruction",
+    )
+)
 
 # Receiver: open-top hollow box. Center on the table (m), inner half-width, wall height/thickness.
 BOX_RGBA = (0.98, 0.82, 0.10, 1.0)
@@ -74,8 +94,13 @@ class PickPlaceEnv(TaskEnv):
     def add_target(spec: mujoco.MjSpec) -> None:
         body = spec.worldbody.add_body(name="box", pos=[BOX_CENTER[0], BOX_CENTER[1], 0.0])
         half_out = BOX_INNER_HALF + BOX_WALL_THICK
-        body.add_geom(name="box_floor", type=mujoco.mjtGeom.mjGEOM_BOX, rgba=BOX_RGBA,
-                      size=[half_out, half_out, BOX_FLOOR_THICK / 2], pos=[0, 0, BOX_FLOOR_THICK / 2])
+        body.add_geom(
+            name="box_floor",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            rgba=BOX_RGBA,
+            size=[half_out, half_out, BOX_FLOOR_THICK / 2],
+            pos=[0, 0, BOX_FLOOR_THICK / 2],
+        )
         wall_z = BOX_WALL_HEIGHT / 2
         half_t = BOX_WALL_THICK / 2
         walls = {
@@ -114,19 +139,36 @@ class PickPlaceEnv(TaskEnv):
         return self.object_speed() < REST_SPEED and released and not self.object_touches_robot()
 
     @staticmethod
-    def plan(planner: PickPlacePlanner, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, reach: float,
-             target_xy: np.ndarray | None, arm_qpos: np.ndarray, ee_pos: np.ndarray | None = None) -> None:
+    def plan(
+        planner: PickPlacePlanner,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        reach: float,
+        target_xy: np.ndarray | None,
+        arm_qpos: np.ndarray,
+        ee_pos: np.ndarray | None = None,
+    ) -> None:
         """Grasp, carry over the box, lower, open, retreat (`PickPlacePlanner.plan`)."""
-        planner.plan(obj_pos, obj_yaw, symmetry, arm_qpos, box_xy=target_xy, release_z=RELEASE_Z, ee_pos=ee_pos)
+        planner.plan(
+            obj_pos, obj_yaw, symmetry, arm_qpos, box_xy=target_xy, release_z=RELEASE_Z, ee_pos=ee_pos
+        )
 
 
-register_task(Task(
-    name=TASK,
-    gym_id="RoboView/PickPlace-v0",
-    env="roboview_data.tasks.pick_place:PickPlaceEnv",
-    success=("the object's center lies inside the box below its rim, moves slower than 5 cm/s, touches no "
-             "part of the robot, and the gripper is open"),
-    timeout_reason="object not released inside the box",
-    small_contexts=(("initial_position", ("center", "left")), ("shape", ("cube", "cylinder")),
-                    ("instruction", (INSTRUCTION.baseline,))),
-))
+register_task(
+    Task(
+        name=TASK,
+        gym_id="RoboView/PickPlace-v0",
+        env="roboview_data.tasks.pick_place:PickPlaceEnv",
+        success=(
+            "the object's center lies inside the box below its rim, moves slower than 5 cm/s, touches no "
+            "part of the robot, and the gripper is open"
+        ),
+        timeout_reason="object not released inside the box",
+        small_contexts=(
+            ("initial_position", ("center", "left")),
+            ("shape", ("cube", "cylinder")),
+            ("instruction", (INSTRUCTION.baseline,)),
+        ),
+    )
+)

@@ -24,12 +24,23 @@ SMALL_VISUALS = (
 )
 # Two values of each factor beyond the paper (three lights).
 SMALL_EXTENDED_VISUALS = (
-    ("lighting", ("dim_left", "default", "bright_front")), ("table_texture", ("plain", "checker_dark")),
-    ("distractors", ("0", "4")), ("object_size", ("0.7", "1.3")),
+    ("lighting", ("dim_left", "default", "bright_front")),
+    ("table_texture", ("plain", "checker_dark")),
+    ("distractors", ("0", "4")),
+    ("object_size", ("0.7", "1.3")),
 )
 # Beyond the paper (docs/formats.md, "Factors"): the paper's splits plus one per new visual factor.
-EXTENDED_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture", "distractors",
-                   "object_size", FACTORIAL_SPLIT)
+EXTENDED_SPLITS = (
+    "color",
+    "camera_pose",
+    "camera_euler",
+    "dist_scale",
+    "lighting",
+    "table_texture",
+    "distractors",
+    "object_size",
+    FACTORIAL_SPLIT,
+)
 
 PRESETS: dict[str, SuiteConfig] = {}
 
@@ -45,8 +56,13 @@ def register_preset(cfg: SuiteConfig) -> SuiteConfig:
 def small_preset(name: str, tasks: tuple[str, ...]) -> SuiteConfig:
     """A demo/test suite: a few values of each paper factor over each task's `small_contexts`."""
     contexts = tuple(pair for task in tasks for pair in load_task(task).small_contexts)
-    return SuiteConfig(preset=name, union_mode="dedupe", factorial_colors=("red", "white"), tasks=tasks,
-                       value_subsets=(*SMALL_VISUALS, *contexts))
+    return SuiteConfig(
+        preset=name,
+        union_mode="dedupe",
+        factorial_colors=("red", "white"),
+        tasks=tasks,
+        value_subsets=(*SMALL_VISUALS, *contexts),
+    )
 
 
 def load_preset(name: str) -> SuiteConfig:
@@ -69,6 +85,16 @@ register_preset(small_preset("tiny", (DEFAULT_TASK,)))
 # 5,101 in all.
 register_preset(replace(PAPER, preset="extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push")))
 # Both tasks and every factor: the tiny preset's values, two of each new factor's, two push starts × two zones.
-register_preset(replace(
-    PRESETS["tiny"], preset="tiny_extended", splits=EXTENDED_SPLITS, tasks=(DEFAULT_TASK, "push"),
-    value_subsets=(*PRESETS["tiny"].value_subsets, *SMALL_EXTENDED_VISUALS, *load_task("push").small_contexts)))
+register_preset(
+    replace(
+        PRESETS["tiny"],
+        preset="tiny_extended",
+        splits=EXTENDED_SPLITS,
+        tasks=(DEFAULT_TASK, "push"),
+        value_subsets=(
+            *PRESETS["tiny"].value_subsets,
+            *SMALL_EXTENDED_VISUALS,
+            *load_task("push").small_contexts,
+        ),
+    )
+)

@@ -11,9 +11,8 @@ the line to the zone center, slides it there, backs off and lifts.
 
 from __future__ import annotations
 
-import numpy as np
-
 import mujoco
+import numpy as np
 
 from roboview_data.sim.motion import PickPlacePlanner, Segment
 from roboview_data.tasks.base import Task, register_task
@@ -34,25 +33,54 @@ ZONE_OFFSETS: dict[str, tuple[float, float]] = {
     "diagonal": (0.10, -0.11),
 }
 
-PUSH_START = register_factor(Factor(
-    name="push_start", kind="context", task=TASK, values=tuple(PUSH_STARTS), baseline="center",
-    doc="Named start xy of the object (PUSH_STARTS).", title="Start position",
-))
-ZONE = register_factor(Factor(
-    name="zone", kind="context", task=TASK, values=tuple(ZONE_OFFSETS), baseline="right",
-    doc="Where the marked target zone lies relative to the start (ZONE_OFFSETS).", title="Zone placement",
-))
-PUSH_SHAPE = register_factor(Factor(
-    name="push_shape", kind="context", task=TASK, values=("cube", "cuboid", "hex_prism"), baseline="cube",
-    doc="Solid pushed (flat-sided: each slides rather than rolls).", title="Shape",
-))
-PUSH_INSTRUCTION = register_factor(Factor(
-    name="push_instruction", kind="context", task=TASK,
-    values=("push the small object into the marked zone", "slide the small object onto the marked square",
-            "push the small object until it rests inside the marked area"),
-    baseline="push the small object into the marked zone",
-    doc="Language goal: paraphrases naming neither color nor shape.", title="Instruction",
-))
+PUSH_START = register_factor(
+    Factor(
+        name="push_start",
+        kind="context",
+        task=TASK,
+        values=tuple(PUSH_STARTS),
+        baseline="center",
+        doc="Named start xy of the object (PUSH_STARTS).",
+        title="Start position",
+    )
+)
+ZONE = register_factor(
+    Factor(
+        name="zone",
+        kind="context",
+        task=TASK,
+        values=tuple(ZONE_OFFSETS),
+        baseline="right",
+        doc="Where the marked target zone lies relative to the start (ZONE_OFFSETS).",
+        title="Zone placement",
+    )
+)
+PUSH_SHAPE = register_factor(
+    Factor(
+        name="push_shape",
+        kind="context",
+        task=TASK,
+        values=("cube", "cuboid", "hex_prism"),
+        baseline="cube",
+        doc="Solid pushed (flat-sided: each slides rather than rolls).",
+        title="Shape",
+    )
+)
+PUSH_INSTRUCTION = register_factor(
+    Factor(
+        name="push_instruction",
+        kind="context",
+        task=TASK,
+        values=(
+            "push the small object into the marked zone",
+            "slide the small object onto the marked square",
+            "push the small object until it rests inside the marked area",
+        ),
+        baseline="push the small object into the marked zone",
+        doc="Language goal: paraphrases naming neither color nor shape.",
+        title="Instruction",
+    )
+)
 
 # The zone: a flat marked square on the table (visual only, no collision).
 ZONE_HALF = 0.05
@@ -75,8 +103,15 @@ class PushEnv(TaskEnv):
 
     @staticmethod
     def add_target(spec: mujoco.MjSpec) -> None:
-        spec.worldbody.add_geom(name="zone", type=mujoco.mjtGeom.mjGEOM_BOX, size=[ZONE_HALF, ZONE_HALF, 0.0005],
-                                pos=[0.0, 0.0, 0.0005], rgba=list(ZONE_RGBA), contype=0, conaffinity=0)
+        spec.worldbody.add_geom(
+            name="zone",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[ZONE_HALF, ZONE_HALF, 0.0005],
+            pos=[0.0, 0.0, 0.0005],
+            rgba=list(ZONE_RGBA),
+            contype=0,
+            conaffinity=0,
+        )
 
     def bind_target(self) -> None:
         self._zone = self.model.geom("zone").id
@@ -103,14 +138,24 @@ class PushEnv(TaskEnv):
         return self.object_speed() < REST_SPEED and not self.object_touches_robot()
 
     @staticmethod
-    def plan(planner: PickPlacePlanner, obj_pos: np.ndarray, obj_yaw: float, symmetry: float, reach: float,
-             target_xy: np.ndarray | None, arm_qpos: np.ndarray, ee_pos: np.ndarray | None = None) -> None:
+    def plan(
+        planner: PickPlacePlanner,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        reach: float,
+        target_xy: np.ndarray | None,
+        arm_qpos: np.ndarray,
+        ee_pos: np.ndarray | None = None,
+    ) -> None:
         """Push along the line from the object to the zone center (`push_segments`)."""
         start = planner.pinch_position(arm_qpos) if ee_pos is None else ee_pos
         planner.follow(push_segments(planner, obj_pos[:2], target_xy, reach), start, arm_qpos)
 
 
-def push_segments(planner: PickPlacePlanner, obj_xy: np.ndarray, zone_xy: np.ndarray, reach: float) -> list[Segment]:
+def push_segments(
+    planner: PickPlacePlanner, obj_xy: np.ndarray, zone_xy: np.ndarray, reach: float
+) -> list[Segment]:
     """Come down behind the object on the line to the zone center, slide it there, back off, lift.
 
     `reach` is the object's extent along the push (m). The closed fingers' broad face meets the
@@ -130,13 +175,18 @@ def push_segments(planner: PickPlacePlanner, obj_xy: np.ndarray, zone_xy: np.nda
     ]
 
 
-
-register_task(Task(
-    name=TASK,
-    gym_id="RoboView/Push-v0",
-    env="roboview_data.tasks.push:PushEnv",
-    success="the object's center lies inside the marked zone, it moves slower than 5 cm/s and touches no part of the robot",
-    timeout_reason="object not at rest inside the zone",
-    small_contexts=(("push_start", ("center", "left")), ("zone", ("right", "far")), ("push_shape", ("cube",)),
-                    ("push_instruction", (PUSH_INSTRUCTION.baseline,))),
-))
+register_task(
+    Task(
+        name=TASK,
+        gym_id="RoboView/Push-v0",
+        env="roboview_data.tasks.push:PushEnv",
+        success="the object's center lies inside the marked zone, it moves slower than 5 cm/s and touches no part of the robot",
+        timeout_reason="object not at rest inside the zone",
+        small_contexts=(
+            ("push_start", ("center", "left")),
+            ("zone", ("right", "far")),
+            ("push_shape", ("cube",)),
+            ("push_instruction", (PUSH_INSTRUCTION.baseline,)),
+        ),
+    )
+)

@@ -135,12 +135,7 @@ def delta_e_2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
     s_c = 1.0 + 0.045 * cp_bar
     s_h = 1.0 + 0.015 * cp_bar * t
     r_t = -np.sin(np.radians(2.0 * d_theta)) * r_c
-    return np.sqrt(
-        (dlp / s_l) ** 2
-        + (dcp / s_c) ** 2
-        + (dhp / s_h) ** 2
-        + r_t * (dcp / s_c) * (dhp / s_h)
-    )
+    return np.sqrt((dlp / s_l) ** 2 + (dcp / s_c) ** 2 + (dhp / s_h) ** 2 + r_t * (dcp / s_c) * (dhp / s_h))
 
 
 def basic_category(lab: tuple[float, float, float]) -> str:

@@ -58,6 +58,8 @@ def context_subspaces(task: str = DEFAULT_TASK) -> tuple[str, ...]:
 def known_splits() -> tuple[str, ...]:
     """Every split a suite may generate: one per registered visual factor, and the factorial."""
     return (*visual_factors(), FACTORIAL_SPLIT)
+
+
 # Saturated (red, green, blue), achromatic (black, white, gray) and low-saturation (rosybrown).
 DEFAULT_FACTORIAL_COLORS = ("red", "green", "blue", "black", "white", "gray", "rosybrown")
 
@@ -168,8 +170,11 @@ class TaskInstance:
     def id_factors(self) -> dict[str, str]:
         """The factor values an id hashes: the paper's seven always, any later factor only off its baseline
         (so registering a factor changes no existing id; docs/formats.md, "Identity and seeds")."""
-        return {name: value for name, value in self.factors
-                if load_factor(name).always_in_id or value != load_factor(name).baseline}
+        return {
+            name: value
+            for name, value in self.factors
+            if load_factor(name).always_in_id or value != load_factor(name).baseline
+        }
 
     def _with_task(self, params: dict[str, Any]) -> dict[str, Any]:
         return params if self.task == DEFAULT_TASK else params | {"task": self.task}
@@ -177,17 +182,23 @@ class TaskInstance:
     @cached_property
     def instance_id(self) -> str:
         """Stable id over split, varied, the factor values, the context subspace and a non-default task."""
-        return stable_id(self._with_task({
-            "split": self.split,
-            "varied": list(self.varied),
-            "factors": self.id_factors,
-            "context_subspace": self.context_subspace,
-        }))
+        return stable_id(
+            self._with_task(
+                {
+                    "split": self.split,
+                    "varied": list(self.varied),
+                    "factors": self.id_factors,
+                    "context_subspace": self.context_subspace,
+                }
+            )
+        )
 
     @cached_property
     def context_id(self) -> str:
         """Stable id of the context c; shared by every instance that runs in the same context."""
-        return stable_id(self._with_task({"context": self.context, "context_subspace": self.context_subspace}))
+        return stable_id(
+            self._with_task({"context": self.context, "context_subspace": self.context_subspace})
+        )
 
     @property
     def factor(self) -> str:
@@ -250,10 +261,16 @@ class SuiteConfig:
         # Config parsers may hand in lists; tuples keep the config frozen and hashable.
         object.__setattr__(self, "splits", tuple(self.splits))
         object.__setattr__(self, "tasks", tuple(self.tasks))
-        if not self.tasks or len(set(self.tasks)) != len(self.tasks) or any(not context_factors(t) for t in self.tasks):
+        if (
+            not self.tasks
+            or len(set(self.tasks)) != len(self.tasks)
+            or any(not context_factors(t) for t in self.tasks)
+        ):
             known = sorted({f.task for f in FACTORS.values() if f.task})
-            raise ValueError(f"tasks {self.tasks!r}: give distinct registered tasks; allowed: "
-                             f"{', '.join(known) or 'none registered (import roboview_data.tasks first)'}")
+            raise ValueError(
+                f"tasks {self.tasks!r}: give distinct registered tasks; allowed: "
+                f"{', '.join(known) or 'none registered (import roboview_data.tasks first)'}"
+            )
         object.__setattr__(self, "factorial_colors", tuple(self.factorial_colors))
         object.__setattr__(self, "cartesian", tuple(tuple(f) for f in self.cartesian))
         subsets = tuple((name, tuple(values)) for name, values in self.value_subsets)

@@ -45,8 +45,10 @@ def validate_randomize(names: list[str] | tuple[str, ...]) -> tuple[str, ...]:
     """The randomized factors in canonical order; unknown or repeated names raise, naming the allowed ones."""
     bad = [n for n in names if n not in RANDOMIZABLE]
     if bad or len(set(names)) != len(names):
-        raise ValueError(f"randomize={list(names)}: unknown or repeated factor(s) {bad}; "
-                         f"allowed: {', '.join(RANDOMIZABLE)}")
+        raise ValueError(
+            f"randomize={list(names)}: unknown or repeated factor(s) {bad}; "
+            f"allowed: {', '.join(RANDOMIZABLE)}"
+        )
     return tuple(n for n in RANDOMIZABLE if n in names)
 
 
@@ -68,8 +70,10 @@ class Randomization:
 
     def record(self) -> dict:
         """Flat provenance columns (one row per episode in meta/roboview/episodes.parquet)."""
-        row = {"object_rgb": [float(v) for v in self.object_rgb],
-               "object_lab": [float(v) for v in srgb_to_lab(np.asarray(self.object_rgb))]}
+        row = {
+            "object_rgb": [float(v) for v in self.object_rgb],
+            "object_lab": [float(v) for v in srgb_to_lab(np.asarray(self.object_rgb))],
+        }
         for name, pose in self.cameras.items():
             row[f"camera_{name}_pos"] = [float(v) for v in pose.pos]
             row[f"camera_{name}_quat"] = [float(v) for v in pose.quat]
@@ -79,8 +83,9 @@ class Randomization:
 
 def baseline_randomization() -> Randomization:
     """What a context-only episode shows: the baseline color and the original cameras."""
-    return Randomization(get_color(baselines()["color"]).rgb,
-                         {name: BASE_CAMERAS[name] for name in PERTURBED_CAMERAS})
+    return Randomization(
+        get_color(baselines()["color"]).rgb, {name: BASE_CAMERAS[name] for name in PERTURBED_CAMERAS}
+    )
 
 
 def sample_randomization(episode_seed: int, factors: tuple[str, ...]) -> Randomization:

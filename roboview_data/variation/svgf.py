@@ -162,9 +162,7 @@ class Union:
             raise ValueError("Union needs at least one child")
         key_sets = {frozenset(node_keys(child)) for child in children}
         if len(key_sets) != 1:
-            raise ValueError(
-                f"Union children assign different keys: {sorted(map(sorted, key_sets))}"
-            )
+            raise ValueError(f"Union children assign different keys: {sorted(map(sorted, key_sets))}")
 
 
 VariantNode = SamplerModule | Label | Product | Union
@@ -228,7 +226,9 @@ def baseline_context(task: str = DEFAULT_TASK) -> Product:
 
 
 def context_space(
-    union_mode: str = "per_subspace", subsets: Mapping[str, Sequence[str]] | None = None, task: str = DEFAULT_TASK
+    union_mode: str = "per_subspace",
+    subsets: Mapping[str, Sequence[str]] | None = None,
+    task: str = DEFAULT_TASK,
 ) -> Union:
     """D_context = ∪_k C_k^gen: vary one context factor at a time, the others at baseline.
 
@@ -269,9 +269,7 @@ def task_subspace(
     first N instances of a split already give a per-context spread over V_i.
     """
     if factor not in visual_factors():
-        raise ValueError(
-            f"task subspaces exist for visual factors {visual_factors()}, not {factor!r}"
-        )
+        raise ValueError(f"task subspaces exist for visual factors {visual_factors()}, not {factor!r}")
     others = [name for name in visual_factors() if name != factor]
     return Product(c_gen, _sampler(factor, subsets or {}), *_fixed_at_baseline(others))
 

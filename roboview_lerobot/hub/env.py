@@ -24,9 +24,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-SETTINGS = {"benchmark_path": ("ROBOVIEW_BENCHMARK", str), "task": ("ROBOVIEW_TASK", str),
-            "cameras": ("ROBOVIEW_CAMERAS", str), "image_size": ("ROBOVIEW_IMAGE_SIZE", int),
-            "n_repeats": ("ROBOVIEW_N_REPEATS", int), "max_steps": ("ROBOVIEW_MAX_STEPS", int)}
+SETTINGS = {
+    "benchmark_path": ("ROBOVIEW_BENCHMARK", str),
+    "task": ("ROBOVIEW_TASK", str),
+    "cameras": ("ROBOVIEW_CAMERAS", str),
+    "image_size": ("ROBOVIEW_IMAGE_SIZE", int),
+    "n_repeats": ("ROBOVIEW_N_REPEATS", int),
+    "max_steps": ("ROBOVIEW_MAX_STEPS", int),
+}
 
 
 def _benchmark_folder(where: str) -> str:
@@ -37,8 +42,10 @@ def _benchmark_folder(where: str) -> str:
         from huggingface_hub import snapshot_download
 
         return snapshot_download(repo_id=where, repo_type="dataset")
-    raise FileNotFoundError(f"ROBOVIEW_BENCHMARK={where!r} is neither a benchmark folder nor a hub dataset repo id "
-                            "(ORG/NAME); build one with `python -m pipelines.build_benchmark`")
+    raise FileNotFoundError(
+        f"ROBOVIEW_BENCHMARK={where!r} is neither a benchmark folder nor a hub dataset repo id "
+        "(ORG/NAME); build one with `python -m pipelines.build_benchmark`"
+    )
 
 
 def make_env(n_envs: int = 1, use_async_envs: bool = False, cfg=None):
@@ -46,12 +53,16 @@ def make_env(n_envs: int = 1, use_async_envs: bool = False, cfg=None):
     try:
         from roboview_lerobot import RoboViewEnv
     except ImportError as exc:
-        raise ImportError("the RoboView env needs the `roboview` package installed beside lerobot "
-                          "(pip install the RoboView repository)") from exc
+        raise ImportError(
+            "the RoboView env needs the `roboview` package installed beside lerobot "
+            "(pip install the RoboView repository)"
+        ) from exc
     if not isinstance(cfg, RoboViewEnv):
         given = {name: kind(os.environ[var]) for name, (var, kind) in SETTINGS.items() if os.environ.get(var)}
         if "benchmark_path" not in given:
-            raise ValueError("set ROBOVIEW_BENCHMARK to a benchmark folder or a hub dataset repo id (ORG/NAME)")
+            raise ValueError(
+                "set ROBOVIEW_BENCHMARK to a benchmark folder or a hub dataset repo id (ORG/NAME)"
+            )
         given["benchmark_path"] = _benchmark_folder(given["benchmark_path"])
         cfg = RoboViewEnv(**given)
     return cfg.create_envs(n_envs, use_async_envs)

@@ -140,37 +140,47 @@ class PullBack(_CameraApplier):
 # The cameras these factors move: what the isolation certificate lets differ across their values.
 MOVED = tuple(f"camera:{name}" for name in PERTURBED_CAMERAS)
 
-CAMERA_POSE = register_factor(Factor(
-    name="camera_pose",
-    kind="visual",
-    values=tuple(f"orbit_r{ring}_{k}" for ring in range(N_ORBIT_RINGS) for k in range(N_ORBIT_POSES_PER_RING)),
-    baseline=CAMERA_POSE_BASELINE,
-    doc=("Pose of the front and left_top cameras: one of 21 orbital poses (ring r, index k) "
-         f"looking at the workspace center, or {CAMERA_POSE_BASELINE!r} for the unperturbed cameras."),
-    title="Camera Pose",
-    bind=OrbitalPose,
-    always_in_id=True,
-    alters=MOVED,
-))
-CAMERA_EULER = register_factor(Factor(
-    name="camera_euler",
-    kind="visual",
-    values=tuple(f"{yaw},{pitch}" for yaw in EULER_STEPS_DEG for pitch in EULER_STEPS_DEG),
-    baseline="0,0",
-    doc="'yaw,pitch' in degrees: rotation of front and left_top about their own axes.",
-    title="Camera Euler",
-    bind=EulerTurn,
-    always_in_id=True,
-    alters=MOVED,
-))
-DIST_SCALE = register_factor(Factor(
-    name="dist_scale",
-    kind="visual",
-    values=tuple(str(k) for k in range(N_DIST_SCALE_LEVELS)),
-    baseline="0",
-    doc=f"k: front and left_top moved back along their optical axis by {DIST_STEP_M}*k m.",
-    title="Dist Scale",
-    bind=PullBack,
-    always_in_id=True,
-    alters=MOVED,
-))
+CAMERA_POSE = register_factor(
+    Factor(
+        name="camera_pose",
+        kind="visual",
+        values=tuple(
+            f"orbit_r{ring}_{k}" for ring in range(N_ORBIT_RINGS) for k in range(N_ORBIT_POSES_PER_RING)
+        ),
+        baseline=CAMERA_POSE_BASELINE,
+        doc=(
+            "Pose of the front and left_top cameras: one of 21 orbital poses (ring r, index k) "
+            f"looking at the workspace center, or {CAMERA_POSE_BASELINE!r} for the unperturbed cameras."
+        ),
+        title="Camera Pose",
+        bind=OrbitalPose,
+        always_in_id=True,
+        alters=MOVED,
+    )
+)
+CAMERA_EULER = register_factor(
+    Factor(
+        name="camera_euler",
+        kind="visual",
+        values=tuple(f"{yaw},{pitch}" for yaw in EULER_STEPS_DEG for pitch in EULER_STEPS_DEG),
+        baseline="0,0",
+        doc="'yaw,pitch' in degrees: rotation of front and left_top about their own axes.",
+        title="Camera Euler",
+        bind=EulerTurn,
+        always_in_id=True,
+        alters=MOVED,
+    )
+)
+DIST_SCALE = register_factor(
+    Factor(
+        name="dist_scale",
+        kind="visual",
+        values=tuple(str(k) for k in range(N_DIST_SCALE_LEVELS)),
+        baseline="0",
+        doc=f"k: front and left_top moved back along their optical axis by {DIST_STEP_M}*k m.",
+        title="Dist Scale",
+        bind=PullBack,
+        always_in_id=True,
+        alters=MOVED,
+    )
+)

@@ -24,14 +24,16 @@ def _columns(value: str) -> dict:
     return {"color_hex": color.hex, "color_rgb": list(color.rgb), "color_lab": list(color.lab)}
 
 
-COLOR = register_factor(Factor(
-    name="color",
-    kind="visual",
-    values=tuple(sorted(COLORS)),
-    baseline="red",
-    doc="RGB of the manipulated object: a CSS named color (roboview_data.variation.colors).",
-    title="Color",
-    bind=ObjectColor,
-    record_columns=_columns,
-    always_in_id=True,
-))
+COLOR = register_factor(
+    Factor(
+        name="color",
+        kind="visual",
+        values=tuple(sorted(COLORS)),
+        baseline="red",
+        doc="RGB of the manipulated object: a CSS named color (roboview_data.variation.colors).",
+        title="Color",
+        bind=ObjectColor,
+        record_columns=_columns,
+        always_in_id=True,
+    )
+)

@@ -27,15 +27,23 @@ BODIES = (
 )
 # World xy (m) of the slots, in the order distractors are added.
 SLOTS = ((0.66, 0.30), (0.68, -0.22), (0.30, 0.36), (0.28, -0.32))
-PALETTE = ((0.15, 0.35, 0.85), (0.10, 0.60, 0.25), (0.55, 0.20, 0.65), (0.90, 0.45, 0.10), (0.85, 0.15, 0.20),
-           (0.10, 0.55, 0.60))
+PALETTE = (
+    (0.15, 0.35, 0.85),
+    (0.10, 0.60, 0.25),
+    (0.55, 0.20, 0.65),
+    (0.90, 0.45, 0.10),
+    (0.85, 0.15, 0.20),
+    (0.10, 0.55, 0.60),
+)
 MIN_DELTA_E = 25.0
 VALUES = tuple(str(n) for n in range(len(BODIES) + 1))
 
 
 def add_bodies(spec: mujoco.MjSpec) -> None:
     for i, (name, geom_type, size, half_height) in enumerate(BODIES):
-        body = spec.worldbody.add_body(name=f"distractor_{name}", pos=[PARK[0], PARK[1] + 0.2 * i, half_height])
+        body = spec.worldbody.add_body(
+            name=f"distractor_{name}", pos=[PARK[0], PARK[1] + 0.2 * i, half_height]
+        )
         body.add_geom(name=f"distractor_{name}", type=geom_type, size=list(size), rgba=[0.5, 0.5, 0.5, 1.0])
 
 
@@ -62,8 +70,15 @@ class Distractors:
             model.geom_rgba[geom] = [*colors[i % len(colors)], 1.0] if i < n else [0.5, 0.5, 0.5, 1.0]
 
 
-DISTRACTORS = register_factor(Factor(
-    name="distractors", kind="visual", values=VALUES, baseline="0", title="Distractors",
-    doc="Number of larger objects of other colours and shapes placed on fixed, non-occluding slots.",
-    bind=Distractors, extend_spec=add_bodies,
-))
+DISTRACTORS = register_factor(
+    Factor(
+        name="distractors",
+        kind="visual",
+        values=VALUES,
+        baseline="0",
+        title="Distractors",
+        doc="Number of larger objects of other colours and shapes placed on fixed, non-occluding slots.",
+        bind=Distractors,
+        extend_spec=add_bodies,
+    )
+)

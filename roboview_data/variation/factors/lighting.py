@@ -32,8 +32,11 @@ def parse_lighting(value: str) -> tuple[float, np.ndarray, np.ndarray]:
     LIGHTING.validate(value)
     intensity, direction = ("normal", "top") if value == BASELINE else value.split("_")
     pos = np.asarray(POSITIONS[direction], dtype=float)
-    aim = (np.array([0.0, 0.0, -1.0]) if direction == "top"
-           else (WORKSPACE_CENTER - pos) / np.linalg.norm(WORKSPACE_CENTER - pos))
+    aim = (
+        np.array([0.0, 0.0, -1.0])
+        if direction == "top"
+        else (WORKSPACE_CENTER - pos) / np.linalg.norm(WORKSPACE_CENTER - pos)
+    )
     return BASE_DIFFUSE * INTENSITIES[intensity], pos, aim
 
 
@@ -49,8 +52,15 @@ class KeyLight:
         self.model.light_dir[self.light] = aim
 
 
-LIGHTING = register_factor(Factor(
-    name="lighting", kind="visual", values=VALUES, baseline=BASELINE, title="Lighting",
-    doc="Key light: intensity (dim, normal, bright) × direction (top, left, front); default = normal from the top.",
-    bind=KeyLight, keeps_nominal_color=False,
-))
+LIGHTING = register_factor(
+    Factor(
+        name="lighting",
+        kind="visual",
+        values=VALUES,
+        baseline=BASELINE,
+        title="Lighting",
+        doc="Key light: intensity (dim, normal, bright) × direction (top, left, front); default = normal from the top.",
+        bind=KeyLight,
+        keeps_nominal_color=False,
+    )
+)

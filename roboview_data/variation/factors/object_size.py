@@ -33,13 +33,22 @@ class ObjectScale:
         ids = scene.ids
         self.geoms = dict(ids.shape_geom)
         self.bodies = dict(ids.shape_body)
-        self.base = {s: (model.geom_size[g].copy(), float(model.geom_rbound[g]), model.geom_aabb[g].copy(),
-                         model.body_inertia[self.bodies[s]].copy(), int(model.geom_dataid[g]))
-                     for s, g in self.geoms.items()}
+        self.base = {
+            s: (
+                model.geom_size[g].copy(),
+                float(model.geom_rbound[g]),
+                model.geom_aabb[g].copy(),
+                model.body_inertia[self.bodies[s]].copy(),
+                int(model.geom_dataid[g]),
+            )
+            for s, g in self.geoms.items()
+        }
         # The body's bounding-volume hierarchy (collision midphase) was built around the compiled size:
         # it must grow with the geom, or a larger object falls through the table.
-        self.bvh = {s: slice(int(model.body_bvhadr[b]), int(model.body_bvhadr[b] + model.body_bvhnum[b]))
-                    for s, b in self.bodies.items()}
+        self.bvh = {
+            s: slice(int(model.body_bvhadr[b]), int(model.body_bvhadr[b] + model.body_bvhnum[b]))
+            for s, b in self.bodies.items()
+        }
         self.base_bvh = {s: model.bvh_aabb[sl].copy() for s, sl in self.bvh.items()}
         self.meshes = {v: model.mesh(f"hex_prism_x{v}").id for v in VALUES}
 
@@ -64,8 +73,16 @@ class ObjectScale:
         self.scene.data.qpos[adr + 2] = SHAPES[active].half_height * float(value)  # resting on the table
 
 
-OBJECT_SIZE = register_factor(Factor(
-    name="object_size", kind="visual", values=VALUES, baseline="1.0", title="Object size",
-    doc="Uniform scale of the object (0.7–1.3); its mass stays 60 g.",
-    bind=ObjectScale, extend_spec=add_meshes, alters=("object_height",),
-))
+OBJECT_SIZE = register_factor(
+    Factor(
+        name="object_size",
+        kind="visual",
+        values=VALUES,
+        baseline="1.0",
+        title="Object size",
+        doc="Uniform scale of the object (0.7–1.3); its mass stays 60 g.",
+        bind=ObjectScale,
+        extend_spec=add_meshes,
+        alters=("object_height",),
+    )
+)

@@ -24,17 +24,33 @@ TEXTURES = {
     "cross_marks": ("flat", "cross", (0.60, 0.56, 0.50), (0.60, 0.56, 0.50), (0.35, 0.33, 0.30), 0.0, 6),
 }
 VALUES = (BASELINE, *TEXTURES)
-_BUILTIN = {"checker": mujoco.mjtBuiltin.mjBUILTIN_CHECKER, "gradient": mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
-            "flat": mujoco.mjtBuiltin.mjBUILTIN_FLAT}
-_MARK = {"none": mujoco.mjtMark.mjMARK_NONE, "edge": mujoco.mjtMark.mjMARK_EDGE,
-         "cross": mujoco.mjtMark.mjMARK_CROSS, "random": mujoco.mjtMark.mjMARK_RANDOM}
+_BUILTIN = {
+    "checker": mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+    "gradient": mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+    "flat": mujoco.mjtBuiltin.mjBUILTIN_FLAT,
+}
+_MARK = {
+    "none": mujoco.mjtMark.mjMARK_NONE,
+    "edge": mujoco.mjtMark.mjMARK_EDGE,
+    "cross": mujoco.mjtMark.mjMARK_CROSS,
+    "random": mujoco.mjtMark.mjMARK_RANDOM,
+}
 
 
 def add_textures(spec: mujoco.MjSpec) -> None:
     for name, (builtin, mark, rgb1, rgb2, markrgb, random, repeat) in TEXTURES.items():
-        spec.add_texture(name=f"table_{name}", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=_BUILTIN[builtin],
-                         mark=_MARK[mark], rgb1=list(rgb1), rgb2=list(rgb2), markrgb=list(markrgb), random=random,
-                         width=256, height=256)
+        spec.add_texture(
+            name=f"table_{name}",
+            type=mujoco.mjtTexture.mjTEXTURE_2D,
+            builtin=_BUILTIN[builtin],
+            mark=_MARK[mark],
+            rgb1=list(rgb1),
+            rgb2=list(rgb2),
+            markrgb=list(markrgb),
+            random=random,
+            width=256,
+            height=256,
+        )
         material = spec.add_material(name=f"table_{name}", texrepeat=[repeat, repeat], texuniform=True)
         material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = f"table_{name}"
 
@@ -54,8 +70,15 @@ class TableMaterial:
         self.geom_rgba[self.table] = self.plain_rgba if plain else (1.0, 1.0, 1.0, 1.0)
 
 
-TABLE_TEXTURE = register_factor(Factor(
-    name="table_texture", kind="visual", values=VALUES, baseline=BASELINE, title="Table texture",
-    doc="Procedural texture on the table: checker, gradient or marked flat colourways near the plain table's.",
-    bind=TableMaterial, extend_spec=add_textures,
-))
+TABLE_TEXTURE = register_factor(
+    Factor(
+        name="table_texture",
+        kind="visual",
+        values=VALUES,
+        baseline=BASELINE,
+        title="Table texture",
+        doc="Procedural texture on the table: checker, gradient or marked flat colourways near the plain table's.",
+        bind=TableMaterial,
+        extend_spec=add_textures,
+    )
+)
