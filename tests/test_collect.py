@@ -73,32 +73,12 @@ def test_dataset_loads_with_lerobot_and_matches_the_features(reference):
         assert grip.max() == 1.0 and grip[-1] == 0.0
 
 
-def test_lerobot_train_runs_two_steps(reference, tmp_path):
-    out = tmp_path / "train"
-    cmd = [
-        sys.executable,
-        "-m",
-        "lerobot.scripts.lerobot_train",
-        f"--dataset.repo_id={REPO_ID}",
-        f"--dataset.root={reference}",
-        "--policy.type=act",
-        "--policy.pretrained_backbone_weights=null",
-        "--policy.device=cpu",
-        "--policy.push_to_hub=false",
-        "--steps=2",
-        "--batch_size=2",
-        "--num_workers=0",
-        "--save_freq=2",
-        "--wandb.enable=false",
-        f"--output_dir={out}",
-    ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    model_dir = out / "checkpoints" / "last" / "pretrained_model"
-    config = json.loads((model_dir / "config.json").read_text())
+def test_lerobots_trainer_trains_on_a_collected_dataset(tiny_checkpoint):
+    # The shared checkpoint: lerobot-train (through pipelines.train's recipe) on 2 demos collect wrote.
+    config = json.loads((tiny_checkpoint / "config.json").read_text())
     assert config["type"] == "act"
-    assert "observation.images.wrist" in config["input_features"]
-    assert (model_dir / "model.safetensors").stat().st_size > 1_000_000
+    assert {"observation.images.left_top", "observation.images.wrist"} <= set(config["input_features"])
+    assert (tiny_checkpoint / "model.safetensors").stat().st_size > 1_000_000
 
 
 def test_every_collected_dataset_has_a_dataset_card(reference):
