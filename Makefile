@@ -60,11 +60,12 @@ demo: install
 	@echo "Contact sheet:  $(DEMO_DIR)/benchmark/contact_sheet/index.html"
 	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
 
-# Lint and format check first (ruff, pyproject.toml), then the whole suite with its 30 slowest tests listed at
-# the end; test-fast: the tests that take seconds (statistics, formats, factor registry, imports), no rendering,
-# training or servers.
+# Lint and format check first (ruff, pyproject.toml), then the whole suite on TEST_WORKERS processes (pytest-xdist,
+# one test file per process at a time) with its 30 slowest tests listed at the end; test-fast: the tests that take
+# seconds (statistics, formats, factor registry, imports), no rendering, training or servers.
+TEST_WORKERS ?= 2
 test: install lint
-	$(PY) -m pytest -q --durations=30
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
 test-fast: install lint
 	$(PY) -m pytest -q -m "not slow" --durations=10

@@ -283,10 +283,25 @@ def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_ove
     np.testing.assert_allclose(action[:7], expected, rtol=0, atol=1e-6)
     assert action[7] == 1.0
     policy.close()
-    # Two workers, two URLs: worker i talks to server i (mod 2), so both served episodes.
-    served = [len(s.prompts) for s in servers]
+    # Two URLs: the worker of rank i talks to server i (mod 2).
+    from roboview_data.workers import set_worker_rank, worker_rank
+
+    rank = worker_rank()
+    try:
+        for i in (1, 2):
+            set_worker_rank(i)
+            served = [len(s.prompts) for s in servers]
+            policy = cfg.build(AgentView.of(env))
+            policy.reset(Episode.of(env, 2))
+            policy.select_action(obs)
+            policy.close()
+            assert [len(s.prompts) - n for s, n in zip(servers, served)] == [i % 2 == 0, i % 2 == 1]
+    finally:
+        set_worker_rank(rank)
+    # Two spawned workers over the two URLs: every episode served, by whichever server its worker talks to.
+    served = sum(len(s.prompts) for s in servers)
     evaluate(tiny_benchmark, tmp_path / "two", cfg, limit=4, workers=2, max_steps=3)
-    assert all(len(s.prompts) > n for s, n in zip(servers, served)), [len(s.prompts) for s in servers]
+    assert sum(len(s.prompts) for s in servers) - served >= 4
     assert len(rows(tmp_path / "two")) == 4
 
 
