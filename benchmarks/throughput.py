@@ -81,9 +81,8 @@ def phase_render(frames: int) -> dict:
 
     env = make_env(image_size=224)
     env.reset()
-    rounds = [
-        (bare_fps(env, frames), pipeline_fps(env, frames)) for _ in range(3)
-    ]  # interleaved: drift-robust
+    # interleaved: drift-robust
+    rounds = [(bare_fps(env, frames), pipeline_fps(env, frames)) for _ in range(3)]
     env.close()
     bare, pipeline = float(np.median([r[0] for r in rounds])), float(np.median([r[1] for r in rounds]))
     return {"render_fps_bare": bare, "render_fps_pipeline": pipeline, "render_ratio": pipeline / bare}

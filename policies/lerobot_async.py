@@ -115,9 +115,8 @@ def _channel(address: str):
     from lerobot.transport import services_pb2_grpc
     from lerobot.transport.utils import grpc_channel_options
 
-    channel = grpc.insecure_channel(
-        address, grpc_channel_options()
-    )  # lerobot's client options (4 MB, retries)
+    # lerobot's client options (4 MB, retries)
+    channel = grpc.insecure_channel(address, grpc_channel_options())
     return channel, services_pb2_grpc.AsyncInferenceStub(channel)
 
 

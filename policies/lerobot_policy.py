@@ -143,9 +143,8 @@ class LeRobotPolicy:
             )
         self.slots = slots
         self.tasks = [""] * slots
-        self.queues: list[collections.deque] = [
-            collections.deque() for _ in range(slots)
-        ]  # post-processed actions
+        # post-processed actions
+        self.queues: list[collections.deque] = [collections.deque() for _ in range(slots)]
         self.reads = 0  # observations turned into model input (chunks predicted, per slot)
 
     def reset(self, episode: Episode, slot: int = 0) -> None:

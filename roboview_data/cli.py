@@ -245,9 +245,8 @@ class _Layout:
     main: list[Section] = dataclasses.field(default_factory=list)
     groups: list[Section] = dataclasses.field(default_factory=list)
     choices: list[Section] = dataclasses.field(default_factory=list)
-    chosen: dict[str, str] = dataclasses.field(
-        default_factory=dict
-    )  # registry path → the type given with --help
+    # registry path → the type given with --help
+    chosen: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 def _walk(

@@ -170,10 +170,8 @@ def test_lists_are_written_comma_separated_everywhere():
     from pipelines.build_benchmark import BuildConfig
 
     cfg = parse(BuildConfig, ["--factorial_colors=red,blue", "--cartesian=[color,shape]"])
-    assert cfg.factorial_colors == ["red", "blue"] and cfg.cartesian == [
-        "color",
-        "shape",
-    ]  # brackets still read
+    # brackets still read
+    assert cfg.factorial_colors == ["red", "blue"] and cfg.cartesian == ["color", "shape"]
     proc = subprocess.run(
         [
             sys.executable,

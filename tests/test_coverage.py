@@ -63,13 +63,11 @@ def test_context_only_data_covers_exactly_the_baselines(bench, datasets):
     table = audit(load_training_visuals(datasets["context"]), _records(bench))
     color = _status(table, "color")
     assert color.pop("red") == "exact" and set(color.values()) == {"never"}
-    assert set(_status(table, "camera_pose").values()) == {
-        "never"
-    }  # orbital poses are not the original camera
+    # orbital poses are not the original camera
+    assert set(_status(table, "camera_pose").values()) == {"never"}
     euler = _status(table, "camera_euler")
-    assert euler.pop("0,0") == "exact" and set(euler.values()) == {
-        "never"
-    }  # (±6°, ±6°) is 8.5° away: beyond the 5° radius
+    # (±6°, ±6°) is 8.5° away: beyond the 5° radius
+    assert euler.pop("0,0") == "exact" and set(euler.values()) == {"never"}
     dist = table[table["split"] == "dist_scale"].set_index("value")
     assert dist.loc["0", "status"] == "exact"
     assert np.isclose(dist.loc["4", "nearest_pos_m"], 0.20) and dist.loc["4", "status"] == "never"

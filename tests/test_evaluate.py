@@ -592,6 +592,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     first = df.iloc[0]
     assert f"../ev/videos/color/{first['value']}/{first['instance_id']}_r0_wrist.mp4" in text
     assert "## Provenance" in text and entry["checkpoint"]["sha256"][:16] in text
+    # a resume adds an entry
     evaluate(
         bench,
         out,
@@ -603,7 +604,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
         workers=1,
         max_steps=5,
         image_size=0,
-    )  # a resume adds an entry
+    )
     assert [e["episodes_run"] for e in json.loads((out / "provenance.json").read_text())] == [2, 1]
     with pytest.raises(ValueError, match="allowed: a count N"):
         EvalConfig(videos="some")

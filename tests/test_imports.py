@@ -205,9 +205,8 @@ label = "a plain string, not.a.name:either"
     graph = import_graph()
     assert "policies.vision" in graph["policies.types"] and "policies.vision" not in graph["policies.base"]
     assert {"roboview_data.tasks.pick_place", "roboview_data.tasks.push"} <= graph["roboview_data.tasks"]
-    assert (
-        "roboview_data.tasks.env" in graph["roboview_data.tasks.base"]
-    )  # the default expert, "module:Class"
+    # the default expert, "module:Class"
+    assert "roboview_data.tasks.env" in graph["roboview_data.tasks.base"]
     assert "roboview_data.variation.factors.color" in graph["roboview_data.variation.factors"]
     assert "pipelines.collect" in graph["pipelines._console"]
     assert "roboview_lerobot.env" in graph["roboview_lerobot"]

@@ -160,13 +160,8 @@ def test_an_outage_past_the_retries_is_infra_and_a_policy_bug_is_not(tiny_benchm
         ),
         ([ValueError("bad output")], "ok", 0, 1, "policy error: ValueError: bad output"),
         ([InfraError("server lost")], INFRA_ERROR, 0, 1, "infrastructure error: InfraError: server lost"),
-        (
-            [TimeoutError("slow"), None],
-            "ok",
-            3,
-            4,
-            "within 3 steps",
-        ),  # retried, then the policy's own failure
+        # retried, then the policy's own failure
+        ([TimeoutError("slow"), None], "ok", 3, 4, "within 3 steps"),
     ]
     try:
         for errors, status, steps, calls, reason in cases:

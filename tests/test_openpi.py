@@ -344,9 +344,8 @@ def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(
     assert len(errors) == 1 and isinstance(errors[0], PolicyUnavailable), errors
     assert f"ws://127.0.0.1:{port}" in str(errors[0]) and "rerun" in str(errors[0])
     done = [json.loads(line) for line in journal.read_text().splitlines()]
-    assert (
-        1 <= len(done) < 4
-    )  # what finished is kept; nothing the kill cut short is recorded as a policy failure
+    # what finished is kept; nothing the kill cut short is recorded as a policy failure
+    assert 1 <= len(done) < 4
     assert not any("closed the connection" in r["failure_reason"] for r in done)
 
     server = start_server(tiny_checkpoint, port)  # the same server back: the rerun finishes the rest

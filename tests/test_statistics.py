@@ -199,12 +199,10 @@ def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_bi
     m = split_metrics(frame)  # default: up to 20,000 permutations
     assert m["p_value_cv"] < 1e-4 and m["p_value_cv_draws"] == 20_000 and m["p_value_cv_at_floor"]
     assert p_fmt(m["p_value_cv"], m["p_value_cv_at_floor"]) == "≤ 5.0e-05"
-    assert (
-        m["p_value_method"] == "permutation" and m["p_value_at_floor"]
-    )  # the GLM calibration's floor (200 draws)
+    # the GLM calibration's floor (200 draws)
+    assert m["p_value_method"] == "permutation" and m["p_value_at_floor"]
     assert p_fmt(m["p_value"], m["p_value_at_floor"]) == "≤ 0.0050"
     null, _ = simulate_split(np.random.default_rng(4), 9, 4, 5, 0.0, 0.7)
     quiet = split_metrics(null)
-    assert (
-        quiet["p_value_cv_draws"] < 1000 and not quiet["p_value_cv_at_floor"]
-    )  # stops early when p is large
+    # stops early when p is large
+    assert quiet["p_value_cv_draws"] < 1000 and not quiet["p_value_cv_at_floor"]

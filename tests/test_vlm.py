@@ -276,9 +276,8 @@ def test_agents_succeed_on_red_and_say_why_they_fail_on_gold(standin, rgbd_env, 
 
 def test_sgl_records_the_refined_instruction(standin, rgbd_env, tmp_path):
     config = policy_config("vlm_simple", endpoint=Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path)))
-    policy = make_policy(
-        SGLConfig(enable=True).wrap(config), rgbd_env
-    )  # the SGL asks the agent's own endpoint
+    # the SGL asks the agent's own endpoint
+    policy = make_policy(SGLConfig(enable=True).wrap(config), rgbd_env)
     assert policy.name == "vlm_simple+sgl"
     success, record = _run(policy, rgbd_env, _instance(color="blue"))
     assert success

@@ -197,9 +197,8 @@ def run_ray(
         watch = _HeadWatch(gcs)
         watch.start()
     stats = stats if stats is not None else {}
-    stats.setdefault(
-        "nodes", {}
-    )  # accumulated over the calls of one run (adaptive rounds call once per round)
+    # accumulated over the calls of one run (adaptive rounds call once per round)
+    stats.setdefault("nodes", {})
     stats.setdefault("lost_actors", 0)
     stats["address"] = address or "local"
     actor_cls = ray.remote(num_cpus=1)(EvalWorker).options(scheduling_strategy="SPREAD")

@@ -246,9 +246,8 @@ def roll_back(root: Path, progress: Progress) -> int:
 def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRobotDataset
     """Append one successful expert episode through lerobot's add_frame / save_episode."""
     values = episode.instance.factor_values
-    task = next(
-        values[name] for name in values if name.endswith("instruction")
-    )  # instruction / push_instruction
+    # instruction / push_instruction
+    task = next(values[name] for name in values if name.endswith("instruction"))
     for t in range(episode.steps):
         frame = {IMAGE_KEY.format(cam): frames[t] for cam, frames in episode.images.items()}
         frame[STATE_KEY] = episode.states[t]

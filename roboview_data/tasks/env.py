@@ -233,9 +233,8 @@ class TaskEnv(gym.Env):
     def render_camera(self, camera: str, depth: bool = False) -> np.ndarray:
         """One camera's image (or depth map) now. A renderer that fails (a lost GL context, out of GPU memory)
         raises `RenderError`: the evaluator records that episode as ended by infrastructure."""
-        camera_id = self.scene.ids.cameras[
-            camera
-        ]  # an unknown camera is the caller's error, not a render failure
+        # an unknown camera is the caller's error, not a render failure
+        camera_id = self.scene.ids.cameras[camera]
         try:
             if depth:
                 if self._depth_renderer is None:
