@@ -192,7 +192,7 @@ def locate_object(
     return center, yaw, symmetry, int(stats[best, cv2.CC_STAT_AREA]), float(delta_e[labels == best].mean())
 
 
-TARGET_MASKS = {"box": lambda rgb: yellow_mask(rgb), "zone": lambda rgb: zone_mask(rgb)}
+TARGET_MASKS = {"box": yellow_mask, "zone": zone_mask}
 
 
 def perceive(

@@ -24,7 +24,7 @@ from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
 from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
-from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
 log = logging.getLogger(__name__)
 
@@ -115,9 +115,7 @@ class VisionPolicy:
             return
         p = self.perception
         # The task's own scripted solution, as its expert runs it, through the perceived poses.
-        self._task.env_class().plan(
-            self._motion, p.object_pos, p.object_yaw, p.symmetry, ASSUMED_REACH_M, p.box_xy, arm_q
-        )
+        self._task.solve(self._motion, p.object_pos, p.object_yaw, p.symmetry, p.box_xy, arm_q)
 
     def close(self) -> None:
         pass

@@ -11,7 +11,6 @@ adaptive sampling, the isolation certificate, provenance) are report.md's own, r
 from __future__ import annotations
 
 import base64
-import html
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +18,7 @@ from markdown_it import MarkdownIt
 
 from eval.reporting import format as fmt
 from eval.reporting import tables
+from eval.reporting.tables import escape as _e
 from eval.running.results import VERSION_KEY
 from eval.statistics.metrics import policy_layouts
 from roboview_data.variation.instances import DEFAULT_TASK, split_task
@@ -40,10 +40,6 @@ th{background:#f0f0ee}td.num{text-align:right;font-variant-numeric:tabular-nums}
 .note{color:#555;font-size:13px}
 code{background:#f2f2f2;padding:0 3px;border-radius:3px;word-break:break-all}
 """
-
-
-def _e(text: Any) -> str:
-    return html.escape(str(text), quote=True)
 
 
 def _image(path: Path, alt: str) -> str:

@@ -104,19 +104,20 @@ def to_markdown(table: Table) -> list[str]:
     return markdown_table(table.headings, [[_markdown_cell(c) for c in row] for row in table.rows])
 
 
-def _e(text: Any) -> str:
+def escape(text: Any) -> str:
+    """Text for an HTML page (quotes escaped too)."""
     return html.escape(str(text), quote=True)
 
 
 def _html_cell(cell: Cell) -> str:
-    text = _e(cell.text)
+    text = escape(cell.text)
     if cell.code and text:
         text = f"<code>{text}</code>"
     if cell.strong and text:
         text = f"<b>{text}</b>"
     if cell.tone:
         text = f'<span class="{"note" if cell.tone == "note" else "verdict-" + cell.tone}">{text}</span>'
-    links = " ".join(f'<a href="{_e(href)}">{_e(label)}</a>' for label, href in cell.links)
+    links = " ".join(f'<a href="{escape(href)}">{escape(label)}</a>' for label, href in cell.links)
     return " ".join(t for t in (text, links) if t)
 
 
@@ -124,7 +125,9 @@ def to_html(table: Table) -> str:
     """The table as report.html prints it: each heading's meaning as its tooltip, numeric columns
     right-aligned."""
     head = "".join(
-        f'<th title="{_e(c.note)}">{_e(c.heading)}</th>' if c.note else f"<th>{_e(c.heading)}</th>"
+        f'<th title="{escape(c.note)}">{escape(c.heading)}</th>'
+        if c.note
+        else f"<th>{escape(c.heading)}</th>"
         for c in table.columns
     )
     body = "".join(

@@ -33,7 +33,7 @@ from policies.vlm.marks import draw_marks
 from policies.vlm.prompts import MOKA_MARKS, MOKA_PLAN
 from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
-from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
 # Keypoints along each principal axis of a mask, as a fraction of its half-extent, and at least this
 # many pixels from the centroid (so the drawn marks never merge; see policies.vlm.marks).
@@ -190,9 +190,7 @@ class MokaAgent:
         center, yaw, symmetry = solid
         box_xy = world_point(place_px, depth, calibration)[:2]
         # The task's own scripted solution through the points the VLM gave.
-        load_task(self._episode.task).env_class().plan(
-            self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy, arm_q
-        )
+        load_task(self._episode.task).solve(self.planner, center, yaw, symmetry, box_xy, arm_q)
 
     def episode_record(self) -> dict:
         return {**self.client.take_stats(), **self._record}

@@ -19,7 +19,7 @@ from policies.vlm.common import VLMConfig, check_point, object_from_point, world
 from policies.vlm.prompts import SIMPLE_POINTS
 from roboview_data.sim.motion import PickPlacePlanner
 from roboview_data.tasks import load_task
-from roboview_data.tasks.env import ASSUMED_REACH_M, DEPTH_KEY, IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
 
 @PolicyConfig.register_subclass("vlm_simple")
@@ -98,9 +98,7 @@ class SimpleAgent:
         center, yaw, symmetry = grasp
         box_xy = world_point(target_px, depth, calibration)[:2]
         # The task's own scripted solution through the points the VLM gave.
-        load_task(episode.task).env_class().plan(
-            self.planner, center, yaw, symmetry, ASSUMED_REACH_M, box_xy, arm_q
-        )
+        load_task(episode.task).solve(self.planner, center, yaw, symmetry, box_xy, arm_q)
 
     def episode_record(self) -> dict:
         """Columns this agent adds to the episode row: its VLM usage and the points it was given."""

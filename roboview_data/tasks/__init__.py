@@ -28,7 +28,6 @@ from roboview_data.tasks.base import (
     make_env,
     register_task,
     resolve,
-    unregister_task,
 )
 from roboview_data.tasks.env import ScriptedExpert, TaskEnv
 from roboview_data.variation.factors import DEFAULT_TASK
@@ -60,5 +59,4 @@ __all__ = [
     "register_preset",
     "register_task",
     "resolve",
-    "unregister_task",
 ]

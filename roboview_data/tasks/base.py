@@ -17,8 +17,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
-from roboview_data.tasks.env import DEFAULT_MAX_STEPS
+from roboview_data.sim.motion import PickPlacePlanner
+from roboview_data.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS
 from roboview_data.variation.factors import DEFAULT_TASK, context_factors
 
 
@@ -57,6 +59,19 @@ class Task:
         """What besides the object a policy must find: "box", "zone", … or None."""
         return self.env_class().target
 
+    def solve(
+        self,
+        planner: PickPlacePlanner,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        target_xy: np.ndarray | None,
+        arm_qpos: np.ndarray,
+    ) -> None:
+        """The task's scripted solution (its env's `plan`) from perceived poses, as a non-privileged agent
+        runs it: the object's extent is assumed (`ASSUMED_REACH_M`), the pinch point computed from the joints."""
+        self.env_class().plan(planner, obj_pos, obj_yaw, symmetry, ASSUMED_REACH_M, target_xy, arm_qpos)
+
     def make_expert(self, env: gym.Env) -> Any:
         return resolve(self.expert)(env)
 
@@ -77,13 +92,6 @@ def register_task(task: Task) -> Task:
     if task.gym_id not in gym.registry:
         gym.register(id=task.gym_id, entry_point=task.env, max_episode_steps=task.max_episode_steps)
     return task
-
-
-def unregister_task(name: str) -> None:
-    """Remove a task (tests that register a throwaway task clean up with this)."""
-    task = TASKS.pop(name, None)
-    if task is not None:
-        gym.registry.pop(task.gym_id, None)
 
 
 def load_task(name: str = DEFAULT_TASK) -> Task:

@@ -53,18 +53,6 @@ def register_preset(cfg: SuiteConfig) -> SuiteConfig:
     return cfg
 
 
-def small_preset(name: str, tasks: tuple[str, ...]) -> SuiteConfig:
-    """A demo/test suite: a few values of each paper factor over each task's `small_contexts`."""
-    contexts = tuple(pair for task in tasks for pair in load_task(task).small_contexts)
-    return SuiteConfig(
-        preset=name,
-        union_mode="dedupe",
-        factorial_colors=("red", "white"),
-        tasks=tasks,
-        value_subsets=(*SMALL_VISUALS, *contexts),
-    )
-
-
 def load_preset(name: str) -> SuiteConfig:
     """Return the registered suite preset `name`; unknown names raise listing the valid ones."""
     try:
@@ -79,7 +67,14 @@ register_preset(PAPER)
 register_preset(replace(PAPER, preset="paper_dedupe", union_mode="dedupe"))
 # 3 contexts (G, object left, cylinder) x a few values per visual factor (8 colors, 3 poses, 3 eulers,
 # 3 distances) + 2 colors x 3 poses = 57 instances.
-register_preset(small_preset("tiny", (DEFAULT_TASK,)))
+register_preset(
+    SuiteConfig(
+        preset="tiny",
+        union_mode="dedupe",
+        factorial_colors=("red", "white"),
+        value_subsets=(*SMALL_VISUALS, *load_task(DEFAULT_TASK).small_contexts),
+    )
+)
 # Both tasks. pick_place: 11 × (141 + 21 + 9 + 9 + 9 + 8 + 5 + 7) + 147 = 2,446 instances; push over its
 # own 4 × 3 = 12 per-subspace contexts (start, zone, shape, instruction; 3 values each): 12 × 209 + 147 = 2,655;
 # 5,101 in all.
