@@ -84,12 +84,7 @@ class PickPlacePlanner:
         `symmetry` is the object's rotational symmetry about z (rad), which bounds the wrist turn.
         """
         q_start = np.asarray(arm_qpos, dtype=float).copy()
-        if ee_pos is None:
-            self._scratch.qpos[self._qadr] = q_start
-            mujoco.mj_kinematics(self.model, self._scratch)
-            start = self._scratch.site_xpos[self._site].copy()
-        else:
-            start = np.asarray(ee_pos, dtype=float).copy()
+        start = self.pinch_position(q_start) if ee_pos is None else np.asarray(ee_pos, dtype=float).copy()
         # Fingers close along the site's y axis: align it with the object's x axis, picking the
         # symmetric equivalent nearest the current wrist yaw so the wrist turns as little as possible.
         half_turn = min(symmetry, np.pi)
