@@ -99,7 +99,8 @@ def _read(file: Path, supported: int, in_folder: bool):
 
 
 def _mapped(table: pd.DataFrame, source: str) -> HarnessTable:
-    mapping = {"repeat": "epoch", "policy": "policy"}
+    # No default repeat: scenes sharing a value and context each run epochs 0, 1, …; file order numbers them apart.
+    mapping = {"policy": "policy"}
     missing = {}
     metadata = [c for c in table.columns if c.startswith("metadata.")]
     for name, column in (("factor", FACTOR_KEY), ("value", VALUE_KEY), ("context", CONTEXT_KEY)):
