@@ -228,13 +228,16 @@ def harness_map(cfg: AuditConfig, harness: HarnessTable) -> MapConfig:
     unmapped = [n for n in REQUIRED if not columns[n] and not (n == "factor" and cfg.factor_name)]
     table = harness.table
     if unmapped:
-        reasons = "; ".join(f"{n}: {harness.missing.get(n, 'no default column')}" for n in unmapped)
+        by_reason: dict[str, list[str]] = {}
+        for n in unmapped:
+            by_reason.setdefault(harness.missing.get(n, "no default column"), []).append(n)
+        reasons = "; ".join(f"{', '.join(names)}: {reason}" for reason, names in by_reason.items())
         flags = " ".join(f"--map.{n}=COLUMN" for n in unmapped)
-        names = list(map(str, table.columns))
+        columns_read = list(map(str, table.columns))
         raise ValueError(
             f"--format={cfg.format} --results={cfg.results}: {reasons}. Name them with {flags}"
             + (" (or --factor_name=NAME)" if "factor" in unmapped else "")
-            + f"; its columns: {', '.join(names[:40])}{' …' if len(names) > 40 else ''}"
+            + f"; its columns: {', '.join(columns_read[:40])}{' …' if len(columns_read) > 40 else ''}"
         )
     for name in REQUIRED:
         column = columns[name]

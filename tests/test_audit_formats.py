@@ -31,13 +31,13 @@ from pipelines.audit import main
 
 ROOT = Path(__file__).parents[1]
 FAST = ["--metrics.n_perm=200", "--metrics.n_glm=30", "--metrics.max_perm=200"]
-INSTRUCTIONS = [f"pick up the black bowl {where} and place it on the plate" for where in ("on the stove", "next to the ramekin", "on the cookie box", "in the drawer")]  # fmt: skip
-EPISODES = 6
+INSTRUCTIONS = [f"pick up the black bowl {where} and place it on the plate" for where in ("on the stove", "next to the ramekin", "on the cookie box")]  # fmt: skip
+EPISODES = 5
 # LIBERO-plus category → successes of EPISODES per (base task, difficulty level): camera level 3 fails far more.
 PLANTED = {
-    "Camera Viewpoints": {1: 5, 2: 5, 3: 1},
-    "Light Conditions": {1: 4, 2: 4, 3: 4},
-    "Language Instructions": {1: 3, 2: 3},
+    "Camera Viewpoints": {1: 4, 2: 4, 3: 1},
+    "Light Conditions": {1: 3, 2: 3, 3: 3},
+    "Language Instructions": {1: 2, 2: 2},
 }
 
 
@@ -65,8 +65,12 @@ def record(store, eval_id, config, tasks, outcomes, out, collector=None):
             )
             recorder.record_step(reward=float(ok), done=True, success=ok)
             result = {"episode_id": episode, "metrics": {"success": ok}, "steps": 1}
-            # One planted failure of camera level 3 is an episode that errored: vla-eval counts it as failed.
-            if (task.get("category"), task.get("difficulty_level"), episode) == ("Camera Viewpoints", 3, 5):
+            # The last episode of each camera level-3 task errored (a planted failure): vla-eval counts it as failed.
+            if (task.get("category"), task.get("difficulty_level"), episode) == (
+                "Camera Viewpoints",
+                3,
+                EPISODES - 1,
+            ):
                 result["failure_reason"] = "server_error"
             recorder.close(
                 status="error" if "failure_reason" in result else "success" if ok else "fail",
@@ -143,18 +147,20 @@ def test_vla_eval_run_folder_from_the_command_line(vla_eval_run, tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     splits = metrics["splits"]
     assert set(splits) == set(PLANTED)
-    assert sum(s["n_episodes"] for s in splits.values()) == EPISODES * len(INSTRUCTIONS) * 8 == 192
+    assert sum(s["n_episodes"] for s in splits.values()) == EPISODES * len(INSTRUCTIONS) * 8 == 120
     for category, levels in PLANTED.items():
         # the errored episode (camera level 3) counts as a failure, as vla-eval counts it
         assert successes(splits[category]) == {str(v): k * len(INSTRUCTIONS) for v, k in levels.items()}
     # p at its Monte Carlo floor: none of the 30 null draws reached the planted drop
     camera = splits["Camera Viewpoints"]
-    assert camera["p_value"] < 0.05 and camera["p_value_at_floor"] and camera["n_contexts"] == 4
+    assert camera["p_value"] < 0.05 and camera["p_value_at_floor"] and camera["n_contexts"] == 3
     assert splits["Light Conditions"]["p_value"] > 0.5
     # language variants rewrite the instruction: their base task is the suite
     assert splits["Language Instructions"]["n_contexts"] == 1
     report = (tmp_path / "report.md").read_text()
-    assert "(vla-eval recording-plus.sqlite (LIBERO-plus))" in report and "factor ← category" in report
+    assert (
+        "(vla-eval LIBERO-plus results in recording-plus.sqlite)" in report and "factor ← category" in report
+    )
 
 
 def test_vla_eval_aggregate_and_database_read_the_same_episodes(vla_eval_run, tmp_path):

@@ -65,7 +65,7 @@ def read_inspect_robots(path: Path) -> HarnessTable:
         raise ValueError(f"--results={path} holds no scored trial; {EXPECTED}")
     table = pd.DataFrame(rows)
     names = ", ".join(f.name for f in files)
-    return _mapped(table, f"Inspect Robots {names}")
+    return _mapped(table, f"Inspect Robots eval logs {names}")
 
 
 def _read(file: Path, supported: int, in_folder: bool):

@@ -44,7 +44,9 @@ def read_vla_eval(path: Path) -> HarnessTable:
     if recordings:
         if aggregates:
             logger.info(
-                "reading %s; %s are its export", ", ".join(r.name for r in recordings), len(aggregates)
+                "reading %s; %s beside it, its export, not read again",
+                ", ".join(r.name for r in recordings),
+                ", ".join(a.name for a in aggregates),
             )
         for db in recordings:
             bodies += [(db.name, body) for body in _export(db)]
@@ -58,7 +60,7 @@ def read_vla_eval(path: Path) -> HarnessTable:
                 body.get("benchmark"),
             )
     table = _episodes(bodies, path)
-    return _mapped(table, f"vla-eval {', '.join(sorted({name for name, _ in bodies}))}")
+    return _mapped(table, ", ".join(sorted({name for name, _ in bodies})))
 
 
 def _sources(path: Path) -> tuple[list[Path], list[Path]]:
@@ -175,7 +177,7 @@ def _mapped(table: pd.DataFrame, source: str) -> HarnessTable:
         language = table["category"].astype(str).str.lower().str.contains(LANGUAGE_CATEGORY)
         table["base_task"] = table["name"].where(~language, table["suite"])
         mapping.update(factor="category", value="difficulty_level", context="base_task")
-        return HarnessTable(table, mapping, f"{source} (LIBERO-plus)", missing)
+        return HarnessTable(table, mapping, f"vla-eval LIBERO-plus results in {source}", missing)
     if "suite" in table:
         split = table["suite"].map(_libero_pro_split)
         if split.map(lambda s: bool(s[1])).any():
@@ -185,11 +187,11 @@ def _mapped(table: pd.DataFrame, source: str) -> HarnessTable:
             if "task_id" in table:
                 table["base_task"] = table["base_suite"] + "/" + table["task_id"].astype(str)
             mapping.update(factor="factor", value="perturbation", context="base_suite")
-            return HarnessTable(table, mapping, f"{source} (LIBERO-Pro)", missing)
+            return HarnessTable(table, mapping, f"vla-eval LIBERO-Pro results in {source}", missing)
         if "params.task_config" in table and (table["suite"] == "robotwin").all():
             table["factor"] = "task_config"
             mapping.update(factor="factor", value="params.task_config", context="task")
-            return HarnessTable(table, mapping, f"{source} (RoboTwin)", missing)
+            return HarnessTable(table, mapping, f"vla-eval RoboTwin results in {source}", missing)
     fields = [c for c in table.columns if not c.startswith(("metrics.", "params."))]
     why = (
         f"these vla-eval episodes ({', '.join(sorted(table['benchmark'].astype(str).unique()))}) carry no "
@@ -198,4 +200,4 @@ def _mapped(table: pd.DataFrame, source: str) -> HarnessTable:
         f"{', '.join(fields)})"
     )
     missing.update(factor=why, value=why)
-    return HarnessTable(table, mapping, source, missing)
+    return HarnessTable(table, mapping, f"vla-eval results in {source}", missing)
