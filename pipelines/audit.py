@@ -3,6 +3,7 @@
     python -m pipelines.audit --results=rollouts.csv --map.factor=category --map.value=variant \\
         --map.context=base_task --map.success=success [--map.repeat=trial] [--map.policy=model] \\
         --output_dir=outputs/audit
+    python -m pipelines.audit --format=vla_eval|inspect_robots --results=FILE_OR_DIR --output_dir=outputs/audit
 
 Reads one row per episode (CSV, parquet or JSON lines) from another benchmark — LIBERO-plus, VLA-Arena,
 RoboTwin, your own logs — maps its columns onto RoboView's episode record and writes the same report.md
@@ -10,6 +11,11 @@ and metrics.json as `pipelines.report`: per factor the success rate per value, t
 (`cv_null`), `cv_excess`, the GLM likelihood-ratio test of `value + context` against `context`, per-value
 odds ratios with exact p- and q-values, and the power this design has against a bias of logit SD
 `--tau`. With several policies (`--map.policy`), the paired comparisons too.
+
+`--format` reads another harness's own files instead of a table: `vla_eval` (vla-eval's recording database or
+exported aggregate JSON; LIBERO-plus, LIBERO-Pro and RoboTwin results map without --map flags) or
+`inspect_robots` (Inspect Robots' JSON eval logs; the scenes' metadata keys factor, value and context). Any
+--map.* flag overrides the harness's default column; eval.running.harnesses says what each column holds.
 
 The mapping:
 
@@ -30,13 +36,15 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from eval.reporting.markdown import REPORT_FILE, write_report
+from eval.running.harnesses import HARNESSES, load
+from eval.running.harnesses.base import MAP_FIELDS, REQUIRED, HarnessTable
 from eval.statistics.metrics import MetricsConfig, policy_layouts
 from eval.statistics.significance import lrt_power
 from pipelines._cli import cli_main
@@ -64,8 +72,11 @@ class MapConfig:
 
 @dataclass
 class AuditConfig:
-    # Per-episode results: .csv, .parquet or .jsonl.
+    # Per-episode results: .csv, .parquet or .jsonl; with --format, the harness's file or folder.
     results: str = ""
+    # Another harness's own results instead of a table: vla_eval or inspect_robots (docs/audit.md); empty: a
+    # table mapped with --map.*. With a format, --map.* flags override its default columns.
+    format: str = ""
     map: MapConfig = field(default_factory=MapConfig)
     # The factor's name when the file holds one factor and has no factor column.
     factor_name: str = ""
@@ -80,6 +91,15 @@ class AuditConfig:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
 
     def __post_init__(self) -> None:
+        if not self.tau > 0:
+            raise ValueError(f"--tau={self.tau} must be > 0 (a logit SD, e.g. 0.3)")
+        if self.format:
+            load(self.format)
+            if not self.results:
+                raise ValueError(f"--results is required: the {self.format} results file or folder")
+            if not Path(self.results).exists():
+                raise ValueError(f"--results={self.results}: no such file or folder ({self.format} results)")
+            return  # the mapping is checked once the harness's defaults are known
         if not self.results:
             raise ValueError("--results is required: a per-episode CSV, parquet or JSON-lines file")
         problem = input_problem(Path(self.results))
@@ -90,10 +110,9 @@ class AuditConfig:
             missing.append("--map.factor (or --factor_name)")
         if missing:
             raise ValueError(
-                f"missing {', '.join(missing)}: name the columns of {self.results} that hold them"
+                f"missing {', '.join(missing)}: name the columns of {self.results} that hold them (or read "
+                f"another harness's files with --format={'|'.join(HARNESSES)})"
             )
-        if not self.tau > 0:
-            raise ValueError(f"--tau={self.tau} must be > 0 (a logit SD, e.g. 0.3)")
 
 
 FORMATS = {".csv": "CSV", ".parquet": "parquet", ".jsonl": "JSON lines", ".json": "JSON lines"}
@@ -199,6 +218,37 @@ def to_episodes(table: pd.DataFrame, cfg: AuditConfig) -> pd.DataFrame:
     return out
 
 
+def harness_map(cfg: AuditConfig, harness: HarnessTable) -> MapConfig:
+    """The --map.* flags given, each empty one filled with the harness's default column; a field left without a
+    column, or a column with episodes that lack a value, raises ValueError saying why and which flag names it."""
+    given = {name: getattr(cfg.map, name) for name in MAP_FIELDS}
+    columns = {name: given[name] or harness.mapping.get(name, "") for name in MAP_FIELDS}
+    if cfg.factor_name and not given["factor"]:
+        columns["factor"] = ""
+    unmapped = [n for n in REQUIRED if not columns[n] and not (n == "factor" and cfg.factor_name)]
+    table = harness.table
+    if unmapped:
+        by_reason: dict[str, list[str]] = {}
+        for n in unmapped:
+            by_reason.setdefault(harness.missing.get(n, "no default column"), []).append(n)
+        reasons = "; ".join(f"{', '.join(names)}: {reason}" for reason, names in by_reason.items())
+        flags = " ".join(f"--map.{n}=COLUMN" for n in unmapped)
+        columns_read = list(map(str, table.columns))
+        raise ValueError(
+            f"--format={cfg.format} --results={cfg.results}: {reasons}. Name them with {flags}"
+            + (" (or --factor_name=NAME)" if "factor" in unmapped else "")
+            + f"; its columns: {', '.join(columns_read[:40])}{' …' if len(columns_read) > 40 else ''}"
+        )
+    for name in REQUIRED:
+        column = columns[name]
+        if column in table and table[column].isna().any():
+            raise ValueError(
+                f"--map.{name}={column}: {int(table[column].isna().sum())} of {len(table)} episodes of "
+                f"{cfg.results} have no {column}; name another column with --map.{name}=COLUMN"
+            )
+    return MapConfig(**columns)
+
+
 def power_lines(episodes: pd.DataFrame, tau: float) -> dict[str, dict[str, dict]]:
     """policy → split → the design's power against a logit-SD `tau` bias (asymptotic LRT, as pipelines.plan)."""
     out: dict[str, dict[str, dict]] = {}
@@ -218,7 +268,14 @@ def power_lines(episodes: pd.DataFrame, tau: float) -> dict[str, dict[str, dict]
 
 
 def run(cfg: AuditConfig):
-    episodes = to_episodes(read_table(cfg.results), cfg)
+    origin = f"`{cfg.results}`"
+    if cfg.format:
+        harness = load(cfg.format)(Path(cfg.results))
+        cfg = replace(cfg, map=harness_map(cfg, harness))
+        table, origin = harness.table, f"{origin} ({harness.source})"
+    else:
+        table = read_table(cfg.results)
+    episodes = to_episodes(table, cfg)
     metrics_cfg = cfg.metrics
     source = {
         "path": str(cfg.results),
@@ -226,6 +283,8 @@ def run(cfg: AuditConfig):
         "provenance": [],
         "mapping": {k: v for k, v in vars(cfg.map).items() if v},
     }
+    if cfg.format:
+        source["format"] = cfg.format
     result = write_report(episodes, cfg.output_dir, metrics_cfg, sources=[source], plots=False)
     power = power_lines(episodes, cfg.tau)
     for name, layout in policy_layouts(result.metrics).items():
@@ -236,7 +295,7 @@ def run(cfg: AuditConfig):
     lines = [
         "## Audit: mapping and power",
         "",
-        f"Source `{cfg.results}`: {len(episodes)} episodes; factor ← {cfg.map.factor or repr(cfg.factor_name)}, "
+        f"Source {origin}: {len(episodes)} episodes; factor ← {cfg.map.factor or repr(cfg.factor_name)}, "
         f"value ← {cfg.map.value}, context ← {cfg.map.context}, success ← {cfg.map.success}, repeat ← "
         f"{cfg.map.repeat or 'file order'}, policy ← {cfg.map.policy or repr(cfg.policy_name)}.",
         "",
