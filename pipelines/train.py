@@ -119,7 +119,6 @@ class TrainConfig:
         }
         side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
         return [
-            "--env.discover_packages_path=roboview_lerobot",
             "--env.type=roboview",
             f"--env.benchmark_path={self.benchmark.path}",
             f"--env.task={self.eval_split}",

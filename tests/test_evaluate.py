@@ -617,7 +617,6 @@ def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpo
     lerobot_eval = Path(sys.executable).parent / "lerobot-eval"
     args = [
         str(lerobot_eval),
-        "--env.discover_packages_path=roboview_lerobot",
         "--env.type=roboview",
         f"--env.benchmark_path={bench}",
         "--env.task=color,dist_scale",
