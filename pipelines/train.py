@@ -1,7 +1,8 @@
 """Train a reference policy on `pipelines.collect` demos: lerobot's own trainer, the recipe that works here.
 
     python -m pipelines.train --dataset.repo_id=roboview/pick_place_96 --dataset.root=outputs/demos96 \
-        --output_dir=outputs/train_act96 [--steps=6000] [--device=auto]
+        --output_dir=outputs/train_act96 [--steps=6000] [--device=auto] \
+        [--benchmark.path=outputs/benchmark --eval_splits=color,camera_pose --eval_freq=1000]
 
 A thin layer over `lerobot-train`: it checks the dataset, then runs lerobot's trainer with
 ACT-small (dim_model 256, feed-forward 1024, 2 encoder layers, chunk 20 executing 10, lr 1e-4 for
@@ -10,6 +11,8 @@ which fails offline). Images are used at the size they were collected (`--datase
 collect): ACT has no resize step, and evaluation renders the checkpoint's own size. Checkpoints
 land in OUTPUT/checkpoints/<step>/pretrained_model every `--save_freq` steps; rerunning the same
 command resumes from the last one (lerobot's `--resume`). Measured step time: docs/results/act_ref.md.
+With `--benchmark.path`, lerobot-train evaluates the policy every `--eval_freq` steps on the RoboView splits
+`--eval_splits` names (the `roboview` env of the lerobot_env_roboview plugin) and logs each split's success.
 """
 
 from __future__ import annotations
