@@ -9,6 +9,7 @@ PYTHON ?= $(shell for p in python3.12 python3.13 $$(pyenv root 2>/dev/null)/vers
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+PLUGIN := plugins/lerobot_env_roboview
 OPENPI_PACKAGES := openpi-client==0.1.2 openpi-server==0.1.0
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Headless rendering through EGL (Mesa llvmpipe on CPU-only machines).
@@ -29,7 +30,7 @@ sysdeps:
 	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq ffmpeg libegl1 libgl1-mesa-dri chromium >/dev/null; \
 	fi
 
-$(STAMP): pyproject.toml requirements.lock
+$(STAMP): pyproject.toml requirements.lock $(PLUGIN)/pyproject.toml
 	@if [ -x $(PY) ] && ! $(PY) -c '$(PY_OK)' 2>/dev/null; then \
 	  echo "[install] $(VENV) holds Python $$($(PY) -c 'import platform; print(platform.python_version())'); rebuilding it for 3.12"; \
 	  rm -rf $(VENV); fi
@@ -41,6 +42,9 @@ $(STAMP): pyproject.toml requirements.lock
 	  echo "[install] $(VENV) with $(PYTHON)"; $(PYTHON) -m venv $(VENV); fi
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c requirements.lock -e ".[dev]"
+	@# LeRobot's plugin convention: lerobot-eval / lerobot-train import installed `lerobot_env_*` distributions,
+	@# so with this one `--env.type=roboview` needs no --env.discover_packages_path.
+	$(PY) -m pip install -q --no-deps -e $(PLUGIN)
 	@# openpi's client and server packages pin numpy < 2 but run on numpy 2 (their codec is msgpack +
 	@# ndarray bytes): installed without their dependencies, which the line above provides.
 	$(PY) -m pip install -q --no-deps $(OPENPI_PACKAGES)

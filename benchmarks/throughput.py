@@ -153,7 +153,6 @@ def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: 
 
     cmd = [
         str(Path(sys.executable).parent / "lerobot-eval"),
-        "--env.discover_packages_path=roboview_lerobot",
         "--env.type=roboview",
         f"--env.benchmark_path={bench}",
         f"--env.task={split}",

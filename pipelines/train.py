@@ -1,7 +1,8 @@
 """Train a reference policy on `pipelines.collect` demos: lerobot's own trainer, the recipe that works here.
 
     python -m pipelines.train --dataset.repo_id=roboview/pick_place_96 --dataset.root=outputs/demos96 \
-        --output_dir=outputs/train_act96 [--steps=6000] [--device=auto]
+        --output_dir=outputs/train_act96 [--steps=6000] [--device=auto] \
+        [--benchmark.path=outputs/benchmark --eval_splits=color,camera_pose --eval_freq=1000]
 
 A thin layer over `lerobot-train`: it checks the dataset, then runs lerobot's trainer with
 ACT-small (dim_model 256, feed-forward 1024, 2 encoder layers, chunk 20 executing 10, lr 1e-4 for
@@ -10,6 +11,8 @@ which fails offline). Images are used at the size they were collected (`--datase
 collect): ACT has no resize step, and evaluation renders the checkpoint's own size. Checkpoints
 land in OUTPUT/checkpoints/<step>/pretrained_model every `--save_freq` steps; rerunning the same
 command resumes from the last one (lerobot's `--resume`). Measured step time: docs/results/act_ref.md.
+With `--benchmark.path`, lerobot-train evaluates the policy every `--eval_freq` steps on the RoboView splits
+`--eval_splits` names (the `roboview` env of the lerobot_env_roboview plugin) and logs each split's success.
 """
 
 from __future__ import annotations
@@ -53,13 +56,14 @@ class TrainConfig:
     chunk_size: int = 20
     # Actions of each chunk run before the next inference (at most chunk_size).
     n_action_steps: int = 10
-    # Periodic evaluation while training, through lerobot-train's own eval loop on a frozen RoboView split
-    # (`--env.type=roboview`, the lerobot-eval plugin); no --benchmark.path: no periodic evaluation. Results
-    # land in OUT/eval/.
+    # Periodic evaluation while training, through lerobot-train's own eval loop on frozen RoboView splits
+    # (`--env.type=roboview`, the lerobot_env_roboview plugin); no --benchmark.path: no periodic evaluation.
+    # lerobot-train logs each split's success rate (`Suite per_group aggregated`) and the overall one; the
+    # episode videos land in OUT/eval/.
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
-    # Periodic evaluation: the benchmark split it runs on.
-    eval_split: str = "color"
-    # Periodic evaluation: episodes per evaluation.
+    # Periodic evaluation: the benchmark splits it runs (comma-separated, or `all`), one success rate each.
+    eval_splits: str = "color"
+    # Periodic evaluation: episodes per split per evaluation (the split's first instances, once each).
     eval_episodes: int = 10
     # Periodic evaluation: run one every this many optimizer steps.
     eval_freq: int = 1000
@@ -102,10 +106,20 @@ class TrainConfig:
                 f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one"
             )
         if self.benchmark.path:
-            from roboview_data.benchmark.format import load_benchmark
+            from roboview_data.benchmark.format import available_splits, load_benchmark
 
+            # An unknown folder or split fails now, not at the first periodic evaluation.
             with flag_errors("--benchmark.path"):
-                load_benchmark(self.benchmark.path, [self.eval_split])  # an unknown folder or split fails now
+                available = available_splits(self.benchmark.path)
+            splits = [s.strip() for s in self.eval_splits.split(",") if s.strip()]
+            unknown = [s for s in splits if s not in available] if splits != ["all"] else []
+            if unknown or not splits:
+                raise ValueError(
+                    f"--eval_splits={self.eval_splits!r}: unknown split(s) {unknown}; the benchmark at "
+                    f"{self.benchmark.path} has: {', '.join(available)} (comma-separated, or `all`)"
+                )
+            with flag_errors("--benchmark.path"):
+                load_benchmark(self.benchmark.path, None if splits == ["all"] else splits)  # checksums
 
     def eval_flags(self) -> list[str]:
         """lerobot-train's flags for periodic evals on the RoboView split (the dataset's cameras and size)."""
@@ -119,10 +133,9 @@ class TrainConfig:
         }
         side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
         return [
-            "--env.discover_packages_path=roboview_lerobot",
             "--env.type=roboview",
             f"--env.benchmark_path={self.benchmark.path}",
-            f"--env.task={self.eval_split}",
+            f"--env.task={self.eval_splits.replace(' ', '')}",
             f"--env.limit={self.eval_episodes}",
             f"--env.cameras={','.join(images)}",
             f"--env.image_size={side}",
@@ -193,7 +206,7 @@ def run(cfg: TrainConfig) -> Path:
     if cfg.dry_run:
         print(" ".join([*(f"{k}={v}" for k, v in threads.items()), *cmd]))
         return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
-    # lerobot imports the roboview_lerobot plugin by name: make this checkout importable in the trainer.
+    # lerobot imports roboview_lerobot by name (its lerobot_env_roboview plugin): this checkout's, first.
     root = str(Path(__file__).resolve().parents[1])
     env = (
         os.environ

@@ -1,6 +1,6 @@
 """RoboView inside lerobot's own tools, unpatched: `lerobot-eval --env.type=roboview`.
 
-    lerobot-eval --env.discover_packages_path=roboview_lerobot --env.type=roboview \
+    lerobot-eval --env.type=roboview \
         --env.benchmark_path=outputs/benchmark --env.task=color,camera_pose --env.cameras=left_top,wrist \
         --env.image_size=96 --policy.path=CKPT/pretrained_model --eval.n_episodes=141 --eval.batch_size=8 \
         --output_dir=outputs/lerobot_eval
@@ -15,9 +15,12 @@ rule); the env maps that to the split's i-th (instance, repeat) and runs it with
 seed, so both tools run the same episodes. Every sub-env exposes `task` (the split), `task_description`
 (the episode's instruction, which reaches language-conditioned policies) and `_max_episode_steps`.
 
-lerobot imports this package for `--env.discover_packages_path`; importing it registers the `roboview`
-`EnvConfig` and the gymnasium id `RoboView/LeRobotEval-v0`. `lerobot-train --env.type=roboview` takes the
-same flags for its periodic evals. The same env is offered as a LeRobot EnvHub env: `roboview_lerobot/hub/`.
+Importing this package registers the `roboview` `EnvConfig` and the gymnasium id `RoboView/LeRobotEval-v0`.
+lerobot-eval and lerobot-train import it at start-up through the `lerobot_env_roboview` distribution
+(plugins/lerobot_env_roboview, installed by `make install`: LeRobot imports every installed `lerobot_env_*`),
+so no flag is needed; `--env.discover_packages_path=roboview_lerobot` still works where that distribution is
+not installed. `lerobot-train --env.type=roboview --env_eval_freq=N` takes the same flags for its periodic
+evals, one success rate per split. The same env is offered as a LeRobot EnvHub env: `roboview_lerobot/hub/`.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ import pytest  # noqa: E402
 
 # Test tiers. Slow: a test that uses a rendered environment, the built benchmark or a trained checkpoint, or lives
 # in a module that starts simulations, servers, clusters or a browser. `make test-fast` runs the rest.
-SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_checkpoint", "bench"}
+SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_demos", "tiny_checkpoint", "bench"}
 FAST_MODULES = {
     "test_adaptive",
     "test_audit",
@@ -25,6 +25,7 @@ FAST_MODULES = {
     "test_folders",
     "test_imports",
     "test_isolation",
+    "test_lerobot_plugin",
     "test_metrics",
     "test_ranking",
     "test_report",
@@ -63,20 +64,17 @@ def tiny_benchmark(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def tiny_checkpoint(tmp_path_factory, tiny_benchmark) -> Path:
-    """A 2-step ACT checkpoint (left_top + wrist at 64²) trained by pipelines.train on 2 collected demos."""
-    import subprocess
-    import sys
-
+def tiny_demos(tmp_path_factory) -> Path:
+    """2 expert demos (left_top + wrist at 64²) collected by pipelines.collect as repo_id `t/demos`."""
     from pipelines.collect import CollectConfig, DatasetConfig
     from pipelines.collect import run as collect
 
-    root = tmp_path_factory.mktemp("ckpt")
+    root = tmp_path_factory.mktemp("demos") / "ds"
     collect(
         CollectConfig(
             DatasetConfig(
                 repo_id="t/demos",
-                root=str(root / "ds"),
+                root=str(root),
                 num_episodes=2,
                 image_size=64,
                 cameras=["left_top", "wrist"],
@@ -84,13 +82,23 @@ def tiny_checkpoint(tmp_path_factory, tiny_benchmark) -> Path:
             num_workers=1,
         )
     )
+    return root
+
+
+@pytest.fixture(scope="session")
+def tiny_checkpoint(tmp_path_factory, tiny_benchmark, tiny_demos) -> Path:
+    """A 2-step ACT checkpoint (left_top + wrist at 64²) trained by pipelines.train on `tiny_demos`."""
+    import subprocess
+    import sys
+
+    root = tmp_path_factory.mktemp("ckpt")
     # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
     args = [
         sys.executable,
         "-m",
         "pipelines.train",
         "--dataset.repo_id=t/demos",
-        f"--dataset.root={root / 'ds'}",
+        f"--dataset.root={tiny_demos}",
         f"--output_dir={root / 'train'}",
         "--batch_size=2",
         "--save_freq=2",
@@ -99,7 +107,7 @@ def tiny_checkpoint(tmp_path_factory, tiny_benchmark) -> Path:
     # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
     periodic = [
         f"--benchmark.path={tiny_benchmark}",
-        "--eval_split=color",
+        "--eval_splits=color",
         "--eval_episodes=2",
         "--eval_freq=2",
     ]

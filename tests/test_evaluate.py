@@ -148,7 +148,32 @@ def test_rerun_recording_verifies(bench, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     assert "verified without error" in proc.stdout + proc.stderr
-    assert rrd.stat().st_size > 20_000  # frames of two episodes, not an empty shell
+    # Read back with rerun's own reader: every episode's entities, one camera frame per logged step.
+    import rerun as rr
+    from rerun.experimental import RrdReader
+
+    steps: dict[str, list[int]] = {}
+    entities = set()
+    for chunk in RrdReader(rrd).stream():
+        entities.add(chunk.entity_path)
+        if "/camera/" in chunk.entity_path and not chunk.is_static:
+            steps.setdefault(chunk.entity_path, []).extend(chunk.to_record_batch().column("step").to_pylist())
+    df = pd.read_parquet(tmp_path / "ev" / "episodes.parquet")
+    assert len(df) == 2
+    expected = {}
+    for row in df.itertuples():
+        # The reader prints entity paths escaped ("color\\=red"), as rerun.new_entity_path builds them.
+        base = rr.new_entity_path(
+            ["episodes", "color", f"color={row.value}", row.instance_id, f"r{row.repeat}"]
+        )
+        leaves = ("instance", "ee", "object", "ee_path", "object_path", "outcome")
+        assert {f"{base}/{leaf}" for leaf in leaves} <= entities, sorted(entities)
+        cams = sorted(e.rpartition("/")[2] for e in steps if e.startswith(f"{base}/camera/"))
+        assert cams, f"no camera frames under {base}"
+        # One JPEG per step on the `step` timeline: the observation each action was chosen from.
+        expected |= {f"{base}/camera/{cam}": list(range(row.steps)) for cam in cams}
+    assert {entity: sorted(found) for entity, found in steps.items()} == expected
+    assert "/summary/color/sr_by_value" in entities and "/summary/color/values" in entities
 
 
 def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_path):
@@ -617,7 +642,6 @@ def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpo
     lerobot_eval = Path(sys.executable).parent / "lerobot-eval"
     args = [
         str(lerobot_eval),
-        "--env.discover_packages_path=roboview_lerobot",
         "--env.type=roboview",
         f"--env.benchmark_path={bench}",
         "--env.task=color,dist_scale",

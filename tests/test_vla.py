@@ -173,7 +173,6 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
     assert (ours["steps"] == 6).all() and not ours["success"].any()  # random weights: every episode runs out
     args = [
         str(BIN / "lerobot-eval"),
-        "--env.discover_packages_path=roboview_lerobot",
         "--env.type=roboview",
         f"--env.benchmark_path={tiny_benchmark}",
         "--env.task=color",

@@ -6,7 +6,9 @@ Entity tree:
         ee_path, object_path   3D trajectories (points per step + the whole path as a line strip)
         instance           factor values and seed (static text)
         outcome            success / failure text event at the episode's last step
-    /summary/<split>/sr_by_value   bar chart of success rate per factor value (static)
+    /summary/<split>/sr_by_value   bar chart of success rate per factor value (static; a split with two values
+                                   or more)
+    /summary/<split>/values        each value's success rate and episode count (static text)
 
 A recording is never overwritten: the file opens when the first episode is logged (a resumed run with nothing
 left to run writes none), and when `vision.rrd` already exists a run's episodes go to the next free
@@ -116,7 +118,8 @@ class RerunLogger:
         for split, by_value in self._outcomes.items():
             values = sorted(by_value)
             srs = np.array([np.mean(by_value[v]) for v in values])
-            self.rec.log(f"summary/{_safe(split)}/sr_by_value", rr.BarChart(srs), static=True)
+            if len(values) > 1:  # one bar compares nothing, and rerun-sdk 0.33 warns that it is not 1-D
+                self.rec.log(f"summary/{_safe(split)}/sr_by_value", rr.BarChart(srs), static=True)
             self.rec.log(
                 f"summary/{_safe(split)}/values",
                 rr.TextDocument(
