@@ -77,6 +77,7 @@ class Session:
             open_timeout=open_timeout_s,
             close_timeout=1,
             ping_interval=None,
+            legacy=True,
         )
         try:
             self.send(MessageType.HELLO, make_hello_payload(benchmark="roboview"))
