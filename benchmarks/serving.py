@@ -63,6 +63,8 @@ class ServingConfig:
     # Comma-separated paths to measure (in_process always runs: the others are compared with it): serve_policy,
     # openpi_server, lerobot_async, vla_eval, and requests_per_second.
     paths: str = ",".join(PATHS)
+    # How the vla_eval path sends images (its --policy.image_format): png (vla-eval's default), raw or jpeg.
+    vla_eval_image_format: str = "png"
 
     def __post_init__(self) -> None:
         if (
@@ -356,7 +358,7 @@ def run(cfg: ServingConfig) -> dict:
             procs = [vla_eval_server(cfg.checkpoint, p, scratch / f"vla_eval_{p}.log") for p in ports]
             try:
                 urls = ",".join(f"ws://127.0.0.1:{p}" for p in ports)
-                policy = policy_config("vla_eval", url=urls, **openpi)
+                policy = policy_config("vla_eval", url=urls, image_format=cfg.vla_eval_image_format, **openpi)
                 paths["vla_eval"] = evaluate(cfg, bench, policy, scratch / "vla_eval")
             finally:
                 stop(*procs)
