@@ -9,15 +9,15 @@ The protocol is vla-eval's (allenai/vla-evaluation-harness): a websocket of msgp
 vla-eval's own `pack_message` / `unpack_message` (arrays by its numpy codec, images as `--policy.image_format`).
 HELLO first; the answer carries the server's action and observation specs, which are negotiated
 (`policies.vla_eval_specs`) before any episode: the env control, the cameras, the state. Then, per env slot,
-one session (one websocket): EPISODE_START with the instance's instruction, task and episode seed, one
+one websocket: EPISODE_START with the instance's instruction, task and episode seed, one
 OBSERVATION per step (`images` {camera: H×W×3 uint8}, `task_description`, the state as `states` and `state`,
 the two spellings vla-eval's servers read), one ACTION back, EPISODE_END when the next episode starts. As in
-vla-eval's own sync runner, action chunks live on the server (`PredictModelServer` buffers them per session
+vla-eval's own sync runner, action chunks live on the server (`PredictModelServer` buffers them per connection
 and answers one action per observation); an answer that is a whole (H, D) chunk is played from its first row,
 as PredictModelServer's continuous-inference path does. vla-eval's `Connection` is asyncio; RoboView's
 policies are called synchronously, so the frames go over `websockets`' sync client.
 
-Envs stepped in lockstep (`--eval.envs_per_worker=K`) get one session each: every slot's observation is sent
+Envs stepped in lockstep (`--eval.envs_per_worker=K`) get one connection each: every slot's observation is sent
 before any answer is read, so a server with `max_batch_size > 1` (PredictModelServer's `predict_batch`) runs
 them as one batch. **A served policy's randomness lives on the server**: the episode seed is sent in
 EPISODE_START, and only a server that reads it reproduces RoboView's seeds.
@@ -25,13 +25,14 @@ EPISODE_START, and only a server that reads it reproduces RoboView's seeds.
 Failures: a server that is down, or whose specs cannot be mapped, fails before any rollout naming the field.
 An ERROR frame answering an observation (the model raised) fails that episode with the server's message as
 the reason (the policy's failure). A connection lost (or an answer not back within `--policy.timeout_s`)
-mid-episode loses the server's state of that episode (its chunk buffer): the session is reopened
+mid-episode loses the server's state of that episode (its chunk buffer): the connection is reopened
 (`--policy.reconnects` times) and the episode ends with an `InfraError` (counted in no rate, run again);
 if the server stays unreachable the run stops with `PolicyUnavailable`, and rerunning the command resumes.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from dataclasses import dataclass
@@ -41,7 +42,6 @@ import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
 from policies.errors import InfraError, PolicyUnavailable
-from policies.openpi import _plain
 from policies.vla_eval_specs import CONTROLS, Negotiated, negotiate
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.tasks.env import IMAGE_KEY
@@ -60,7 +60,7 @@ class _Lost(Exception):
     """The websocket closed or timed out (the server's state of the episode in flight is gone)."""
 
 
-class Session:
+class ServerConnection:
     """One websocket to a vla-eval server, HELLO exchanged: `hello` is the server's answer."""
 
     def __init__(self, url: str, open_timeout_s: float, timeout_s: float, image_format: str) -> None:
@@ -128,29 +128,31 @@ class Session:
 
 
 class VlaEvalPolicy:
-    """The client of `slots` envs: one session each, opened at build (the server's HELLO checked again)."""
+    """The client of `slots` envs: one connection each, opened at build (the server's HELLO checked again)."""
 
     def __init__(self, config: VlaEvalConfig, negotiated: Negotiated, slots: int = 1) -> None:
         self.config, self.agreed = config, negotiated
         self.url = config.url_list[worker_rank() % len(config.url_list)]
         self.name = f"vla_eval:{config.server_name(self.url)}"
         self.failure_reason = ""
-        self.sessions: list[Session | None] = [None] * slots
+        self.connections: list[ServerConnection | None] = [None] * slots
         self.episodes: list[Episode | None] = [None] * slots
         self.steps = [0] * slots
         for slot in range(slots):
             self._open(slot)
 
     def _open(self, slot: int, lost: str = "") -> None:
-        """Open slot's session (re-sending its episode's start), `reconnects` more tries; else the run stops."""
+        """Open slot's connection (re-sending its episode's start), `reconnects` more tries; else the run stops."""
         from vla_eval.protocol.messages import MessageType
 
         cfg, last = self.config, None
         for attempt in range(cfg.reconnects + 1):
             try:
-                self.sessions[slot] = Session(self.url, cfg.open_timeout_s, cfg.timeout_s, cfg.image_format)
+                self.connections[slot] = ServerConnection(
+                    self.url, cfg.open_timeout_s, cfg.timeout_s, cfg.image_format
+                )
                 if self.episodes[slot] is not None:
-                    self.sessions[slot].send(MessageType.EPISODE_START, start_payload(self.episodes[slot]))
+                    self.connections[slot].send(MessageType.EPISODE_START, start_payload(self.episodes[slot]))
                 return
             except Exception as exc:  # refused, timed out, bad handshake
                 last = exc
@@ -163,9 +165,9 @@ class VlaEvalPolicy:
         )
 
     def _lose(self, slot: int, why: str) -> InfraError:
-        session, self.sessions[slot] = self.sessions[slot], None
-        if session is not None:
-            session.close()
+        connection, self.connections[slot] = self.connections[slot], None
+        if connection is not None:
+            connection.close()
         self._open(slot, why)  # PolicyUnavailable (the run stops) if the server stays away
         return InfraError(
             f"lost the vla-eval server {self.url} mid-episode ({why}); reconnected, so only this episode is "
@@ -186,17 +188,17 @@ class VlaEvalPolicy:
         from vla_eval.protocol.messages import MessageType
 
         self.failure_reason = ""
-        session = self.sessions[slot]
+        connection = self.connections[slot]
         try:
-            if session is None:
-                raise _Lost("no session")
+            if connection is None:
+                raise _Lost("no connection")
             if self.episodes[slot] is not None:
-                self._call(session.send, MessageType.EPISODE_END, {"steps": self.steps[slot]})
+                self._call(connection.send, MessageType.EPISODE_END, {"steps": self.steps[slot]})
             self.episodes[slot], self.steps[slot] = episode, 0
-            self._call(session.send, MessageType.EPISODE_START, start_payload(episode))
+            self._call(connection.send, MessageType.EPISODE_START, start_payload(episode))
         except _Lost as exc:  # nothing of this episode was lost yet: reopen and start it there
             self.episodes[slot], self.steps[slot] = episode, 0
-            self.sessions[slot] = None
+            self.connections[slot] = None
             self._open(slot, str(exc))
 
     def select_action(self, observation: dict) -> np.ndarray:
@@ -209,16 +211,16 @@ class VlaEvalPolicy:
         sent: dict[int, int] = {}
         answers: dict[int, Any] = {}
         for slot, obs in observations.items():
-            session = self.sessions[slot]
+            connection = self.connections[slot]
             try:
-                if session is None:
-                    raise _Lost("the session was closed")
-                sent[slot] = self._call(session.send, MessageType.OBSERVATION, self.payload(slot, obs))
+                if connection is None:
+                    raise _Lost("the connection was closed")
+                sent[slot] = self._call(connection.send, MessageType.OBSERVATION, self.payload(slot, obs))
             except _Lost as exc:
                 answers[slot] = exc
         for slot, seq in sent.items():
             try:
-                answers[slot] = self._call(self.sessions[slot].answer, seq)
+                answers[slot] = self._call(self.connections[slot].answer, seq)
             except _Lost as exc:
                 answers[slot] = exc
         lost = [(slot, a) for slot, a in answers.items() if isinstance(a, _Lost)]
@@ -249,16 +251,16 @@ class VlaEvalPolicy:
     def close(self) -> None:
         from vla_eval.protocol.messages import MessageType
 
-        for slot, session in enumerate(self.sessions):
-            if session is None:
+        for slot, connection in enumerate(self.connections):
+            if connection is None:
                 continue
             try:
                 if self.episodes[slot] is not None:
-                    session.send(MessageType.EPISODE_END, {"steps": self.steps[slot]})
+                    connection.send(MessageType.EPISODE_END, {"steps": self.steps[slot]})
             except Exception:  # the server is gone: nothing to tell it
                 pass
-            session.close()
-            self.sessions[slot] = None
+            connection.close()
+            self.connections[slot] = None
 
 
 def start_payload(episode: Episode) -> dict:
@@ -350,15 +352,15 @@ class VlaEvalConfig(PolicyConfig):
         agreed = None
         for url in self.url_list:
             try:
-                session = Session(url, self.open_timeout_s, self.timeout_s, self.image_format)
+                connection = ServerConnection(url, self.open_timeout_s, self.timeout_s, self.image_format)
             except Exception as exc:
                 raise ValueError(
                     f"cannot reach the vla-eval server at --policy.url={url} ({type(exc).__name__}: {exc}); "
                     "is it running, and is the port right?"
                 ) from None
-            session.close()
-            self._hello[url] = session.hello
-            mine = negotiate(session.hello, self.camera_list, camera_map, self.action_control)
+            connection.close()
+            self._hello[url] = connection.hello
+            mine = negotiate(connection.hello, self.camera_list, camera_map, self.action_control)
             if agreed is not None and mine != agreed:
                 raise ValueError(
                     f"--policy.url: {url} declares other specs than {self.url_list[0]}: {mine} vs {agreed}"
@@ -393,7 +395,7 @@ class VlaEvalConfig(PolicyConfig):
             "control": self._agreed.control,
             "cameras": dict(self._agreed.cameras),
             "state": self._agreed.state_key,
-            "hello": {url: _plain(hello) for url, hello in self._hello.items()},
+            "hello": json.loads(json.dumps(self._hello, default=str)),  # JSON-safe for provenance.json
         }
 
     def observed_cameras(self) -> tuple[str, ...]:

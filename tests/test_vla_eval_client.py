@@ -78,7 +78,7 @@ class FixedServer(PredictModelServer):
 
     def predict_batch(self, obs_batch, ctx_batch):
         if self.max_batch_size > 1 and not self.batches:
-            time.sleep(0.3)  # the first batch is slow: the other sessions' observations queue meanwhile
+            time.sleep(0.3)  # the first batch is slow: the other connections' observations queue meanwhile
         self.batches.append(len(obs_batch))
         for obs, ctx in zip(obs_batch, ctx_batch):
             self.seen.append(obs)
@@ -275,7 +275,7 @@ def test_a_server_killed_mid_episode_is_an_infra_error_and_one_gone_stops_the_ru
         proc = start_subprocess_server(port)  # back, but the episode's server state is gone
         with pytest.raises(InfraError, match=r"lost the vla-eval server .* mid-episode"):
             policy.select_action(obs)
-        np.testing.assert_array_equal(policy.select_action(obs), POSE)  # the reopened session works
+        np.testing.assert_array_equal(policy.select_action(obs), POSE)  # the reopened connection works
         proc.kill()
         proc.wait()
         with pytest.raises(PolicyUnavailable, match=rf"ws://127.0.0.1:{port} is unreachable.*rerun the same"):
@@ -393,7 +393,7 @@ def test_end_effector_specs_negotiate_an_ee_control_and_send_the_ee_state(
 
 
 def test_lockstep_envs_are_batched_by_a_batching_server():
-    """Three slots, one session each, every observation sent before any answer is read: while the server's
+    """Three slots, one connection each, every observation sent before any answer is read: while the server's
     first batch runs the others queue, and its next batch holds two."""
     server = joint_server(max_batch_size=2)
     with serving(server) as url:
