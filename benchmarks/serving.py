@@ -7,8 +7,9 @@ Writes one JSON file with:
 - `episodes_per_hour`: the same checkpoint, the same episodes (`--split`, first `--episodes` instances,
   2 workers) evaluated in-process (`lerobot`), through `pipelines.serve_policy` (`openpi` client, one
   server batching both workers' requests), through openpi-server's own `WebsocketPolicyServer`
-  (`--server=openpi`: one request at a time) and through LeRobot's async policy server (`lerobot_async`,
-  one server per worker). Every server runs one torch thread per model, as each in-process worker does,
+  (`--server=openpi`: one request at a time), through LeRobot's async policy server (`lerobot_async`,
+  one server per worker) and through vla-eval's `LeRobotModelServer` (`vla_eval`, one server per worker:
+  it has no batched predict). `--paths` picks some of them. Every server runs one torch thread per model, as each in-process worker does,
   so rows can be compared: `rows_equal_in_process` per path. `over_in_process`: each path's rate over the
   in-process rate (wall clock of the whole evaluate call; server start-up excluded).
 - `requests_per_second`: `--clients` threads, each with openpi-client's own `WebsocketClientPolicy`, send
@@ -40,6 +41,7 @@ from pipelines._cli import BenchmarkPath, cli_main
 REFERENCE_CHECKPOINT = "outputs/train_act96/checkpoints/last/pretrained_model"
 ROOT = Path(__file__).resolve().parents[1]
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
+PATHS = ("serve_policy", "openpi_server", "lerobot_async", "vla_eval", "requests_per_second")
 
 
 @dataclass
@@ -58,6 +60,11 @@ class ServingConfig:
     clients: int = 4
     # Requests each client sends in the requests-per-second comparison.
     requests: int = 40
+    # Comma-separated paths to measure (in_process always runs: the others are compared with it): serve_policy,
+    # openpi_server, lerobot_async, vla_eval, and requests_per_second.
+    paths: str = ",".join(PATHS)
+    # How the vla_eval path sends images (its --policy.image_format): png (vla-eval's default), raw or jpeg.
+    vla_eval_image_format: str = "png"
 
     def __post_init__(self) -> None:
         if (
@@ -71,6 +78,13 @@ class ServingConfig:
         for name in ("episodes", "clients", "requests"):
             if getattr(self, name) < 1:
                 raise ValueError(f"--{name}={getattr(self, name)} must be ≥ 1")
+        unknown = [p for p in self.path_list if p not in PATHS]
+        if unknown:
+            raise ValueError(f"--paths={self.paths!r}: unknown {unknown}; allowed: {', '.join(PATHS)}")
+
+    @property
+    def path_list(self) -> tuple[str, ...]:
+        return tuple(p.strip() for p in self.paths.split(",") if p.strip())
 
 
 def free_port() -> int:
@@ -147,6 +161,35 @@ def lerobot_server(port: int, cwd: Path) -> subprocess.Popen:
     raise RuntimeError(
         f"lerobot policy server did not start:\n{(cwd / f'server_{port}.log').read_text()[-2000:]}"
     )
+
+
+def vla_eval_server(checkpoint: str, port: int, log: Path) -> subprocess.Popen:
+    """vla-eval's own LeRobot model server (`python -m vla_eval.model_servers.lerobot`) on 127.0.0.1:port."""
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "vla_eval.model_servers.lerobot",
+            f"--address=127.0.0.1:{port}",
+            "--args.policy_type=act",
+            f"--args.checkpoint={checkpoint}",
+            "--args.device=cpu",
+        ],
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+        env=_env(),
+    )
+    deadline = time.time() + 180
+    while time.time() < deadline:
+        try:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=1)
+            return proc
+        except OSError:
+            time.sleep(0.3)
+        if proc.poll() is not None:
+            break
+    proc.kill()
+    raise RuntimeError(f"vla-eval's LeRobot model server did not start:\n{log.read_text()[-2000:]}")
 
 
 def stop(*procs: subprocess.Popen) -> None:
@@ -284,6 +327,8 @@ def run(cfg: ServingConfig) -> dict:
             cfg, bench, policy_config("lerobot", path=cfg.checkpoint), scratch / "inproc"
         )
         for name, server in (("serve_policy", "roboview"), ("openpi_server", "openpi")):
+            if name not in cfg.path_list:
+                continue
             print(f"[serving] {name} …", flush=True)
             port = free_port()
             proc = serve_policy(cfg.checkpoint, port, scratch / f"{name}.log", server)
@@ -296,16 +341,27 @@ def run(cfg: ServingConfig) -> dict:
                 )
             finally:
                 stop(proc)
-        print("[serving] lerobot_async …", flush=True)
-        ports = [free_port(), free_port()]
-        procs = [lerobot_server(p, scratch) for p in ports]
-        try:
-            policy = policy_config(
-                "lerobot_async", server=",".join(f"127.0.0.1:{p}" for p in ports), path=cfg.checkpoint
-            )
-            paths["lerobot_async"] = evaluate(cfg, bench, policy, scratch / "lerobot_async")
-        finally:
-            stop(*procs)
+        if "lerobot_async" in cfg.path_list:
+            print("[serving] lerobot_async …", flush=True)
+            ports = [free_port(), free_port()]
+            procs = [lerobot_server(p, scratch) for p in ports]
+            try:
+                policy = policy_config(
+                    "lerobot_async", server=",".join(f"127.0.0.1:{p}" for p in ports), path=cfg.checkpoint
+                )
+                paths["lerobot_async"] = evaluate(cfg, bench, policy, scratch / "lerobot_async")
+            finally:
+                stop(*procs)
+        if "vla_eval" in cfg.path_list:
+            print("[serving] vla_eval …", flush=True)
+            ports = [free_port(), free_port()]
+            procs = [vla_eval_server(cfg.checkpoint, p, scratch / f"vla_eval_{p}.log") for p in ports]
+            try:
+                urls = ",".join(f"ws://127.0.0.1:{p}" for p in ports)
+                policy = policy_config("vla_eval", url=urls, image_format=cfg.vla_eval_image_format, **openpi)
+                paths["vla_eval"] = evaluate(cfg, bench, policy, scratch / "vla_eval")
+            finally:
+                stop(*procs)
         reference = paths["in_process"]["_rows"]
         for path in paths.values():
             rows = path.pop("_rows")
@@ -316,8 +372,9 @@ def run(cfg: ServingConfig) -> dict:
             path["rows_differing"] = int((rows != reference).any(axis=1).sum())
         results["episodes_per_hour"] = paths
 
-        print("[serving] requests per second …", flush=True)
-        results["requests_per_second"] = rps_only(cfg, bench, scratch)
+        if "requests_per_second" in cfg.path_list:
+            print("[serving] requests per second …", flush=True)
+            results["requests_per_second"] = rps_only(cfg, bench, scratch)
         results["provenance"] = entry | {"ended": now()}
         Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
         Path(cfg.output).write_text(json.dumps(results, indent=2))
@@ -332,7 +389,9 @@ def _summary(cfg: ServingConfig, results: dict) -> None:
             f"[serving] {name:14s} {path['episodes_per_hour']:8.0f} episodes/h  ({path['over_in_process']:.2f}× "
             f"in-process; rows equal: {path['rows_equal_in_process']})"
         )
-    rps = results["requests_per_second"]
+    rps = results.get("requests_per_second")
+    if rps is None:
+        return
     print(
         f"[serving] {rps['clients']} clients: serve_policy {rps['serve_policy']['requests_per_second']} req/s, "
         f"openpi-server {rps['openpi_server']['requests_per_second']} req/s ({rps['batching_speedup']}×) → {cfg.output}"

@@ -22,6 +22,7 @@ BUILTIN_MODULES = (
     "policies.vlm.moka",
     "policies.openpi",
     "policies.lerobot_async",
+    "policies.vla_eval",
 )
 # Third-party packages add types through entry points in this group, each naming such a module.
 ENTRY_POINT_GROUP = "roboview.policies"

@@ -1,0 +1,411 @@
+"""vla_eval: RoboView's runner against vla-eval's own model servers (`vla_eval.model_servers.serve`) on 127.0.0.1.
+
+The servers are vla-eval's: `serve_async` in a thread of this process (a `PredictModelServer` subclass declaring
+specs and answering fixed actions, and vla-eval's `LeRobotModelServer` holding the tiny ACT checkpoint), or
+`serve` in a subprocess where it must be killed.
+"""
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import anyio.from_thread
+import numpy as np
+import pandas as pd
+import pytest
+from vla_eval.model_servers.predict import PredictModelServer
+from vla_eval.model_servers.serve import serve_async
+from vla_eval.specs import (
+    GRIPPER_CLOSE_01,
+    GRIPPER_CLOSE_NEG,
+    GRIPPER_CLOSE_POS,
+    IMAGE_RGB,
+    LANGUAGE,
+    POSITION_ABSOLUTE,
+    POSITION_DELTA,
+    RAW,
+    ROTATION_AA,
+    ROTATION_EULER,
+    STATE_EEF_POS_AA_GRIP,
+    STATE_EEF_POS_QUAT_GRIP,
+    STATE_JOINT,
+    DimSpec,
+)
+
+from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, main, run
+from policies.base import Episode
+from policies.errors import InfraError, PolicyUnavailable
+from policies.types import policy_config
+from policies.vla_eval_specs import EE_STATE_KEY, SpecMismatch
+from roboview_data.tasks.env import STATE_KEY
+
+ROOT = Path(__file__).resolve().parents[1]
+ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
+# A reachable arm pose (rad) and a closed gripper: RoboView's joint action.
+POSE = np.array([0.3, -0.2, 0.1, -2.2, 0.05, 2.0, 0.6, 1.0], np.float32)
+JOINTS = {"joints": DimSpec("joints", 7, "joint_positions"), "gripper": GRIPPER_CLOSE_01}
+
+
+class FixedServer(PredictModelServer):
+    """Answers `action` to every observation, declaring the given specs; records what it was sent."""
+
+    def __init__(self, action, action_spec, observation_spec, params=None, fail_at=None, max_batch_size=1):
+        super().__init__(max_batch_size=max_batch_size)
+        self.action, self.fail_at = np.asarray(action, np.float32), fail_at
+        self.specs = action_spec, observation_spec
+        self.params = params or {}
+        self.starts, self.seen, self.batches = [], [], []
+
+    def get_action_spec(self):
+        return self.specs[0]
+
+    def get_observation_spec(self):
+        return self.specs[1]
+
+    def get_observation_params(self):
+        return self.params
+
+    async def on_episode_start(self, config, ctx):
+        self.starts.append(config["task"])
+        await super().on_episode_start(config, ctx)
+
+    def predict(self, obs, ctx):
+        return self.predict_batch([obs], [ctx])[0]
+
+    def predict_batch(self, obs_batch, ctx_batch):
+        if self.max_batch_size > 1 and not self.batches:
+            time.sleep(0.3)  # the first batch is slow: the other connections' observations queue meanwhile
+        self.batches.append(len(obs_batch))
+        for obs, ctx in zip(obs_batch, ctx_batch):
+            self.seen.append(obs)
+            if self.fail_at is not None and ctx.step >= self.fail_at:
+                raise RuntimeError(f"model exploded at step {ctx.step}")
+        return [{"actions": self.action.copy()} for _ in obs_batch]
+
+
+def joint_server(**kw) -> FixedServer:
+    return FixedServer(
+        POSE,
+        JOINTS,
+        {"front": IMAGE_RGB, "state": STATE_JOINT, "language": LANGUAGE},
+        {"send_state": True},
+        **kw,
+    )
+
+
+@contextmanager
+def serving(model_server):
+    """vla-eval's `serve_async` for `model_server` on a free loopback port, in a thread; yields its URL."""
+    with anyio.from_thread.start_blocking_portal() as portal:
+        future, port = portal.start_task(serve_async, model_server, "127.0.0.1", 0)
+        try:
+            yield f"ws://127.0.0.1:{port}"
+        finally:
+            future.cancel()
+
+
+def evaluate(bench: Path, out: Path, policy, limit=2, max_steps=8):
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(bench), "color"),
+        policy,
+        EvalConfig(n_repeats=1, limit=limit, num_workers=1, max_steps=max_steps, image_size=0),
+        str(out),
+    )
+    return run(cfg)
+
+
+def rows(out: Path) -> pd.DataFrame:
+    return (
+        pd.read_parquet(out / "episodes.parquet")
+        .sort_values(["instance_id", "repeat"])
+        .reset_index(drop=True)
+    )
+
+
+def test_joint_server_negotiated_and_its_actions_reach_the_env(tiny_benchmark, tmp_path):
+    from roboview_data.tasks import make_env
+
+    server = joint_server()
+    with serving(server) as url:
+        out = tmp_path / "cli"
+        main(
+            [
+                f"--benchmark.path={tiny_benchmark}",
+                "--benchmark.splits=color",
+                "--policy.type=vla_eval",
+                f"--policy.url={url}",
+                "--policy.image_size=64",
+                "--eval.n_repeats=1",
+                "--eval.limit=2",
+                "--eval.max_steps=6",
+                "--eval.num_workers=1",
+                f"--output_dir={out}",
+            ]
+        )
+        got = rows(out)
+        assert got["policy"].tolist() == ["vla_eval:FixedServer"] * 2 and got["steps"].tolist() == [6, 6]
+        assert (got["status"] == "ok").all() and not got["success"].any()
+        # One EPISODE_START per episode with its instruction and seed; one OBSERVATION per step, as negotiated.
+        assert sorted(s["seed"] for s in server.starts) == sorted(got["episode_seed"].tolist())
+        assert all(s["name"] and s["task"] == "pick_place" for s in server.starts)
+        assert len(server.seen) == 12
+        first = server.seen[0]
+        assert set(first["images"]) == {"front"} and first["images"]["front"].shape == (64, 64, 3)
+        assert first["states"].shape == (8,) and first["task_description"] == server.starts[0]["name"]
+
+        # The commanded pose reaches the env: the joints settle on it, the gripper closes.
+        config = policy_config("vla_eval", url=url, image_size=64)
+        assert (config.control(), config.observed_cameras(), config.negotiated.state_key) == (
+            "joint",
+            ("front",),
+            STATE_KEY,
+        )
+        env = make_env(cameras=config.observed_cameras(), image_size=64, max_steps=60)
+        policy = config.build(None)
+        try:
+            obs, _ = env.reset(seed=3)
+            policy.reset(Episode.of(env, 3))
+            for _ in range(40):
+                action = policy.select_action(obs)
+                obs, *_ = env.step(action)
+            np.testing.assert_array_equal(action, POSE)
+            np.testing.assert_allclose(obs[STATE_KEY][:7], POSE[:7], atol=0.03)
+            assert obs[STATE_KEY][7] > 0.5
+        finally:
+            policy.close()
+            env.close()
+
+
+def test_lerobot_model_server_gives_the_in_process_rows_and_actions(
+    tiny_benchmark, tiny_checkpoint, tmp_path
+):
+    from vla_eval.model_servers.lerobot import LeRobotModelServer
+
+    from policies.lerobot_policy import LeRobotPolicy
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.tasks import make_env
+
+    model = LeRobotModelServer("act", str(tiny_checkpoint), device="cpu")
+    with serving(model) as url:
+        config = policy_config("vla_eval", url=url, image_size=64, cameras="left_top,wrist")
+        assert config.control() == "joint" and config.negotiated.state_key == STATE_KEY
+        local = evaluate(
+            tiny_benchmark, tmp_path / "local", policy_config("lerobot", path=str(tiny_checkpoint))
+        )
+        served = evaluate(tiny_benchmark, tmp_path / "served", config)
+        assert local.episodes == served.episodes == 2
+        pd.testing.assert_frame_equal(rows(tmp_path / "local")[ROW], rows(tmp_path / "served")[ROW])
+
+        # The 2-step checkpoint's rows all end at max_steps: compare the actions too, across a chunk boundary.
+        items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:2]
+        env = make_env(cameras=config.observed_cameras(), image_size=64)
+        policy, reference = config.build(None), LeRobotPolicy(str(tiny_checkpoint), "cpu")
+        try:
+            for seed, item in enumerate(items):
+                obs, _ = env.reset(seed=seed, options={"instance": item.instance})
+                policy.reset(Episode.of(env, seed))
+                reference.reset(Episode.of(env, seed))
+                for _ in range(12):
+                    want = reference.select_action(obs)
+                    np.testing.assert_allclose(policy.select_action(obs), want, rtol=0, atol=1e-5)
+                    obs, *_ = env.step(want)
+        finally:
+            policy.close()
+            env.close()
+
+
+def test_a_model_that_raises_fails_its_episode_with_the_servers_message(tiny_benchmark, tmp_path):
+    with serving(joint_server(fail_at=2)) as url:
+        result = evaluate(
+            tiny_benchmark, tmp_path / "out", policy_config("vla_eval", url=url, image_size=64), limit=1
+        )
+    got = rows(tmp_path / "out")
+    assert result.episodes == 1 and got["status"].tolist() == ["ok"] and got["steps"].tolist() == [2]
+    reason = got["failure_reason"][0]
+    assert "ServerError" in reason and "observation_failed: RuntimeError: model exploded at step 2" in reason
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def start_subprocess_server(port: int) -> subprocess.Popen:
+    """`vla_eval.model_servers.serve.serve` of `joint_server()` in a process of its own, once it answers."""
+    code = (
+        "from vla_eval.model_servers.serve import serve; from tests.test_vla_eval_client import joint_server; "
+        f"serve(joint_server(), '127.0.0.1', {port})"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], cwd=ROOT, env=os.environ | {"PYTHONPATH": str(ROOT)}
+    )
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return proc
+        except OSError:
+            time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("vla-eval server did not start")
+
+
+def test_a_server_killed_mid_episode_is_an_infra_error_and_one_gone_stops_the_run():
+    port = free_port()
+    proc = start_subprocess_server(port)
+    try:
+        config = policy_config(
+            "vla_eval", url=f"ws://127.0.0.1:{port}", image_size=64, reconnects=1, reconnect_backoff_s=0.1
+        )
+        policy = config.build(None)
+        obs = {
+            "observation.images.front": np.zeros((64, 64, 3), np.uint8),
+            STATE_KEY: np.zeros(8, np.float32),
+        }
+        episode = Episode("pick_place", "pick up the cube", 7, {}, 64)
+        policy.reset(episode)
+        np.testing.assert_array_equal(policy.select_action(obs), POSE)
+        proc.kill()
+        proc.wait()
+        proc = start_subprocess_server(port)  # back, but the episode's server state is gone
+        with pytest.raises(InfraError, match=r"lost the vla-eval server .* mid-episode"):
+            policy.select_action(obs)
+        np.testing.assert_array_equal(policy.select_action(obs), POSE)  # the reopened connection works
+        proc.kill()
+        proc.wait()
+        with pytest.raises(PolicyUnavailable, match=rf"ws://127.0.0.1:{port} is unreachable.*rerun the same"):
+            policy.select_action(obs)
+        policy.close()
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_unmappable_specs_stop_before_any_episode_naming_the_field(tiny_benchmark, tmp_path, capsys):
+    euler = FixedServer(
+        np.zeros(7),
+        {"position": POSITION_DELTA, "rotation": ROTATION_EULER, "gripper": GRIPPER_CLOSE_POS},
+        {},
+    )
+    with serving(euler) as url:
+        out = tmp_path / "out"
+        with pytest.raises(SystemExit) as exit_:
+            main(
+                [
+                    f"--benchmark.path={tiny_benchmark}",
+                    "--policy.type=vla_eval",
+                    f"--policy.url={url}",
+                    f"--output_dir={out}",
+                ]
+            )
+        err = capsys.readouterr().err
+        assert exit_.value.code == 2 and not out.exists() and euler.seen == []
+        assert (
+            "action_spec['rotation']: it declares format 'euler_xyz' (3 dims); RoboView provides axis_angle"
+            in err
+        )
+    quat = FixedServer(POSE, JOINTS, {"front": IMAGE_RGB, "state": STATE_EEF_POS_QUAT_GRIP})
+    with (
+        serving(quat) as url,
+        pytest.raises(SpecMismatch, match=r"observation_spec\['state'\].*eef_pos3_quat4_gripper1"),
+    ):
+        policy_config("vla_eval", url=url)
+    libero_cams = FixedServer(POSE, JOINTS, {"agentview": IMAGE_RGB, "state": STATE_JOINT})
+    with serving(libero_cams) as url:
+        with pytest.raises(
+            SpecMismatch,
+            match=r"'agentview'.*front, left_top, right_top, wrist.*--policy.camera_map=agentview",
+        ):
+            policy_config("vla_eval", url=url)
+        assert policy_config("vla_eval", url=url, camera_map="agentview=right_top").negotiated.cameras == (
+            ("agentview", "right_top"),
+        )
+    wrist = FixedServer(
+        POSE, {"actions": RAW}, {"image": IMAGE_RGB, "state": RAW}, {"send_wrist_image": True}
+    )
+    with (
+        serving(wrist) as url,
+        pytest.raises(SpecMismatch, match=r"send_wrist_image.*add wrist to --policy.cameras"),
+    ):
+        policy_config("vla_eval", url=url, cameras="front")
+
+
+LIBERO_OBS = {
+    "agentview": IMAGE_RGB,
+    "wrist": IMAGE_RGB,
+    "state": STATE_EEF_POS_AA_GRIP,
+    "language": LANGUAGE,
+}
+
+
+@pytest.mark.parametrize(
+    ("position", "gripper", "control", "want_gripper"),
+    [
+        (POSITION_DELTA, GRIPPER_CLOSE_POS, "ee_delta", 1.0),  # LIBERO's convention: +1 close
+        (POSITION_ABSOLUTE, GRIPPER_CLOSE_NEG, "ee_abs", -1.0),  # +0.7 under close-negative: open
+    ],
+)
+def test_end_effector_specs_negotiate_an_ee_control_and_send_the_ee_state(
+    position, gripper, control, want_gripper
+):
+    answer = np.array([0.1, -0.2, 0.3, 0.0, 0.5, -0.1, 0.7], np.float32)
+    server = FixedServer(
+        answer, {"position": position, "rotation": ROTATION_AA, "gripper": gripper}, LIBERO_OBS
+    )
+    with serving(server) as url:
+        config = policy_config(
+            "vla_eval", url=url, camera_map="agentview=left_top,wrist=wrist", image_size=32
+        )
+        assert config.control() == control and config.negotiated.state_key == EE_STATE_KEY
+        assert config.observed_cameras() == ("left_top", "wrist")
+        with pytest.raises(SpecMismatch, match=rf"\({control} control\).*--policy.control=joint"):
+            policy_config("vla_eval", url=url, camera_map="agentview=left_top", action_control="joint")
+        # An observation as an EE env gives it (not stepped here): the EE state goes out as the state.
+        ee_state = np.arange(8, dtype=np.float32) / 10
+        obs = {
+            "observation.images.left_top": np.full((32, 32, 3), 1, np.uint8),
+            "observation.images.wrist": np.full((32, 32, 3), 2, np.uint8),
+            STATE_KEY: np.zeros(8, np.float32),
+            EE_STATE_KEY: ee_state,
+        }
+        policy = config.build(None)
+        policy.reset(Episode("pick_place", "put the cube in the bowl", 11, {}, 32))
+        action = policy.select_action(obs)
+        policy.close()
+    np.testing.assert_array_equal(action, [*answer[:6], want_gripper])
+    seen = server.seen[0]
+    np.testing.assert_array_equal(seen["states"], ee_state)
+    assert (seen["images"]["agentview"] == 1).all() and (seen["images"]["wrist"] == 2).all()
+    assert server.starts == [
+        {
+            "name": "put the cube in the bowl",
+            "instruction": "put the cube in the bowl",
+            "task": "pick_place",
+            "seed": 11,
+            "image_size": 32,
+        }
+    ]
+
+
+def test_lockstep_envs_are_batched_by_a_batching_server():
+    """Three slots, one connection each, every observation sent before any answer is read: while the server's
+    first batch runs the others queue, and its next batch holds two."""
+    server = joint_server(max_batch_size=2)
+    with serving(server) as url:
+        policy = policy_config("vla_eval", url=url, image_size=16).build_batched(None, 3)
+        for slot in range(3):
+            policy.reset(Episode("pick_place", f"task {slot}", slot, {}, 16), slot)
+        obs = {
+            "observation.images.front": np.zeros((16, 16, 3), np.uint8),
+            STATE_KEY: np.zeros(8, np.float32),
+        }
+        got = policy.select_actions({0: obs, 1: obs, 2: obs})
+        policy.close()
+    assert set(got) == {0, 1, 2} and all((a == POSE).all() for a in got.values())
+    assert sorted(server.batches) == [1, 2]
+    assert sorted(o["task_description"] for o in server.seen) == ["task 0", "task 1", "task 2"]
