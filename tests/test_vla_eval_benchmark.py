@@ -316,3 +316,15 @@ def test_specs_follow_the_control_and_bad_params_fail_before_any_episode(tiny_be
             RoboViewBenchmark(**({"benchmark_path": bench} | params))
     with pytest.raises(ValueError, match="set episodes_per_task: 1"):
         joint.reset(tasks[0] | {"episode_idx": 1})
+    # A malformed action ends the episode as the policy's failure (as in pipelines.evaluate), not as an error.
+
+    async def malformed_action() -> dict:
+        await joint.start_episode(joint.get_tasks()[0])
+        await joint.apply_action({"actions": np.zeros(7, dtype=np.float32)})
+        assert await joint.is_done()
+        return await joint.get_result()
+
+    result = anyio.run(malformed_action)
+    assert not result["success"] and result["steps"] == 0 and result["repeat"] == 0
+    assert result["failure_reason"].startswith("policy error: action of shape (7,)")
+    joint.cleanup()
