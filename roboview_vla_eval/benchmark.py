@@ -150,7 +150,7 @@ class RoboViewBenchmark(StepBenchmark):
         bench = load_benchmark(benchmark_path, chosen)
         self.benchmark_path = str(Path(benchmark_path).resolve())
         self.version = bench.version
-        self.n_repeats, self.contexts, self.limit = n_repeats, contexts, limit
+        self.n_repeats = n_repeats
         self.image_size, self.max_steps, self.control = image_size, max_steps, control
         self.send_images, self.send_state = send_images, send_state
         self.items = {split: select_items(bench.splits[split], contexts, limit) for split in chosen}
@@ -159,7 +159,7 @@ class RoboViewBenchmark(StepBenchmark):
         self._conformance_reported = False
         self._envs: dict[str, Any] = {}
         self._env: Any = None
-        self._error = ""
+        self._error, self._isolation = "", ""
         self._info: dict = {}
         self._success = False
 
@@ -175,7 +175,7 @@ class RoboViewBenchmark(StepBenchmark):
                 Path(self.benchmark_path), self.version, self.allow_drift, "params.allow_drift"
             ).record()
 
-        return [
+        tasks = [
             {
                 "name": item.record["instance_id"],
                 "suite": split,
@@ -191,6 +191,15 @@ class RoboViewBenchmark(StepBenchmark):
             for item in items
             for repeat in range(self.n_repeats)
         ]
+        log.info(
+            "RoboView benchmark %s: %d episodes (%s × %d repeats), conformance %s",
+            self.version,
+            len(tasks),
+            ", ".join(f"{split} {len(items)}" for split, items in self.items.items()),
+            self.n_repeats,
+            self.conformance["verdict"],
+        )
+        return tasks
 
     def _env_for(self, task: str) -> Any:
         """One env per RoboView task (pick_place, push, …), made on first use and kept."""
@@ -236,7 +245,8 @@ class RoboViewBenchmark(StepBenchmark):
             )
             return StepResult(obs=None, reward=0.0, done=True, info={})
         obs, reward, self._success, truncated, self._info = env.step(raw)
-        done = self._success or truncated or env.steps >= env.max_steps or "failure_reason" in self._info
+        # The env truncates at max_steps and when the simulation turns unstable (its info says so).
+        done = self._success or truncated
         return StepResult(obs=obs, reward=reward, done=done, info=self._info)
 
     def make_obs(self, raw_obs: Any, task: Task) -> Observation:

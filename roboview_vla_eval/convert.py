@@ -19,6 +19,7 @@ from __future__ import annotations
 import inspect
 import json
 import tempfile
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -129,11 +130,11 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
         raise ValueError(
             f"{len(unknown)} instance(s) of the vla-eval results are not in {root}: {unknown[:3]}"
         )
-    keys = [(e["instance_id"], int(e["repeat"])) for _, e in episodes]
-    twice = sorted({k for k in keys if keys.count(k) > 1})
+    counts = Counter((e["instance_id"], int(e["repeat"])) for _, e in episodes)
+    twice = sorted(k for k, n in counts.items() if n > 1)
     if twice:
         raise ValueError(
-            f"(instance, repeat) {twice[0]} ran {keys.count(twice[0])} times: run the benchmark with "
+            f"(instance, repeat) {twice[0]} ran {counts[twice[0]]} times: run the benchmark with "
             "episodes_per_task: 1 (repeats come from params.n_repeats)"
         )
     first = params[0]
