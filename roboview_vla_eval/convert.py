@@ -73,8 +73,9 @@ def roboview_entries(aggregates: list[dict]) -> list[dict]:
     return ours
 
 
-def episode_row(episode: dict, record: dict, policy: str) -> dict:
-    """The RoboView row of one vla-eval episode (its task fields sit at the top, the result under metrics)."""
+def episode_row(episode: dict, record: dict, policy: str, verdict: str) -> dict:
+    """The RoboView row of one vla-eval episode (its task fields sit at the top, the result under metrics);
+    `verdict`: the conformance verdict of the process that ran it, for an episode that returned no result."""
     metrics = episode.get("metrics") or {}
     repeat = int(episode["repeat"])
     row = {
@@ -95,7 +96,7 @@ def episode_row(episode: dict, record: dict, policy: str) -> dict:
             + (f": {detail[-1]}" if detail else ""),
             "isolation": None,
             "status": INFRA_ERROR,
-            "conformance": metrics.get("conformance", ""),
+            "conformance": verdict,
         }
     return row | {
         "success": bool(metrics["success"]),
@@ -164,8 +165,12 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
             "image_size": first["image_size"],
         },
     )
+    verdicts = {
+        e.get("sid"): e["metrics"]["conformance"] for _, e in episodes if "conformance" in e["metrics"]
+    }
     for _, episode in episodes:
-        store.add(episode_row(episode, records[episode["instance_id"]], policy))
+        verdict = verdicts.get(episode.get("sid"), "")
+        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict))
     store.close()
     provenance.write(Path(output_dir), provenance_entries(entries, episodes, bench.version, root))
     return Path(output_dir) / "episodes.parquet"
@@ -192,7 +197,7 @@ def provenance_entries(entries: list[dict], episodes: list, version: str, root: 
                     "created_at": aggregate.get("created_at"),
                     "server_info": aggregate.get("server_info"),
                     "config": aggregate.get("config"),
-                    "session": episode.get("sid"),
+                    "process": episode.get("sid"),  # vla-eval's id of the process that ran it
                 },
                 "episodes_run": sum(1 for _, e in episodes if e.get("sid") == episode.get("sid")),
             }
