@@ -35,6 +35,8 @@ ENTRY_POINTS = (
 
 # The LeRobot side's own commands.
 LEROBOT_SIDE = ("roboview_lerobot.convert", "roboview_lerobot.tiny_vla")
+# The vla-eval side's own command.
+VLA_EVAL_SIDE = ("roboview_vla_eval.convert",)
 # The measurement harnesses (`make bench` and the figures in docs/performance.md).
 HARNESSES = (
     "adaptive",
@@ -67,6 +69,7 @@ def help_run(module: str) -> subprocess.CompletedProcess:
     "module",
     [f"pipelines.{name}" for name in ENTRY_POINTS]
     + list(LEROBOT_SIDE)
+    + list(VLA_EVAL_SIDE)
     + [f"benchmarks.{name}" for name in HARNESSES],
 )
 def test_help_documents_the_flags(module):

@@ -99,7 +99,12 @@ def _all_commands() -> list[tuple[str, int, str, str, list[str]]]:
     for page in PAGES:
         for line, command in bash_commands(page):
             parsed = _module_of(command)
-            if parsed and parsed[0].split(".")[0] in ("pipelines", "benchmarks", "roboview_lerobot"):
+            if parsed and parsed[0].split(".")[0] in (
+                "pipelines",
+                "benchmarks",
+                "roboview_lerobot",
+                "roboview_vla_eval",
+            ):
                 found.append((str(page.relative_to(ROOT)), line, command, *parsed))
     return found
 

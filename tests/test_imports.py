@@ -11,7 +11,15 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
-PACKAGES = ("eval", "policies", "pipelines", "roboview_data", "roboview_lerobot", "benchmarks")
+PACKAGES = (
+    "eval",
+    "policies",
+    "pipelines",
+    "roboview_data",
+    "roboview_lerobot",
+    "roboview_vla_eval",
+    "benchmarks",
+)
 
 
 def _modules(packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
@@ -260,7 +268,7 @@ FLOORS = (
     ("eval.running",),
     ("eval.statistics",),
     ("eval.reporting", "eval"),
-    ("roboview_lerobot",),
+    ("roboview_lerobot", "roboview_vla_eval"),
     ("pipelines", "benchmarks"),
 )
 

@@ -1,0 +1,322 @@
+"""RoboView inside vla-eval: vla-eval's own CLI runs the RoboView benchmark against model servers on 127.0.0.1,
+and its results, converted, equal a native pipelines.evaluate run of the same episodes."""
+
+import contextlib
+import json
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import anyio
+import numpy as np
+import pandas as pd
+import pytest
+from vla_eval.model_servers.predict import PredictModelServer
+from vla_eval.model_servers.serve import serve_async
+from vla_eval.orchestrator import Orchestrator
+from vla_eval.results.export import export_eval
+from vla_eval.specs import (
+    GRIPPER_01,
+    GRIPPER_CLOSE_POS,
+    IMAGE_RGB,
+    LANGUAGE,
+    POSITION_ABSOLUTE,
+    POSITION_DELTA,
+    ROTATION_AA,
+    STATE_EEF_POS_AA_GRIP,
+    STATE_JOINT,
+)
+
+from roboview_data.benchmark.format import load_benchmark
+from roboview_data.tasks import load_task, make_env
+from roboview_data.variation.instances import episode_seed
+from roboview_vla_eval.benchmark import JOINT_TARGETS, RoboViewBenchmark
+from roboview_vla_eval.convert import convert, read_aggregates
+
+ROOT = Path(__file__).parents[1]
+CONFIG = ROOT / "configs" / "vla_eval" / "roboview_tiny.yaml"
+SPLIT = "color_x_camera_pose"  # the tiny benchmark's smallest split: 6 instances of one context
+ROW_COLUMNS = [
+    "split",
+    "instance_id",
+    "repeat",
+    "value",
+    "episode_seed",
+    "success",
+    "steps",
+    "failure_reason",
+    "isolation",
+    "status",
+    "conformance",
+]
+
+
+class ReplayServer(PredictModelServer):
+    """Replays a recorded action list per (instance, repeat): the task fields vla-eval sends at episode start."""
+
+    def __init__(self, actions: dict[tuple[str, int], list[np.ndarray]]) -> None:
+        super().__init__()
+        self.actions, self.queues = actions, {}
+
+    def get_action_spec(self):
+        return {"joints": JOINT_TARGETS, "gripper": GRIPPER_01}
+
+    def get_observation_spec(self):
+        return {"state": STATE_JOINT, "language": LANGUAGE}
+
+    async def on_episode_start(self, config, ctx) -> None:
+        task = config["task"]
+        self.queues[ctx.session_id] = list(self.actions[(task["instance_id"], task["repeat"])])
+        await super().on_episode_start(config, ctx)
+
+    def predict(self, obs, ctx):
+        queue = self.queues[ctx.session_id]
+        return {"actions": queue.pop(0) if len(queue) > 1 else queue[0]}
+
+
+class FailingServer(ReplayServer):
+    async def on_episode_start(self, config, ctx) -> None:
+        await PredictModelServer.on_episode_start(self, config, ctx)
+
+    def predict(self, obs, ctx):
+        raise RuntimeError("model crashed")
+
+
+@contextlib.contextmanager
+def served(server):
+    """`server` on ws://127.0.0.1:PORT in a thread (vla-eval's own serve_async); yields the URL."""
+    ready, stop, port = threading.Event(), threading.Event(), []
+
+    async def main() -> None:
+        async with anyio.create_task_group() as tg:
+            port.append(await tg.start(serve_async, server, "127.0.0.1", 0))
+            ready.set()
+            await anyio.to_thread.run_sync(stop.wait)
+            tg.cancel_scope.cancel()
+
+    thread = threading.Thread(target=anyio.run, args=(main,), daemon=True)
+    thread.start()
+    assert ready.wait(30), "the model server did not start"
+    try:
+        yield f"ws://127.0.0.1:{port[0]}"
+    finally:
+        stop.set()
+        thread.join(10)
+
+
+def expert_actions(bench: Path, split: str, repeats: int, max_steps: int) -> dict:
+    """The scripted expert's actions in each (instance, repeat) of `split`, recorded as pipelines.evaluate runs it."""
+    env = make_env(cameras=("left_top",), image_size=64, max_steps=max_steps, lazy=True)
+    out = {}
+    for item in load_benchmark(bench, [split]).splits[split]:
+        for repeat in range(repeats):
+            env.reset(
+                seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.instance}
+            )
+            expert = load_task(item.instance.task).make_expert(env)
+            expert.reset()
+            actions, done = [], False
+            while not done:
+                actions.append(expert.select_action(None))
+                _, _, success, truncated, _ = env.step(actions[-1])
+                done = success or truncated
+            out[(item.record["instance_id"], repeat)] = actions
+    env.close()
+    return out
+
+
+def table(path: Path) -> pd.DataFrame:
+    df = pd.read_parquet(path)
+    return df[ROW_COLUMNS].sort_values(["instance_id", "repeat"]).reset_index(drop=True)
+
+
+def test_vla_eval_runs_the_benchmark_and_its_results_convert_to_the_native_run(tiny_benchmark, tmp_path):
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from pipelines.evaluate import run as evaluate
+    from pipelines.report import ReportConfig
+    from pipelines.report import run as report
+    from pipelines.verify import VerifyConfig
+    from pipelines.verify import run as verify
+    from policies.types import policy_config
+
+    repeats, max_steps = 2, 60
+    actions = expert_actions(tiny_benchmark, SPLIT, repeats, max_steps)
+    with served(ReplayServer(actions)) as url:
+        proc = subprocess.run(
+            [
+                str(Path(sys.executable).parent / "vla-eval"),
+                "run",
+                "-c",
+                str(CONFIG),
+                "--no-docker",
+                "--server-url",
+                url,
+                "--output-dir",
+                str(tmp_path / "vla"),
+                "--param",
+                f"benchmark_path={tiny_benchmark}",
+                "--param",
+                f"splits={SPLIT}",
+                "--param",
+                "limit=0",
+                "--param",
+                f"n_repeats={repeats}",
+                "--param",
+                "send_images=false",  # the replay reads none: no camera renders
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=os.environ | {"PYTHONPATH": str(ROOT)},
+        )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "Spec validation passed" in proc.stderr
+    aggregate = json.loads((tmp_path / "vla" / "RoboView_aggregate.json").read_text())
+    assert aggregate["num_episodes_total"] == 6 * repeats and aggregate["num_errors"] == 0
+
+    converted = tmp_path / "converted"
+    convert(
+        tmp_path / "vla" / "RoboView_aggregate.json", str(tiny_benchmark), converted, policy_name="expert"
+    )
+    evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(tiny_benchmark), SPLIT),
+            policy_config("expert"),
+            EvalConfig(n_repeats=repeats, num_workers=1, image_size=64, max_steps=max_steps),
+            str(tmp_path / "native"),
+        )
+    )
+    ours, theirs = table(tmp_path / "native" / "episodes.parquet"), table(converted / "episodes.parquet")
+    pd.testing.assert_frame_equal(theirs, ours)
+    # A comparison that could fail: each row's isolation certificate hashes the seed, the object's initial pose and
+    # the cameras the episode was reset to, and the two repeats differ in it; the replayed expert succeeds in all.
+    by_repeat = theirs.groupby("repeat")["isolation"].agg(set)
+    assert not by_repeat[0] & by_repeat[1] and theirs["success"].all()
+
+    metrics = []
+    for name, folder in (("native", tmp_path / "native"), ("converted", converted)):
+        report(ReportConfig(results=str(folder), output_dir=str(tmp_path / f"report_{name}"), plots=False))
+        metrics.append(json.loads((tmp_path / f"report_{name}" / "metrics.json").read_text()))
+        metrics[-1].pop("sources")  # the file's path and the command that wrote it
+    assert metrics[0] == metrics[1]
+    checked = verify(VerifyConfig(results=str(converted)))
+    assert checked.passed, [(c.name, c.detail) for c in checked.checks if not c.passed]
+    # The sqlite recording, through vla-eval's own exporter, gives the same table.
+    (db,) = (tmp_path / "vla").glob("recording-*.sqlite")
+    convert(db, "", tmp_path / "from_db", policy_name="expert")
+    pd.testing.assert_frame_equal(table(tmp_path / "from_db" / "episodes.parquet"), ours)
+
+
+def orchestrate(url: str, out: Path, **params) -> list[dict]:
+    """The config's entry with `params`, run by vla-eval's Orchestrator in this process, then its export."""
+    from vla_eval.cli.config_loader import load_config
+
+    config = load_config(str(CONFIG))
+    config["server"]["url"], config["output_dir"] = url, str(out)
+    config["benchmarks"][0]["params"].update(params)
+    orchestrator = Orchestrator(config)
+    anyio.run(orchestrator.run)
+    return export_eval(out, orchestrator.eval_id)
+
+
+def test_vla_evals_lerobot_server_runs_a_roboview_checkpoint_as_roboview_does(
+    tiny_benchmark, tiny_checkpoint, tmp_path
+):
+    from vla_eval.model_servers.lerobot import LeRobotModelServer
+
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from pipelines.evaluate import run as evaluate
+    from policies.types import policy_config
+
+    server = LeRobotModelServer(
+        "act",
+        str(tiny_checkpoint),
+        image_keys={c: f"observation.images.{c}" for c in ("left_top", "wrist")},
+        device="cpu",
+    )
+    with served(server) as url:
+        (aggregate,) = orchestrate(
+            url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=2, max_steps=6
+        )
+    assert aggregate["server_info"]["model_server"] == "LeRobotModelServer" and aggregate["num_errors"] == 0
+    convert(tmp_path / "vla", str(tiny_benchmark), tmp_path / "converted", policy_name="act")
+    evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(tiny_benchmark), "color"),
+            policy_config("lerobot", path=str(tiny_checkpoint)),
+            EvalConfig(n_repeats=1, limit=2, num_workers=1, max_steps=6),
+            str(tmp_path / "native"),
+        )
+    )
+    native = table(tmp_path / "native" / "episodes.parquet")
+    pd.testing.assert_frame_equal(table(tmp_path / "converted" / "episodes.parquet"), native)
+    assert list(native["steps"]) == [6, 6] and native["failure_reason"].str.endswith("within 6 steps").all()
+
+
+def test_an_episode_the_model_server_failed_is_an_infrastructure_row(tiny_benchmark, tmp_path):
+    with served(FailingServer({})) as url:  # its predict raises
+        orchestrate(
+            url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=1, send_images=False, max_steps=3
+        )
+    rows = pd.read_parquet(convert(tmp_path / "vla", "", tmp_path / "converted"))
+    assert list(rows["status"]) == ["infra_error"] and not rows["success"].any()
+    assert (
+        rows["failure_reason"][0].startswith("infrastructure error: vla-eval model_act")
+        and "model crashed" in (rows["failure_reason"][0])
+    )
+    other = read_aggregates(tmp_path / "vla")[0] | {"config": {"benchmark": "x:Other"}}
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    with pytest.raises(ValueError, match="hold no roboview_vla_eval.benchmark:RoboViewBenchmark entry"):
+        convert(tmp_path / "other.json", str(tiny_benchmark), tmp_path / "other")
+
+
+def test_specs_follow_the_control_and_bad_params_fail_before_any_episode(tiny_benchmark):
+    bench = str(tiny_benchmark)
+    joint = RoboViewBenchmark(bench, "color", cameras="left_top,wrist")
+    assert joint.get_action_spec() == {"joints": JOINT_TARGETS, "gripper": GRIPPER_01}
+    assert joint.get_observation_spec() == {
+        "left_top": IMAGE_RGB,
+        "wrist": IMAGE_RGB,
+        "language": LANGUAGE,
+        "state": STATE_JOINT,
+    }
+    ee = {"gripper": GRIPPER_CLOSE_POS, "rotation": ROTATION_AA}
+    assert RoboViewBenchmark(bench, "color", control="ee_delta").get_action_spec() == ee | {
+        "position": POSITION_DELTA
+    }
+    ee_abs = RoboViewBenchmark(bench, "color", control="ee_abs", send_images=False)
+    assert ee_abs.get_action_spec() == ee | {"position": POSITION_ABSOLUTE}
+    assert ee_abs.get_observation_spec() == {"language": LANGUAGE, "state": STATE_EEF_POS_AA_GRIP}
+    tasks = RoboViewBenchmark(bench, "color,dist_scale", n_repeats=2, contexts=1).get_tasks()
+    items = load_benchmark(bench, ["color"]).splits["color"]
+    first = [i for i in items if i.record["context_id"] == items[0].record["context_id"]]
+    assert [(t["instance_id"], t["repeat"]) for t in tasks[: 2 * len(first)]] == [
+        (i.record["instance_id"], r) for i in first for r in (0, 1)
+    ]
+    assert tasks[1]["episode_seed"] == episode_seed(first[0].record["context_id"], 1)
+    assert {t["suite"] for t in tasks} == {"color", "dist_scale"}
+    for params, message in (
+        ({"control": "cartesian"}, "allowed: joint, ee_delta, ee_abs"),
+        ({"splits": "colour"}, "unknown split.*colour.*color"),
+        ({"cameras": "top"}, "allowed: front, left_top, right_top, wrist"),
+        ({"n_repeats": 0}, "params.n_repeats=0 must be a positive count"),
+        ({"benchmark_path": "/nonexistent"}, "no such folder"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            RoboViewBenchmark(**({"benchmark_path": bench} | params))
+    with pytest.raises(ValueError, match="set episodes_per_task: 1"):
+        joint.reset(tasks[0] | {"episode_idx": 1})
+    # A malformed action ends the episode as the policy's failure (as in pipelines.evaluate), not as an error.
+
+    async def malformed_action() -> dict:
+        await joint.start_episode(joint.get_tasks()[0])
+        await joint.apply_action({"actions": np.zeros(7, dtype=np.float32)})
+        assert await joint.is_done()
+        return await joint.get_result()
+
+    result = anyio.run(malformed_action)
+    assert not result["success"] and result["steps"] == 0 and result["repeat"] == 0
+    assert result["failure_reason"].startswith("policy error: action of shape (7,)")
+    joint.cleanup()
