@@ -221,13 +221,15 @@ class TaskEnv(gym.Env):
         self.instruction = self.instance.get(self.instruction_factor)
         self.steps = 0
 
+        arm_range = self.scene.ids.arm_range
+        low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
+        high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
+        # The joint-target action (what the scripted planners plan in, whatever the control).
+        self.joint_action_space = gym.spaces.Box(low, high, dtype=np.float32)
         if control == "joint":
-            arm_range = self.scene.ids.arm_range
-            low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
-            high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
+            self.action_space = self.joint_action_space
         else:
-            low, high = ee_action_space_bounds(control)
-        self.action_space = gym.spaces.Box(low, high, dtype=np.float32)
+            self.action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
         spaces = {
             IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
             for c in self.cameras
