@@ -1,0 +1,115 @@
+"""End-effector control (docs/control.md): action layouts, the EE state, the controller, determinism."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from roboview_data.sim.control import EE_ACTION_NAMES, axis_angle, rotation_matrix
+from roboview_data.tasks import load_task
+from roboview_data.tasks.env import CONTROLS, EE_STATE_KEY, EE_STATE_NAMES, STATE_KEY, action_names
+from roboview_data.tasks.pick_place import PickPlaceEnv
+
+OPEN, CLOSE = -1.0, 1.0
+
+
+@pytest.fixture(scope="module")
+def envs():
+    made = {c: PickPlaceEnv(cameras=("front",), image_size=16, lazy=True, control=c) for c in CONTROLS}
+    yield made
+    for env in made.values():
+        env.close()
+
+
+def rotation_error(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (rad) between two orientations given as axis-angle."""
+    return float(np.linalg.norm(axis_angle(rotation_matrix(a) @ rotation_matrix(b).T)))
+
+
+def test_unknown_control_names_the_allowed_values():
+    assert CONTROLS == ("joint", "ee_delta", "ee_abs")
+    with pytest.raises(ValueError, match="unknown control 'osc'; allowed: joint, ee_delta, ee_abs"):
+        PickPlaceEnv(control="osc")
+    with pytest.raises(ValueError, match="allowed: joint, ee_delta, ee_abs"):
+        gym.make(load_task("pick_place").gym_id, control="cartesian")
+
+
+def test_action_and_observation_spaces(envs):
+    assert envs["joint"].action_space.shape == (8,)
+    delta, absolute = envs["ee_delta"].action_space, envs["ee_abs"].action_space
+    assert delta.shape == absolute.shape == (7,) and delta.dtype == np.float32
+    np.testing.assert_array_equal(delta.low, -1.0), np.testing.assert_array_equal(delta.high, 1.0)
+    assert absolute.high[2] == 1.5 and absolute.high[3] == np.float32(np.pi) and absolute.low[6] == -1.0
+    assert action_names("ee_delta") == EE_ACTION_NAMES["ee_delta"] and len(action_names("joint")) == 8
+    for control, env in envs.items():
+        assert env.observation_space[EE_STATE_KEY].shape == (len(EE_STATE_NAMES),) == (8,)
+        obs, _ = env.reset(seed=3)
+        assert set(obs) == {"observation.images.front", STATE_KEY, EE_STATE_KEY}, control
+        np.testing.assert_array_equal(obs[EE_STATE_KEY], env.ee_state())
+        assert obs[EE_STATE_KEY].dtype == np.float32
+
+
+def test_ee_state_at_home_and_gripper_openings(envs):
+    env = envs["ee_abs"]
+    obs, _ = env.reset(seed=3)
+    state = obs[EE_STATE_KEY]
+    # The pinch point sits 44 cm in front of the base, 34 cm up, pointing straight down (π about x).
+    np.testing.assert_allclose(state[:3], [0.4444, 0.0, 0.3368], atol=1e-3)
+    np.testing.assert_allclose(rotation_matrix(state[3:6]), np.diag([1.0, -1.0, -1.0]), atol=2e-3)
+    # Open: each pad face 42.6 mm from the pinch point (the 2F-85's 85 mm stroke), mirrored.
+    np.testing.assert_allclose(state[6:], [0.0427, -0.0427], atol=1e-3)
+    hold = np.append(state[:6], CLOSE).astype(np.float32)
+    for _ in range(10):
+        obs, *_ = env.step(hold)
+    assert 0 <= obs[EE_STATE_KEY][6] < 3e-3 and -3e-3 < obs[EE_STATE_KEY][7] <= 0
+    assert obs[STATE_KEY][7] > 0.95  # the joint state's closure says the same
+
+
+def test_ee_abs_reaches_the_commanded_pose(envs):
+    env = envs["ee_abs"]
+    obs, _ = env.reset(seed=3)
+    start = obs[EE_STATE_KEY]
+    rotation = rotation_matrix([0.0, 0.0, 0.3]) @ rotation_matrix(start[3:6])  # 0.3 rad about the vertical
+    target = np.array([*(start[:3] + [0.05, -0.05, -0.1]), *axis_angle(rotation), OPEN], np.float32)
+    for _ in range(10):
+        obs, *_ = env.step(target)
+    reached = obs[EE_STATE_KEY]
+    np.testing.assert_allclose(reached[:3], target[:3], atol=5e-4)
+    assert rotation_error(reached[3:6], target[3:6]) < 5e-3
+
+
+def test_ee_delta_moves_relative_to_the_current_pose(envs):
+    env = envs["ee_delta"]
+    ids = env.scene.ids
+    obs, _ = env.reset(seed=3)
+    start = obs[EE_STATE_KEY]
+    for _ in range(3):  # zero delta, gripper open: the arm holds its pose
+        obs, *_ = env.step(np.array([0, 0, 0, 0, 0, 0, OPEN], np.float32))
+    np.testing.assert_allclose(obs[EE_STATE_KEY], start, atol=2e-4)
+    before = obs[EE_STATE_KEY]
+    obs, *_ = env.step(np.array([1, 0, 0, 0, 0, 0, OPEN], np.float32))  # +x: 0.05 m asked, lagging servos
+    moved = obs[EE_STATE_KEY][:3] - before[:3]
+    assert 0.04 < moved[0] <= 0.0501 and np.abs(moved[1:]).max() < 3e-3
+    before = obs[EE_STATE_KEY]
+    obs, *_ = env.step(np.array([0, 0, 0, 0, 0, 0.2, OPEN], np.float32))  # 0.1 rad about base z
+    turn = axis_angle(rotation_matrix(obs[EE_STATE_KEY][3:6]) @ rotation_matrix(before[3:6]).T)
+    assert 0.08 < turn[2] <= 0.101 and np.abs(turn[:2]).max() < 5e-3
+    # Far out of reach: the joint targets stay inside the joint range.
+    low, high = ids.arm_range[:, 0], ids.arm_range[:, 1]
+    for _ in range(25):
+        env.step(np.array([1, 0, 1, 0, 1, 0, OPEN], np.float32))
+        ctrl = env.data.ctrl[ids.arm_actuators]
+        assert np.all(ctrl >= low) and np.all(ctrl <= high)
+
+
+@pytest.mark.parametrize("control", ["ee_delta", "ee_abs"])
+def test_same_actions_give_bit_identical_trajectories(envs, control):
+    env = envs[control]
+    space = env.action_space
+    actions = np.random.default_rng(7).uniform(space.low, space.high, (12, 7)).astype(np.float32)
+    if control == "ee_abs":  # reachable targets: within 10 cm of home
+        actions[:, :3] = np.float32([0.44, 0.0, 0.30]) + 0.1 * (actions[:, :3] / space.high[:3])
+    runs = []
+    for _ in range(2):
+        env.reset(seed=11)
+        runs.append([env.step(a)[0][EE_STATE_KEY].tobytes() + env.data.qpos.tobytes() for a in actions])
+    assert runs[0] == runs[1]
