@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from policies.base import AgentView, ControlledConfig, Episode
+from policies.base import AgentView, ControlledConfig, Episode, PolicyConfig
 from roboview_data.tasks import load_task
 from roboview_data.tasks.env import TaskEnv
 

@@ -296,7 +296,9 @@ class LeRobotConfig(PolicyConfig):
                 f"{' or --policy.control='.join(EE_CONTROLS)}"
             )
         if given == "joint" and found is None:
-            raise ValueError(f"--policy.control='joint' but the checkpoint {self.path} has a 7-d (end-effector) action")
+            raise ValueError(
+                f"--policy.control='joint' but the checkpoint {self.path} has a 7-d (end-effector) action"
+            )
         self.control = given or found
         control_field(self)
 

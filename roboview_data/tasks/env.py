@@ -22,10 +22,13 @@ import numpy as np
 
 from roboview_data.errors import RenderError
 from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, check_image_size
-from roboview_data.sim.control import CONTROLS, EE_STATE_NAMES  # noqa: F401  (re-exported)
+from roboview_data.sim.control import (
+    CONTROLS as CONTROLS,  # re-exported: the control modes a TaskEnv takes
+)
 from roboview_data.sim.control import (
     EE_ACTION_NAMES,
     EE_CONTROLS,
+    EE_STATE_NAMES,
     EEController,
     EndEffector,
     JointToEE,
