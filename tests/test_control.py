@@ -162,3 +162,26 @@ def test_ee_delta_demos_read_back_with_lerobot_and_replay(tmp_path):
         np.testing.assert_array_equal(np.stack(replayed), states[mine])
         assert success and np.abs(actions[mine]).max() <= 1.0
     env.close()
+
+
+def test_policy_types_act_in_the_control_they_are_given(envs):
+    from policies.base import Episode, JointPlanInEE
+    from policies.factory import make_policy
+    from policies.types import policy_config
+
+    expert = policy_config("expert", control="ee_abs")
+    assert expert.control() == expert.control == "ee_abs" and "control" not in expert.options()
+    assert policy_config("vision").control() == "joint"
+    with pytest.raises(ValueError, match="unknown --policy.control='osc'; allowed: joint, ee_delta, ee_abs"):
+        policy_config("random", control="osc")
+    # An agent that plans joint targets acts through their EE action: here the random floor.
+    env = envs["ee_delta"]
+    policy = make_policy(policy_config("random", control="ee_delta"), env)
+    assert isinstance(policy, JointPlanInEE) and policy.name == "random" and policy.failure_reason == ""
+    obs, _ = env.reset(seed=5)
+    policy.reset(Episode.of(env, 5))
+    for _ in range(3):
+        action = policy.select_action(obs)
+        assert action.shape == (7,) and action.dtype == np.float32 and np.abs(action).max() <= 1.0
+        obs, *_ = env.step(action)
+    assert not np.allclose(obs[EE_STATE_KEY][:3], env.reset(seed=5)[0][EE_STATE_KEY][:3], atol=1e-3)
