@@ -41,7 +41,9 @@ class RandomPolicy:
     failure_reason = ""
 
     def __init__(self, view: AgentView, step_rad: float = 0.15) -> None:
-        self.action_space = view.joint_action_space or view.action_space
+        # Joint targets, whatever the control (an EE control gets the EE actions reaching them).
+        joint = view.joint_action_space
+        self.action_space = joint if joint is not None else view.action_space
         self.step_rad = step_rad
         self._rng = np.random.default_rng(0)
 

@@ -3,8 +3,9 @@
 `PickPlacePlanner.plan` takes an object pose (center, heading, rotational symmetry) and where to
 release it, and lays out the gripper's pinch-point path through fixed waypoints (hover, descend, close,
 lift, carry, lower, open, retreat), each segment interpolated with a minimum-jerk profile. Each
-`next_action` solves inverse kinematics (position + "pointing down at yaw ψ") on a scratch
-`MjData`, so it emits exactly the env's action: 7 joint targets + gripper command. It never reads
+`next_action` solves inverse kinematics (position + "pointing down at yaw ψ"; `ArmIK`, which the
+end-effector controller of roboview_data.sim.control shares) on a scratch `MjData`, so it emits exactly
+the joint action: 7 joint targets + gripper command. It never reads
 the simulator's object state: whoever calls `plan` decides where the object is — a task's privileged
 expert (roboview_data.tasks) from ground truth, the `vision` policy from perception.
 """

@@ -104,9 +104,9 @@ class TaskEnv(gym.Env):
     period (1/fps s). ``ee_delta`` float32 (7,) in [-1, 1]: pinch-point position delta × 0.05 m and
     axis-angle rotation delta × 0.5 rad (base frame, from the current pose), gripper +1 close / −1 open;
     ``ee_abs`` float32 (7,): target pinch position (m) and axis-angle (rad), base frame, and the gripper.
-    Both end-effector modes become joint targets through inverse kinematics (`EEController`). Should MuJoCo find the simulation unstable (NaN/Inf accelerations, after which it
-    resets the state on its own), the step truncates the episode with
-    ``info["failure_reason"] == "simulation unstable"``.
+    Both end-effector modes become joint targets through inverse kinematics (`EEController`). Should
+    MuJoCo find the simulation unstable (NaN/Inf accelerations, after which it resets the state on its
+    own), the step truncates the episode with ``info["failure_reason"] == "simulation unstable"``.
 
     **Randomizations** — the instance fixes every factor (the visual ones: object color, camera
     pose / Euler perturbation / distance, …; the task's context: where the object starts, its
