@@ -10,6 +10,7 @@ from roboview_data.tasks.env import CONTROLS, EE_STATE_KEY, EE_STATE_NAMES, STAT
 from roboview_data.tasks.pick_place import PickPlaceEnv
 
 OPEN, CLOSE = -1.0, 1.0
+EE_REPO = "t/ee_demos"
 
 
 @pytest.fixture(scope="module")
@@ -115,21 +116,15 @@ def test_same_actions_give_bit_identical_trajectories(envs, control):
     assert runs[0] == runs[1]
 
 
-def test_ee_delta_demos_read_back_with_lerobot_and_replay(tmp_path):
-    """`--dataset.control=ee_delta` writes the EE state and action, named; replaying the recorded actions in a
-    fresh env with the episode's seed gives back the recorded states, bit for bit, and succeeds."""
-    import json
-
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
+@pytest.fixture(scope="module")
+def ee_demos(tmp_path_factory):
+    """2 expert demos collected with `--dataset.control=ee_delta` (front camera, 64²): the dataset root."""
     from pipelines.collect import main
-    from roboview_data.demos.dataset import PROGRESS_FILE, read_provenance
-    from roboview_data.demos.recorder import training_instance
 
-    root = tmp_path / "ds"
+    root = tmp_path_factory.mktemp("ee") / "ds"
     result = main(
         [
-            "--dataset.repo_id=t/ee_demos",
+            f"--dataset.repo_id={EE_REPO}",
             f"--dataset.root={root}",
             "--dataset.num_episodes=2",
             "--dataset.image_size=64",
@@ -139,17 +134,30 @@ def test_ee_delta_demos_read_back_with_lerobot_and_replay(tmp_path):
         ]
     )
     assert result.episodes == 2
-    ds = LeRobotDataset("t/ee_demos", root=root)
+    return root
+
+
+def test_ee_delta_demos_read_back_with_lerobot_and_replay(ee_demos):
+    """The dataset holds the EE state and action, named; replaying the recorded actions in a fresh env with the
+    episode's seed gives back the recorded states, bit for bit, and succeeds."""
+    import json
+
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from roboview_data.demos.dataset import PROGRESS_FILE, read_provenance
+    from roboview_data.demos.recorder import training_instance
+
+    ds = LeRobotDataset(EE_REPO, root=ee_demos)
     features = ds.meta.features
     assert features[STATE_KEY]["shape"] == (8,) and features[STATE_KEY]["names"] == list(EE_STATE_NAMES)
     assert features["action"]["shape"] == (7,)
     assert features["action"]["names"] == list(EE_ACTION_NAMES["ee_delta"])
-    assert json.loads((root / PROGRESS_FILE).read_text())["signature"]["control"] == "ee_delta"
-    assert "Control: `ee_delta`" in (root / "README.md").read_text()
+    assert json.loads((ee_demos / PROGRESS_FILE).read_text())["signature"]["control"] == "ee_delta"
+    assert "Control: `ee_delta`" in (ee_demos / "README.md").read_text()
 
     frames = ds.hf_dataset.with_format("numpy")[:]  # every frame: column -> array
     episode_index, states, actions = frames["episode_index"], frames[STATE_KEY], frames["action"]
-    provenance, _ = read_provenance(root)
+    provenance, _ = read_provenance(ee_demos)
     env = PickPlaceEnv(cameras=("front",), image_size=16, lazy=True, control="ee_delta")
     for row in provenance.itertuples():
         mine = episode_index == row.episode_index
@@ -162,6 +170,53 @@ def test_ee_delta_demos_read_back_with_lerobot_and_replay(tmp_path):
         np.testing.assert_array_equal(np.stack(replayed), states[mine])
         assert success and np.abs(actions[mine]).max() <= 1.0
     env.close()
+
+
+def test_a_checkpoint_trained_on_ee_demos_acts_in_their_control(ee_demos, tmp_path):
+    """pipelines.train (1 step) on the ee_delta demos: the `lerobot` type reads ee_delta from the checkpoint, the env
+    is made in it, and the model's observation.state is the env's EE state (not the joint state)."""
+    import subprocess
+    import sys
+
+    from policies.factory import make_policy
+    from policies.types import policy_config
+
+    out = tmp_path / "train"
+    args = [f"--dataset.repo_id={EE_REPO}", f"--dataset.root={ee_demos}", f"--output_dir={out}"]
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipelines.train",
+            *args,
+            "--batch_size=2",
+            "--steps=1",
+            "--save_freq=1",
+            "--device=cpu",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    checkpoint = str(out / "checkpoints" / "last" / "pretrained_model")
+    config = policy_config("lerobot", path=checkpoint, device="cpu")
+    assert config.control() == "ee_delta" and config.observed_cameras() == ("front",)
+    with pytest.raises(
+        ValueError, match="--policy.control='ee_abs' but the checkpoint .* acts in 'ee_delta'"
+    ):
+        policy_config("lerobot", path=checkpoint, device="cpu", control="ee_abs")
+    env = PickPlaceEnv(cameras=("front",), image_size=config.input_image_size(), control=config.control())
+    policy = make_policy(config, env)
+    obs, _ = env.reset(seed=2)
+    chunk = policy.predict_chunks({0: obs})[0]
+    assert np.shape(chunk[0]) == (7,)
+    moved_ee = dict(obs) | {EE_STATE_KEY: obs[EE_STATE_KEY] + np.float32(0.05)}
+    moved_joints = dict(obs) | {STATE_KEY: obs[STATE_KEY] + np.float32(0.05)}
+    assert not np.array_equal(policy.predict_chunks({0: moved_ee})[0], chunk)
+    np.testing.assert_array_equal(policy.predict_chunks({0: moved_joints})[0], chunk)
+    obs, *_ = env.step(chunk[0])
+    policy.close(), env.close()
 
 
 def test_policy_types_act_in_the_control_they_are_given(envs):
