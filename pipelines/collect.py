@@ -6,7 +6,8 @@
 Each attempt draws a task context (object position, shape, instruction) at random with every
 visual factor at its baseline, as the paper did for its π0 training demos (add
 `--dataset.randomize=color,camera_pose` for visual domain randomization); only successful
-episodes are kept and failures are counted. Rerunning with the same root resumes where a killed
+episodes are kept and failures are counted. `--dataset.control=ee_delta` (or ee_abs) records
+end-effector demos, LIBERO-style: `observation.state` is the EE state and `action` the EE action. Rerunning with the same root resumes where a killed
 run stopped. Load the result with `LeRobotDataset(repo_id, root=root)`.
 """
 
@@ -39,6 +40,7 @@ from roboview_data.demos.dataset import (
 )
 from roboview_data.demos.recorder import DemoCollector, DemoEpisode
 from roboview_data.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
+from roboview_data.sim.control import CONTROLS
 from roboview_data.tasks import DEFAULT_TASK, load_task
 from roboview_data.variation.randomization import validate_randomize
 from roboview_data.workers import WorkerPool
@@ -76,6 +78,9 @@ class DatasetConfig:
     randomize: list[str] = field(default_factory=list)
     # Task the expert demonstrates: pick_place (the paper's) or push (roboview_data.tasks).
     task: str = DEFAULT_TASK
+    # Control the demos are recorded in: joint (observation.state = joints, action = 7 joint targets + gripper),
+    # ee_delta or ee_abs (observation.state = the EE state, action = the 7-d EE action; docs/control.md).
+    control: str = "joint"
 
     def __post_init__(self) -> None:
         if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):
@@ -105,6 +110,8 @@ class DatasetConfig:
             self.randomize = list(validate_randomize(self.randomize))
         with flag_errors("--dataset.task"):
             load_task(self.task)
+        if self.control not in CONTROLS:
+            raise ValueError(f"unknown --dataset.control={self.control!r}; allowed: {', '.join(CONTROLS)}")
 
 
 @dataclass
@@ -140,6 +147,7 @@ class CollectConfig:
             self.max_steps,
             tuple(d.randomize),
             d.task,
+            d.control,
         )
 
 
@@ -164,7 +172,16 @@ class CollectResult:
 def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
     """Attempts first_attempt, first_attempt+1, … in order, computed by the worker pool."""
     d = cfg.dataset
-    args = (cfg.seed, tuple(d.cameras), d.image_size, d.fps, cfg.max_steps, tuple(d.randomize), d.task)
+    args = (
+        cfg.seed,
+        tuple(d.cameras),
+        d.image_size,
+        d.fps,
+        cfg.max_steps,
+        tuple(d.randomize),
+        d.task,
+        d.control,
+    )
     attempt = first_attempt
     if cfg.num_workers == 1:
         collector = DemoCollector(*args)
@@ -197,7 +214,7 @@ def _open_dataset(cfg: CollectConfig, create: bool):
         return LeRobotDataset.create(
             d.repo_id,
             d.fps,
-            demo_features(tuple(d.cameras), d.image_size),
+            demo_features(tuple(d.cameras), d.image_size, d.control),
             root=d.root,
             robot_type=ROBOT_TYPE,
             use_videos=True,
@@ -266,7 +283,7 @@ def run(cfg: CollectConfig) -> CollectResult:
                 dataset.finalize()
                 write_checkpoint(root, progress, provenance)
                 checkpointed = progress.episodes_saved
-                write_card(root, cfg.dataset.repo_id, cfg.dataset.task, len(provenance))
+                write_card(root, cfg.dataset.repo_id, cfg.dataset.task, len(provenance), cfg.dataset.control)
                 if done:
                     break
                 dataset = _open_dataset(cfg, create=False)

@@ -50,6 +50,7 @@ from policies.openpi import EPISODE_KEY, OBS_FORMATS, ROBOVIEW_KEY, episode_from
 from policies.types import load_policy_types
 from roboview_data.sim.cameras import check_image_size
 from roboview_data.tasks import DEFAULT_TASK, TASKS
+from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
 
 log = logging.getLogger(__name__)
 
@@ -159,7 +160,10 @@ class PolicyService:
         self.image_size = own or cfg.image_size or 224
         cameras = cfg.policy.observed_cameras()
         self.format = wire_format(cfg.obs_format, cameras, cfg.key_map, cfg.policy.depth)
-        self.view = AgentView.of_task(cfg.task, cameras, self.image_size, cfg.policy.depth)
+        self.control = cfg.policy.control()
+        self.view = AgentView.of_task(cfg.task, cameras, self.image_size, cfg.policy.depth, self.control)
+        # The wire's state is the policy's: the EE state for a policy acting in an end-effector control.
+        self.state_key = STATE_KEY if self.control == "joint" else EE_STATE_KEY
         self.batched = (
             cfg.policy.build_batched(self.view, cfg.max_clients) if cfg.policy.batchable() else None
         )
@@ -178,6 +182,7 @@ class PolicyService:
                 "action_horizon": self.horizon,
                 "batched": self.batched is not None,
                 "task": cfg.task,
+                "control": self.control,
             }
         }
         if cfg.threads and "torch" in sys.modules:
@@ -186,7 +191,7 @@ class PolicyService:
         self.forward_passes = 0
 
     def decode(self, request: dict) -> tuple[dict, str, dict | None]:
-        obs, instruction = self.format.decode(request, self.image_size)
+        obs, instruction = self.format.decode(request, self.image_size, self.state_key)
         return obs, instruction, request.get(EPISODE_KEY)
 
     def predict(self, batch: dict[int, tuple[dict, str]]) -> dict[int, np.ndarray]:

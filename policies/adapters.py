@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from policies.base import AgentView, Episode, PolicyConfig
+from policies.base import AgentView, ControlledConfig, Episode, PolicyConfig
 from roboview_data.tasks import load_task
 from roboview_data.tasks.env import TaskEnv
 
@@ -41,7 +41,9 @@ class RandomPolicy:
     failure_reason = ""
 
     def __init__(self, view: AgentView, step_rad: float = 0.15) -> None:
-        self.action_space = view.action_space
+        # Joint targets, whatever the control (an EE control gets the EE actions reaching them).
+        joint = view.joint_action_space
+        self.action_space = joint if joint is not None else view.action_space
         self.step_rad = step_rad
         self._rng = np.random.default_rng(0)
 
@@ -62,7 +64,7 @@ class RandomPolicy:
 
 @PolicyConfig.register_subclass("expert")
 @dataclass
-class ExpertConfig(PolicyConfig):
+class ExpertConfig(ControlledConfig):
     """The scripted expert, reading ground-truth object and box poses from the simulator."""
 
     doc = "privileged scripted expert (upper bound)"
@@ -74,10 +76,11 @@ class ExpertConfig(PolicyConfig):
 
 @PolicyConfig.register_subclass("random")
 @dataclass
-class RandomConfig(PolicyConfig):
-    """Random joint targets around the current pose: the floor."""
+class RandomConfig(ControlledConfig):
+    """Random joint targets around the current pose: the floor (in an EE control, the EE actions reaching them)."""
 
     doc = "random joint targets around the current pose (floor)"
+    plans_joints = True
 
     def build(self, view: AgentView) -> RandomPolicy:
         return RandomPolicy(view)

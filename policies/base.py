@@ -28,8 +28,9 @@ import numpy as np
 
 from policies.errors import TransientPolicyError  # noqa: F401  (part of the policy API)
 from roboview_data.sim.cameras import CameraPose
+from roboview_data.sim.control import CONTROLS, JointToEE, check_control
 from roboview_data.sim.scene import Scene
-from roboview_data.tasks.env import TaskEnv
+from roboview_data.tasks.env import EE_STATE_KEY, TaskEnv
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,10 @@ class AgentView:
     fps: int
     action_space: gym.spaces.Box
     observation_space: gym.spaces.Dict
+    # The env's control mode (roboview_data.sim.control.CONTROLS) and the joint-target action space, which
+    # agents that plan joint targets plan in whatever the control (their plans are converted).
+    control: str = "joint"
+    joint_action_space: gym.spaces.Box | None = None
 
     @classmethod
     def of(cls, env: TaskEnv) -> AgentView:
@@ -81,15 +86,24 @@ class AgentView:
             env.fps,
             env.action_space,
             env.observation_space,
+            env.control,
+            env.joint_action_space,
         )
 
     @classmethod
-    def of_task(cls, task: str, cameras: tuple[str, ...], image_size: int, depth: bool = False) -> AgentView:
+    def of_task(
+        cls,
+        task: str,
+        cameras: tuple[str, ...],
+        image_size: int,
+        depth: bool = False,
+        control: str = "joint",
+    ) -> AgentView:
         """The view of `task`'s env with these cameras, for a policy built away from any worker's env (a
         policy server): the env is made for its interface and closed again."""
         from roboview_data.tasks import make_env
 
-        env = make_env(task, cameras=cameras, image_size=image_size, depth=depth)
+        env = make_env(task, cameras=cameras, image_size=image_size, depth=depth, control=control)
         try:
             return cls.of(env)
         finally:
@@ -119,7 +133,8 @@ class Policy(Protocol):
         """Called after every env reset, before the first action of an episode."""
 
     def select_action(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        """Env action (8,) float32: 7 joint targets (rad) + gripper command (0 open … 1 closed)."""
+        """Env action in the env's control: joint (8,) float32: 7 joint targets (rad) + gripper command (0 open …
+        1 closed); ee_delta / ee_abs (7,) (roboview_data.sim.control)."""
 
     def close(self) -> None:
         """Release what the policy holds (models, sessions, connections); called once, at the end.
@@ -167,6 +182,9 @@ class PolicyConfig(draccus.ChoiceRegistry):
     depth: ClassVar[bool] = False
     # Whether `build` gets the env itself (ground-truth state): the scripted expert only.
     privileged: ClassVar[bool] = False
+    # Whether the policy plans joint targets, converted to the EE action when `control()` is an EE mode
+    # (`JointPlanInEE`, applied by policies.factory): the vision and VLM agents, the random floor.
+    plans_joints: ClassVar[bool] = False
     # One line for listings and error messages.
     doc: ClassVar[str] = ""
 
@@ -196,13 +214,19 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """Cameras the policy observes (the env renders only these)."""
         return DEFAULT_CAMERAS
 
+    def control(self) -> str:
+        """The control mode the policy acts in (roboview_data.sim.control.CONTROLS); the evaluator makes its envs
+        with it. Types that take `--policy.control` or read it from a model override this."""
+        return "joint"
+
     def input_image_size(self) -> int | None:
         """Image side the policy was trained on (the env renders exactly that); None: any size works."""
         return None
 
     def options(self) -> dict[str, Any]:
-        """The type's own settings, recorded in run.json (a resume must match them)."""
-        skip = {"name", "path"}
+        """The type's own settings, recorded in run.json (a resume must match them); the control is recorded
+        on its own (run.json's `control`)."""
+        skip = {"name", "path", "control"}
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
     def build(self, view: AgentView) -> Policy:
@@ -218,6 +242,58 @@ class PolicyConfig(draccus.ChoiceRegistry):
         obs})`) with one model, or None: the evaluator then builds one policy per env. Types whose cost is
         a model (checkpoints) override it; weightless ones need not."""
         return None
+
+
+class ControlName(str):
+    """A control mode's name that can be called for itself: a config's `--policy.control` field holds one, so
+    `config.control` is the flag's value and `config.control()` the answer every PolicyConfig gives."""
+
+    def __call__(self) -> str:
+        return str(self)
+
+
+def control_field(config: PolicyConfig) -> None:
+    """Check a config's `control` field (the `--policy.control` flag) and make it callable (`ControlName`)."""
+    if config.control not in CONTROLS:
+        raise ValueError(f"unknown --policy.control={config.control!r}; allowed: {', '.join(CONTROLS)}")
+    config.control = ControlName(config.control)
+
+
+@dataclass
+class ControlledConfig(PolicyConfig):
+    """A policy type whose control mode is chosen with `--policy.control` (default joint)."""
+
+    # Control mode the policy acts in: joint (7 joint targets + gripper), ee_delta or ee_abs (end effector:
+    # position + axis-angle + gripper, LIBERO convention; docs/control.md).
+    control: str = "joint"  # type: ignore[assignment]  (a ControlName once validated: still callable)
+
+    def __post_init__(self) -> None:
+        control_field(self)
+        super().__post_init__()
+
+
+class JointPlanInEE:
+    """A policy that plans joint targets, acting in an end-effector control: each of its joint actions becomes
+    the EE action commanding the same pinch pose (`JointToEE`, from the observation's EE state)."""
+
+    def __init__(self, policy: Policy, model: mujoco.MjModel, control: str) -> None:
+        self.policy = policy
+        self.name = policy.name
+        self._to_ee = JointToEE(model, check_control(control))
+
+    def __getattr__(self, name: str) -> Any:  # failure_reason, episode_record, … are the policy's own
+        if name == "policy" or name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(self.policy, name)
+
+    def reset(self, episode: Episode) -> None:
+        self.policy.reset(episode)
+
+    def select_action(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        return self._to_ee(self.policy.select_action(observation), observation[EE_STATE_KEY])
+
+    def close(self) -> None:
+        self.policy.close()
 
 
 def registered_types() -> tuple[str, ...]:

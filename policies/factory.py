@@ -5,7 +5,7 @@ A config wrapped in the SGL (`policies.vlm.sgl.SGLConfig.wrap`) builds grounded 
 
 from __future__ import annotations
 
-from policies.base import AgentView, Policy, PolicyBatch, PolicyConfig
+from policies.base import AgentView, JointPlanInEE, Policy, PolicyBatch, PolicyConfig
 from roboview_data.tasks.env import TaskEnv
 
 
@@ -25,5 +25,11 @@ def make_policy(config: PolicyConfig, env: TaskEnv) -> Policy:
 
 
 def build_policy(config: PolicyConfig, view: AgentView | TaskEnv) -> Policy:
-    """`config`'s policy from an agent's view (a privileged type's from the env)."""
-    return config.build(view)
+    """`config`'s policy from an agent's view (a privileged type's from the env); one that plans joint targets acts
+    through `JointPlanInEE` when its control is an end-effector one."""
+    policy = config.build(view)
+    control = config.control()
+    if config.plans_joints and control != "joint":
+        model = view.model if isinstance(view, TaskEnv) else view.kinematic_model()
+        policy = JointPlanInEE(policy, model, control)
+    return policy

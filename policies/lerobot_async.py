@@ -71,12 +71,12 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import DEFAULT_CAMERAS, AgentView, Episode, PolicyConfig
+from policies.base import DEFAULT_CAMERAS, AgentView, ControlledConfig, Episode, PolicyConfig, control_field
 from policies.errors import InfraError, PolicyUnavailable
 from policies.lerobot_policy import CHUNKED_TYPES, checkpoint_image_size, is_chunked, load_config
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.tasks.env import EE_STATE_KEY, EE_STATE_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
 from roboview_data.workers import worker_rank
 
 log = logging.getLogger(__name__)
@@ -166,6 +166,12 @@ class _Spec:
     load_timeout_s: float
     reconnects: int
     reconnect_backoff_s: float
+    control: str = "joint"
+
+    @property
+    def state(self) -> tuple[str, tuple[str, ...]]:
+        """The observation key the state is read from and its entries' names (joint, or the EE state)."""
+        return (STATE_KEY, STATE_NAMES) if self.control == "joint" else (EE_STATE_KEY, EE_STATE_NAMES)
 
 
 class _ConnectionLost(Exception):
@@ -191,9 +197,10 @@ class LeRobotAsyncPolicy:
         self.tasks = [""] * slots
         self.queues: list[collections.deque] = [collections.deque() for _ in range(slots)]
         # The raw observation's features, as a LeRobot robot client describes its robot: one float per
-        # joint (→ observation.state in STATE_NAMES order) and one HxWx3 image per camera.
+        # joint (→ observation.state in STATE_NAMES order; EE_STATE_NAMES in an end-effector control) and one
+        # HxWx3 image per camera.
         side = spec.image_size
-        hw = {name: float for name in STATE_NAMES} | {cam: (side, side, 3) for cam in spec.cameras}
+        hw = {name: float for name in spec.state[1]} | {cam: (side, side, 3) for cam in spec.cameras}
         self.features = hw_to_dataset_features(hw, "observation", use_video=False)
         self.round_trips = 0  # chunks asked for (observations sent)
         self.round_trip_s = 0.0
@@ -298,9 +305,10 @@ class LeRobotAsyncPolicy:
         return {slot: self.queues[slot].popleft() for slot in observations}
 
     def raw_observation(self, observation: dict, task: str) -> dict[str, Any]:
-        """What a LeRobot robot client sends: joint values by name, images by camera name, the task."""
-        state = observation[STATE_KEY]
-        raw: dict[str, Any] = {name: float(state[i]) for i, name in enumerate(STATE_NAMES)}
+        """What a LeRobot robot client sends: joint (or EE state) values by name, images by camera name, the task."""
+        key, names = self.spec.state
+        state = observation[key]
+        raw: dict[str, Any] = {name: float(state[i]) for i, name in enumerate(names)}
         raw |= {cam: np.ascontiguousarray(observation[IMAGE_KEY.format(cam)]) for cam in self.spec.cameras}
         raw["task"] = task
         return raw
@@ -381,7 +389,7 @@ class LeRobotAsyncPolicy:
 
 @PolicyConfig.register_subclass("lerobot_async")
 @dataclass
-class LeRobotAsyncConfig(PolicyConfig):
+class LeRobotAsyncConfig(ControlledConfig):
     """A LeRobot checkpoint served by `python -m lerobot.async_inference.policy_server` (gRPC)."""
 
     # The server: HOST:PORT, or a comma-separated list (worker i talks to entry i mod n; one client per server).
@@ -413,6 +421,7 @@ class LeRobotAsyncConfig(PolicyConfig):
     doc = "a LeRobot checkpoint served by lerobot.async_inference.policy_server (--policy.server=HOST:PORT)"
 
     def __post_init__(self) -> None:
+        control_field(self)
         with flag_errors(f"--policy.server={self.server!r}"):
             servers = parse_servers(self.server)
         with flag_errors(f"--policy.device={self.device!r}"):
@@ -534,6 +543,7 @@ class LeRobotAsyncConfig(PolicyConfig):
             self.load_timeout_s,
             self.reconnects,
             self.reconnect_backoff_s,
+            str(self.control),
         )
 
     @property

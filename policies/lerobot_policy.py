@@ -5,6 +5,11 @@ Loaded the way `lerobot-eval` loads it: the config and weights through the polic
 tokenization). Our observation keys are the dataset's feature keys, so a policy trained on
 `pipelines.collect` demos needs no renaming; a checkpoint that wants a camera or a state/action
 shape this env cannot provide fails before any rollout with the mismatch spelled out.
+
+The control mode comes from the checkpoint: an 8-d action is joint targets; a 7-d one is end-effector
+control, ee_delta or ee_abs as the training dataset's `action` names say (read from the dataset that
+`train_config.json` names). An EE checkpoint gets the env's `observation.ee_state` as its
+`observation.state`, as its dataset recorded it.
 """
 
 from __future__ import annotations
@@ -12,18 +17,20 @@ from __future__ import annotations
 import collections
 import copy
 import functools
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from policies.base import AgentView, Episode, PolicyConfig
+from policies.base import AgentView, ControlName, Episode, PolicyConfig, control_field
 from policies.checkpoints import CheckpointError, checkpoint_dir
 from policies.devices import resolve_device
 from roboview_data.cli_errors import flag_errors
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.tasks.env import ACTION_NAMES, STATE_KEY, STATE_NAMES
+from roboview_data.sim.control import CONTROLS, EE_ACTION_NAMES, EE_CONTROLS
+from roboview_data.tasks.env import ACTION_NAMES, EE_STATE_KEY, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 
@@ -61,13 +68,49 @@ def check_features(config) -> None:
         else:
             problems.append(f"input {key!r} (env provides observation.images.<camera> and {STATE_KEY})")
     action = config.output_features.get("action")
-    if action is None or tuple(action.shape) != (len(ACTION_NAMES),):
+    if action is None or tuple(action.shape) not in ((len(ACTION_NAMES),), (EE_ACTION_DIMS,)):
         shape = None if action is None else tuple(action.shape)
         problems.append(
-            f"action shape {shape} (env expects ({len(ACTION_NAMES)},): 7 joint targets + gripper)"
+            f"action shape {shape} (env expects ({len(ACTION_NAMES)},): 7 joint targets + gripper, or "
+            f"({EE_ACTION_DIMS},): end-effector pose + gripper)"
         )
     if problems:
         raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
+
+
+EE_ACTION_DIMS = 7
+
+
+def dataset_action_names(root: Path) -> list[str] | None:
+    """The `action` feature names of the dataset a checkpoint was trained on (its `train_config.json` names the
+    dataset: a local root, or a repo id in LeRobot's cache); None when that dataset cannot be read here."""
+    train_config = root / "train_config.json"
+    if not train_config.is_file():
+        return None
+    dataset = json.loads(train_config.read_text()).get("dataset") or {}
+    candidates = []
+    if dataset.get("root"):
+        candidates.append(Path(dataset["root"]))
+    if dataset.get("repo_id"):
+        from lerobot.utils.constants import HF_LEROBOT_HOME
+
+        candidates.append(Path(HF_LEROBOT_HOME) / str(dataset["repo_id"]))
+    for candidate in candidates:
+        info = candidate / "meta" / "info.json"
+        if info.is_file():
+            names = json.loads(info.read_text()).get("features", {}).get("action", {}).get("names")
+            return list(names) if isinstance(names, list) else None
+    return None
+
+
+def checkpoint_control(path: str | None) -> str | None:
+    """The control a checkpoint acts in: joint for an 8-d action; for a 7-d one the EE control whose action
+    names its training dataset records (None when that dataset cannot be read here)."""
+    root, config = load_config(path)
+    if tuple(config.output_features["action"].shape) == (len(ACTION_NAMES),):
+        return "joint"
+    names = dataset_action_names(root)
+    return next((c for c in EE_CONTROLS if names == list(EE_ACTION_NAMES[c])), None)
 
 
 def checkpoint_image_size(path: str | None) -> int | None:
@@ -116,7 +159,7 @@ class LeRobotPolicy:
 
     failure_reason = ""
 
-    def __init__(self, path: str, device: str, slots: int = 1) -> None:
+    def __init__(self, path: str, device: str, slots: int = 1, control: str = "joint") -> None:
         import torch
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
@@ -133,6 +176,8 @@ class LeRobotPolicy:
             preprocessor_overrides={"device_processor": {"device": device}},
         )
         self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
+        # An end-effector checkpoint was trained on the EE state as its observation.state.
+        self.state_key = STATE_KEY if control == "joint" else EE_STATE_KEY
         # Chunked: the adapter pops the chunk itself (observations read once per chunk, slots batched).
         self.chunked = is_chunked(config) and hasattr(self.policy, "predict_action_chunk")
         self.n_action_steps = int(getattr(config, "n_action_steps", 1))
@@ -159,7 +204,7 @@ class LeRobotPolicy:
     def _batch(self, observations: list[dict], tasks: list[str]) -> dict:
         torch = self._torch
         batch = {
-            STATE_KEY: torch.from_numpy(np.stack([o[STATE_KEY] for o in observations])).float(),
+            STATE_KEY: torch.from_numpy(np.stack([o[self.state_key] for o in observations])).float(),
             "task": tasks,
         }
         for key in self.image_keys:
@@ -218,6 +263,9 @@ class LeRobotConfig(PolicyConfig):
     path: str | None = None
     # Device: auto (CUDA when present), cpu or cuda.
     device: str = "auto"
+    # Control mode: empty to read it from the checkpoint (8-d action: joint; 7-d: ee_delta or ee_abs, from its
+    # training dataset's action names); name it (ee_delta / ee_abs) for a 7-d checkpoint whose dataset is not here.
+    control: str = ""  # type: ignore[assignment]  (a ControlName once resolved: still callable)
 
     doc = "any LeRobot checkpoint (--policy.path=DIR)"
 
@@ -226,7 +274,33 @@ class LeRobotConfig(PolicyConfig):
             load_config(self.path)  # missing or mismatched checkpoints fail before any rollout
         with flag_errors(f"--policy.device={self.device!r}"):
             resolve_device(self.device)
+        self._resolve_control()
         super().__post_init__()
+
+    def _resolve_control(self) -> None:
+        if isinstance(self.control, ControlName):  # resolved already (a copy of a checked config)
+            return
+        given = self.control
+        if given and given not in CONTROLS:
+            raise ValueError(f"unknown --policy.control={given!r}; allowed: {', '.join(CONTROLS)}")
+        found = checkpoint_control(self.path)
+        if given and found and given != found:
+            raise ValueError(
+                f"--policy.control={given!r} but the checkpoint {self.path} acts in {found!r} (its action "
+                "shape and its dataset's action names); drop the flag"
+            )
+        if not given and found is None:
+            raise ValueError(
+                f"the checkpoint {self.path} acts in end-effector space (7-d action) but its training dataset "
+                f"(named in train_config.json) is not here to say which: pass --policy.control="
+                f"{' or --policy.control='.join(EE_CONTROLS)}"
+            )
+        if given == "joint" and found is None:
+            raise ValueError(
+                f"--policy.control='joint' but the checkpoint {self.path} has a 7-d (end-effector) action"
+            )
+        self.control = given or found
+        control_field(self)
 
     @property
     def checkpoint(self) -> str | None:
@@ -239,7 +313,7 @@ class LeRobotConfig(PolicyConfig):
         return checkpoint_image_size(self.path)
 
     def build(self, view: AgentView) -> LeRobotPolicy:
-        return LeRobotPolicy(self.path, self.device)
+        return LeRobotPolicy(self.path, self.device, control=self.control())
 
     def batchable(self) -> bool:
         return is_chunked(load_config(self.path)[1])
@@ -251,4 +325,4 @@ class LeRobotConfig(PolicyConfig):
                 load_config(self.path)[1].type,
             )
             return None
-        return LeRobotPolicy(self.path, self.device, slots)
+        return LeRobotPolicy(self.path, self.device, slots, control=self.control())

@@ -51,10 +51,11 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import AgentView, Episode, PolicyConfig
+from policies.base import AgentView, ControlledConfig, Episode, PolicyConfig, control_field
 from policies.errors import InfraError, PolicyUnavailable
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.tasks.env import ACTION_NAMES, DEPTH_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.sim.control import EE_ACTION_NAMES
+from roboview_data.tasks.env import ACTION_NAMES, DEPTH_KEY, EE_STATE_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
 from roboview_data.workers import worker_rank
 
 log = logging.getLogger(__name__)
@@ -67,6 +68,7 @@ GRIPPER_MODES = ("continuous", "binary")
 ROBOVIEW_KEY = "roboview"
 EPISODE_KEY = "roboview/episode"
 WIRE_DIMS = len(ACTION_NAMES)  # 7 joints + gripper
+EE_WIRE_DIMS = len(EE_ACTION_NAMES["ee_delta"])  # end-effector pose (6) + gripper
 _SLICE = re.compile(r"^state\[(\d*):(\d*)\]$")
 
 
@@ -100,18 +102,20 @@ class WireFormat:
     def depth_cameras(self) -> tuple[str, ...]:
         return tuple(src.split(":", 1)[1] for _, src in self.entries if src.startswith("depth:"))
 
-    def encode(self, observation: dict, instruction: str) -> dict:
-        """The request for one observation (only the cameras named are read, so only those render)."""
+    def encode(self, observation: dict, instruction: str, state_key: str = STATE_KEY) -> dict:
+        """The request for one observation (only the cameras named are read, so only those render); `state`
+        sources read `state_key` (the EE state for an end-effector control)."""
         request: dict[str, Any] = {}
         for path, src in self.entries:
             node = request
             for key in path[:-1]:
                 node = node.setdefault(key, {})
-            node[path[-1]] = _read(observation, src, instruction)
+            node[path[-1]] = _read(observation, src, instruction, state_key)
         return request
 
-    def decode(self, request: dict, image_size: int) -> tuple[dict, str]:
-        """(RoboView observation, instruction) from a request; a missing key or a wrong image size is named."""
+    def decode(self, request: dict, image_size: int, state_key: str = STATE_KEY) -> tuple[dict, str]:
+        """(RoboView observation, instruction) from a request; a missing key or a wrong image size is named. The
+        state goes under `state_key` (the EE state's key for a policy acting in an end-effector control)."""
         obs: dict[str, np.ndarray] = {}
         state = np.full(len(STATE_NAMES), np.nan, np.float32)
         instruction = ""
@@ -146,7 +150,7 @@ class WireFormat:
                 f"the {self.name} layout leaves state entries {np.flatnonzero(np.isnan(state)).tolist()} "
                 f"unset (RoboView's state is {len(STATE_NAMES)}: {', '.join(STATE_NAMES)})"
             )
-        obs[STATE_KEY] = state
+        obs[state_key] = state
         return obs, instruction
 
 
@@ -158,12 +162,12 @@ def _state_range(src: str) -> tuple[int, int]:
     return lo, hi
 
 
-def _read(observation: dict, src: str, instruction: str):
+def _read(observation: dict, src: str, instruction: str, state_key: str = STATE_KEY):
     if src == "instruction":
         return instruction
     if src.startswith("state"):
         lo, hi = _state_range(src)
-        return np.asarray(observation[STATE_KEY], np.float32)[lo:hi].copy()
+        return np.asarray(observation[state_key], np.float32)[lo:hi].copy()
     kind, cam = src.split(":", 1)
     if kind == "depth":
         return np.ascontiguousarray(observation[DEPTH_KEY.format(cam)], np.float32)
@@ -357,6 +361,10 @@ class OpenPIPolicy:
         self.url = urls[worker_rank() % len(urls)]
         self.format = config.wire_format()
         self.dt = 1.0 / view.fps
+        self.joint = config.control() == "joint"
+        # What the model reads as its state and answers: joints, or (end-effector control) the EE state and pose.
+        self.state_key = STATE_KEY if self.joint else EE_STATE_KEY
+        self.action_dims = WIRE_DIMS if self.joint else EE_WIRE_DIMS
         self.name = f"openpi:{config.obs_format}"
         self.failure_reason = ""
         self.queue: collections.deque = collections.deque()
@@ -396,7 +404,7 @@ class OpenPIPolicy:
 
         if self.conn is None:
             self._connect()
-        request = self.format.encode(observation, self.instruction)
+        request = self.format.encode(observation, self.instruction, self.state_key)
         if self.pending_episode is not None:
             request[EPISODE_KEY] = self.pending_episode
         try:
@@ -434,12 +442,17 @@ class OpenPIPolicy:
         if (
             chunk.ndim != 2
             or chunk.shape[0] < 1
-            or chunk.shape[1] != WIRE_DIMS
+            or chunk.shape[1] != self.action_dims
             or not np.isfinite(chunk).all()
         ):
+            meaning = (
+                f"7 joint {self.config.action_space}s + gripper"
+                if self.joint
+                else f"{self.config.control()} end-effector pose + gripper"
+            )
             raise ProtocolError(
                 f"openpi server {self.url} answered actions of shape {np.shape(actions)}; RoboView "
-                f"takes (H, {WIRE_DIMS}) finite values: 7 joint {self.config.action_space}s + gripper"
+                f"takes (H, {self.action_dims}) finite values: {meaning}"
             )
         steps = self.config.replan_steps or len(chunk)
         return chunk[:steps]
@@ -450,8 +463,11 @@ class OpenPIPolicy:
         action = self.queue.popleft().copy()
         if self.config.action_space == "joint_velocity":  # rad/s, integrated over one control period
             action[:7] = np.asarray(observation[STATE_KEY], np.float32)[:7] + action[:7] * self.dt
-        if self.config.gripper == "binary":
-            action[7] = 1.0 if action[7] > 0.5 else 0.0
+        if self.config.gripper == "binary":  # joint: 0 open … 1 closed; EE: −1 open … +1 close
+            if self.joint:
+                action[7] = 1.0 if action[7] > 0.5 else 0.0
+            else:
+                action[6] = 1.0 if action[6] > 0.0 else -1.0
         return action
 
     def episode_record(self) -> dict:
@@ -465,7 +481,7 @@ class OpenPIPolicy:
 
 @PolicyConfig.register_subclass("openpi")
 @dataclass
-class OpenPIConfig(PolicyConfig):
+class OpenPIConfig(ControlledConfig):
     """A policy behind openpi's websocket protocol (openpi's serve_policy.py, pipelines.serve_policy, …)."""
 
     # ws://HOST:PORT of the server; a comma-separated list spreads workers over several (worker i → entry i mod n).
@@ -483,10 +499,12 @@ class OpenPIConfig(PolicyConfig):
     send_depth: bool = False
     # Actions used from each chunk before asking again; 0: the whole chunk (openpi's LIBERO example uses 5, DROID 8).
     replan_steps: int = 0
-    # What the server's actions are: joint_position (targets, RoboView's action) or joint_velocity (rad/s,
-    # integrated at the control rate from the observed joints).
+    # What the server's actions are with --policy.control=joint: joint_position (targets, RoboView's action) or
+    # joint_velocity (rad/s, integrated at the control rate from the observed joints). With an end-effector
+    # control the model reads the EE state as its state and answers 7-d EE actions.
     action_space: str = "joint_position"
-    # Gripper action: continuous (as sent; the env clips it to 0 open … 1 closed) or binary (closed above 0.5).
+    # Gripper action: continuous (as sent; the env clips it to 0 open … 1 closed, or −1 … +1 in EE controls) or
+    # binary (closed above 0.5; in EE controls above 0).
     gripper: str = "continuous"
     # Name of the environment variable holding the API key (sent as `Authorization: Api-Key …`; never recorded).
     api_key_env: str = "OPENPI_API_KEY"
@@ -502,6 +520,7 @@ class OpenPIConfig(PolicyConfig):
     doc = "a policy served over openpi's websocket protocol (--policy.url=ws://HOST:PORT)"
 
     def __post_init__(self) -> None:
+        control_field(self)
         if not self.url_list:
             raise ValueError(
                 "--policy.url is required: ws://HOST:PORT of the openpi server (comma-separated for several)"
@@ -517,6 +536,11 @@ class OpenPIConfig(PolicyConfig):
         ):
             if value not in allowed:
                 raise ValueError(f"unknown --policy.{name}={value!r}; allowed: {', '.join(allowed)}")
+        if self.control != "joint" and self.action_space != "joint_position":
+            raise ValueError(
+                f"--policy.action_space={self.action_space!r} is a joint action; with --policy.control="
+                f"{self.control} the server answers end-effector actions (leave --policy.action_space unset)"
+            )
         unknown = [c for c in self.camera_list if c not in ALL_CAMERAS]
         if unknown or not self.camera_list:
             raise ValueError(

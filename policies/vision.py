@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from policies.base import AgentView, Episode, PolicyConfig
+from policies.base import AgentView, ControlledConfig, Episode, PolicyConfig
 from policies.perception import Perception, PerceptionError, perceive
 from roboview_data.sim.cameras import ALL_CAMERAS, CameraPose
 from roboview_data.sim.motion import PickPlacePlanner
@@ -33,13 +33,14 @@ DEFAULT_CAMERA = "front"
 
 @PolicyConfig.register_subclass("vision")
 @dataclass
-class VisionConfig(PolicyConfig):
+class VisionConfig(ControlledConfig):
     """Colour-based RGB-D perception of one scene camera, then the expert's motion."""
 
     # Scene camera the policy looks through (front, left_top, right_top or wrist).
     camera: str = DEFAULT_CAMERA
 
     depth = True
+    plans_joints = True
     doc = "classic colour-based RGB-D perception of one camera (--policy.camera=front) + scripted motion"
 
     def __post_init__(self) -> None:

@@ -129,6 +129,27 @@ def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
     assert evaluate(bench, out, splits="color,dist_scale", limit=2, repeats=2).new_episodes == 0
 
 
+def test_end_effector_control_runs_and_is_recorded(bench, tmp_path):
+    """`--policy.control=ee_delta`: envs made in it, the expert succeeds through it, run.json and provenance record
+    it, and a resume asking for another control is refused."""
+    from eval.running import provenance
+    from eval.running.results import ResultsError
+
+    out = tmp_path / "ee"
+    cfg = EvaluateConfig(
+        BenchmarkConfig(str(bench), "color"),
+        policy_config("expert", control="ee_delta"),
+        EvalConfig(n_repeats=1, limit=2, num_workers=1, image_size=64),
+        str(out),
+    )
+    result = run(cfg)
+    assert result.new_episodes == 2 and rows(out)["success"].all()
+    assert json.loads((out / "run.json").read_text())["control"] == "ee_delta"
+    assert provenance.read(out)[-1]["control"] == "ee_delta"
+    with pytest.raises(ResultsError, match="control: existing 'ee_delta' vs requested 'joint'"):
+        evaluate(bench, out, splits="color", limit=2, workers=1)
+
+
 def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path):
     evaluate(bench, tmp_path / "local", splits="color,camera_pose", limit=1, repeats=2)
     evaluate(bench, tmp_path / "ray", splits="color,camera_pose", limit=1, repeats=2, backend="ray")

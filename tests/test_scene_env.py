@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from roboview_data.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
-from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY, baseline_instance
+from roboview_data.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY, baseline_instance
 from roboview_data.tasks.pick_place import PickPlaceEnv
 from roboview_data.variation.colors import COLORS
 from roboview_data.variation.factors import FACTORS, baselines
@@ -96,7 +96,8 @@ def test_reset_is_deterministic_and_seeded():
 def test_observation_and_action_spaces(env):
     obs, info = env.reset(options={"instance": baseline_instance()})
     assert set(obs) == {IMAGE_KEY.format(c) for c in ("front", "left_top", "right_top", "wrist")} | {
-        STATE_KEY
+        STATE_KEY,
+        EE_STATE_KEY,
     }
     assert obs[STATE_KEY].shape == (8,) and env.action_space.shape == (8,)
     assert info["task"] == baselines()["instruction"]

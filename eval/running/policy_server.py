@@ -115,7 +115,9 @@ def serve(
 ) -> None:
     """The server process: build the batched policy once, then answer requests until ("stop",)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    policy = config.build_batched(AgentView.of_task(task, cameras, image_size), slots)
+    policy = config.build_batched(
+        AgentView.of_task(task, cameras, image_size, control=config.control()), slots
+    )
     if not isinstance(policy, ChunkPredictor):
         raise SystemExit(f"policy type {config.type!r} cannot be served (no batched chunk prediction)")
     while True:

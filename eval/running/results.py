@@ -39,6 +39,8 @@ from roboview_data.folders import folder_problem
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
 RUN_FILE = "run.json"
+# run.json keys added later, with the value every run written before them had (a resume of such a run matches).
+RUN_DEFAULTS = {"control": "joint"}
 VERSION_KEY = "roboview_benchmark_version"  # parquet metadata key: the benchmark version a results file ran
 FORMAT_KEY = b"roboview_results_format"
 # 2: episode seeds from (context_id, repeat), shared by every value of a context (common random
@@ -80,9 +82,9 @@ class EpisodeStore:
                     "context and repeat) and never mixes the two: choose a new folder"
                 )
             diffs = [
-                f"{k}: existing {previous.get(k)!r} vs requested {v!r}"
+                f"{k}: existing {previous.get(k, RUN_DEFAULTS.get(k))!r} vs requested {v!r}"
                 for k, v in self.run_info.items()
-                if previous.get(k) != v
+                if previous.get(k, RUN_DEFAULTS.get(k)) != v
             ]
             if diffs:
                 raise ResultsError(

@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from policies.base import PolicyConfig
+from policies.base import ControlledConfig
 from policies.perception import (
     ELONGATED_ASPECT,
     TOP_FACE_BAND,
@@ -25,7 +25,7 @@ MIN_POINTS = 4
 
 
 @dataclass
-class VLMConfig(PolicyConfig):
+class VLMConfig(ControlledConfig):
     """An agent that asks an OpenAI-compatible chat-completions endpoint about its camera image."""
 
     # The VLM endpoint the agent asks (--policy.endpoint.base_url, --policy.endpoint.model, ...).
@@ -34,6 +34,7 @@ class VLMConfig(PolicyConfig):
     camera: str = "front"
 
     depth = True
+    plans_joints = True
     # The endpoint's settings were once flags of their own: --policy.model still means
     # --policy.endpoint.model.
     flag_aliases: ClassVar[dict[str, str]] = endpoint_aliases()

@@ -21,7 +21,7 @@ import pandas as pd
 
 from roboview_data.demos.recorder import DemoEpisode
 from roboview_data.folders import folder_problem
-from roboview_data.tasks.env import ACTION_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
+from roboview_data.tasks.env import EE_STATE_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES, action_names
 from roboview_data.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -55,10 +55,17 @@ class CollectionSignature:
     max_steps: int
     randomize: tuple[str, ...] = ()  # collections made before randomization existed had none
     task: str = DEFAULT_TASK  # collections made before the task axis were pick_place
+    control: str = "joint"  # collections made before end-effector control were joint
 
 
-def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
-    """LeRobot features: one video per camera, 8-d state and 8-d action (docs/benchmark.md, "The task and its interfaces")."""
+def state_names(control: str) -> tuple[str, ...]:
+    """The names of a collection's `observation.state` entries: the joints, or the EE state for an EE control."""
+    return STATE_NAMES if control == "joint" else EE_STATE_NAMES
+
+
+def demo_features(cameras: tuple[str, ...], image_size: int, control: str = "joint") -> dict[str, dict]:
+    """LeRobot features: one video per camera, 8-d state and the control's action, named (docs/benchmark.md, "The
+    task and its interfaces"; docs/control.md)."""
     features = {
         IMAGE_KEY.format(cam): {
             "dtype": "video",
@@ -67,8 +74,9 @@ def demo_features(cameras: tuple[str, ...], image_size: int) -> dict[str, dict]:
         }
         for cam in cameras
     }
-    features[STATE_KEY] = {"dtype": "float32", "shape": (len(STATE_NAMES),), "names": list(STATE_NAMES)}
-    features["action"] = {"dtype": "float32", "shape": (len(ACTION_NAMES),), "names": list(ACTION_NAMES)}
+    states, actions = state_names(control), action_names(control)
+    features[STATE_KEY] = {"dtype": "float32", "shape": (len(states),), "names": list(states)}
+    features["action"] = {"dtype": "float32", "shape": (len(actions),), "names": list(actions)}
     return features
 
 
@@ -145,7 +153,7 @@ def _append_only_files(root: Path) -> list[str]:
 CARD = "README.md"
 
 
-def write_card(root: Path, repo_id: str, task: str, provenance_rows: int) -> Path:
+def write_card(root: Path, repo_id: str, task: str, provenance_rows: int, control: str = "joint") -> Path:
     """The dataset card (README.md), LeRobot's own template (`create_lerobot_dataset_card`, what its push writes)
     filled with what RoboView knows: how the demos were made and what they do not vary."""
     from lerobot.datasets.io_utils import load_info
@@ -162,7 +170,8 @@ def write_card(root: Path, repo_id: str, task: str, provenance_rows: int) -> Pat
         f"measured for visual bias on the RoboView-Bias benchmark.\n\n"
         f"- Episodes: {info['total_episodes']} ({info['total_frames']} frames at {info['fps']} fps)\n"
         f"- Cameras: {', '.join(cameras)} ({info['features'][IMAGE_KEY.format(cameras[0])]['shape'][0]} px square)\n"
-        f"- `observation.state`: {', '.join(STATE_NAMES)}; `action`: {', '.join(ACTION_NAMES)}\n"
+        f"- Control: `{control}`; `observation.state`: {', '.join(state_names(control))}; `action`: "
+        f"{', '.join(action_names(control))}\n"
         f"- Per-episode provenance (instance, context, seed): `{PROVENANCE_FILE.as_posix()}` "
         f"({provenance_rows} rows)"
     )

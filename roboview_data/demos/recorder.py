@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from roboview_data.tasks import DEFAULT_TASK, load_task, make_env
-from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.variation.factors import context_factors
 from roboview_data.variation.instances import TaskInstance, seed_from_text
 from roboview_data.variation.randomization import Randomization, sample_randomization
@@ -44,8 +44,8 @@ class DemoEpisode:
     steps: int
     duration_s: float
     images: dict[str, np.ndarray] = field(default_factory=dict)  # camera -> (T, H, W, 3) uint8
-    states: np.ndarray | None = None  # (T, 8) float32
-    actions: np.ndarray | None = None  # (T, 8) float32
+    states: np.ndarray | None = None  # (T, 8) float32: joints, or the EE state in an end-effector control
+    actions: np.ndarray | None = None  # (T, 8) float32 joint actions, or (T, 7) EE actions
     visuals: Randomization | None = None  # the object color and camera poses the frames show
     randomized: tuple[str, ...] = ()
 
@@ -73,12 +73,17 @@ class DemoCollector:
         max_steps: int,
         randomize: tuple[str, ...] = (),
         task: str = DEFAULT_TASK,
+        control: str = "joint",
     ) -> None:
         self.seed = seed
         self.randomize = randomize
         self.task = task
-        self.env = make_env(task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps)
-        self.expert = load_task(task).make_expert(self.env)
+        self.env = make_env(
+            task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps, control=control
+        )
+        self.expert = load_task(task).make_expert(self.env)  # its actions are in the env's control
+        # The state recorded with each action: the one the control's policies read (LIBERO-style for EE).
+        self.state_key = STATE_KEY if control == "joint" else EE_STATE_KEY
 
     def run(self, attempt: int) -> DemoEpisode:
         start = time.perf_counter()
@@ -97,7 +102,7 @@ class DemoCollector:
             action = self.expert.select_action(obs)
             for cam in self.env.cameras:
                 frames[cam].append(obs[IMAGE_KEY.format(cam)])
-            states.append(obs[STATE_KEY])
+            states.append(obs[self.state_key])
             actions.append(action)
             obs, _, success, truncated, _ = self.env.step(action)
             if success or truncated:

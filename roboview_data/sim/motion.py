@@ -3,8 +3,9 @@
 `PickPlacePlanner.plan` takes an object pose (center, heading, rotational symmetry) and where to
 release it, and lays out the gripper's pinch-point path through fixed waypoints (hover, descend, close,
 lift, carry, lower, open, retreat), each segment interpolated with a minimum-jerk profile. Each
-`next_action` solves inverse kinematics (position + "pointing down at yaw ψ") on a scratch
-`MjData`, so it emits exactly the env's action: 7 joint targets + gripper command. It never reads
+`next_action` solves inverse kinematics (position + "pointing down at yaw ψ"; `ArmIK`, which the
+end-effector controller of roboview_data.sim.control shares) on a scratch `MjData`, so it emits exactly
+the joint action: 7 joint targets + gripper command. It never reads
 the simulator's object state: whoever calls `plan` decides where the object is — a task's privileged
 expert (roboview_data.tasks) from ground truth, the `vision` policy from perception.
 """
@@ -45,22 +46,71 @@ def _min_jerk(s: float) -> float:
     return s**3 * (10 - 15 * s + 6 * s * s)
 
 
+class ArmIK:
+    """Damped-least-squares inverse kinematics of the pinch point, on a scratch `MjData` of `model`.
+
+    Each iteration takes the pinch site's Jacobian (`mj_jacSite`) and steps
+    dq = Jᵀ (J Jᵀ + λI)⁻¹ e toward the 6-d pose error e, plus a gentle pull toward the home posture in the
+    Jacobian's null space so the redundant elbow does not drift; the joints are clipped to their range
+    (1 mrad inside it) after every step. It never touches the simulation's own data.
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)
+        ids = SceneIds.lookup(model)
+        self._qadr, self._dof, self._site = ids.arm_qpos, ids.arm_dof, ids.pinch_site
+        self._jac_p = np.zeros((3, model.nv))
+        self._jac_r = np.zeros((3, model.nv))
+        lo_hi = ids.arm_range
+        self.q_lo, self.q_hi = lo_hi[:, 0] + 1e-3, lo_hi[:, 1] - 1e-3
+        # Orientation of the pinch site at the home pose (pointing straight down, yaw 0).
+        self.home_rotation = self.pinch_pose(HOME_QPOS)[1]
+
+    def pinch_pose(self, arm_qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World position and 3×3 rotation of the pinch site for a joint reading (forward kinematics)."""
+        self.data.qpos[self._qadr] = arm_qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        return self.data.site_xpos[self._site].copy(), self.data.site_xmat[self._site].reshape(3, 3).copy()
+
+    def solve(
+        self,
+        target: np.ndarray,
+        r_target: np.ndarray,
+        q0: np.ndarray,
+        iters: int = 30,
+        damping: float = 1e-4,
+    ) -> np.ndarray:
+        """Arm joints (7) putting the pinch site at `target` (world, m) with rotation `r_target` (3×3, world),
+        iterated from `q0`; stops early within 0.1 mm and 1 mrad."""
+        data, q = self.data, q0.copy()
+        for _ in range(iters):
+            data.qpos[self._qadr] = q
+            mujoco.mj_kinematics(self.model, data)
+            mujoco.mj_comPos(self.model, data)
+            r_now = data.site_xmat[self._site].reshape(3, 3)
+            err_p = target - data.site_xpos[self._site]
+            err_r = 0.5 * sum(np.cross(r_now[:, i], r_target[:, i]) for i in range(3))
+            err = np.concatenate([err_p, err_r])
+            if np.linalg.norm(err_p) < 1e-4 and np.linalg.norm(err_r) < 1e-3:
+                break
+            mujoco.mj_jacSite(self.model, data, self._jac_p, self._jac_r, self._site)
+            jac = np.vstack([self._jac_p[:, self._dof], self._jac_r[:, self._dof]])
+            dq = jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(6), err)
+            # Pull gently toward the home posture in the null space to avoid drifting elbows.
+            null = np.eye(7) - np.linalg.pinv(jac) @ jac
+            dq += null @ (0.05 * (HOME_QPOS - q))
+            q = np.clip(q + dq, self.q_lo, self.q_hi)
+        return q
+
+
 class PickPlacePlanner:
     """Plans a grasp-carry-release path for a given object pose and follows it, one action per step."""
 
     def __init__(self, model: mujoco.MjModel) -> None:
         self.model = model  # the robot's kinematics: the scene compiled at defaults is enough
-        self._scratch = mujoco.MjData(model)
-        ids = SceneIds.lookup(model)
-        self._qadr, self._dof, self._site = ids.arm_qpos, ids.arm_dof, ids.pinch_site
-        self._jac_p = np.zeros((3, self.model.nv))
-        self._jac_r = np.zeros((3, self.model.nv))
-        lo_hi = ids.arm_range
-        self._q_lo, self._q_hi = lo_hi[:, 0] + 1e-3, lo_hi[:, 1] - 1e-3
-        # Orientation of the pinch site at the home pose (pointing straight down, yaw 0).
-        self._scratch.qpos[self._qadr] = HOME_QPOS
-        mujoco.mj_kinematics(self.model, self._scratch)
-        self._r_home = self._scratch.site_xmat[self._site].reshape(3, 3).copy()
+        self.ik = ArmIK(model)
+        self._r_home = self.ik.home_rotation
         self._home_finger_yaw = float(np.arctan2(self._r_home[1, 1], self._r_home[0, 1]))
         self._plan: list[tuple[np.ndarray, float, float]] = []
         self._t = 0
@@ -115,9 +165,7 @@ class PickPlacePlanner:
 
     def pinch_position(self, arm_qpos: np.ndarray) -> np.ndarray:
         """Where the pinch point is for a joint reading (forward kinematics on the scratch data)."""
-        self._scratch.qpos[self._qadr] = arm_qpos
-        mujoco.mj_kinematics(self.model, self._scratch)
-        return self._scratch.site_xpos[self._site].copy()
+        return self.ik.pinch_pose(arm_qpos)[0]
 
     def follow(self, segments: list[Segment], start: np.ndarray, q_start: np.ndarray) -> None:
         """Lay out `segments` from `start` (pinch point) and `q_start` (arm joints), min-jerk each."""
@@ -138,26 +186,7 @@ class PickPlacePlanner:
         self._q = self._solve_ik(target, yaw, self._q)
         return np.append(self._q, grip).astype(np.float32)
 
-    def _solve_ik(self, target: np.ndarray, yaw: float, q0: np.ndarray, iters: int = 30) -> np.ndarray:
+    def _solve_ik(self, target: np.ndarray, yaw: float, q0: np.ndarray) -> np.ndarray:
         c, s = np.cos(yaw), np.sin(yaw)
         r_target = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ self._r_home
-        data, q = self._scratch, q0.copy()
-        damping = 1e-4
-        for _ in range(iters):
-            data.qpos[self._qadr] = q
-            mujoco.mj_kinematics(self.model, data)
-            mujoco.mj_comPos(self.model, data)
-            r_now = data.site_xmat[self._site].reshape(3, 3)
-            err_p = target - data.site_xpos[self._site]
-            err_r = 0.5 * sum(np.cross(r_now[:, i], r_target[:, i]) for i in range(3))
-            err = np.concatenate([err_p, err_r])
-            if np.linalg.norm(err_p) < 1e-4 and np.linalg.norm(err_r) < 1e-3:
-                break
-            mujoco.mj_jacSite(self.model, data, self._jac_p, self._jac_r, self._site)
-            jac = np.vstack([self._jac_p[:, self._dof], self._jac_r[:, self._dof]])
-            dq = jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(6), err)
-            # Pull gently toward the home posture in the null space to avoid drifting elbows.
-            null = np.eye(7) - np.linalg.pinv(jac) @ jac
-            dq += null @ (0.05 * (HOME_QPOS - q))
-            q = np.clip(q + dq, self._q_lo, self._q_hi)
-        return q
+        return self.ik.solve(target, r_target, q0)

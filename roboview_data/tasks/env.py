@@ -22,6 +22,19 @@ import numpy as np
 
 from roboview_data.errors import RenderError
 from roboview_data.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, check_image_size
+from roboview_data.sim.control import (
+    CONTROLS as CONTROLS,  # re-exported: the control modes a TaskEnv takes
+)
+from roboview_data.sim.control import (
+    EE_ACTION_NAMES,
+    EE_CONTROLS,
+    EE_STATE_NAMES,
+    EEController,
+    EndEffector,
+    JointToEE,
+    check_control,
+    ee_action_space_bounds,
+)
 from roboview_data.sim.motion import PickPlacePlanner, yaw_of
 from roboview_data.sim.observation import LazyObservation
 from roboview_data.sim.scene import (
@@ -52,6 +65,8 @@ ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close"
 IMAGE_KEY = "observation.images.{}"
 DEPTH_KEY = "observation.depth.{}"
 STATE_KEY = "observation.state"
+# The end-effector state (8: EE_STATE_NAMES), in every control mode's observations.
+EE_STATE_KEY = "observation.ee_state"
 
 # Per-episode jitter drawn from the episode seed (kept small so the named position stays meaningful).
 POSITION_JITTER_M = 0.01
@@ -60,6 +75,11 @@ YAW_JITTER_RAD = 0.35
 REST_SPEED = 0.05
 UNSTABLE_REASON = "simulation unstable"
 RELEASED_GRIPPER = 0.25
+
+
+def action_names(control: str) -> tuple[str, ...]:
+    """The names of a control mode's action entries (a dataset's `action` feature names)."""
+    return ACTION_NAMES if check_control(control) == "joint" else EE_ACTION_NAMES[control]
 
 
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
@@ -74,14 +94,19 @@ class TaskEnv(gym.Env):
 
     **Observations** (keys are the LeRobot dataset's feature keys): ``observation.images.<camera>``
     uint8 H×W×3 for each requested camera (``front``, ``left_top``, ``right_top``, ``wrist``),
-    optionally ``observation.depth.<camera>`` float32 H×W metres, and ``observation.state`` float32
-    (8,) = 7 arm joint positions (rad) + gripper closure (0 open … 1 closed).
+    optionally ``observation.depth.<camera>`` float32 H×W metres, ``observation.state`` float32
+    (8,) = 7 arm joint positions (rad) + gripper closure (0 open … 1 closed), and
+    ``observation.ee_state`` float32 (8,) = pinch-point position (m) + orientation axis-angle (rad), both
+    in the robot base frame, + the two finger openings (m) (`roboview_data.sim.control`).
 
-    **Actions** float32 (8,): absolute target positions (rad) of the 7 arm joints, tracked by joint
-    position servos, and the gripper command (0 open … 1 closed), held for one control period
-    (1/fps s). Should MuJoCo find the simulation unstable (NaN/Inf accelerations, after which it
-    resets the state on its own), the step truncates the episode with
-    ``info["failure_reason"] == "simulation unstable"``.
+    **Actions** (`control`): ``joint`` float32 (8,): absolute target positions (rad) of the 7 arm joints,
+    tracked by joint position servos, and the gripper command (0 open … 1 closed), held for one control
+    period (1/fps s). ``ee_delta`` float32 (7,) in [-1, 1]: pinch-point position delta × 0.05 m and
+    axis-angle rotation delta × 0.5 rad (base frame, from the current pose), gripper +1 close / −1 open;
+    ``ee_abs`` float32 (7,): target pinch position (m) and axis-angle (rad), base frame, and the gripper.
+    Both end-effector modes become joint targets through inverse kinematics (`EEController`). Should
+    MuJoCo find the simulation unstable (NaN/Inf accelerations, after which it resets the state on its
+    own), the step truncates the episode with ``info["failure_reason"] == "simulation unstable"``.
 
     **Randomizations** — the instance fixes every factor (the visual ones: object color, camera
     pose / Euler perturbation / distance, …; the task's context: where the object starts, its
@@ -155,7 +180,9 @@ class TaskEnv(gym.Env):
         quality: RenderQuality = "fast",
         render_mode: str | None = "rgb_array",
         lazy: bool = False,
+        control: str = "joint",
     ) -> None:
+        check_control(control)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(
                 f"render_mode={render_mode!r} unsupported; allowed: None, "
@@ -177,6 +204,7 @@ class TaskEnv(gym.Env):
         self.fps = fps
         self.max_steps = max_steps
         self.depth = depth
+        self.control = control
         # Lazy: observations render their cameras when read (roboview_data.sim.observation), so steps
         # whose images no one reads cost physics only; the pixels are those eager rendering gives.
         self.lazy = lazy
@@ -190,6 +218,8 @@ class TaskEnv(gym.Env):
         self._open_renderers: list[mujoco.Renderer] = []
         self._appliers: dict[str, SceneApplier] = {}
         self.bind_target()
+        self.end_effector = EndEffector(self.model)
+        self.controller = EEController(self.model, control) if control in EE_CONTROLS else None
         self.instance = baseline_instance(self.task)
         self.instruction = self.instance.get(self.instruction_factor)
         self.steps = 0
@@ -197,7 +227,12 @@ class TaskEnv(gym.Env):
         arm_range = self.scene.ids.arm_range
         low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
         high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
-        self.action_space = gym.spaces.Box(low, high, dtype=np.float32)
+        # The joint-target action (what the scripted planners plan in, whatever the control).
+        self.joint_action_space = gym.spaces.Box(low, high, dtype=np.float32)
+        if control == "joint":
+            self.action_space = self.joint_action_space
+        else:
+            self.action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
         spaces = {
             IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
             for c in self.cameras
@@ -208,6 +243,7 @@ class TaskEnv(gym.Env):
                 for c in self.cameras
             }
         spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
+        spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(EE_STATE_NAMES),), np.float32)
         self.observation_space = gym.spaces.Dict(spaces)
 
     # -- rendering ---------------------------------------------------------------------------
@@ -309,6 +345,8 @@ class TaskEnv(gym.Env):
         if action.shape != self.action_space.shape or not np.all(np.isfinite(action)):
             raise ValueError(f"action must be {self.action_space.shape} finite values, got {action!r}")
         action = np.clip(action, self.action_space.low, self.action_space.high)
+        if self.controller is not None:
+            action = self.controller.joint_action(self.data.qpos, action)
         self.data.ctrl[self.scene.ids.arm_actuators] = action[:7]
         self.data.ctrl[self.scene.ids.gripper_actuator] = 255.0 * action[7]
         self._generation += 1  # before the state changes: any lazy observation still unread is now stale
@@ -351,6 +389,10 @@ class TaskEnv(gym.Env):
         body = self.scene.ids.shape_body[self.shape]
         return self.data.xpos[body].copy(), self.data.xquat[body].copy()
 
+    def ee_state(self) -> np.ndarray:
+        """float32 (8): pinch position + orientation axis-angle (base frame) + finger openings (EE_STATE_NAMES)."""
+        return self.end_effector.state(self.data.qpos)
+
     def ee_position(self) -> np.ndarray:
         return self.data.site_xpos[self.scene.ids.pinch_site].copy()
 
@@ -371,7 +413,7 @@ class TaskEnv(gym.Env):
         renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}
         if self.depth:
             renders |= {DEPTH_KEY.format(c): functools.partial(self._render_depth, c) for c in self.cameras}
-        state = {STATE_KEY: self.state()}
+        state = {STATE_KEY: self.state(), EE_STATE_KEY: self.ee_state()}
         if self.lazy:
             generation = self._generation
             return LazyObservation(state, renders, lambda: self._generation == generation)
@@ -401,7 +443,9 @@ class TaskEnv(gym.Env):
 class ScriptedExpert:
     """Privileged: reads the object's true pose and the target's, then follows the task's `plan`.
 
-    It solves every context at baseline visuals, so a benchmark that biases it is broken.
+    It solves every context at baseline visuals, so a benchmark that biases it is broken. It plans joint
+    targets; an env with end-effector control gets the EE action commanding the same pinch pose
+    (`JointToEE`: the targets' forward kinematics for ee_abs, their difference from the EE state for ee_delta).
     """
 
     name = "expert"
@@ -409,6 +453,7 @@ class ScriptedExpert:
     def __init__(self, env: TaskEnv) -> None:
         self.env = env
         self.planner = PickPlacePlanner(env.model)
+        self._to_ee = JointToEE(env.model, env.control) if env.control in EE_CONTROLS else None
 
     def reset(self) -> None:
         """Plan from the current (just reset) simulator state."""
@@ -427,4 +472,5 @@ class ScriptedExpert:
         )
 
     def select_action(self, observation: dict | None = None) -> np.ndarray:
-        return self.planner.next_action()
+        action = self.planner.next_action()
+        return action if self._to_ee is None else self._to_ee(action, self.env.ee_state())
