@@ -369,7 +369,7 @@ def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
         "policy_path": policy.checkpoint,
         **({"policy_name": policy.name} if policy.name else {}),
         "policy_options": policy.options(),
-        "control": policy.control(),
+        "control": policy.env_control(),
         "n_repeats": p.repeats,
         "max_steps": cfg.eval.max_steps,
         "image_size": p.image_size,
@@ -525,7 +525,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     entry = provenance.start_entry(p.version, cfg.policy.checkpoint)
     entry["benchmark_path"] = str(Path(cfg.benchmark.path).resolve())
     entry["conformance"] = conformance
-    entry["control"] = cfg.policy.control()
+    entry["control"] = cfg.policy.env_control()
     verdict = conformance["verdict"]
     if cfg.policy.served_by() is not None:
         entry["policy_server"] = cfg.policy.served_by()

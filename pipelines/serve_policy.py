@@ -160,7 +160,7 @@ class PolicyService:
         self.image_size = own or cfg.image_size or 224
         cameras = cfg.policy.observed_cameras()
         self.format = wire_format(cfg.obs_format, cameras, cfg.key_map, cfg.policy.depth)
-        self.control = cfg.policy.control()
+        self.control = cfg.policy.env_control()
         self.view = AgentView.of_task(cfg.task, cameras, self.image_size, cfg.policy.depth, self.control)
         # The wire's state is the policy's: the EE state for a policy acting in an end-effector control.
         self.state_key = STATE_KEY if self.control == "joint" else EE_STATE_KEY

@@ -182,7 +182,7 @@ class PolicyConfig(draccus.ChoiceRegistry):
     depth: ClassVar[bool] = False
     # Whether `build` gets the env itself (ground-truth state): the scripted expert only.
     privileged: ClassVar[bool] = False
-    # Whether the policy plans joint targets, converted to the EE action when `control()` is an EE mode
+    # Whether the policy plans joint targets, converted to the EE action when `env_control()` is an EE mode
     # (`JointPlanInEE`, applied by policies.factory): the vision and VLM agents, the random floor.
     plans_joints: ClassVar[bool] = False
     # One line for listings and error messages.
@@ -214,7 +214,7 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """Cameras the policy observes (the env renders only these)."""
         return DEFAULT_CAMERAS
 
-    def control(self) -> str:
+    def env_control(self) -> str:
         """The control mode the policy acts in (roboview_data.sim.control.CONTROLS); the evaluator makes its envs
         with it. Types that take `--policy.control` or read it from a model override this."""
         return "joint"
@@ -244,19 +244,10 @@ class PolicyConfig(draccus.ChoiceRegistry):
         return None
 
 
-class ControlName(str):
-    """A control mode's name that can be called for itself: a config's `--policy.control` field holds one, so
-    `config.control` is the flag's value and `config.control()` the answer every PolicyConfig gives."""
-
-    def __call__(self) -> str:
-        return str(self)
-
-
 def control_field(config: PolicyConfig) -> None:
-    """Check a config's `control` field (the `--policy.control` flag) and make it callable (`ControlName`)."""
+    """Check a config's `control` field (the `--policy.control` flag)."""
     if config.control not in CONTROLS:
         raise ValueError(f"unknown --policy.control={config.control!r}; allowed: {', '.join(CONTROLS)}")
-    config.control = ControlName(config.control)
 
 
 @dataclass
@@ -265,11 +256,14 @@ class ControlledConfig(PolicyConfig):
 
     # Control mode the policy acts in: joint (7 joint targets + gripper), ee_delta or ee_abs (end effector:
     # position + axis-angle + gripper, LIBERO convention; docs/control.md).
-    control: str = "joint"  # type: ignore[assignment]  (a ControlName once validated: still callable)
+    control: str = "joint"
 
     def __post_init__(self) -> None:
         control_field(self)
         super().__post_init__()
+
+    def env_control(self) -> str:
+        return self.control
 
 
 class JointPlanInEE:

@@ -28,7 +28,7 @@ def build_policy(config: PolicyConfig, view: AgentView | TaskEnv) -> Policy:
     """`config`'s policy from an agent's view (a privileged type's from the env); one that plans joint targets acts
     through `JointPlanInEE` when its control is an end-effector one."""
     policy = config.build(view)
-    control = config.control()
+    control = config.env_control()
     if config.plans_joints and control != "joint":
         model = view.model if isinstance(view, TaskEnv) else view.kinematic_model()
         policy = JointPlanInEE(policy, model, control)

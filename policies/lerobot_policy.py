@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from policies.base import AgentView, ControlName, Episode, PolicyConfig, control_field
+from policies.base import AgentView, Episode, PolicyConfig, control_field
 from policies.checkpoints import CheckpointError, checkpoint_dir
 from policies.devices import resolve_device
 from roboview_data.cli_errors import flag_errors
@@ -265,7 +265,7 @@ class LeRobotConfig(PolicyConfig):
     device: str = "auto"
     # Control mode: empty to read it from the checkpoint (8-d action: joint; 7-d: ee_delta or ee_abs, from its
     # training dataset's action names); name it (ee_delta / ee_abs) for a 7-d checkpoint whose dataset is not here.
-    control: str = ""  # type: ignore[assignment]  (a ControlName once resolved: still callable)
+    control: str = ""
 
     doc = "any LeRobot checkpoint (--policy.path=DIR)"
 
@@ -278,8 +278,6 @@ class LeRobotConfig(PolicyConfig):
         super().__post_init__()
 
     def _resolve_control(self) -> None:
-        if isinstance(self.control, ControlName):  # resolved already (a copy of a checked config)
-            return
         given = self.control
         if given and given not in CONTROLS:
             raise ValueError(f"unknown --policy.control={given!r}; allowed: {', '.join(CONTROLS)}")
@@ -306,6 +304,9 @@ class LeRobotConfig(PolicyConfig):
     def checkpoint(self) -> str | None:
         return self.path
 
+    def env_control(self) -> str:
+        return self.control
+
     def observed_cameras(self) -> tuple[str, ...]:
         return checkpoint_cameras(self.path)
 
@@ -313,7 +314,7 @@ class LeRobotConfig(PolicyConfig):
         return checkpoint_image_size(self.path)
 
     def build(self, view: AgentView) -> LeRobotPolicy:
-        return LeRobotPolicy(self.path, self.device, control=self.control())
+        return LeRobotPolicy(self.path, self.device, control=self.env_control())
 
     def batchable(self) -> bool:
         return is_chunked(load_config(self.path)[1])
@@ -325,4 +326,4 @@ class LeRobotConfig(PolicyConfig):
                 load_config(self.path)[1].type,
             )
             return None
-        return LeRobotPolicy(self.path, self.device, slots, control=self.control())
+        return LeRobotPolicy(self.path, self.device, slots, control=self.env_control())

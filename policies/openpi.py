@@ -361,7 +361,7 @@ class OpenPIPolicy:
         self.url = urls[worker_rank() % len(urls)]
         self.format = config.wire_format()
         self.dt = 1.0 / view.fps
-        self.joint = config.control() == "joint"
+        self.joint = config.env_control() == "joint"
         # What the model reads as its state and answers: joints, or (end-effector control) the EE state and pose.
         self.state_key = STATE_KEY if self.joint else EE_STATE_KEY
         self.action_dims = WIRE_DIMS if self.joint else EE_WIRE_DIMS
@@ -448,7 +448,7 @@ class OpenPIPolicy:
             meaning = (
                 f"7 joint {self.config.action_space}s + gripper"
                 if self.joint
-                else f"{self.config.control()} end-effector pose + gripper"
+                else f"{self.config.env_control()} end-effector pose + gripper"
             )
             raise ProtocolError(
                 f"openpi server {self.url} answered actions of shape {np.shape(actions)}; RoboView "

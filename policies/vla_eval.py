@@ -42,8 +42,9 @@ import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
 from policies.errors import InfraError, PolicyUnavailable
-from policies.vla_eval_specs import CONTROLS, Negotiated, negotiate
+from policies.vla_eval_specs import Negotiated, negotiate
 from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview_data.sim.control import CONTROLS
 from roboview_data.tasks.env import IMAGE_KEY
 from roboview_data.workers import worker_rank
 
@@ -305,7 +306,7 @@ class VlaEvalConfig(PolicyConfig):
     image_size: int = 224
     # The env control for a server whose action spec is `raw` (LeRobot's server: the checkpoint decides): joint,
     # ee_delta or ee_abs; empty: joint. For other servers it must agree with their spec (empty: follow it).
-    action_control: str = ""
+    control: str = ""
     # How images travel: raw bytes, png (lossless, vla-eval's default) or jpeg (lossy).
     image_format: str = "png"
     # Seconds to open a connection and exchange HELLO.
@@ -333,10 +334,8 @@ class VlaEvalConfig(PolicyConfig):
                 f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(ALL_CAMERAS)}"
             )
         camera_map = _pairs(self.camera_map, "--policy.camera_map")
-        if self.action_control and self.action_control not in CONTROLS:
-            raise ValueError(
-                f"unknown --policy.action_control={self.action_control!r}; allowed: {', '.join(CONTROLS)}"
-            )
+        if self.control and self.control not in CONTROLS:
+            raise ValueError(f"unknown --policy.control={self.control!r}; allowed: {', '.join(CONTROLS)}")
         if self.image_format not in IMAGE_FORMATS:
             raise ValueError(
                 f"unknown --policy.image_format={self.image_format!r}; allowed: {', '.join(IMAGE_FORMATS)}"
@@ -360,7 +359,7 @@ class VlaEvalConfig(PolicyConfig):
                 ) from None
             connection.close()
             self._hello[url] = connection.hello
-            mine = negotiate(connection.hello, self.camera_list, camera_map, self.action_control)
+            mine = negotiate(connection.hello, self.camera_list, camera_map, self.control)
             if agreed is not None and mine != agreed:
                 raise ValueError(
                     f"--policy.url: {url} declares other specs than {self.url_list[0]}: {mine} vs {agreed}"
@@ -384,7 +383,7 @@ class VlaEvalConfig(PolicyConfig):
     def server_name(self, url: str) -> str:
         return str(self._hello.get(url, {}).get("model_server", "server"))
 
-    def control(self) -> str:
+    def env_control(self) -> str:
         """The env control the server's actions are in (negotiated from its HELLO)."""
         return self._agreed.control
 

@@ -29,11 +29,8 @@ import numpy as np
 from vla_eval.specs import DimSpec
 
 from roboview_data.sim.cameras import ALL_CAMERAS
-from roboview_data.tasks.env import STATE_KEY
+from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
 
-# The env's controls and its end-effector state key (roboview_data.sim.control / roboview_data.tasks.env).
-CONTROLS = ("joint", "ee_delta", "ee_abs")
-EE_STATE_KEY = "observation.ee_state"
 # Action width of each control: 7 joint targets + closure; 3 position + 3 axis-angle + gripper.
 ACTION_DIMS = {"joint": 8, "ee_delta": 7, "ee_abs": 7}
 

@@ -206,15 +206,13 @@ class RoboViewBenchmark(StepBenchmark):
         if task not in self._envs:
             from roboview_data.tasks import make_env
 
-            # joint is make_env's default control; the others are named.
-            control = {} if self.control == "joint" else {"control": self.control}
             self._envs[task] = make_env(
                 task,
                 cameras=self.cameras,
                 image_size=self.image_size,
                 max_steps=self.max_steps,
                 lazy=True,
-                **control,
+                control=self.control,
             )
         return self._envs[task]
 

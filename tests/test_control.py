@@ -201,12 +201,12 @@ def test_a_checkpoint_trained_on_ee_demos_acts_in_their_control(ee_demos, tmp_pa
     assert proc.returncode == 0, proc.stderr[-2000:]
     checkpoint = str(out / "checkpoints" / "last" / "pretrained_model")
     config = policy_config("lerobot", path=checkpoint, device="cpu")
-    assert config.control() == "ee_delta" and config.observed_cameras() == ("front",)
+    assert config.env_control() == "ee_delta" and config.observed_cameras() == ("front",)
     with pytest.raises(
         ValueError, match="--policy.control='ee_abs' but the checkpoint .* acts in 'ee_delta'"
     ):
         policy_config("lerobot", path=checkpoint, device="cpu", control="ee_abs")
-    env = PickPlaceEnv(cameras=("front",), image_size=config.input_image_size(), control=config.control())
+    env = PickPlaceEnv(cameras=("front",), image_size=config.input_image_size(), control=config.env_control())
     policy = make_policy(config, env)
     obs, _ = env.reset(seed=2)
     chunk = policy.predict_chunks({0: obs})[0]
@@ -225,8 +225,8 @@ def test_policy_types_act_in_the_control_they_are_given(envs):
     from policies.types import policy_config
 
     expert = policy_config("expert", control="ee_abs")
-    assert expert.control() == expert.control == "ee_abs" and "control" not in expert.options()
-    assert policy_config("vision").control() == "joint"
+    assert expert.env_control() == expert.control == "ee_abs" and "control" not in expert.options()
+    assert policy_config("vision").env_control() == "joint"
     with pytest.raises(ValueError, match="unknown --policy.control='osc'; allowed: joint, ee_delta, ee_abs"):
         policy_config("random", control="osc")
     # An agent that plans joint targets acts through their EE action: here the random floor.

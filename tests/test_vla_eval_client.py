@@ -40,8 +40,8 @@ from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, main
 from policies.base import Episode
 from policies.errors import InfraError, PolicyUnavailable
 from policies.types import policy_config
-from policies.vla_eval_specs import EE_STATE_KEY, SpecMismatch
-from roboview_data.tasks.env import STATE_KEY
+from policies.vla_eval_specs import SpecMismatch
+from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
 
 ROOT = Path(__file__).resolve().parents[1]
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
@@ -159,7 +159,7 @@ def test_joint_server_negotiated_and_its_actions_reach_the_env(tiny_benchmark, t
 
         # The commanded pose reaches the env: the joints settle on it, the gripper closes.
         config = policy_config("vla_eval", url=url, image_size=64)
-        assert (config.control(), config.observed_cameras(), config.negotiated.state_key) == (
+        assert (config.env_control(), config.observed_cameras(), config.negotiated.state_key) == (
             "joint",
             ("front",),
             STATE_KEY,
@@ -192,7 +192,7 @@ def test_lerobot_model_server_gives_the_in_process_rows_and_actions(
     model = LeRobotModelServer("act", str(tiny_checkpoint), device="cpu")
     with serving(model) as url:
         config = policy_config("vla_eval", url=url, image_size=64, cameras="left_top,wrist")
-        assert config.control() == "joint" and config.negotiated.state_key == STATE_KEY
+        assert config.env_control() == "joint" and config.negotiated.state_key == STATE_KEY
         local = evaluate(
             tiny_benchmark, tmp_path / "local", policy_config("lerobot", path=str(tiny_checkpoint))
         )
@@ -361,10 +361,10 @@ def test_end_effector_specs_negotiate_an_ee_control_and_send_the_ee_state(
         config = policy_config(
             "vla_eval", url=url, camera_map="agentview=left_top,wrist=wrist", image_size=32
         )
-        assert config.control() == control and config.negotiated.state_key == EE_STATE_KEY
+        assert config.env_control() == control and config.negotiated.state_key == EE_STATE_KEY
         assert config.observed_cameras() == ("left_top", "wrist")
         with pytest.raises(SpecMismatch, match=rf"\({control} control\).*--policy.control=joint"):
-            policy_config("vla_eval", url=url, camera_map="agentview=left_top", action_control="joint")
+            policy_config("vla_eval", url=url, camera_map="agentview=left_top", control="joint")
         # An observation as an EE env gives it (not stepped here): the EE state goes out as the state.
         ee_state = np.arange(8, dtype=np.float32) / 10
         obs = {

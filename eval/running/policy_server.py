@@ -116,7 +116,7 @@ def serve(
     """The server process: build the batched policy once, then answer requests until ("stop",)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     policy = config.build_batched(
-        AgentView.of_task(task, cameras, image_size, control=config.control()), slots
+        AgentView.of_task(task, cameras, image_size, control=config.env_control()), slots
     )
     if not isinstance(policy, ChunkPredictor):
         raise SystemExit(f"policy type {config.type!r} cannot be served (no batched chunk prediction)")

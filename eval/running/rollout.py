@@ -165,7 +165,7 @@ class EvalWorker:
                 max_steps=spec.max_steps,
                 depth=spec.policy.depth,
                 lazy=not spec.eager,
-                control=spec.policy.control(),
+                control=spec.policy.env_control(),
             )
             for _ in range(spec.envs_per_worker)
         ]
