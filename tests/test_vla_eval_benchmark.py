@@ -76,6 +76,16 @@ class ReplayServer(PredictModelServer):
         return {"actions": queue.pop(0) if len(queue) > 1 else queue[0]}
 
 
+class EEReplayServer(ReplayServer):
+    """The replay in LIBERO's conventions: position and axis-angle deltas, gripper +1 = close, the EE state in."""
+
+    def get_action_spec(self):
+        return {"position": POSITION_DELTA, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS}
+
+    def get_observation_spec(self):
+        return {"state": STATE_EEF_POS_AA_GRIP, "language": LANGUAGE}
+
+
 class FailingServer(ReplayServer):
     async def on_episode_start(self, config, ctx) -> None:
         await PredictModelServer.on_episode_start(self, config, ctx)
@@ -106,9 +116,9 @@ def served(server):
         thread.join(10)
 
 
-def expert_actions(bench: Path, split: str, repeats: int, max_steps: int) -> dict:
+def expert_actions(bench: Path, split: str, repeats: int, max_steps: int, control: str = "joint") -> dict:
     """The scripted expert's actions in each (instance, repeat) of `split`, recorded as pipelines.evaluate runs it."""
-    env = make_env(cameras=("left_top",), image_size=64, max_steps=max_steps, lazy=True)
+    env = make_env(cameras=("left_top",), image_size=64, max_steps=max_steps, lazy=True, control=control)
     out = {}
     for item in load_benchmark(bench, [split]).splits[split]:
         for repeat in range(repeats):
@@ -320,3 +330,40 @@ def test_specs_follow_the_control_and_bad_params_fail_before_any_episode(tiny_be
     assert not result["success"] and result["steps"] == 0 and result["repeat"] == 0
     assert result["failure_reason"].startswith("policy error: action of shape (7,)")
     joint.cleanup()
+
+
+def test_vla_eval_runs_the_benchmark_in_end_effector_control(tiny_benchmark, tmp_path):
+    """`params.control: ee_delta`: a server in LIBERO's conventions (the expert's EE actions, replayed) gives the
+    rows of the expert run natively in ee_delta."""
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from pipelines.evaluate import run as evaluate
+    from policies.types import policy_config
+
+    max_steps = 60
+    actions = expert_actions(tiny_benchmark, SPLIT, 1, max_steps, control="ee_delta")
+    assert all(np.all(np.abs(a) <= 1) and a.shape == (7,) for run in actions.values() for a in run)
+    with served(EEReplayServer(actions)) as url:
+        (aggregate,) = orchestrate(
+            url,
+            tmp_path / "vla",
+            benchmark_path=str(tiny_benchmark),
+            splits=SPLIT,
+            limit=0,
+            n_repeats=1,
+            max_steps=max_steps,
+            control="ee_delta",
+            send_images=False,
+        )
+    assert aggregate["num_errors"] == 0
+    convert(tmp_path / "vla", str(tiny_benchmark), tmp_path / "converted", policy_name="expert")
+    evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(tiny_benchmark), SPLIT),
+            policy_config("expert", control="ee_delta"),
+            EvalConfig(n_repeats=1, num_workers=1, image_size=64, max_steps=max_steps),
+            str(tmp_path / "native"),
+        )
+    )
+    native = table(tmp_path / "native" / "episodes.parquet")
+    pd.testing.assert_frame_equal(table(tmp_path / "converted" / "episodes.parquet"), native)
+    assert len(native) == 6 and native["success"].all()

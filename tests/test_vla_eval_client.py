@@ -5,6 +5,7 @@ specs and answering fixed actions, and vla-eval's `LeRobotModelServer` holding t
 `serve` in a subprocess where it must be killed.
 """
 
+import json
 import os
 import socket
 import subprocess
@@ -409,3 +410,82 @@ def test_lockstep_envs_are_batched_by_a_batching_server():
     assert set(got) == {0, 1, 2} and all((a == POSE).all() for a in got.values())
     assert sorted(server.batches) == [1, 2]
     assert sorted(o["task_description"] for o in server.seen) == ["task 0", "task 1", "task 2"]
+
+
+class ExpertReplayServer(PredictModelServer):
+    """LIBERO's conventions — position and axis-angle deltas, gripper +1 = close, the end-effector state in —
+    answering the scripted expert's `ee_delta` actions recorded for the episode's seed."""
+
+    def __init__(self, actions_by_seed: dict[int, list[np.ndarray]]) -> None:
+        super().__init__()
+        self.actions, self.queues, self.states = actions_by_seed, {}, []
+
+    def get_action_spec(self):
+        return {"position": POSITION_DELTA, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS}
+
+    def get_observation_spec(self):
+        return {"front": IMAGE_RGB, "state": STATE_EEF_POS_AA_GRIP, "language": LANGUAGE}
+
+    def get_observation_params(self):
+        return {"send_state": True}
+
+    async def on_episode_start(self, config, ctx):
+        self.queues[ctx.session_id] = list(self.actions[config["task"]["seed"]])
+        await super().on_episode_start(config, ctx)
+
+    def predict(self, obs, ctx):
+        self.states.append(np.asarray(obs["state"], np.float64))
+        queue = self.queues[ctx.session_id]
+        return {"actions": queue.pop(0) if len(queue) > 1 else queue[0]}
+
+
+def test_a_libero_convention_server_drives_the_end_effector_as_the_native_expert_does(
+    tiny_benchmark, tmp_path
+):
+    """End to end in end-effector control: a server declaring LIBERO's specs is negotiated to `ee_delta`, sent the EE
+    state, and its actions (the expert's, replayed) give exactly the rows of the expert run natively in ee_delta."""
+    from roboview_data.benchmark.format import load_benchmark
+    from roboview_data.tasks import load_task, make_env
+    from roboview_data.variation.instances import episode_seed
+
+    split, max_steps = "color_x_camera_pose", 60  # one context: every instance of a repeat shares its seed
+    env = make_env(cameras=("front",), image_size=64, max_steps=max_steps, lazy=True, control="ee_delta")
+    by_seed: dict[int, list[np.ndarray]] = {}
+    for item in load_benchmark(tiny_benchmark, [split]).splits[split]:
+        seed = episode_seed(item.record["context_id"], 0)
+        env.reset(seed=seed, options={"instance": item.instance})
+        expert = load_task(item.instance.task).make_expert(env)
+        expert.reset()
+        actions, done = [], False
+        while not done:
+            actions.append(np.asarray(expert.select_action(None), np.float32))
+            _, _, success, truncated, _ = env.step(actions[-1])
+            done = success or truncated
+        if seed in by_seed:  # the expert reads the state only: the visual factors leave its actions alone
+            assert len(actions) == len(by_seed[seed]) and all(map(np.array_equal, actions, by_seed[seed]))
+        by_seed[seed] = actions
+    env.close()
+    assert len(by_seed) == 1 and all(np.all(np.abs(a) <= 1) for a in by_seed[seed])
+
+    def run_split(policy, out):
+        return run(
+            EvaluateConfig(
+                BenchmarkConfig(str(tiny_benchmark), split),
+                policy,
+                EvalConfig(n_repeats=1, num_workers=1, max_steps=max_steps, image_size=64),
+                str(out),
+            )
+        )
+
+    server = ExpertReplayServer(by_seed)
+    with serving(server) as url:
+        config = policy_config("vla_eval", url=url, cameras="front", image_size=64)
+        assert config.env_control() == "ee_delta" and config.negotiated.state_key == EE_STATE_KEY
+        run_split(config, tmp_path / "served")
+    run_split(policy_config("expert", control="ee_delta"), tmp_path / "native")
+    served, native = rows(tmp_path / "served"), rows(tmp_path / "native")
+    assert len(served) == 6 and served["success"].all()
+    pd.testing.assert_frame_equal(served[ROW], native[ROW])
+    # The server was sent the EE state: the pinch point's position (m), axis-angle, two finger openings.
+    assert all(s.shape == (8,) for s in server.states) and 0.0 < server.states[0][2] < 1.0
+    assert json.loads((tmp_path / "served" / "run.json").read_text())["control"] == "ee_delta"
