@@ -168,7 +168,7 @@ def run(cfg: LeaderboardConfig) -> Board:
             policies.append(names[0])
         labels = labels_for(policies, list(accepted))
         episodes, sources = load_results([p / PARQUET for p in accepted.values()], labels)
-        for label, policy, (source, path), src in zip(labels, policies, accepted.items(), sources):
+        for label, policy, source, src in zip(labels, policies, accepted, sources):
             own = episodes[episodes["policy"] == label]
             report_dir = out / "reports" / label.replace("/", "_")
             write_report(own, report_dir, cfg.metrics, sources=[src], plots=cfg.plots)
