@@ -17,8 +17,11 @@ export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 export HF_HUB_OFFLINE ?= 1
 DEMO_DIR ?= outputs/demo
+BOARD_DIR ?= outputs/board
+BOARD_PAGE ?= docs/results/board
+BOARD_VLM_PORT ?= 8765
 
-.PHONY: install sysdeps demo test test-fast lint format bench clean-demo
+.PHONY: install sysdeps demo test test-fast lint format bench board clean-demo
 
 install: sysdeps $(STAMP)
 
@@ -49,6 +52,22 @@ $(STAMP): pyproject.toml requirements.lock $(PLUGIN)/pyproject.toml
 	@# ndarray bytes): installed without their dependencies, which the line above provides.
 	$(PY) -m pip install -q --no-deps $(OPENPI_PACKAGES)
 	@touch $(STAMP)
+
+# The first leaderboard (docs/results/board): the policies that run on this machine — the privileged expert, the
+# `vision` agent, `vlm_simple` against the classic-CV stand-in endpoint, and the random floor — on the `tiny`
+# benchmark, 3 repeats, every bundle verified, ranked with significance groups.
+board: install
+	$(PY) -m pipelines.build_benchmark --output_dir=$(BOARD_DIR)/benchmark --preset=tiny --num_workers=2
+	@set -e; for p in expert vision random; do \
+	  $(PY) -m pipelines.evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=$$p \
+	    --eval.n_repeats=3 --eval.num_workers=2 --output_dir=$(BOARD_DIR)/eval/$$p; done
+	@set -e; $(PY) -m pipelines.serve_vlm --port=$(BOARD_VLM_PORT) & server=$$!; trap "kill $$server" EXIT; sleep 5; \
+	  $(PY) -m pipelines.evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=vlm_simple \
+	    --policy.name=vlm_simple_standin --policy.endpoint.base_url=http://127.0.0.1:$(BOARD_VLM_PORT)/v1 \
+	    --policy.endpoint.model=roboview-classic-cv-standin --eval.n_repeats=3 --eval.num_workers=2 \
+	    --output_dir=$(BOARD_DIR)/eval/vlm_simple_standin
+	$(PY) -m pipelines.leaderboard --benchmark.path=$(BOARD_DIR)/benchmark --plots=false --output_dir=$(BOARD_PAGE) \
+	  --results=$(BOARD_DIR)/eval/expert,$(BOARD_DIR)/eval/vision,$(BOARD_DIR)/eval/vlm_simple_standin,$(BOARD_DIR)/eval/random
 
 demo: install
 	$(PY) -m pipelines.collect --dataset.repo_id=roboview/demo_pick_place \

@@ -1,6 +1,16 @@
-"""Publish a built benchmark (and optionally a collected LeRobot dataset) to the Hugging Face hub.
+"""Publish a built benchmark (and optionally a collected LeRobot dataset), or a verified result bundle, to the
+Hugging Face hub.
 
     python -m pipelines.publish --path=outputs/benchmark --repo_id=ORG/NAME [--dry_run=true]
+    python -m pipelines.publish --results=outputs/eval/vision --repo_id=ORG/vision-results [--dry_run=true]
+           [--benchmark_repo_id=ORG/BENCH] [--model_repo_id=ORG/MODEL]
+
+With `--results`: the results folder is verified first (`pipelines.verify --results`, against `--benchmark.path` or
+the benchmark its provenance names) and refused, with the failed checks, unless every check passes. The bundle —
+the results, their report, verify.json, a dataset card and bundle.json (the SHA-256 of every file) — is written
+to `--staging_dir` (default: `<results>_bundle`) and uploaded as a Hub dataset. `--model_repo_id` also writes the
+model repo's `.eval_results/<benchmark>.yaml` (one entry per split: the success rate, the bundle as source), opened
+as a pull request. `--dry_run=true` writes the exact folder and lists what would be uploaded.
 
 Creates the dataset repo if missing, uploads the folder, and tags the upload with the benchmark
 version from `benchmark.json`. `--env_repo_id=ORG/NAME` also publishes RoboView as a LeRobot EnvHub env
@@ -12,11 +22,12 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fnmatch import fnmatch
 from pathlib import Path
+from typing import Any
 
-from pipelines._cli import cli_main
+from pipelines._cli import BenchmarkPath, cli_main
 from roboview_data.benchmark.format import MANIFEST, load_benchmark
 from roboview_data.cli_errors import flag_errors
 
@@ -48,15 +59,39 @@ class PublishConfig:
     # Optionally also publish RoboView as a LeRobot EnvHub env (env.py with make_env, and a README that
     # points it at the benchmark repo) to this hub repo (ORG/NAME).
     env_repo_id: str | None = None
+    # A results folder (pipelines.evaluate --output_dir) to publish as a verified result bundle instead of a
+    # benchmark; --path is then not used.
+    results: str = ""
+    # The benchmark the results are verified against (default: the one their provenance names).
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
+    # Where the benchmark is published on the Hub (ORG/NAME): named in the card and in .eval_results.
+    benchmark_repo_id: str | None = None
+    # Also write this model repo's .eval_results/<benchmark>.yaml (needs --benchmark_repo_id), opened as a PR.
+    model_repo_id: str | None = None
+    # Folder the bundle is written to before the upload (default: <results>_bundle); replaced if it exists.
+    staging_dir: str | None = None
 
     def __post_init__(self) -> None:
         for flag, value in (
             ("repo_id", self.repo_id),
             ("lerobot_repo_id", self.lerobot_repo_id),
             ("env_repo_id", self.env_repo_id),
+            ("benchmark_repo_id", self.benchmark_repo_id),
+            ("model_repo_id", self.model_repo_id),
         ):
             if value is not None and (value.count("/") != 1 or not all(value.split("/"))):
                 raise ValueError(f"--{flag}={value!r} must look like ORG/NAME")
+        if self.results:
+            from eval.running.inputs import results_folder_problem
+
+            if problem := results_folder_problem(Path(self.results)):
+                raise ValueError(f"--results: {problem}")
+            if self.model_repo_id and not self.benchmark_repo_id:
+                raise ValueError(
+                    "--model_repo_id needs --benchmark_repo_id=ORG/NAME: .eval_results entries name the "
+                    "benchmark's Hub dataset"
+                )
+            return
         manifest = Path(self.path) / MANIFEST
         if not manifest.is_file():
             raise ValueError(
@@ -188,6 +223,8 @@ def publish(cfg: PublishConfig, the_plan: Plan) -> str:
 def run(cfg: PublishConfig) -> Plan:
     if not cfg.repo_id:
         raise PublishError("--repo_id=ORG/NAME is required")
+    if cfg.results:
+        return publish_results(cfg)
     the_plan = plan(cfg)
     if cfg.dry_run:
         for rel, size in the_plan.files:
@@ -204,6 +241,142 @@ def run(cfg: PublishConfig) -> Plan:
         return the_plan
     publish(cfg, the_plan)
     print(f"[publish] {cfg.repo_id} tagged {the_plan.version}")
+    return the_plan
+
+
+# --- a result bundle ----------------------------------------------------------------------------------
+
+
+def stage_results(cfg: PublishConfig) -> tuple[Path, dict[str, Any], str | None]:
+    """Verify the results, write the bundle folder; (folder, manifest, .eval_results text or None).
+    PublishError, with every failed check, for results that do not verify."""
+    import datetime
+    import shutil
+
+    import pandas as pd
+
+    from eval.reporting import bundle
+    from eval.reporting.format import PRIVILEGED_POLICIES
+    from eval.reporting.markdown import HTML_FILE, REPORT_FILE, load_results, write_report
+    from eval.running import provenance
+    from eval.running.results import PARQUET, counted
+    from pipelines.verify import VerifyConfig, benchmark_path, verify_results
+
+    results = Path(cfg.results)
+    verified = verify_results(VerifyConfig(benchmark=cfg.benchmark, results=cfg.results))
+    failed = [c for c in verified.checks if not c.passed]
+    if failed:
+        raise PublishError(
+            f"{results} does not verify, so it is not published: "
+            + "; ".join(f"{c.name}: {c.detail}" for c in failed)
+            + " (python -m pipelines.verify --results=... prints every check)"
+        )
+    episodes, sources = load_results([results / PARQUET])
+    policies = sorted(map(str, counted(episodes)["policy"].unique()))
+    if len(policies) != 1:
+        raise PublishError(
+            f"{results} holds several policies ({', '.join(policies)}); publish one per bundle"
+        )
+    policy = policies[0]
+    staging = Path(cfg.staging_dir) if cfg.staging_dir else results.with_name(results.name + "_bundle")
+    if staging.resolve() == results.resolve() or results.resolve() in staging.resolve().parents:
+        raise PublishError(f"--staging_dir={staging} must lie outside the results folder {results}")
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    bundle.copy_results(results, staging)
+    report = write_report(episodes, staging / bundle.REPORT_DIR, sources=sources)
+    entries = provenance.read(results)
+    bench_root = benchmark_path(VerifyConfig(benchmark=cfg.benchmark, results=cfg.results), results)
+    manifest = json.loads((bench_root / MANIFEST).read_text())
+    checks = [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in verified.checks]
+    identity = {
+        "policy": policy,
+        "benchmark_repo_id": cfg.benchmark_repo_id,
+        "benchmark_version": manifest["benchmark_version"],
+        "benchmark_content_hash": bundle.content_hash(manifest),
+        "episodes": int(counted(episodes).shape[0]),
+        "conformance": sorted(set(pd.Series(episodes.get("conformance", [])).dropna().astype(str))),
+    }
+    (staging / bundle.VERIFY_FILE).write_text(
+        json.dumps(
+            {
+                "checks": checks,
+                "passed": True,
+                "stacks": [e["conformance"] for e in entries if e.get("conformance")],
+            }
+            | identity,
+            indent=2,
+            default=str,
+        )
+        + "\n"
+    )
+    (staging / bundle.CARD_FILE).write_text(
+        bundle.card(
+            policy=policy,
+            repo_id=cfg.repo_id,
+            identity=identity,
+            checks=checks,
+            report_md=(report.output_dir / REPORT_FILE).read_text(),
+            privileged=policy.partition("+")[0] in PRIVILEGED_POLICIES,
+        )
+    )
+    assert (report.output_dir / HTML_FILE).is_file()
+    written = bundle.write_manifest(staging, identity)
+    eval_results = None
+    if cfg.model_repo_id:
+        date = max((e.get("ended") or "" for e in entries), default="") or datetime.datetime.now(
+            datetime.UTC
+        ).isoformat(timespec="seconds")
+        eval_results = bundle.eval_results_yaml(
+            bundle.eval_result_entries(
+                report.metrics,
+                benchmark_repo_id=cfg.benchmark_repo_id,
+                results_repo_id=cfg.repo_id,
+                date=date,
+            )
+        )
+        target = staging.with_name(staging.name + "_eval_results") / ".eval_results"
+        target.mkdir(parents=True, exist_ok=True)
+        (target / bundle.eval_results_name(cfg.benchmark_repo_id)).write_text(eval_results)
+    return staging, written, eval_results
+
+
+def publish_results(cfg: PublishConfig) -> Plan:
+    from eval.reporting import bundle
+
+    staging, manifest, eval_results = stage_results(cfg)
+    files = _files(staging, [])
+    the_plan = Plan(cfg.repo_id, manifest["benchmark_version"], files, [], {})
+    eval_path = f".eval_results/{bundle.eval_results_name(cfg.benchmark_repo_id or 'x/roboview')}"
+    if cfg.dry_run:
+        for rel, size in files:
+            print(f"{size:>12,}  {cfg.repo_id}/{rel}")
+        if eval_results is not None:
+            print(f"{len(eval_results.encode()):>12,}  {cfg.model_repo_id}/{eval_path} (pull request)")
+        print(
+            f"[dry run] result bundle of {manifest['policy']} in {staging}: {len(files)} files, "
+            f"{the_plan.total_bytes:,} bytes; verified; nothing uploaded"
+        )
+        return the_plan
+    api = _hub_api()
+    api.create_repo(cfg.repo_id, repo_type="dataset", private=cfg.private, exist_ok=True)
+    api.upload_folder(
+        folder_path=str(staging),
+        repo_id=cfg.repo_id,
+        repo_type="dataset",
+        commit_message=f"RoboView-Bias results of {manifest['policy']} on {manifest['benchmark_version']}",
+    )
+    if eval_results is not None:
+        from huggingface_hub import CommitOperationAdd
+
+        api.create_commit(
+            cfg.model_repo_id,
+            [CommitOperationAdd(eval_path, eval_results.encode())],
+            commit_message=f"RoboView-Bias eval results ({manifest['benchmark_version']})",
+            create_pr=True,
+        )
+    print(f"[publish] {cfg.repo_id}: result bundle of {manifest['policy']} ({len(files)} files)")
     return the_plan
 
 

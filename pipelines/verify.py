@@ -38,6 +38,10 @@ class VerifyConfig:
     # A results folder (pipelines.evaluate --output_dir) to verify against its benchmark; empty: verify the
     # benchmark (--benchmark.path) on this machine.
     results: str = ""
+    # With --results: re-run this many of its episodes (a fixed sample; all when larger) with the policy run.json
+    # records, here, and require each to end as recorded (success, steps, failure reason). Catches an edited row;
+    # needs the policy to be deterministic and reachable (a checkpoint on disk, a server that answers).
+    replay: int = 0
 
     def __post_init__(self) -> None:
         if not self.results and not self.benchmark.path:
@@ -126,7 +130,8 @@ def verify_benchmark(root: Path) -> VerifyResult:
 # --- a results folder against its benchmark --------------------------------------------------------------
 
 
-def _benchmark_path(cfg: VerifyConfig, results: Path) -> Path:
+def benchmark_path(cfg: VerifyConfig, results: Path) -> Path:
+    """The benchmark folder `results` are checked against: --benchmark.path, else the one its provenance names."""
     from eval.running import provenance
 
     if cfg.benchmark.path:
@@ -286,12 +291,25 @@ def verify_results(cfg: VerifyConfig) -> VerifyResult:
     start = time.perf_counter()
     results = Path(cfg.results)
     rows, run = _rows(results)
-    root = _benchmark_path(cfg, results)
+    root = benchmark_path(cfg, results)
     try:
         bench = load_benchmark(root)
     except BenchmarkError as exc:
         return VerifyResult([Check("benchmark", False, str(exc))], time.perf_counter() - start)
     checks = [Check("benchmark", True, f"{root}: version {bench.version}, every cell as built")]
+    from eval.reporting.bundle import BUNDLE_FILE, manifest_problems
+
+    problems = manifest_problems(results)
+    if problems is not None:  # a published bundle: every file as bundle.json records it
+        checks.append(
+            Check(
+                "files",
+                not problems,
+                f"every file as {BUNDLE_FILE} records it"
+                if not problems
+                else f"{len(problems)} file(s) differ from {BUNDLE_FILE}: {_listed(problems)}",
+            )
+        )
     recorded = read_version(results / "episodes.parquet")
     checks.append(
         Check(
@@ -357,7 +375,68 @@ def verify_results(cfg: VerifyConfig) -> VerifyResult:
             ),
         )
     )
+    if cfg.replay > 0:
+        checks.append(check_replay(rows, bench, run, cfg.replay))
     return VerifyResult(checks, time.perf_counter() - start)
+
+
+REPLAYED = ("success", "steps", "failure_reason")  # what a replayed episode must reproduce
+
+
+def replay_sample(rows: list[dict], n: int) -> list[dict]:
+    """`n` rows in a fixed order (by a hash of instance and repeat): the same sample on every machine."""
+    import hashlib
+
+    def key(row: dict) -> str:
+        return hashlib.sha256(f"{row['instance_id']}:{row['repeat']}".encode()).hexdigest()
+
+    return sorted((r for r in rows if r.get("status") != "infra_error"), key=key)[:n]
+
+
+def check_replay(rows: list[dict], bench, run: dict, n: int) -> Check:
+    """Re-run a sample of the episodes with the recorded policy; every one must end as its row says."""
+    from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from policies.types import policy_config
+
+    sample = replay_sample(rows, n)
+    try:
+        settings = dict(run.get("policy_options") or {})
+        if run.get("policy_path"):
+            settings["path"] = run["policy_path"]
+        if run.get("policy_name"):
+            settings["name"] = run["policy_name"]
+        policy = policy_config(run["policy"], **settings)
+    except Exception as exc:  # any failure to rebuild the policy is the check's answer
+        return Check("replay", False, f"cannot rebuild policy {run.get('policy')!r} from run.json: {exc}")
+    items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
+    workers: dict[str, EvalWorker] = {}
+    differ = []
+    try:
+        for row in sample:
+            item = items[row["instance_id"]]
+            task = item.instance.task
+            if task not in workers:
+                workers[task] = EvalWorker(
+                    WorkerSpec(policy, run.get("image_size", 224), run.get("max_steps", 120), task=task)
+                )
+            again = workers[task].run(WorkItem(item, int(row["repeat"]))).row
+            changed = [
+                f"{k} {row.get(k)!r} → {again.get(k)!r}"
+                for k in REPLAYED
+                if (row.get(k) or None) != (again.get(k) or None)
+            ]
+            if changed:
+                differ.append(f"{row['instance_id']} repeat {row['repeat']}: {', '.join(changed)}")
+    finally:
+        for worker in workers.values():
+            worker.close()
+    return Check(
+        "replay",
+        not differ,
+        f"{len(sample)} episodes re-run with {run['policy']}, each ended as recorded"
+        if not differ
+        else f"{len(differ)} of {len(sample)} re-run episodes end differently from their rows: {_listed(differ)}",
+    )
 
 
 def run(cfg: VerifyConfig) -> VerifyResult:

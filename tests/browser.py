@@ -35,6 +35,8 @@ class Page:
     screenshot: np.ndarray  # the whole page, H × W × 3 uint8
     # The page's scroll width and each table's right edge (CSS px): what overflows the window.
     layout: dict = None  # type: ignore[assignment]
+    # What each expression given to load_page(scripts=...) returned, in order (run after the screenshot).
+    evaluated: list = None  # type: ignore[assignment]
 
 
 class _DevTools:
@@ -98,7 +100,7 @@ _LAYOUT_JS = """JSON.stringify({page: document.documentElement.scrollWidth,
   tables: Array.from(document.querySelectorAll('table')).map(t => t.getBoundingClientRect().right + scrollX)})"""
 
 
-def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
+def load_page(path: Path, width: int = 1200, timeout: float = 60, scripts: tuple[str, ...] = ()) -> Page:
     binary = chromium_binary()
     if binary is None:
         raise FileNotFoundError("no chromium on PATH (make sysdeps installs Debian's chromium)")
@@ -160,6 +162,12 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
                     captureBeyondViewport=True,
                     clip={"x": 0, "y": 0, "width": width, "height": size["height"], "scale": 1},
                 )
+                evaluated = [
+                    tools.call("Runtime.evaluate", session, expression=js, returnByValue=True)["result"].get(
+                        "value"
+                    )
+                    for js in scripts
+                ]
                 time.sleep(0.2)  # late console messages
                 tools.call("Runtime.evaluate", session, expression="1")
                 errors = _errors(tools.events)
@@ -170,4 +178,4 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60) -> Page:
             except subprocess.TimeoutExpired:
                 proc.kill()
     pixels = np.asarray(Image.open(io.BytesIO(base64.b64decode(shot["data"]))).convert("RGB"))
-    return Page(errors, images, pixels, layout)
+    return Page(errors, images, pixels, layout, evaluated)

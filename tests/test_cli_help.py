@@ -30,6 +30,7 @@ ENTRY_POINTS = (
     "audit",
     "merge",
     "verify",
+    "leaderboard",
 )
 
 

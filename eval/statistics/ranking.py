@@ -89,7 +89,7 @@ def rank_table(
     return out
 
 
-def _pooled_p_sr(episodes: pd.DataFrame, a: str, b: str) -> float | None:
+def pooled_p_sr(episodes: pd.DataFrame, a: str, b: str) -> float | None:
     wide = (
         episodes[episodes["policy"].isin([a, b])]
         .pivot_table(
@@ -124,7 +124,7 @@ def rankings(metrics: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any] 
             per_split[split] = entry
     names = sorted(layouts)
     overall_sr = {name: float(episodes.loc[episodes["policy"] == name, "success"].mean()) for name in names}
-    pooled = {frozenset((a, b)): _pooled_p_sr(episodes, a, b) for a, b in itertools.combinations(names, 2)}
+    pooled = {frozenset((a, b)): pooled_p_sr(episodes, a, b) for a, b in itertools.combinations(names, 2)}
     mean_cv = {
         name: float(np.mean(v))
         for name in names

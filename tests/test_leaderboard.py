@@ -1,0 +1,285 @@
+"""The leaderboard, result bundles on the Hub and the Hub's eval-results files.
+
+The significance groups are checked by simulation against a known truth; the rest runs on real result bundles of
+the `tiny` benchmark (expert, random, vision on one split), published as a dry run, tampered with, and loaded in
+headless Chromium.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+import yaml
+
+from eval.statistics.ranking import rank_table
+from eval.statistics.significance import paired_success_test
+
+SPLIT = "camera_pose"
+
+
+# --- the groups, by simulation --------------------------------------------------------------------------
+
+
+def simulated_groups(truth: dict[str, float], n: int, rng: np.random.Generator, alpha: float = 0.05):
+    """One simulated board: paired episodes of each policy (independent given the truth), McNemar per pair."""
+    outcomes = {name: rng.random(n) < p for name, p in truth.items()}
+    names = sorted(truth)
+    pvalues = {
+        frozenset((a, b)): paired_success_test(outcomes[a], outcomes[b])
+        for i, a in enumerate(names)
+        for b in names[i + 1 :]
+    }
+    rows = rank_table({k: float(v.mean()) for k, v in outcomes.items()}, pvalues, True, alpha)
+    return {r["policy"]: set(r["group"]) for r in rows}
+
+
+def test_letters_never_separate_tied_policies_beyond_the_error_rate():
+    """Truth: a and b tie (0.7), c is worse (0.4), d ties c. Over 400 boards, a pair the truth does not separate
+    gets disjoint letters in at most α of them (Holm controls the family-wise rate), while the real gaps are
+    found in nearly every board."""
+    truth = {"a": 0.7, "b": 0.7, "c": 0.4, "d": 0.4}
+    rng = np.random.default_rng(7)
+    sims, false_split, found = 400, 0, 0
+    for _ in range(sims):
+        groups = simulated_groups(truth, 150, rng)
+        false_split += not (groups["a"] & groups["b"]) or not (groups["c"] & groups["d"])
+        found += all(not (groups[x] & groups[y]) for x in "ab" for y in "cd")
+    bound = 0.05 + 3 * np.sqrt(0.05 * 0.95 / sims)
+    assert false_split / sims <= bound, f"tied policies separated in {false_split}/{sims} boards"
+    assert found / sims > 0.9, f"the 0.7 vs 0.4 gaps were found in only {found}/{sims} boards"
+
+
+def test_letters_of_a_known_order():
+    """Three policies far apart in truth get three letters in order; two identical ones share theirs."""
+    rng = np.random.default_rng(3)
+    groups = simulated_groups({"hi": 0.95, "mid": 0.5, "lo": 0.05}, 200, rng)
+    assert groups == {"hi": {"a"}, "mid": {"b"}, "lo": {"c"}}
+    ranked = rank_table({"x": 0.5, "y": 0.5}, {frozenset("xy"): 1.0}, True)
+    assert [r["group"] for r in ranked] == ["a", "a"]
+
+
+# --- real bundles --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
+    """expert, random and vision evaluated on one split of the tiny benchmark, each a complete results folder."""
+    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from pipelines.evaluate import run as evaluate
+    from policies.types import policy_config
+
+    root = tmp_path_factory.mktemp("board")
+    out = {}
+    for name in ("expert", "random", "vision"):
+        evaluate(
+            EvaluateConfig(
+                BenchmarkConfig(str(tiny_benchmark), SPLIT),
+                policy_config(name),
+                EvalConfig(n_repeats=2, num_workers=1, image_size=64),
+                str(root / name),
+            )
+        )
+        out[name] = root / name
+    return out
+
+
+def _board(bundles, tmp_path, *extra, **kw):
+    from pipelines.leaderboard import LeaderboardConfig, run
+
+    sources = ",".join([str(bundles[n]) for n in ("expert", "random", "vision")] + [str(e) for e in extra])
+    return run(LeaderboardConfig(results=sources, output_dir=str(tmp_path / "board"), plots=False, **kw))
+
+
+def test_board_ranks_verified_bundles_with_groups_and_links(bundles, tmp_path):
+    board = _board(bundles, tmp_path)
+    sr = {r["policy"]: r for r in board.overall["sr"]}
+    assert set(sr) == {"expert", "random", "vision"} and not board.rejected
+    # The expert and vision solve every episode here, random none: two groups, random alone and last.
+    assert sr["expert"]["value"] == sr["vision"]["value"] == 1.0 and sr["random"]["value"] == 0.0
+    assert sr["expert"]["group"] == sr["vision"]["group"] == "a" and sr["random"]["group"] == "b"
+    assert sr["expert"]["rank"] == sr["vision"]["rank"] == 1 and sr["random"]["rank"] == 3
+    assert sr["random"]["rank_range"] == [3, 3] and sr["vision"]["rank_range"] == [1, 2]
+    assert sr["random"]["episodes"] == 18 and sr["random"]["ci95"][1] == pytest.approx(0.1759, abs=1e-3)
+    assert list(board.splits) == [SPLIT]
+    entries = {e.label: e for e in board.entries}
+    assert entries["expert"].privileged and not entries["vision"].privileged
+    saved = json.loads((tmp_path / "board" / "leaderboard.json").read_text())
+    assert saved["benchmark_version"] == board.benchmark_version and saved["adjustment"] == "holm"
+    for e in board.entries:  # each row links to a report of that bundle's episodes
+        report = tmp_path / "board" / e.report
+        metrics = json.loads((report.parent / "metrics.json").read_text())
+        assert report.is_file() and metrics["policy"] == e.policy
+        assert metrics["splits"][SPLIT]["sr"] == sr[e.label]["value"]
+
+
+def _retag(results: Path, to: Path, version: str) -> Path:
+    """A copy of a results folder whose rows say they ran on benchmark `version`."""
+    shutil.copytree(results, to)
+    table = pq.read_table(to / "episodes.parquet")
+    meta = dict(table.schema.metadata) | {b"roboview_benchmark_version": version.encode()}
+    pq.write_table(table.replace_schema_metadata(meta), to / "episodes.parquet")
+    run = json.loads((to / "run.json").read_text()) | {"benchmark_version": version}
+    (to / "run.json").write_text(json.dumps(run))
+    return to
+
+
+def _flip_success(parquet: Path, n: int = 3) -> None:
+    table = pq.read_table(parquet)
+    success = table.column("success").to_pylist()
+    flipped = [not s if i < n else s for i, s in enumerate(success)]
+    table = table.set_column(table.schema.get_field_index("success"), "success", pa.array(flipped))
+    pq.write_table(table, parquet)
+
+
+def test_other_versions_tampered_and_missing_bundles_are_listed_apart(bundles, tmp_path):
+    from pipelines.publish import PublishConfig
+    from pipelines.publish import run as publish
+
+    other = _retag(bundles["random"], tmp_path / "other", "tiny-000000000000")
+    publish(
+        PublishConfig(
+            results=str(bundles["vision"]),
+            repo_id="lab/vision-results",
+            dry_run=True,
+            staging_dir=str(tmp_path / "vision_bundle"),
+        )
+    )
+    _flip_success(tmp_path / "vision_bundle" / "episodes.parquet")
+    board = _board(bundles, tmp_path, other, tmp_path / "vision_bundle", tmp_path / "nowhere")
+    reasons = {Path(r.source).name: r.reason for r in board.rejected}
+    assert "results of benchmark tiny-000000000000; this board ranks" in reasons["other"]
+    assert "files: 1 file(s) differ from bundle.json: episodes.parquet: edited" in reasons["vision_bundle"]
+    assert "does not exist" in reasons["nowhere"]
+    assert {e.label for e in board.entries} == {"expert", "random", "vision"}  # never ranked
+
+
+def test_replay_refuses_edited_rows(bundles, tmp_path):
+    """Rows edited in place (no bundle.json to compare with) are caught by re-running them."""
+    from pipelines.verify import VerifyConfig, verify_results
+
+    edited = tmp_path / "edited"
+    shutil.copytree(bundles["random"], edited)
+    _flip_success(edited / "episodes.parquet", n=18)
+    result = verify_results(VerifyConfig(results=str(edited), replay=6))
+    replay = {c.name: c for c in result.checks}["replay"]
+    assert not replay.passed and "6 of 6 re-run episodes end differently" in replay.detail
+    assert "success True → False" in replay.detail
+    honest = verify_results(VerifyConfig(results=str(bundles["random"]), replay=3))
+    assert {c.name: c for c in honest.checks}["replay"].passed
+
+
+def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
+    from huggingface_hub import EvalResultEntry, parse_eval_result_entries
+
+    from eval.reporting.bundle import BUNDLE_FILE, sha256_file
+    from pipelines.publish import PublishConfig, PublishError
+    from pipelines.publish import run as publish
+
+    staging = tmp_path / "bundle"
+    cfg = PublishConfig(
+        results=str(bundles["expert"]),
+        repo_id="lab/expert-results",
+        benchmark_repo_id="lab/roboview-bias",
+        model_repo_id="lab/expert",
+        dry_run=True,
+        staging_dir=str(staging),
+    )
+    plan = publish(cfg)
+    listed = capsys.readouterr().out
+    files = {rel for rel, _ in plan.files}
+    assert {
+        "episodes.parquet",
+        "run.json",
+        "provenance.json",
+        "verify.json",
+        "README.md",
+        BUNDLE_FILE,
+        "report/metrics.json",
+        "report/report.md",
+        "report/report.html",
+    } <= files
+    assert "episodes.jsonl" not in files and "nothing uploaded" in listed
+    # Every file listed is in the folder with the listed size, and bundle.json holds its hash.
+    manifest = json.loads((staging / BUNDLE_FILE).read_text())
+    for rel, size in plan.files:
+        assert (staging / rel).stat().st_size == size
+        if rel != BUNDLE_FILE:
+            assert manifest["files"][rel] == sha256_file(staging / rel)
+    assert manifest["benchmark_version"] == plan.version and manifest["policy"] == "expert"
+    card = (staging / "README.md").read_text()
+    assert "## Table 1" in card and plan.version in card and manifest["benchmark_content_hash"] in card
+    assert "(privileged)" in card and "| conformance | pass |" in card
+    verify = json.loads((staging / "verify.json").read_text())
+    assert verify["passed"] and all(c["passed"] for c in verify["checks"])
+
+    # The model repo's .eval_results file: the documented schema, one entry per split, read back by the Hub's
+    # own parser.
+    text = (tmp_path / "bundle_eval_results" / ".eval_results" / "roboview-bias.yaml").read_text()
+    assert "lab/expert/.eval_results/roboview-bias.yaml" in listed
+    data = yaml.safe_load(text)
+    assert isinstance(data, list) and len(data) == 1
+    entry = data[0]
+    assert set(entry) <= {"dataset", "value", "verifyToken", "date", "source", "notes"}
+    assert entry["dataset"] == {"id": "lab/roboview-bias", "task_id": SPLIT}
+    assert isinstance(entry["value"], float) and entry["value"] == 100.0
+    datetime.datetime.fromisoformat(entry["date"])
+    assert entry["source"]["url"] == "https://huggingface.co/datasets/lab/expert-results"
+    parsed = parse_eval_result_entries(data)
+    assert parsed == [
+        EvalResultEntry(
+            dataset_id="lab/roboview-bias",
+            task_id=SPLIT,
+            value=100.0,
+            date=entry["date"],
+            source_url=entry["source"]["url"],
+            source_name=entry["source"]["name"],
+            notes=entry["notes"],
+        )
+    ]
+
+    # Offline, the real upload stops with what to do, after writing nothing to the Hub.
+    cfg.dry_run = False
+    with pytest.raises(PublishError, match="offline mode is on"):
+        publish(cfg)
+
+
+def test_publish_refuses_results_that_do_not_verify(bundles, tmp_path):
+    from pipelines.publish import PublishConfig, PublishError
+    from pipelines.publish import run as publish
+
+    partial = tmp_path / "partial"
+    shutil.copytree(bundles["random"], partial)
+    table = pq.read_table(partial / "episodes.parquet")
+    pq.write_table(table.slice(0, 10), partial / "episodes.parquet")
+    with pytest.raises(
+        PublishError, match=r"does not verify.*complete: camera_pose: 8 of 18 episodes missing"
+    ):
+        publish(PublishConfig(results=str(partial), repo_id="lab/x", dry_run=True))
+    assert not (tmp_path / "partial_bundle").exists()
+
+
+def test_board_page_in_chromium(bundles, tmp_path):
+    from tests.browser import chromium_binary, load_page
+
+    if chromium_binary() is None:
+        pytest.skip("no chromium (make sysdeps installs it)")
+    _board(bundles, tmp_path)
+    order = "Array.from(document.querySelector('table.ranked').tBodies[0].rows).map(r => r.cells[1].textContent).join(',')"
+    sort_by_sr = "document.querySelector('table.ranked').tHead.rows[0].cells[2].click(); " + order
+    page = load_page(tmp_path / "board" / "leaderboard.html", scripts=(order, sort_by_sr, sort_by_sr))
+    assert page.errors == []
+    before, ascending, descending = page.evaluated
+    assert before == "expert (privileged),vision,random"
+    assert ascending.split(",")[0] == "random" and descending.split(",")[-1] == "random"
+    # The screenshot shows the ranked table: dark text rows on white, the header band grey.
+    shot = page.screenshot
+    assert shot.shape[0] > 600
+    dark_rows = np.flatnonzero((shot.min(axis=2) < 90).sum(axis=1) > 20)
+    assert len(dark_rows) > 100
