@@ -104,7 +104,7 @@ def load_page(path: Path, width: int = 1200, timeout: float = 60, scripts: tuple
     binary = chromium_binary()
     if binary is None:
         raise FileNotFoundError("no chromium on PATH (make sysdeps installs Debian's chromium)")
-    with tempfile.TemporaryDirectory() as profile:
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:  # chromium may still be writing
         proc = subprocess.Popen(
             [
                 binary,

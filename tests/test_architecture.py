@@ -134,7 +134,9 @@ def test_a_policy_cannot_read_the_instance():
             "image_size",
             "depth",
             "fps",
+            "control",
             "action_space",
+            "joint_action_space",
             "observation_space",
         }
         assert not hasattr(view, "instance") and not hasattr(view, "env") and not hasattr(view, "scene")
