@@ -42,8 +42,14 @@ class VerifyConfig:
     # records, here, and require each to end as recorded (success, steps, failure reason). Catches an edited row;
     # needs the policy to be deterministic and reachable (a checkpoint on disk, a server that answers).
     replay: int = 0
+    # With --benchmark.path alone: re-render and re-simulate only the first N instances of the reference sample
+    # (a quick look; the verdict then speaks for those only). 0: all of them.
+    sample: int = 0
 
     def __post_init__(self) -> None:
+        for flag in ("replay", "sample"):
+            if getattr(self, flag) < 0:
+                raise ValueError(f"--{flag}={getattr(self, flag)} must be 0 or more")
         if not self.results and not self.benchmark.path:
             raise ValueError(
                 "give --benchmark.path=DIR (verify a benchmark on this machine) or --results=DIR "
@@ -82,7 +88,7 @@ class VerifyResult:
 # --- a benchmark on this machine -----------------------------------------------------------------------
 
 
-def verify_benchmark(root: Path) -> VerifyResult:
+def verify_benchmark(root: Path, sample: int = 0) -> VerifyResult:
     from roboview_data.benchmark import conformance
     from roboview_data.benchmark.format import BenchmarkError, read_manifest, verify_table
     from roboview_data.sim import stack
@@ -106,7 +112,7 @@ def verify_benchmark(root: Path) -> VerifyResult:
             )
         except BenchmarkError as exc:
             checks.append(Check(f"content {path.relative_to(root).with_suffix('')}", False, str(exc)))
-    report = conformance.check(root)
+    report = conformance.check(root, limit=sample or None)
     for line in report.lines():
         print(line)
     differences = stack.differences(manifest.get("stack"), report.stack)
@@ -442,7 +448,7 @@ def check_replay(rows: list[dict], bench, run: dict, n: int) -> Check:
 def run(cfg: VerifyConfig) -> VerifyResult:
     if cfg.results:
         return verify_results(cfg)
-    return verify_benchmark(Path(cfg.benchmark.path))
+    return verify_benchmark(Path(cfg.benchmark.path), cfg.sample)
 
 
 def _summary(cfg: VerifyConfig, result: VerifyResult) -> None:

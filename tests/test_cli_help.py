@@ -191,3 +191,12 @@ def test_lists_are_written_comma_separated_everywhere():
         cwd=ROOT,
     )
     assert proc.returncode != 0 and "nope" in proc.stderr  # the list was read: its bad entry is named
+
+
+def test_every_documented_flag_exists():
+    """Every flag the README and docs/ pass to a RoboView command is one its --help documents (checked here, where
+    each module's --help has already run once)."""
+    from tests.test_docs import documented_flag_problems
+
+    wrong = documented_flag_problems()
+    assert not wrong, "\n".join(wrong)

@@ -330,11 +330,15 @@ def read_reference(root: Path) -> dict:
     return json.loads(path.read_text())
 
 
-def check(root: Path, tolerances: Tolerances | None = None, envs: _Envs | None = None) -> Report:
+def check(
+    root: Path, tolerances: Tolerances | None = None, envs: _Envs | None = None, limit: int | None = None
+) -> Report:
     """Re-render and re-simulate the benchmark's reference sample here (its records are in reference.json,
-    covered by the benchmark version, which `read_manifest` checks)."""
+    covered by the benchmark version, which `read_manifest` checks); `limit`: only its first instances."""
     start = time.perf_counter()
     reference = read_reference(root)
+    if limit is not None:
+        reference["instances"] = reference["instances"][:limit]
     tol = tolerances or Tolerances(**reference["tolerances"])
     envs = envs or _Envs(reference["image_size"])
     checks = []
