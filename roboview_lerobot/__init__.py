@@ -66,6 +66,9 @@ class RoboViewEnv(EnvConfig):
     limit: int = 0
     # Steps before an episode is cut (lerobot reads it as the env's _max_episode_steps).
     max_steps: int = 120
+    # The checkpoint's control: joint (8-d action: 7 joint targets + gripper; agent_pos the joint state) or ee_delta /
+    # ee_abs (7-d LIBERO-convention action; agent_pos the end-effector state), as its dataset was collected.
+    control: str = "joint"
     # Must equal lerobot-eval's --seed (default 1000): episode i is the one reset with seed start_seed + i.
     start_seed: int = 1000
     # Run even when this machine renders or simulates the benchmark `different`ly from the machine that built it
@@ -88,10 +91,14 @@ class RoboViewEnv(EnvConfig):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
         check_image_size(self.image_size, "--env.image_size")
+        from roboview_data.sim.control import CONTROLS
+
+        if self.control not in CONTROLS:
+            raise ValueError(f"--env.control={self.control!r} unknown; allowed: {', '.join(CONTROLS)}")
         if not self.split_names_given:
             raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
         self.features = {
-            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,)),
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,) if self.control == "joint" else (7,)),
             "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(8,)),
         }
         self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
@@ -150,6 +157,7 @@ class RoboViewEnv(EnvConfig):
             "max_steps": self.max_steps,
             "start_seed": self.start_seed,
             "fps": self.fps,
+            "control": self.control,
         }
 
     def check_conformance(self) -> dict:

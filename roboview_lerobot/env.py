@@ -10,7 +10,7 @@ import numpy as np
 
 from roboview_data.benchmark.format import BenchmarkItem, load_benchmark, select_items
 from roboview_data.tasks import make_env
-from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
+from roboview_data.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
 from roboview_data.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
@@ -49,6 +49,7 @@ class RoboViewEvalEnv(gym.Env):
         start_seed: int = 1000,
         fps: int = 10,
         render_mode: str = "rgb_array",
+        control: str = "joint",
     ) -> None:
         self.version, self.episodes = episode_plan(benchmark_path, split, n_repeats, contexts, limit)
         if not self.episodes:
@@ -57,7 +58,11 @@ class RoboViewEvalEnv(gym.Env):
                 f"limit={limit})"
             )
         task = self.episodes[0][0].instance.task
-        self.env = make_env(task, cameras=tuple(cameras), image_size=image_size, max_steps=max_steps, fps=fps)
+        self.env = make_env(
+            task, cameras=tuple(cameras), image_size=image_size, max_steps=max_steps, fps=fps, control=control
+        )
+        # agent_pos: the joint state, or the end-effector state for a checkpoint that acts in an EE control.
+        self.state_key = STATE_KEY if control == "joint" else EE_STATE_KEY
         self.cameras = tuple(cameras)
         self.split = split
         self.start_seed = start_seed
@@ -73,7 +78,7 @@ class RoboViewEvalEnv(gym.Env):
         self.action_space = self.env.action_space
         pixels = {c: self.env.observation_space[IMAGE_KEY.format(c)] for c in self.cameras}
         self.observation_space = gym.spaces.Dict(
-            {"pixels": gym.spaces.Dict(pixels), "agent_pos": self.env.observation_space[STATE_KEY]}
+            {"pixels": gym.spaces.Dict(pixels), "agent_pos": self.env.observation_space[self.state_key]}
         )
 
     @property
@@ -87,7 +92,10 @@ class RoboViewEvalEnv(gym.Env):
         return self.env.instruction
 
     def _convert(self, obs: dict) -> dict:
-        return {"pixels": {c: obs[IMAGE_KEY.format(c)] for c in self.cameras}, "agent_pos": obs[STATE_KEY]}
+        return {
+            "pixels": {c: obs[IMAGE_KEY.format(c)] for c in self.cameras},
+            "agent_pos": obs[self.state_key],
+        }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)

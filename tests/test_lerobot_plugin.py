@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).parents[1]
@@ -143,3 +144,30 @@ def test_pipelines_train_passes_the_splits_to_lerobot_train(tiny_benchmark, tiny
         f"--eval_splits='color,colour': unknown split(s) ['colour']; the benchmark at {tiny_benchmark} has: "
         f"{', '.join(available_splits(tiny_benchmark))} (comma-separated, or `all`)"
     )
+
+
+def test_the_plugin_runs_an_end_effector_checkpoint_in_its_control(tiny_benchmark):
+    """`--env.control=ee_delta`: 7-d LIBERO-convention actions in, the end-effector state as agent_pos out."""
+    from lerobot.utils.constants import ACTION
+
+    from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
+    from roboview_lerobot import RoboViewEnv
+    from roboview_lerobot.env import RoboViewEvalEnv
+
+    config = RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), image_size=64, control="ee_delta")
+    assert config.features[ACTION].shape == (7,) and config.split_kwargs("color")["control"] == "ee_delta"
+    with pytest.raises(ValueError, match=r"--env.control='ee' unknown; allowed: joint, ee_delta, ee_abs"):
+        RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), control="ee")
+    env = RoboViewEvalEnv(**config.split_kwargs("color"))
+    try:
+        obs, _ = env.reset(seed=1000)
+        assert env.action_space.shape == (7,) and np.array_equal(obs["agent_pos"], env.env.ee_state())
+        up = np.array([0, 0, 1, 0, 0, 0, -1], np.float32)  # +5 cm, gripper open
+        after, *_ = env.step(up)
+        assert after["agent_pos"][2] > obs["agent_pos"][2] + 0.02  # the pinch point rose
+        assert not np.allclose(after["agent_pos"], env.env.state())  # the EE state, not the joint state
+        assert (
+            EE_STATE_KEY in env.env.observation_space.spaces and STATE_KEY in env.env.observation_space.spaces
+        )
+    finally:
+        env.close()
