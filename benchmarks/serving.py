@@ -65,6 +65,8 @@ class ServingConfig:
     paths: str = ",".join(PATHS)
     # How the vla_eval path sends images (its --policy.image_format): png (vla-eval's default), raw or jpeg.
     vla_eval_image_format: str = "png"
+    # The vla_eval path's --policy.images_every: images only every N-th step (the checkpoint's n_action_steps).
+    vla_eval_images_every: int = 1
 
     def __post_init__(self) -> None:
         if (
@@ -358,7 +360,13 @@ def run(cfg: ServingConfig) -> dict:
             procs = [vla_eval_server(cfg.checkpoint, p, scratch / f"vla_eval_{p}.log") for p in ports]
             try:
                 urls = ",".join(f"ws://127.0.0.1:{p}" for p in ports)
-                policy = policy_config("vla_eval", url=urls, image_format=cfg.vla_eval_image_format, **openpi)
+                policy = policy_config(
+                    "vla_eval",
+                    url=urls,
+                    image_format=cfg.vla_eval_image_format,
+                    images_every=cfg.vla_eval_images_every,
+                    **openpi,
+                )
                 paths["vla_eval"] = evaluate(cfg, bench, policy, scratch / "vla_eval")
             finally:
                 stop(*procs)

@@ -238,9 +238,14 @@ class VlaEvalPolicy:
     def payload(self, slot: int, observation: dict) -> dict:
         """An OBSERVATION: images by the server's camera names, the instruction, the negotiated state."""
         payload: dict[str, Any] = {
-            "images": {wire: observation[IMAGE_KEY.format(cam)] for wire, cam in self.agreed.cameras},
             "task_description": self.episodes[slot].instruction if self.episodes[slot] else "",
         }
+        # Images only on the steps that run the server's model (every step unless --policy.images_every says
+        # the chunk size): the other steps are answered from its chunk buffer and their cameras never render.
+        if self.steps[slot] % self.config.images_every == 0:
+            payload["images"] = {
+                wire: observation[IMAGE_KEY.format(cam)] for wire, cam in self.agreed.cameras
+            }
         if self.agreed.state_key is not None:
             state = np.asarray(observation[self.agreed.state_key], np.float32)
             payload["states"] = payload["state"] = state
@@ -309,6 +314,11 @@ class VlaEvalConfig(PolicyConfig):
     control: str = ""
     # How images travel: raw bytes, png (lossless, vla-eval's default) or jpeg (lossy).
     image_format: str = "png"
+    # Send images on steps 0, N, 2N, … of an episode only. Set N to the server's chunk size (a LeRobot checkpoint's
+    # n_action_steps) for a server without action ensembling: it answers the steps between model calls from its
+    # chunk buffer without reading them, so those steps render no camera. 1: every step (a server that runs its
+    # model on a step without images answers an error, which fails the episode with its message).
+    images_every: int = 1
     # Seconds to open a connection and exchange HELLO.
     open_timeout_s: float = 10.0
     # Seconds to wait for one answer.
@@ -340,6 +350,8 @@ class VlaEvalConfig(PolicyConfig):
             raise ValueError(
                 f"unknown --policy.image_format={self.image_format!r}; allowed: {', '.join(IMAGE_FORMATS)}"
             )
+        if self.images_every < 1:
+            raise ValueError(f"--policy.images_every={self.images_every} must be 1 or more (1: every step)")
         for name in ("image_size", "open_timeout_s", "timeout_s"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")

@@ -200,6 +200,18 @@ def test_lerobot_model_server_gives_the_in_process_rows_and_actions(
         served = evaluate(tiny_benchmark, tmp_path / "served", config)
         assert local.episodes == served.episodes == 2
         pd.testing.assert_frame_equal(rows(tmp_path / "local")[ROW], rows(tmp_path / "served")[ROW])
+        # Images only on the steps that run the model (the checkpoint's n_action_steps = 10): the same rows over
+        # 25 steps, three model calls each.
+        evaluate(
+            tiny_benchmark,
+            tmp_path / "local25",
+            policy_config("lerobot", path=str(tiny_checkpoint)),
+            max_steps=25,
+        )
+        chunked = policy_config("vla_eval", url=url, image_size=64, cameras="left_top,wrist", images_every=10)
+        evaluate(tiny_benchmark, tmp_path / "chunked", chunked, max_steps=25)
+        pd.testing.assert_frame_equal(rows(tmp_path / "local25")[ROW], rows(tmp_path / "chunked")[ROW])
+        assert list(rows(tmp_path / "chunked")["steps"]) == [25, 25]
 
         # The 2-step checkpoint's rows all end at max_steps: compare the actions too, across a chunk boundary.
         items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:2]
@@ -489,3 +501,19 @@ def test_a_libero_convention_server_drives_the_end_effector_as_the_native_expert
     # The server was sent the EE state: the pinch point's position (m), axis-angle, two finger openings.
     assert all(s.shape == (8,) for s in server.states) and 0.0 < server.states[0][2] < 1.0
     assert json.loads((tmp_path / "served" / "run.json").read_text())["control"] == "ee_delta"
+
+
+def test_images_go_only_on_the_steps_that_run_the_model(tiny_benchmark, tmp_path):
+    server = joint_server()
+    with serving(server) as url:
+        evaluate(
+            tiny_benchmark,
+            tmp_path / "ev",
+            policy_config("vla_eval", url=url, cameras="front", image_size=64, images_every=3),
+            limit=1,
+            max_steps=7,
+        )
+    assert [("images" in obs) for obs in server.seen] == [True, False, False, True, False, False, True]
+    assert all("state" in obs for obs in server.seen)
+    with pytest.raises(ValueError, match=r"--policy.images_every=0 must be 1 or more"):
+        policy_config("vla_eval", url="ws://127.0.0.1:9", images_every=0)
