@@ -52,15 +52,36 @@ def env():
     env.close()
 
 
+def shared_folder(tmp_path_factory, name: str, build) -> Path:
+    """A folder `build(folder)` fills once for the whole run: under pytest-xdist the first worker that needs it
+    builds it (the others wait on a lock, then read it), so the processes do not each build their own."""
+    import shutil
+
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the run's folder, shared by every worker
+    folder = base / f"shared-{name}"
+    with FileLock(str(folder) + ".lock"):
+        if not (folder / ".built").is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir(parents=True)
+            build(folder)
+            (folder / ".built").touch()
+    return folder
+
+
 @pytest.fixture(scope="session")
 def tiny_benchmark(tmp_path_factory):
     """The `tiny` preset built once for every test that only reads a benchmark (57 instances, 64² previews)."""
     from pipelines.build_benchmark import BuildConfig
     from pipelines.build_benchmark import run as build
 
-    out = tmp_path_factory.mktemp("bench") / "tiny"
-    build(BuildConfig(output_dir=str(out), preset="tiny", image_size=64))
-    return out
+    def make(folder: Path) -> None:
+        build(BuildConfig(output_dir=str(folder / "tiny"), preset="tiny", image_size=64))
+
+    return shared_folder(tmp_path_factory, "bench", make) / "tiny"
 
 
 @pytest.fixture(scope="session")
@@ -69,20 +90,21 @@ def tiny_demos(tmp_path_factory) -> Path:
     from pipelines.collect import CollectConfig, DatasetConfig
     from pipelines.collect import run as collect
 
-    root = tmp_path_factory.mktemp("demos") / "ds"
-    collect(
-        CollectConfig(
-            DatasetConfig(
-                repo_id="t/demos",
-                root=str(root),
-                num_episodes=2,
-                image_size=64,
-                cameras=["left_top", "wrist"],
-            ),
-            num_workers=1,
+    def make(folder: Path) -> None:
+        collect(
+            CollectConfig(
+                DatasetConfig(
+                    repo_id="t/demos",
+                    root=str(folder / "ds"),
+                    num_episodes=2,
+                    image_size=64,
+                    cameras=["left_top", "wrist"],
+                ),
+                num_workers=1,
+            )
         )
-    )
-    return root
+
+    return shared_folder(tmp_path_factory, "demos", make) / "ds"
 
 
 @pytest.fixture(scope="session")
@@ -91,34 +113,40 @@ def tiny_checkpoint(tmp_path_factory, tiny_benchmark, tiny_demos) -> Path:
     import subprocess
     import sys
 
-    root = tmp_path_factory.mktemp("ckpt")
-    # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
-    args = [
-        sys.executable,
-        "-m",
-        "pipelines.train",
-        "--dataset.repo_id=t/demos",
-        f"--dataset.root={tiny_demos}",
-        f"--output_dir={root / 'train'}",
-        "--batch_size=2",
-        "--save_freq=2",
-        "--device=cpu",
-    ]
-    # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
-    periodic = [
-        f"--benchmark.path={tiny_benchmark}",
-        "--eval_splits=color",
-        "--eval_episodes=2",
-        "--eval_freq=2",
-    ]
-    proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert (
-        "'task_group': 'color'" in proc.stdout + proc.stderr
-        and "'n_episodes': 2" in proc.stdout + proc.stderr
+    def make(root: Path) -> None:
+        # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
+        args = [
+            sys.executable,
+            "-m",
+            "pipelines.train",
+            "--dataset.repo_id=t/demos",
+            f"--dataset.root={tiny_demos}",
+            f"--output_dir={root / 'train'}",
+            "--batch_size=2",
+            "--save_freq=2",
+            "--device=cpu",
+        ]
+        # With a periodic evaluation on the RoboView split through lerobot-train's own eval loop (the plugin).
+        periodic = [
+            f"--benchmark.path={tiny_benchmark}",
+            "--eval_splits=color",
+            "--eval_episodes=2",
+            "--eval_freq=2",
+        ]
+        proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert (
+            "'task_group': 'color'" in proc.stdout + proc.stderr
+            and "'n_episodes': 2" in proc.stdout + proc.stderr
+        )
+        dry = subprocess.run(
+            [*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120
+        )
+        assert (
+            "--resume=true" in dry.stdout
+            and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
+        )
+
+    return (
+        shared_folder(tmp_path_factory, "ckpt", make) / "train" / "checkpoints" / "last" / "pretrained_model"
     )
-    dry = subprocess.run([*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120)
-    assert (
-        "--resume=true" in dry.stdout and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout
-    )
-    return root / "train" / "checkpoints" / "last" / "pretrained_model"

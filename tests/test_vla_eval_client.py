@@ -194,23 +194,16 @@ def test_lerobot_model_server_gives_the_in_process_rows_and_actions(
     with serving(model) as url:
         config = policy_config("vla_eval", url=url, image_size=64, cameras="left_top,wrist")
         assert config.env_control() == "joint" and config.negotiated.state_key == STATE_KEY
-        local = evaluate(
-            tiny_benchmark, tmp_path / "local", policy_config("lerobot", path=str(tiny_checkpoint))
-        )
-        served = evaluate(tiny_benchmark, tmp_path / "served", config)
+        # 25 steps: three model calls (the checkpoint's n_action_steps = 10), two answered chunks between.
+        lerobot = policy_config("lerobot", path=str(tiny_checkpoint))
+        local = evaluate(tiny_benchmark, tmp_path / "local", lerobot, max_steps=25)
+        served = evaluate(tiny_benchmark, tmp_path / "served", config, max_steps=25)
         assert local.episodes == served.episodes == 2
         pd.testing.assert_frame_equal(rows(tmp_path / "local")[ROW], rows(tmp_path / "served")[ROW])
-        # Images only on the steps that run the model (the checkpoint's n_action_steps = 10): the same rows over
-        # 25 steps, three model calls each.
-        evaluate(
-            tiny_benchmark,
-            tmp_path / "local25",
-            policy_config("lerobot", path=str(tiny_checkpoint)),
-            max_steps=25,
-        )
+        # Images only on the steps that run the model: the same rows.
         chunked = policy_config("vla_eval", url=url, image_size=64, cameras="left_top,wrist", images_every=10)
         evaluate(tiny_benchmark, tmp_path / "chunked", chunked, max_steps=25)
-        pd.testing.assert_frame_equal(rows(tmp_path / "local25")[ROW], rows(tmp_path / "chunked")[ROW])
+        pd.testing.assert_frame_equal(rows(tmp_path / "local")[ROW], rows(tmp_path / "chunked")[ROW])
         assert list(rows(tmp_path / "chunked")["steps"]) == [25, 25]
 
         # The 2-step checkpoint's rows all end at max_steps: compare the actions too, across a chunk boundary.
