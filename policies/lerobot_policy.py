@@ -78,7 +78,7 @@ def check_features(config) -> None:
         raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
 
 
-EE_ACTION_DIMS = 7
+EE_ACTION_DIMS = len(EE_ACTION_NAMES[EE_CONTROLS[0]])  # every EE control: 3 + 3 + gripper
 
 
 def dataset_action_names(root: Path) -> list[str] | None:

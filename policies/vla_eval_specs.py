@@ -26,13 +26,37 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from vla_eval.specs import DimSpec
+from vla_eval.specs import (
+    GRIPPER_01,
+    GRIPPER_CLOSE_POS,
+    POSITION_ABSOLUTE,
+    POSITION_DELTA,
+    ROTATION_AA,
+    STATE_EEF_POS_AA_GRIP,
+    STATE_JOINT,
+    DimSpec,
+)
 
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
 
+JOINT_TARGETS = DimSpec(
+    "joints", 7, "joint_positions", description="absolute Panda joint position targets (rad)"
+)
+# RoboView's action layout of each control (the env's action_space) and its state, in vla-eval's vocabulary: what
+# the benchmark side declares (roboview_vla_eval) and what the client maps a server's specs onto.
+ACTION_SPECS: dict[str, dict[str, DimSpec]] = {
+    "joint": {"joints": JOINT_TARGETS, "gripper": GRIPPER_01},
+    "ee_delta": {"position": POSITION_DELTA, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS},
+    "ee_abs": {"position": POSITION_ABSOLUTE, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS},
+}
+STATE_SPECS: dict[str, DimSpec] = {
+    "joint": STATE_JOINT,
+    "ee_delta": STATE_EEF_POS_AA_GRIP,
+    "ee_abs": STATE_EEF_POS_AA_GRIP,
+}
 # Action width of each control: 7 joint targets + closure; 3 position + 3 axis-angle + gripper.
-ACTION_DIMS = {"joint": 8, "ee_delta": 7, "ee_abs": 7}
+ACTION_DIMS = {control: sum(spec.dims for spec in specs.values()) for control, specs in ACTION_SPECS.items()}
 
 GRIPPERS = ("binary_close_positive", "binary_close_negative", "continuous_01", "binary_close_01", "raw")
 POSITIONS = {"delta_xyz": "ee_delta", "absolute_xyz": "ee_abs"}

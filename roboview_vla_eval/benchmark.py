@@ -26,36 +26,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 from vla_eval.benchmarks.base import StepBenchmark, StepResult
-from vla_eval.specs import (
-    GRIPPER_01,
-    GRIPPER_CLOSE_POS,
-    IMAGE_RGB,
-    LANGUAGE,
-    POSITION_ABSOLUTE,
-    POSITION_DELTA,
-    ROTATION_AA,
-    STATE_EEF_POS_AA_GRIP,
-    STATE_JOINT,
-    DimSpec,
-)
+from vla_eval.specs import IMAGE_RGB, LANGUAGE, DimSpec
 from vla_eval.types import Action, EpisodeResult, Observation, Task
+
+from policies.vla_eval_specs import ACTION_SPECS, STATE_SPECS
 
 log = logging.getLogger(__name__)
 
-JOINT_TARGETS = DimSpec(
-    "joints", 7, "joint_positions", description="absolute Panda joint position targets (rad)"
-)
-# The action layout of each control (the env's action_space), in vla-eval's vocabulary.
-ACTION_SPECS: dict[str, dict[str, DimSpec]] = {
-    "joint": {"joints": JOINT_TARGETS, "gripper": GRIPPER_01},
-    "ee_delta": {"position": POSITION_DELTA, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS},
-    "ee_abs": {"position": POSITION_ABSOLUTE, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS},
-}
-STATE_SPECS: dict[str, DimSpec] = {
-    "joint": STATE_JOINT,
-    "ee_delta": STATE_EEF_POS_AA_GRIP,
-    "ee_abs": STATE_EEF_POS_AA_GRIP,
-}
 # The fields of an episode's result that vla-eval aggregates (as mean_success, mean_steps).
 METRIC_KEYS = {"success": "mean", "steps": "mean"}
 

@@ -29,10 +29,11 @@ from vla_eval.specs import (
     STATE_JOINT,
 )
 
+from policies.vla_eval_specs import JOINT_TARGETS
 from roboview_data.benchmark.format import load_benchmark
 from roboview_data.tasks import load_task, make_env
 from roboview_data.variation.instances import episode_seed
-from roboview_vla_eval.benchmark import JOINT_TARGETS, RoboViewBenchmark
+from roboview_vla_eval.benchmark import RoboViewBenchmark
 from roboview_vla_eval.convert import convert, read_aggregates
 
 ROOT = Path(__file__).parents[1]
