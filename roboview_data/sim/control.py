@@ -146,12 +146,12 @@ class EEController:
     track the targets for the control period. The targets stay 1 mrad inside the joint range.
     """
 
-    def __init__(self, model: mujoco.MjModel, control: str) -> None:
+    def __init__(self, model: mujoco.MjModel, control: str, end_effector: EndEffector | None = None) -> None:
         if check_control(control) not in EE_CONTROLS:
             raise ValueError(f"EEController runs {', '.join(EE_CONTROLS)}, not {control!r}")
         self.control = control
         self.ik = ArmIK(model)
-        self.end_effector = EndEffector(model)
+        self.end_effector = end_effector or EndEffector(model)  # the env's own, where it has one
         self._arm = SceneIds.lookup(model).arm_qpos
 
     def target_pose(self, qpos: np.ndarray, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -180,11 +180,13 @@ class JointToEE:
     (open), 1 → +1 (close).
     """
 
-    def __init__(self, model: mujoco.MjModel, control: str) -> None:
+    def __init__(self, model: mujoco.MjModel, control: str, ik: ArmIK | None = None) -> None:
         if check_control(control) not in EE_CONTROLS:
             raise ValueError(f"JointToEE converts to {', '.join(EE_CONTROLS)}, not {control!r}")
         self.control = control
-        self.ik = ArmIK(model)
+        self.ik = ik or ArmIK(
+            model
+        )  # a planner's own, where it has one (its forward kinematics is all we use)
         self.end_effector = EndEffector(model)
 
     def __call__(self, joint_action: np.ndarray, ee_state: np.ndarray) -> np.ndarray:

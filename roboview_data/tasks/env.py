@@ -219,7 +219,9 @@ class TaskEnv(gym.Env):
         self._appliers: dict[str, SceneApplier] = {}
         self.bind_target()
         self.end_effector = EndEffector(self.model)
-        self.controller = EEController(self.model, control) if control in EE_CONTROLS else None
+        self.controller = (
+            EEController(self.model, control, self.end_effector) if control in EE_CONTROLS else None
+        )
         self.instance = baseline_instance(self.task)
         self.instruction = self.instance.get(self.instruction_factor)
         self.steps = 0
@@ -453,7 +455,9 @@ class ScriptedExpert:
     def __init__(self, env: TaskEnv) -> None:
         self.env = env
         self.planner = PickPlacePlanner(env.model)
-        self._to_ee = JointToEE(env.model, env.control) if env.control in EE_CONTROLS else None
+        self._to_ee = (
+            JointToEE(env.model, env.control, self.planner.ik) if env.control in EE_CONTROLS else None
+        )
 
     def reset(self) -> None:
         """Plan from the current (just reset) simulator state."""
