@@ -17,6 +17,7 @@ share a letter are not significantly different). Each row links to a report.html
 
 from __future__ import annotations
 
+import copy
 import datetime
 import logging
 from dataclasses import dataclass, field
@@ -127,9 +128,12 @@ def _board_benchmark(cfg: LeaderboardConfig, local: dict[str, Path]) -> Path:
 
 
 def run(cfg: LeaderboardConfig) -> Board:
+    import pandas as pd
+    import pyarrow.parquet as pq
+
     from eval.reporting.leaderboard import rank_metrics, single_policy_rows
     from eval.reporting.markdown import HTML_FILE, load_results, write_report
-    from eval.running.results import PARQUET, counted
+    from eval.running.results import PARQUET, STATUS, counted
     from eval.statistics.metrics import compute_all_metrics
     from roboview_data.benchmark.format import load_benchmark
 
@@ -159,8 +163,10 @@ def run(cfg: LeaderboardConfig) -> Board:
     )
     if accepted:
         policies = []
-        for path in accepted.values():
-            names = sorted(map(str, counted(load_results([path / PARQUET])[0])["policy"].unique()))
+        for path in accepted.values():  # each bundle's policy, read first: the labels rename them when loaded
+            columns = [c for c in ("policy", STATUS) if c in pq.read_schema(path / PARQUET).names]
+            rows = counted(pd.read_parquet(path / PARQUET, columns=columns))
+            names = sorted(map(str, rows["policy"].unique()))
             if len(names) != 1:
                 raise EpisodesError(
                     f"{path} holds several policies ({', '.join(names)}); give one per bundle"
@@ -168,10 +174,14 @@ def run(cfg: LeaderboardConfig) -> Board:
             policies.append(names[0])
         labels = labels_for(policies, list(accepted))
         episodes, sources = load_results([p / PARQUET for p in accepted.values()], labels)
+        metrics = compute_all_metrics(episodes, cfg.metrics)
+        several = "policies" in metrics
         for label, policy, source, src in zip(labels, policies, accepted, sources):
             own = episodes[episodes["policy"] == label]
             report_dir = out / "reports" / label.replace("/", "_")
-            write_report(own, report_dir, cfg.metrics, sources=[src], plots=cfg.plots)
+            # The bundle's own metrics are those just computed for it among the others: not computed again.
+            mine = copy.deepcopy(metrics["policies"][label] if several else metrics)
+            write_report(own, report_dir, cfg.metrics, sources=[src], plots=cfg.plots, metrics=mine)
             entries.append(
                 Entry(
                     label,
@@ -182,8 +192,7 @@ def run(cfg: LeaderboardConfig) -> Board:
                     is_privileged(policy),
                 )
             )
-        metrics = compute_all_metrics(episodes, cfg.metrics)
-        if "policies" in metrics:
+        if several:
             board.overall, board.splits = rank_metrics(metrics, episodes)
         else:
             board.overall, board.splits = single_policy_rows(metrics)

@@ -771,11 +771,14 @@ def write_report(
     cfg: MetricsConfig = MetricsConfig(),
     sources: list[dict[str, Any]] | None = None,
     plots: bool = True,
+    metrics: dict[str, Any] | None = None,
 ) -> ReportResult:
-    """Compute metrics, write metrics.json, the plots and report.md into `output_dir`."""
+    """Compute metrics, write metrics.json, the plots and report.md into `output_dir`. `metrics`: those
+    `compute_all_metrics(episodes, cfg)` gives, already computed by the caller (completed here, in place)."""
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    metrics = compute_all_metrics(episodes, cfg)
+    if metrics is None:
+        metrics = compute_all_metrics(episodes, cfg)
     if sources is not None:
         metrics["sources"] = sources
         for source in sources:  # adaptive runs: when and why each split stopped
