@@ -17,8 +17,6 @@ that ran episodes; `pipelines.report` and `pipelines.verify --results=OUT` read 
 from __future__ import annotations
 
 import inspect
-import json
-import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,29 +35,11 @@ PARAM_DEFAULTS = {
 
 
 def read_aggregates(path: Path) -> list[dict]:
-    """vla-eval's aggregates from an aggregate JSON, a recording SQLite (vla-eval's exporter) or a folder."""
-    if path.is_dir():
-        found = sorted(path.glob("*_aggregate.json")) or sorted(path.glob("recording-*.sqlite"))
-        if not found:
-            raise ValueError(
-                f"--results={path}: the folder holds no vla-eval results (<name>_aggregate.json or "
-                "recording-<eval_id>.sqlite): give vla-eval run's output_dir"
-            )
-        return [a for f in found for a in read_aggregates(f)]
-    if path.suffix == ".sqlite":
-        from vla_eval.results.export import export_db
+    """vla-eval's aggregates from an aggregate JSON, a recording SQLite (vla-eval's exporter) or a folder: the reader
+    `pipelines.audit --format=vla_eval` uses."""
+    from eval.running.harnesses.vla_eval_results import read_results
 
-        with tempfile.TemporaryDirectory(prefix="roboview-vla-eval-") as tmp:
-            return export_db(path, Path(tmp))
-    if path.suffix == ".json":
-        body = json.loads(path.read_text())
-        if not isinstance(body, dict) or "tasks" not in body:
-            raise ValueError(f"--results={path}: not a vla-eval aggregate (no `tasks`)")
-        return [body]
-    raise ValueError(
-        f"--results={path}: expected vla-eval's <name>_aggregate.json, recording-<eval_id>.sqlite or its "
-        "output folder"
-    )
+    return [body for _, body in read_results(path)]
 
 
 def roboview_entries(aggregates: list[dict]) -> list[dict]:

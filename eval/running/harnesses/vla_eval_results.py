@@ -39,6 +39,14 @@ EXPECTED = (
 
 def read_vla_eval(path: Path) -> HarnessTable:
     """Every episode `path` holds (a recording, an aggregate, or a run folder), mapped as docs/audit.md says."""
+    bodies = read_results(path)
+    table = _episodes(bodies, path)
+    return _mapped(table, ", ".join(sorted({name for name, _ in bodies})))
+
+
+def read_results(path: Path) -> list[tuple[str, dict]]:
+    """(file name, benchmark aggregate with its episodes) of every vla-eval result `path` names or holds: its
+    recordings, through vla-eval's own exporter, else its exported aggregate JSONs (also roboview_vla_eval's)."""
     recordings, aggregates = _sources(Path(path))
     bodies: list[tuple[str, dict]] = []
     if recordings:
@@ -59,8 +67,7 @@ def read_vla_eval(path: Path) -> HarnessTable:
                 name,
                 body.get("benchmark"),
             )
-    table = _episodes(bodies, path)
-    return _mapped(table, ", ".join(sorted({name for name, _ in bodies})))
+    return bodies
 
 
 def _sources(path: Path) -> tuple[list[Path], list[Path]]:
