@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+
 # Infrastructure failures live on the lowest floor (the simulator raises RenderError); part of the policy API.
 from roboview_data.errors import InfraError, RenderError  # noqa: F401
 
@@ -23,3 +26,23 @@ class PolicyUnavailable(RuntimeError):
     the same command resumes once it is back. (A server's error frame while an episode runs is that episode's
     failure: raise anything else; a connection lost mid-episode and reopened is an `InfraError`.)
     """
+
+
+def open_with_retries(
+    open_fn: Callable[[], T], server: str, reconnects: int, backoff_s: float, lost: str = ""
+) -> T:
+    """`open_fn()` (a served policy's connection), tried `reconnects` more times, `backoff_s` apart and doubling;
+    `PolicyUnavailable` naming `server` (and what was `lost`) when every try fails."""
+    last: Exception | None = None
+    for attempt in range(reconnects + 1):
+        try:
+            return open_fn()
+        except Exception as exc:  # refused, timed out, bad handshake
+            last = exc
+            if attempt < reconnects:
+                time.sleep(backoff_s * 2**attempt)
+    raise PolicyUnavailable(
+        f"{server} is unreachable after {reconnects + 1} attempts ({lost + '; ' if lost else ''}"
+        f"{type(last).__name__}: {last}); start it (or fix --policy.url) and rerun the same command: finished "
+        "episodes are kept and the run resumes"
+    )

@@ -45,14 +45,13 @@ import collections
 import logging
 import os
 import re
-import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from policies.base import AgentView, ControlledConfig, Episode, PolicyConfig, control_field
-from policies.errors import InfraError, PolicyUnavailable
+from policies.errors import InfraError, open_with_retries
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.control import EE_ACTION_NAMES
 from roboview_data.tasks.env import ACTION_NAMES, DEPTH_KEY, EE_STATE_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
@@ -377,19 +376,11 @@ class OpenPIPolicy:
     def _connect(self) -> None:
         """Open the connection, trying `reconnects` more times; if it cannot be opened the server is down."""
         cfg = self.config
-        last: Exception | None = None
-        for attempt in range(cfg.reconnects + 1):
-            try:
-                self.conn = connect(self.url, cfg.api_key_env, cfg.open_timeout_s, cfg.timeout_s)
-                return
-            except Exception as exc:  # refused, timed out, bad handshake
-                last = exc
-                if attempt < cfg.reconnects:
-                    time.sleep(cfg.reconnect_backoff_s * 2**attempt)
-        raise PolicyUnavailable(
-            f"openpi server {self.url} is unreachable after {cfg.reconnects + 1} attempts "
-            f"({type(last).__name__}: {last}); start it (or fix --policy.url) and rerun the "
-            "same command: finished episodes are kept and the run resumes"
+        self.conn = open_with_retries(
+            lambda: connect(self.url, cfg.api_key_env, cfg.open_timeout_s, cfg.timeout_s),
+            f"openpi server {self.url}",
+            cfg.reconnects,
+            cfg.reconnect_backoff_s,
         )
 
     def reset(self, episode: Episode) -> None:

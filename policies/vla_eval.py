@@ -34,14 +34,13 @@ from __future__ import annotations
 
 import json
 import logging
-import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from policies.base import AgentView, Episode, PolicyConfig
-from policies.errors import InfraError, PolicyUnavailable
+from policies.errors import InfraError, open_with_retries
 from policies.vla_eval_specs import Negotiated, negotiate
 from roboview_data.sim.cameras import ALL_CAMERAS
 from roboview_data.sim.control import CONTROLS
@@ -146,23 +145,16 @@ class VlaEvalPolicy:
         """Open slot's connection (re-sending its episode's start), `reconnects` more tries; else the run stops."""
         from vla_eval.protocol.messages import MessageType
 
-        cfg, last = self.config, None
-        for attempt in range(cfg.reconnects + 1):
-            try:
-                self.connections[slot] = ServerConnection(
-                    self.url, cfg.open_timeout_s, cfg.timeout_s, cfg.image_format
-                )
-                if self.episodes[slot] is not None:
-                    self.connections[slot].send(MessageType.EPISODE_START, start_payload(self.episodes[slot]))
-                return
-            except Exception as exc:  # refused, timed out, bad handshake
-                last = exc
-                if attempt < cfg.reconnects:
-                    time.sleep(cfg.reconnect_backoff_s * 2**attempt)
-        raise PolicyUnavailable(
-            f"vla-eval server {self.url} is unreachable after {cfg.reconnects + 1} attempts "
-            f"({lost + '; ' if lost else ''}{type(last).__name__}: {last}); start it (or fix --policy.url) and "
-            "rerun the same command: finished episodes are kept and the run resumes"
+        cfg = self.config
+
+        def connect() -> ServerConnection:
+            connection = ServerConnection(self.url, cfg.open_timeout_s, cfg.timeout_s, cfg.image_format)
+            if self.episodes[slot] is not None:
+                connection.send(MessageType.EPISODE_START, start_payload(self.episodes[slot]))
+            return connection
+
+        self.connections[slot] = open_with_retries(
+            connect, f"vla-eval server {self.url}", cfg.reconnects, cfg.reconnect_backoff_s, lost
         )
 
     def _lose(self, slot: int, why: str) -> InfraError:
