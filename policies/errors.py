@@ -28,7 +28,7 @@ class PolicyUnavailable(RuntimeError):
     """
 
 
-def open_with_retries(
+def open_with_retries[T](
     open_fn: Callable[[], T], server: str, reconnects: int, backoff_s: float, lost: str = ""
 ) -> T:
     """`open_fn()` (a served policy's connection), tried `reconnects` more times, `backoff_s` apart and doubling;
