@@ -57,26 +57,26 @@ $(STAMP): pyproject.toml requirements.lock $(PLUGIN)/pyproject.toml
 # `vision` agent, `vlm_simple` against the classic-CV stand-in endpoint, and the random floor — on the `tiny`
 # benchmark, 3 repeats, every bundle verified, ranked with significance groups.
 board: install
-	$(PY) -m pipelines.build_benchmark --output_dir=$(BOARD_DIR)/benchmark --preset=tiny --num_workers=2
+	$(VENV)/bin/roboview-build-benchmark --output_dir=$(BOARD_DIR)/benchmark --preset=tiny --num_workers=2
 	@set -e; for p in expert vision random; do \
-	  $(PY) -m pipelines.evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=$$p \
+	  $(VENV)/bin/roboview-evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=$$p \
 	    --eval.n_repeats=3 --eval.num_workers=2 --output_dir=$(BOARD_DIR)/eval/$$p; done
-	@set -e; $(PY) -m pipelines.serve_vlm --port=$(BOARD_VLM_PORT) & server=$$!; trap "kill $$server" EXIT; sleep 5; \
-	  $(PY) -m pipelines.evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=vlm_simple \
+	@set -e; $(VENV)/bin/roboview-serve-vlm --port=$(BOARD_VLM_PORT) & server=$$!; trap "kill $$server" EXIT; sleep 5; \
+	  $(VENV)/bin/roboview-evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=vlm_simple \
 	    --policy.name=vlm_simple_standin --policy.endpoint.base_url=http://127.0.0.1:$(BOARD_VLM_PORT)/v1 \
 	    --policy.endpoint.model=roboview-classic-cv-standin --eval.n_repeats=3 --eval.num_workers=2 \
 	    --output_dir=$(BOARD_DIR)/eval/vlm_simple_standin
-	$(PY) -m pipelines.leaderboard --benchmark.path=$(BOARD_DIR)/benchmark --plots=false --output_dir=$(BOARD_PAGE) \
+	$(VENV)/bin/roboview-leaderboard --benchmark.path=$(BOARD_DIR)/benchmark --plots=false --output_dir=$(BOARD_PAGE) \
 	  --results=$(BOARD_DIR)/eval/expert,$(BOARD_DIR)/eval/vision,$(BOARD_DIR)/eval/vlm_simple_standin,$(BOARD_DIR)/eval/random
 
 demo: install
-	$(PY) -m pipelines.collect --dataset.repo_id=roboview/demo_pick_place \
+	$(VENV)/bin/roboview-collect --dataset.repo_id=roboview/demo_pick_place \
 	  --dataset.root=$(DEMO_DIR)/dataset --dataset.num_episodes=6 --num_workers=2
-	$(PY) -m pipelines.build_benchmark --output_dir=$(DEMO_DIR)/benchmark --preset=tiny --num_workers=2
-	$(PY) -m pipelines.evaluate --benchmark.path=$(DEMO_DIR)/benchmark --policy.type=vision \
+	$(VENV)/bin/roboview-build-benchmark --output_dir=$(DEMO_DIR)/benchmark --preset=tiny --num_workers=2
+	$(VENV)/bin/roboview-evaluate --benchmark.path=$(DEMO_DIR)/benchmark --policy.type=vision \
 	  --eval.n_repeats=3 --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
 	  --output_dir=$(DEMO_DIR)/eval/vision
-	$(PY) -m pipelines.report --results=$(DEMO_DIR)/eval/vision/episodes.parquet --output_dir=$(DEMO_DIR)/report
+	$(VENV)/bin/roboview-report --results=$(DEMO_DIR)/eval/vision/episodes.parquet --output_dir=$(DEMO_DIR)/report
 	@echo "Report:         $(DEMO_DIR)/report/report.html (open it in a browser; report.md, metrics.json and the plots beside it)"
 	@echo "Evaluation:     $(DEMO_DIR)/eval/vision/episodes.parquet (Rerun: .venv/bin/rerun $(DEMO_DIR)/eval/vision*.rrd)"
 	@echo "Demo benchmark: $(DEMO_DIR)/benchmark (datasets.load_dataset('$(DEMO_DIR)/benchmark', split='color'))"

@@ -4,13 +4,13 @@
     python -m benchmarks.adaptive --results=outputs/eval/act_ref_adaptive --output=outputs/bench/adaptive_real.json
 
 For each design (values × contexts at SR 0.7, the paper's camera_euler / camera_pose shapes and a small
-one) and true bias τ ∈ {0, 0.3, 0.6} (logit SD), `eval.statistics.adaptive.simulate` runs the group-sequential
+one) and true bias τ ∈ {0, 0.3, 0.6} (logit SD), `roboview.eval.statistics.adaptive.simulate` runs the group-sequential
 design (α = 0.05, futility against τ = 0.6 at power 0.8, at most `max_repeats` rounds) on real binomial
 tables with the real test. The fixed-n reference is the smallest number of repeats whose LRT power at
-τ = 0.6 (`eval.statistics.significance.lrt_power`, asymptotic; sparse tables fall short of it, so it favours the fixed
+τ = 0.6 (`roboview.eval.statistics.significance.lrt_power`, asymptotic; sparse tables fall short of it, so it favours the fixed
 design) reaches the adaptive design's simulated power at τ = 0.6. `saving` = 1 − adaptive episodes / fixed.
 
-With `--results=DIR` (a folder written by `pipelines.evaluate --eval.adaptive=true`) it reads that run instead:
+With `--results=DIR` (a folder written by `roboview.pipelines.evaluate --eval.adaptive=true`) it reads that run instead:
 per split, the episodes the adaptive run spent and why it stopped, against the fixed-n design that reaches the
 run's power at its τ with the split's shape and observed success rate (`lrt_power`).
 """
@@ -24,9 +24,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from eval.statistics.adaptive import Design, read_record, simulate
-from eval.statistics.significance import lrt_power
-from pipelines._cli import cli_main
+from roboview.eval.statistics.adaptive import Design, read_record, simulate
+from roboview.eval.statistics.significance import lrt_power
+from roboview.pipelines._cli import cli_main
 
 DESIGNS = ((9, 4, 10), (9, 11, 6), (21, 11, 4))  # values, contexts, max_repeats
 
@@ -45,7 +45,7 @@ class AdaptiveBenchConfig:
             raise ValueError(f"--sims={self.sims} must be ≥ 10")
         if self.results and read_record(Path(self.results)) is None:
             raise ValueError(
-                f"--results={self.results} holds no adaptive.json: run pipelines.evaluate with "
+                f"--results={self.results} holds no adaptive.json: run roboview.pipelines.evaluate with "
                 "--eval.adaptive=true into it first"
             )
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import psutil
 
 from benchmarks.serving import free_port
-from pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
 RAY = Path(sys.executable).parent / "ray"
@@ -161,7 +161,7 @@ def _evaluate(
     cmd = [
         sys.executable,
         "-m",
-        "pipelines.evaluate",
+        "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
         f"--benchmark.splits={cfg.split}",
         f"--eval.limit={cfg.episodes}",
@@ -186,8 +186,8 @@ def run(cfg: ClusterBenchConfig) -> dict:
         "outputs/benchmark_paper" if Path("outputs/benchmark_paper").is_dir() else ""
     )
     if not bench:
-        from pipelines.build_benchmark import BuildConfig
-        from pipelines.build_benchmark import run as build
+        from roboview.pipelines.build_benchmark import BuildConfig
+        from roboview.pipelines.build_benchmark import run as build
 
         bench = str(scratch / "bench")
         build(BuildConfig(output_dir=bench, preset="tiny", image_size=64))

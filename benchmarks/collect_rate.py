@@ -11,9 +11,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipelines._cli import cli_main
-from pipelines.collect import CollectConfig, DatasetConfig
-from pipelines.collect import run as collect
+from roboview.pipelines._cli import cli_main
+from roboview.pipelines.collect import CollectConfig, DatasetConfig
+from roboview.pipelines.collect import run as collect
 
 
 @dataclass

@@ -4,11 +4,11 @@
         [--output=outputs/bench/conformance_drift.json]
 
 Each change is applied to the compiled model right after every reset of the check's envs (in this process), and
-the benchmark's reference sample is re-rendered and re-simulated as `pipelines.verify --benchmark.path` does:
+the benchmark's reference sample is re-rendered and re-simulated as `roboview.pipelines.verify --benchmark.path` does:
 the object's color +0.04 in sRGB, every light's level −10 %, a checker material on the table, the scene cameras
 moved 1 cm, every geom's friction × 0.9 and × 0.7, a 0.0021 s timestep. Prints the verdict and the largest
 deviations per change (docs/benchmark.md, "Identity and conformance"). Another renderer or MuJoCo is measured by
-running `pipelines.verify` under it (GALLIUM_DRIVER=softpipe; PYTHONPATH with another mujoco).
+running `roboview.pipelines.verify` under it (GALLIUM_DRIVER=softpipe; PYTHONPATH with another mujoco).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 
 def _color(env) -> None:
@@ -73,8 +73,8 @@ class DriftConfig:
 
 
 def run(cfg: DriftConfig) -> dict:
-    from roboview_data.benchmark import conformance
-    from roboview_data.tasks.env import TaskEnv
+    from roboview.benchmark import conformance
+    from roboview.tasks.env import TaskEnv
 
     reset = TaskEnv.reset
     out = {}

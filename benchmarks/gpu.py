@@ -9,7 +9,7 @@ The same episodes (first `--episodes` instances of `--split`, one repeat) under 
 - `gpu_policy_server`: one policy server holds the only copy on the GPU; C − 1 render workers with
   `--envs_per_worker` envs each send it their chunk requests, batched into one forward pass
   (`--eval.policy_server=true`).
-- `gpu_served`: `pipelines.serve_policy` holds the model on the GPU and batches across connections; C − 1
+- `gpu_served`: `roboview.pipelines.serve_policy` holds the model on the GPU and batches across connections; C − 1
   workers reach it over openpi's websocket protocol (`--policy.type=openpi`).
 
 Rendering uses EGL, which runs on the NVIDIA driver where one is installed. Writes episodes/hour per layout,
@@ -29,7 +29,7 @@ from pathlib import Path
 
 from benchmarks.cluster import frames_equal
 from benchmarks.serving import REFERENCE_CHECKPOINT, free_port, stop
-from pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
 
@@ -55,7 +55,7 @@ class GpuBenchConfig:
         if not Path(self.checkpoint).is_dir():
             raise ValueError(
                 f"--checkpoint={self.checkpoint} is not a checkpoint folder (a lerobot-train "
-                "pretrained_model); train one with pipelines.train or pass its path"
+                "pretrained_model); train one with roboview.pipelines.train or pass its path"
             )
 
 
@@ -65,7 +65,7 @@ def _evaluate(cfg: GpuBenchConfig, bench: str, out: Path, flags: list[str]) -> d
     cmd = [
         sys.executable,
         "-m",
-        "pipelines.evaluate",
+        "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
         f"--benchmark.splits={cfg.split}",
         f"--eval.limit={cfg.episodes}",
@@ -107,8 +107,8 @@ def run(cfg: GpuBenchConfig) -> dict:
     scratch = Path(tempfile.mkdtemp(prefix="roboview-gpu-bench-"))
     bench = cfg.benchmark.path
     if not bench:
-        from pipelines.build_benchmark import BuildConfig
-        from pipelines.build_benchmark import run as build
+        from roboview.pipelines.build_benchmark import BuildConfig
+        from roboview.pipelines.build_benchmark import run as build
 
         bench = str(scratch / "bench")
         build(BuildConfig(output_dir=bench, preset="tiny", image_size=64))
@@ -136,12 +136,19 @@ def run(cfg: GpuBenchConfig) -> dict:
             ],
         ),
     }
-    from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
+    from roboview.policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     port = free_port()
     log = scratch / "serve_policy.log"
     server = subprocess.Popen(
-        [sys.executable, "-m", "pipelines.serve_policy", *model, "--policy.device=cuda", f"--port={port}"],
+        [
+            sys.executable,
+            "-m",
+            "roboview.pipelines.serve_policy",
+            *model,
+            "--policy.device=cuda",
+            f"--port={port}",
+        ],
         stdout=log.open("w"),
         stderr=subprocess.STDOUT,
         cwd=ROOT,

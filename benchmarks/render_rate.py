@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pipelines._cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
-from roboview_data.sim.cameras import ALL_CAMERAS  # noqa: E402
-from roboview_data.tasks import make_env  # noqa: E402
-from roboview_data.tasks.env import TaskEnv  # noqa: E402
+from roboview.pipelines._cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
+from roboview.sim.cameras import ALL_CAMERAS  # noqa: E402
+from roboview.tasks import make_env  # noqa: E402
+from roboview.tasks.env import TaskEnv  # noqa: E402
 
 
 @dataclass

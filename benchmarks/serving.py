@@ -5,7 +5,7 @@
 Writes one JSON file with:
 
 - `episodes_per_hour`: the same checkpoint, the same episodes (`--split`, first `--episodes` instances,
-  2 workers) evaluated in-process (`lerobot`), through `pipelines.serve_policy` (`openpi` client, one
+  2 workers) evaluated in-process (`lerobot`), through `roboview.pipelines.serve_policy` (`openpi` client, one
   server batching both workers' requests), through openpi-server's own `WebsocketPolicyServer`
   (`--server=openpi`: one request at a time), through LeRobot's async policy server (`lerobot_async`,
   one server per worker) and through vla-eval's `LeRobotModelServer` (`vla_eval`, one server per worker:
@@ -36,7 +36,7 @@ import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 REFERENCE_CHECKPOINT = "outputs/train_act96/checkpoints/last/pretrained_model"
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,7 +75,7 @@ class ServingConfig:
         ):
             raise ValueError(
                 f"--checkpoint={self.checkpoint} is not a LeRobot checkpoint folder (no config.json); "
-                "train one with pipelines.train or pass its pretrained_model folder"
+                "train one with roboview.pipelines.train or pass its pretrained_model folder"
             )
         for name in ("episodes", "clients", "requests"):
             if getattr(self, name) < 1:
@@ -107,7 +107,7 @@ def serve_policy(
         [
             sys.executable,
             "-m",
-            "pipelines.serve_policy",
+            "roboview.pipelines.serve_policy",
             "--policy.type=lerobot",
             f"--policy.path={checkpoint}",
             f"--port={port}",
@@ -132,7 +132,7 @@ def serve_policy(
 
 
 def lerobot_server(port: int, cwd: Path) -> subprocess.Popen:
-    from policies.lerobot_async import check_reachable
+    from roboview.policies.lerobot_async import check_reachable
 
     proc = subprocess.Popen(
         [
@@ -207,7 +207,7 @@ def stop(*procs: subprocess.Popen) -> None:
 def evaluate(cfg: ServingConfig, bench: str, policy, out: Path) -> dict:
     import pandas as pd
 
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 
     start = time.perf_counter()
     result = run(
@@ -260,9 +260,9 @@ def requests_per_second(cfg: ServingConfig, port: int, observations: list[dict])
 
 def observations_for(cfg: ServingConfig, bench: str, image_size: int, cameras: tuple[str, ...]) -> list[dict]:
     """Real first observations of the split's instances, in the droid wire layout."""
-    from policies.openpi import wire_format
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.openpi import wire_format
+    from roboview.tasks import make_env
 
     items = load_benchmark(bench, [cfg.split]).splits[cfg.split][:16]
     env = make_env(cameras=cameras, image_size=image_size)
@@ -276,7 +276,7 @@ def observations_for(cfg: ServingConfig, bench: str, image_size: int, cameras: t
 
 
 def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
-    from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
+    from roboview.policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     observations = observations_for(
         cfg, bench, checkpoint_image_size(cfg.checkpoint), checkpoint_cameras(cfg.checkpoint)
@@ -299,9 +299,9 @@ def rps_only(cfg: ServingConfig, bench: str, scratch: Path) -> dict:
 
 
 def run(cfg: ServingConfig) -> dict:
-    from eval.running.provenance import now, start_entry
-    from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
-    from policies.types import load_policy_types, policy_config
+    from roboview.eval.running.provenance import now, start_entry
+    from roboview.policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
+    from roboview.policies.types import load_policy_types, policy_config
 
     load_policy_types()
     scratch = Path(tempfile.mkdtemp(prefix="roboview_serving_"))
@@ -309,8 +309,8 @@ def run(cfg: ServingConfig) -> dict:
     try:
         bench = cfg.benchmark.path
         if not bench:
-            from pipelines.build_benchmark import BuildConfig
-            from pipelines.build_benchmark import run as build
+            from roboview.pipelines.build_benchmark import BuildConfig
+            from roboview.pipelines.build_benchmark import run as build
 
             bench = str(scratch / "bench")
             build(BuildConfig(output_dir=bench, preset="tiny", image_size=64))

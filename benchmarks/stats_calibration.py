@@ -3,7 +3,7 @@
     python -m benchmarks.stats_calibration [--sims=40] [--values=9] [--contexts=4] [--repeats=5] [--sr=0.7]
 
 For τ = 0 (no bias), 0.3 and 0.6 (logit SD of the value effects) it simulates `--sims` tables of
-one single-factor split (`eval.statistics.simulate`), computes the metrics exactly as `pipelines.report` does,
+one single-factor split (`roboview.eval.statistics.simulate`), computes the metrics exactly as `roboview.pipelines.report` does,
 and prints per τ: the noise-free CV of the true success probabilities, the mean paper CV, cv_null
 and cv_excess, and how often each test says p < 0.05 (type-I error at τ = 0, power above it):
 the GLM likelihood-ratio `p_value`, the CV permutation test `p_value_cv`, and "any value with
@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eval.statistics.metrics import MetricsConfig, split_metrics
-from eval.statistics.significance import lrt_power
-from eval.statistics.simulate import simulate_split
-from pipelines._cli import cli_main
+from roboview.eval.statistics.metrics import MetricsConfig, split_metrics
+from roboview.eval.statistics.significance import lrt_power
+from roboview.eval.statistics.simulate import simulate_split
+from roboview.pipelines._cli import cli_main
 
 
 @dataclass

@@ -8,7 +8,7 @@ do not leak between phases):
 
 - `render_fps_bare`, `render_fps_pipeline`, `render_ratio`: a bare `mujoco.Renderer` loop against the
   env's observation rendering (224², all four cameras; `benchmarks.render_rate`).
-- `collect_demos_per_hour`: `pipelines.collect`, four cameras at 224², 2 workers, encoding included.
+- `collect_demos_per_hour`: `roboview.pipelines.collect`, four cameras at 224², 2 workers, encoding included.
 - `eval_episodes_per_hour` (vision agent, 2 workers), `eval_episodes_per_hour_1_worker`, `speedup_2_workers`,
   `eval_episodes_per_hour_eager` (every camera rendered every step, the pre-lazy behaviour),
   `peak_rss_mb_per_worker` (largest worker's peak resident memory).
@@ -40,7 +40,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 REFERENCE_CHECKPOINT = Path("outputs/train_act96/checkpoints/last/pretrained_model")
 # (quick, full) sizes.
@@ -77,7 +77,7 @@ def phase_render(frames: int) -> dict:
     import numpy as np
 
     from benchmarks.render_rate import bare_fps, pipeline_fps
-    from roboview_data.tasks import make_env
+    from roboview.tasks import make_env
 
     env = make_env(image_size=224)
     env.reset()
@@ -89,7 +89,7 @@ def phase_render(frames: int) -> dict:
 
 
 def phase_collect(episodes: int, scratch: Path) -> dict:
-    from pipelines.collect import CollectConfig, DatasetConfig, run
+    from roboview.pipelines.collect import CollectConfig, DatasetConfig, run
 
     cfg = CollectConfig(
         dataset=DatasetConfig(
@@ -120,8 +120,8 @@ def phase_eval(
     eager: bool,
     out: Path,
 ) -> dict:
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+    from roboview.policies.types import policy_config
 
     cfg = EvaluateConfig(
         BenchmarkConfig(bench, splits),
@@ -148,8 +148,8 @@ def phase_eval(
 
 
 def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: int, out: Path) -> dict:
-    from policies.devices import resolve_device
-    from policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
+    from roboview.policies.devices import resolve_device
+    from roboview.policies.lerobot_policy import checkpoint_cameras, checkpoint_image_size
 
     cmd = [
         str(Path(sys.executable).parent / "lerobot-eval"),
@@ -188,11 +188,11 @@ def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: 
 
 def phase_breakdown(bench: str, policy: str, path: str, splits: str, episodes: int, out: Path) -> dict:
     """One worker in this process, timers around rendering, physics, the policy and the results' I/O."""
-    from eval.running.results import EpisodeStore
-    from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
-    from pipelines.evaluate import resolve_image_size
-    from policies.types import policy_config
-    from roboview_data.benchmark.format import load_benchmark
+    from roboview.benchmark.format import load_benchmark
+    from roboview.eval.running.results import EpisodeStore
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from roboview.pipelines.evaluate import resolve_image_size
+    from roboview.policies.types import policy_config
 
     config = policy_config(policy, **({"path": path} if path else {}))
     worker = EvalWorker(WorkerSpec(config, resolve_image_size(config, 0), torch_threads=1))
@@ -275,7 +275,7 @@ def tiny_checkpoint(scratch: Path) -> str:
         [
             sys.executable,
             "-m",
-            "pipelines.collect",
+            "roboview.pipelines.collect",
             "--dataset.repo_id=bench/ckpt_demos",
             f"--dataset.root={root / 'ds'}",
             "--dataset.num_episodes=2",
@@ -290,7 +290,7 @@ def tiny_checkpoint(scratch: Path) -> str:
         [
             sys.executable,
             "-m",
-            "pipelines.train",
+            "roboview.pipelines.train",
             "--dataset.repo_id=bench/ckpt_demos",
             f"--dataset.root={root / 'ds'}",
             f"--output_dir={root / 'train'}",
@@ -306,8 +306,8 @@ def tiny_checkpoint(scratch: Path) -> str:
 
 
 def run_all(quick: bool, output: Path, checkpoint: str, benchmark: str) -> dict:
-    from eval.running.provenance import now, start_entry
-    from pipelines._cli import setup_environment
+    from roboview.eval.running.provenance import now, start_entry
+    from roboview.pipelines._cli import setup_environment
 
     setup_environment()
     pick = 0 if quick else 1
@@ -453,7 +453,7 @@ class ThroughputConfig:
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
 
     def __post_init__(self) -> None:
-        from roboview_data.benchmark.format import MANIFEST
+        from roboview.benchmark.format import MANIFEST
 
         if self.checkpoint and not (Path(self.checkpoint) / "config.json").is_file():
             raise ValueError(
@@ -489,8 +489,8 @@ def run_phase(args: PhaseConfig) -> dict:
     os.environ.setdefault("MUJOCO_GL", "egl")
     scratch = Path(args.scratch)
     if args.phase == "build":
-        from pipelines.build_benchmark import BuildConfig
-        from pipelines.build_benchmark import run as build
+        from roboview.pipelines.build_benchmark import BuildConfig
+        from roboview.pipelines.build_benchmark import run as build
 
         build(BuildConfig(output_dir=args.scratch, preset="tiny", num_workers=2))
         return {"built": args.scratch}

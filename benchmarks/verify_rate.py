@@ -1,14 +1,14 @@
-"""What trusting a number costs: the start-of-run conformance check and `pipelines.verify --results` on a large
+"""What trusting a number costs: the start-of-run conformance check and `roboview.pipelines.verify --results` on a large
 result bundle.
 
     python -m benchmarks.verify_rate --benchmark.path=outputs/demo/benchmark [--rows=10000] \
         [--output=outputs/bench/verify.json]
 
-1. The conformance check as `pipelines.evaluate` runs it before its first episode: measured (empty cache), then
-   read from the cache (the stack described, the verdict reused), and `pipelines.verify --benchmark.path`'s check.
+1. The conformance check as `roboview.pipelines.evaluate` runs it before its first episode: measured (empty cache), then
+   read from the cache (the stack described, the verdict reused), and `roboview.pipelines.verify --benchmark.path`'s check.
 2. A results folder of `--rows` episodes: the expert runs every instance of the benchmark once, then the rows are
    repeated over repeats 1, 2, … with each repeat's common-random-number seed (what a long run of a deterministic
-   policy writes) until `--rows`; `pipelines.verify --results` is timed on it (it must pass).
+   policy writes) until `--rows`; `roboview.pipelines.verify --results` is timed on it (it must pass).
 
 Prints one line per figure and writes them as JSON (docs/performance.md).
 """
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 
 @dataclass
@@ -42,7 +42,7 @@ class VerifyBenchConfig:
         if not (Path(self.benchmark.path) / "benchmark.json").is_file():
             raise ValueError(
                 f"--benchmark.path={self.benchmark.path} holds no benchmark; build one with "
-                "`python -m pipelines.build_benchmark --preset=tiny --output_dir=outputs/demo/benchmark`"
+                "`roboview-build-benchmark --preset=tiny --output_dir=outputs/demo/benchmark`"
             )
 
 
@@ -53,12 +53,12 @@ def _timed(fn):
 
 
 def run(cfg: VerifyBenchConfig) -> dict:
-    from eval.running.results import EpisodeStore
-    from pipelines.verify import VerifyConfig
-    from pipelines.verify import run as verify
-    from roboview_data.benchmark import conformance
-    from roboview_data.benchmark.format import read_manifest
-    from roboview_data.variation.instances import episode_seed
+    from roboview.benchmark import conformance
+    from roboview.benchmark.format import read_manifest
+    from roboview.eval.running.results import EpisodeStore
+    from roboview.pipelines.verify import VerifyConfig
+    from roboview.pipelines.verify import run as verify
+    from roboview.variation.instances import episode_seed
 
     root = Path(cfg.benchmark.path)
     version = read_manifest(root)["benchmark_version"]
@@ -83,7 +83,7 @@ def run(cfg: VerifyBenchConfig) -> dict:
             [
                 sys.executable,
                 "-m",
-                "pipelines.evaluate",
+                "roboview.pipelines.evaluate",
                 f"--benchmark.path={root}",
                 "--policy.type=expert",
                 "--eval.n_repeats=1",

@@ -45,7 +45,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def env():
-    from roboview_data.tasks.pick_place import PickPlaceEnv
+    from roboview.tasks.pick_place import PickPlaceEnv
 
     env = PickPlaceEnv(image_size=96, depth=False)
     yield env
@@ -75,8 +75,8 @@ def shared_folder(tmp_path_factory, name: str, build) -> Path:
 @pytest.fixture(scope="session")
 def tiny_benchmark(tmp_path_factory):
     """The `tiny` preset built once for every test that only reads a benchmark (57 instances, 64² previews)."""
-    from pipelines.build_benchmark import BuildConfig
-    from pipelines.build_benchmark import run as build
+    from roboview.pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines.build_benchmark import run as build
 
     def make(folder: Path) -> None:
         build(BuildConfig(output_dir=str(folder / "tiny"), preset="tiny", image_size=64))
@@ -86,9 +86,9 @@ def tiny_benchmark(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def tiny_demos(tmp_path_factory) -> Path:
-    """2 expert demos (left_top + wrist at 64²) collected by pipelines.collect as repo_id `t/demos`."""
-    from pipelines.collect import CollectConfig, DatasetConfig
-    from pipelines.collect import run as collect
+    """2 expert demos (left_top + wrist at 64²) collected by roboview.pipelines.collect as repo_id `t/demos`."""
+    from roboview.pipelines.collect import CollectConfig, DatasetConfig
+    from roboview.pipelines.collect import run as collect
 
     def make(folder: Path) -> None:
         collect(
@@ -109,16 +109,16 @@ def tiny_demos(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_checkpoint(tmp_path_factory, tiny_benchmark, tiny_demos) -> Path:
-    """A 2-step ACT checkpoint (left_top + wrist at 64²) trained by pipelines.train on `tiny_demos`."""
+    """A 2-step ACT checkpoint (left_top + wrist at 64²) trained by roboview.pipelines.train on `tiny_demos`."""
     import subprocess
     import sys
 
     def make(root: Path) -> None:
-        # The reference recipe (pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
+        # The reference recipe (roboview.pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
         args = [
             sys.executable,
             "-m",
-            "pipelines.train",
+            "roboview.pipelines.train",
             "--dataset.repo_id=t/demos",
             f"--dataset.root={tiny_demos}",
             f"--output_dir={root / 'train'}",

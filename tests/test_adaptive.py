@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.statistics.adaptive import Design, decide, simulate
-from eval.statistics.tables import MetricsConfig
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.types import policy_config
+from roboview.eval.statistics.adaptive import Design, decide, simulate
+from roboview.eval.statistics.tables import MetricsConfig
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from roboview.policies.types import policy_config
 
 
 def within(rate: float, level: float, n: int) -> bool:
@@ -26,7 +26,7 @@ def test_type_one_error_stays_at_alpha_when_looking_after_every_round():
 
 
 def test_fewer_episodes_than_the_fixed_design_of_equal_power():
-    from eval.statistics.significance import lrt_power
+    from roboview.eval.statistics.significance import lrt_power
 
     # The paper's camera_pose shape (21 values × 11 contexts), a bias of logit SD 0.6, SR 0.7.
     adaptive = simulate(21, 11, 0.7, 0.6, Design(alpha=0.05, tau=0.6, power=0.8, max_repeats=4), 30, seed=4)
@@ -51,8 +51,8 @@ def test_boundaries_decide_from_the_lrt():
 
 
 def test_an_adaptive_run_stops_splits_resumes_and_is_reported(tiny_benchmark, tmp_path):
-    from pipelines.report import ReportConfig
-    from pipelines.report import run as report
+    from roboview.pipelines.report import ReportConfig
+    from roboview.pipelines.report import run as report
 
     cfg = EvaluateConfig(
         BenchmarkConfig(str(tiny_benchmark), "color,color_x_camera_pose"),

@@ -5,20 +5,20 @@ import dataclasses
 import numpy as np
 import pytest
 
-from policies.base import AgentView, Episode, PolicyConfig
-from policies.factory import make_policy
-from policies.types import policy_config
-from roboview_data.tasks import load_preset, make_env
-from roboview_data.tasks.env import IMAGE_KEY
-from roboview_data.tasks.pick_place import PickPlaceEnv
-from roboview_data.variation.factors import (
+from roboview.policies.base import AgentView, Episode, PolicyConfig
+from roboview.policies.factory import make_policy
+from roboview.policies.types import policy_config
+from roboview.tasks import load_preset, make_env
+from roboview.tasks.env import IMAGE_KEY
+from roboview.tasks.pick_place import PickPlaceEnv
+from roboview.variation.factors import (
     Factor,
     baselines,
     factor_names,
     register_factor,
     unregister_factor,
 )
-from roboview_data.variation.instances import SuiteConfig, generate_suite
+from roboview.variation.instances import SuiteConfig, generate_suite
 
 PAPER_FIRST_ID = "1209193fe4df70d1"  # first instance of the `paper` preset (tests/test_stable_ids.py)
 
@@ -180,16 +180,23 @@ def test_only_the_expert_is_privileged():
 def test_console_scripts_are_installed_and_answer_help():
     import subprocess
     import sys
+    import tomllib
     from pathlib import Path
 
+    from roboview.pipelines._console import VERBS, script_name
+
+    declared = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
+    assert declared == {script_name(v): f"roboview.pipelines._console:{v}" for v in VERBS}
     bindir = Path(sys.executable).parent
     for script, flag in (
-        ("roboview-eval", "--eval.envs_per_worker"),
+        ("roboview-evaluate", "--eval.envs_per_worker"),
         ("roboview-collect", "--dataset.task"),
-        ("roboview-build", "--preset"),
+        ("roboview-build-benchmark", "--preset"),
         ("roboview-report", "--results"),
         ("roboview-publish", "--repo_id"),
         ("roboview-train", "--steps"),
+        ("roboview-verify", "--results"),
+        ("roboview-serve-policy", "--port"),
     ):
         proc = subprocess.run([str(bindir / script), "--help"], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0 and flag in proc.stdout, (script, proc.stderr[-500:])

@@ -1,4 +1,4 @@
-"""pipelines.audit: another benchmark's per-episode table, mapped onto RoboView's statistics, on known truth."""
+"""roboview.pipelines.audit: another benchmark's per-episode table, mapped onto RoboView's statistics, on known truth."""
 
 import json
 
@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.statistics.metrics import MetricsConfig, compute_metrics
-from eval.statistics.simulate import simulate_split
-from pipelines.audit import main
+from roboview.eval.statistics.metrics import MetricsConfig, compute_metrics
+from roboview.eval.statistics.simulate import simulate_split
+from roboview.pipelines.audit import main
 
 FAST = ["--metrics.n_perm=300", "--metrics.n_glm=40", "--metrics.max_perm=300"]
 

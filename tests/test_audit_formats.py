@@ -1,4 +1,4 @@
-"""pipelines.audit --format: vla-eval's recording and export, and Inspect Robots' eval logs, each written by the
+"""roboview.pipelines.audit --format: vla-eval's recording and export, and Inspect Robots' eval logs, each written by the
 harness's own code with a planted bias, audited back to the planted counts."""
 
 import json
@@ -27,7 +27,7 @@ from vla_eval.recording import (
 from vla_eval.results.collector import ResultCollector
 from vla_eval.results.export import export_db
 
-from pipelines.audit import main
+from roboview.pipelines.audit import main
 
 ROOT = Path(__file__).parents[1]
 FAST = ["--metrics.n_perm=200", "--metrics.n_glm=30", "--metrics.max_perm=200"]
@@ -139,7 +139,7 @@ def successes(split: dict) -> dict[str, int]:
 def test_vla_eval_run_folder_from_the_command_line(vla_eval_run, tmp_path):
     out, _ = vla_eval_run
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    command = [sys.executable, "-m", "pipelines.audit", "--format=vla_eval", f"--results={out}"]
+    command = [sys.executable, "-m", "roboview.pipelines.audit", "--format=vla_eval", f"--results={out}"]
     done = subprocess.run(
         [*command, f"--output_dir={tmp_path}", *FAST], cwd=ROOT, env=env, capture_output=True, text=True
     )
@@ -250,7 +250,7 @@ def test_inspect_robots_log_folder_from_the_command_line(inspect_logs, tmp_path)
     command = [
         sys.executable,
         "-m",
-        "pipelines.audit",
+        "roboview.pipelines.audit",
         "--format=inspect_robots",
         f"--results={inspect_logs}",
     ]

@@ -12,14 +12,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from pipelines.build_benchmark import BuildConfig, run
-from pipelines.publish import PublishConfig, plan
-from roboview_data.benchmark.fairness import FairnessThresholds
-from roboview_data.benchmark.render import InstanceRenderer
-from roboview_data.sim.cameras import WORKSPACE_CENTER, quat_to_mat
-from roboview_data.tasks import load_preset
-from roboview_data.variation.factors import parse_dist_scale, parse_euler
-from roboview_data.variation.instances import generate_suite
+from roboview.benchmark.fairness import FairnessThresholds
+from roboview.benchmark.render import InstanceRenderer
+from roboview.pipelines.build_benchmark import BuildConfig, run
+from roboview.pipelines.publish import PublishConfig, plan
+from roboview.sim.cameras import WORKSPACE_CENTER, quat_to_mat
+from roboview.tasks import load_preset
+from roboview.variation.factors import parse_dist_scale, parse_euler
+from roboview.variation.instances import generate_suite
 
 ROOT = Path(__file__).parents[1]
 
@@ -142,8 +142,8 @@ def _cli(module: str, *args: str, env_extra: dict | None = None) -> subprocess.C
 
 
 def _build_main(capsys, *args: str) -> subprocess.CompletedProcess:
-    """`_cli("pipelines.build_benchmark", *args)` through its `main`, in this process: status and stderr."""
-    from pipelines.build_benchmark import main
+    """`_cli("roboview.pipelines.build_benchmark", *args)` through its `main`, in this process: status and stderr."""
+    from roboview.pipelines.build_benchmark import main
 
     capsys.readouterr()
     with pytest.raises(SystemExit) as exit_:
@@ -153,7 +153,7 @@ def _build_main(capsys, *args: str) -> subprocess.CompletedProcess:
 
 def test_bad_input_fails_before_work(tmp_path, built, capsys):
     # The command line itself (exit status 2, the message on stderr); the rest through the same `main`.
-    proc = _cli("pipelines.build_benchmark", f"--output_dir={tmp_path / 'x'}", "--preset=huge")
+    proc = _cli("roboview.pipelines.build_benchmark", f"--output_dir={tmp_path / 'x'}", "--preset=huge")
     assert (
         proc.returncode == 2 and "unknown --preset='huge'; allowed: paper, paper_dedupe, tiny" in proc.stderr
     )
@@ -172,7 +172,7 @@ def test_bad_input_fails_before_work(tmp_path, built, capsys):
 
 
 def test_publish_dry_run_lists_exactly_the_files(built):
-    proc = _cli("pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", "--dry_run=true")
+    proc = _cli("roboview.pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", "--dry_run=true")
     assert proc.returncode == 0, proc.stderr
     listed = sorted(
         line.split("roboview/tiny/")[1] for line in proc.stdout.splitlines() if "roboview/tiny/" in line
@@ -190,12 +190,16 @@ def test_publish_dry_run_lists_exactly_the_files(built):
 def test_publish_without_token_or_network_fails_cleanly(built, tmp_path):
     before = tree_digest(built)
     no_token = {"HF_HUB_OFFLINE": "0", "HF_HOME": str(tmp_path / "hf"), "HF_TOKEN": ""}
-    proc = _cli("pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", env_extra=no_token)
+    proc = _cli(
+        "roboview.pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", env_extra=no_token
+    )
     assert proc.returncode == 2 and "no Hugging Face token" in proc.stderr
     unreachable = no_token | {"HF_TOKEN": "hf_not_a_real_token", "HF_ENDPOINT": "http://127.0.0.1:9"}
-    proc = _cli("pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", env_extra=unreachable)
+    proc = _cli(
+        "roboview.pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", env_extra=unreachable
+    )
     assert proc.returncode == 2 and "cannot reach the hub at http://127.0.0.1:9" in proc.stderr
     offline = no_token | {"HF_HUB_OFFLINE": "1", "HF_TOKEN": "hf_x"}
-    proc = _cli("pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", env_extra=offline)
+    proc = _cli("roboview.pipelines.publish", f"--path={built}", "--repo_id=roboview/tiny", env_extra=offline)
     assert proc.returncode == 2 and "offline mode is on" in proc.stderr
     assert tree_digest(built) == before

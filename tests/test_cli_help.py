@@ -13,31 +13,17 @@ from pathlib import Path
 import draccus
 import pytest
 
+from roboview.pipelines._console import VERBS
+
 ROOT = Path(__file__).parents[1]
-ENTRY_POINTS = (
-    "collect",
-    "build_benchmark",
-    "publish",
-    "evaluate",
-    "report",
-    "plan",
-    "train",
-    "coverage",
-    "serve_vlm",
-    "probe_grounding",
-    "export_dataset",
-    "serve_policy",
-    "audit",
-    "merge",
-    "verify",
-    "leaderboard",
-)
+# The verbs: one module in roboview/pipelines/ and one console script each (declared in _console.VERBS).
+ENTRY_POINTS = VERBS
 
 
 # The LeRobot side's own commands.
-LEROBOT_SIDE = ("roboview_lerobot.convert", "roboview_lerobot.tiny_vla")
+LEROBOT_SIDE = ("roboview.integrations.lerobot.convert", "roboview.integrations.lerobot.tiny_vla")
 # The vla-eval side's own command.
-VLA_EVAL_SIDE = ("roboview_vla_eval.convert",)
+VLA_EVAL_SIDE = ("roboview.integrations.vla_eval.convert",)
 # The measurement harnesses (`make bench` and the figures in docs/performance.md).
 HARNESSES = (
     "adaptive",
@@ -68,7 +54,7 @@ def help_run(module: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize(
     "module",
-    [f"pipelines.{name}" for name in ENTRY_POINTS]
+    [f"roboview.pipelines.{name}" for name in ENTRY_POINTS]
     + list(LEROBOT_SIDE)
     + list(VLA_EVAL_SIDE)
     + [f"benchmarks.{name}" for name in HARNESSES],
@@ -115,7 +101,7 @@ def accepted_flags(config: type) -> set[str]:
     """The flags draccus's parser of `config` accepts (less the per-section config-file ones)."""
     from draccus.argparsing import ArgumentParser
 
-    from policies.types import load_policy_types
+    from roboview.policies.types import load_policy_types
 
     load_policy_types()  # as a command does before it parses: every --policy.type's flags
     actions = ArgumentParser(config_class=config).parser._option_string_actions
@@ -150,8 +136,8 @@ def config_flags(config: type, prefix: str = "") -> list[str]:
 
 
 def test_config_flags_walks_nested_configs():
-    from pipelines.evaluate import EvaluateConfig
-    from pipelines.report import ReportConfig
+    from roboview.pipelines.evaluate import EvaluateConfig
+    from roboview.pipelines.report import ReportConfig
 
     flags = config_flags(EvaluateConfig)
     assert {"--benchmark.path", "--eval.shard", "--eval.n_repeats", "--policy.type", "--output_dir"} <= set(
@@ -161,7 +147,7 @@ def test_config_flags_walks_nested_configs():
 
 
 def test_every_pipeline_module_is_covered():
-    modules = {p.stem for p in (ROOT / "pipelines").glob("*.py") if not p.stem.startswith("_")}
+    modules = {p.stem for p in (ROOT / "roboview" / "pipelines").glob("*.py") if not p.stem.startswith("_")}
     assert modules == set(ENTRY_POINTS)
     harnesses = {p.stem for p in (ROOT / "benchmarks").glob("*.py") if not p.stem.startswith("_")}
     assert harnesses == set(HARNESSES)
@@ -170,8 +156,8 @@ def test_every_pipeline_module_is_covered():
 
 
 def test_lists_are_written_comma_separated_everywhere():
-    from pipelines._cli import parse
-    from pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines._cli import parse
+    from roboview.pipelines.build_benchmark import BuildConfig
 
     cfg = parse(BuildConfig, ["--factorial_colors=red,blue", "--cartesian=[color,shape]"])
     # brackets still read
@@ -180,7 +166,7 @@ def test_lists_are_written_comma_separated_everywhere():
         [
             sys.executable,
             "-m",
-            "pipelines.collect",
+            "roboview.pipelines.collect",
             "--dataset.repo_id=t/x",
             "--dataset.root=/nonexistent/roboview-test",
             "--dataset.cameras=left_top,nope",

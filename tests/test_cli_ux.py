@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from pipelines._cli import cli_main, interrupted
+from roboview.pipelines._cli import cli_main, interrupted
 
 ROOT = Path(__file__).parents[1]
 ENV = os.environ | {"PYTHONPATH": str(ROOT)}
@@ -29,8 +29,8 @@ def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedPro
 
 
 def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+    from roboview.policies.types import policy_config
 
     out = tmp_path / "ev"
     flags = [
@@ -44,7 +44,7 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
     ]
     # Its own process group, signalled as a terminal's Ctrl-C is: the command and its workers all get SIGINT.
     proc = subprocess.Popen(
-        [sys.executable, "-m", "pipelines.evaluate", *flags],
+        [sys.executable, "-m", "roboview.pipelines.evaluate", *flags],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -81,8 +81,8 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
 
 
 def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monkeypatch, capsys):
-    import pipelines.collect as collect
-    from roboview_data.demos.dataset import Progress
+    import roboview.pipelines.collect as collect
+    from roboview.demos.dataset import Progress
 
     real = collect._episodes
 
@@ -118,7 +118,7 @@ def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monke
 
 
 def test_ctrl_c_during_build_says_nothing_was_written(tmp_path, monkeypatch, capsys):
-    import pipelines.build_benchmark as build
+    import roboview.pipelines.build_benchmark as build
 
     def ctrl_c(cfg, instances):
         raise KeyboardInterrupt
@@ -133,7 +133,7 @@ def test_ctrl_c_during_build_says_nothing_was_written(tmp_path, monkeypatch, cap
 
 
 def test_ctrl_c_elsewhere_says_to_rerun(capsys):
-    from pipelines.plan import PlanConfig
+    from roboview.pipelines.plan import PlanConfig
 
     def run(cfg):
         raise KeyboardInterrupt
@@ -157,8 +157,8 @@ def test_ctrl_c_elsewhere_says_to_rerun(capsys):
 @pytest.mark.parametrize(
     "module, wrong, right",
     [
-        ("pipelines.evaluate", "--eval.n_repeat=3", "--eval.n_repeats"),
-        ("pipelines.collect", "--dataset.num_episode=3", "--dataset.num_episodes"),
+        ("roboview.pipelines.evaluate", "--eval.n_repeat=3", "--eval.n_repeats"),
+        ("roboview.pipelines.collect", "--dataset.num_episode=3", "--dataset.num_episodes"),
     ],
 )
 def test_a_misspelled_flag_gets_two_lines_and_the_closest_real_flag(module, wrong, right):
@@ -172,9 +172,9 @@ def test_a_misspelled_flag_gets_two_lines_and_the_closest_real_flag(module, wron
 
 
 def test_evaluate_help_puts_the_common_flags_first():
-    from pipelines._cli import format_help
-    from pipelines.evaluate import EvaluateConfig
-    from policies.types import load_policy_types
+    from roboview.pipelines._cli import format_help
+    from roboview.pipelines.evaluate import EvaluateConfig
+    from roboview.policies.types import load_policy_types
 
     load_policy_types()
     text = format_help(EvaluateConfig)
@@ -193,10 +193,10 @@ def test_evaluate_help_puts_the_common_flags_first():
 
 
 def test_build_help_lists_every_preset_with_its_instance_count():
-    from roboview_data.tasks import PRESETS
-    from roboview_data.variation.instances import generate_suite
+    from roboview.tasks import PRESETS
+    from roboview.variation.instances import generate_suite
 
-    proc = _cli("pipelines.build_benchmark", "--help")
+    proc = _cli("roboview.pipelines.build_benchmark", "--help")
     assert proc.returncode == 0
     text = " ".join(proc.stdout.split())
     for name, suite in PRESETS.items():
@@ -205,23 +205,23 @@ def test_build_help_lists_every_preset_with_its_instance_count():
 
 
 def test_other_libraries_info_lines_are_silenced_ours_kept(tiny_benchmark):
-    from pipelines._cli import setup_environment
+    from roboview.pipelines._cli import setup_environment
 
     setup_environment()
     assert not logging.getLogger("OpenGL.acceleratesupport").isEnabledFor(logging.INFO)
     assert logging.getLogger("OpenGL.acceleratesupport").isEnabledFor(logging.WARNING)
-    assert logging.getLogger("pipelines.evaluate").isEnabledFor(logging.INFO)
+    assert logging.getLogger("roboview.pipelines.evaluate").isEnabledFor(logging.INFO)
     # A quick command that imports PyOpenGL after logging is set up.
-    proc = _cli("pipelines.plan", f"--benchmark.path={tiny_benchmark}")
+    proc = _cli("roboview.pipelines.plan", f"--benchmark.path={tiny_benchmark}")
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert "OpenGL.acceleratesupport" not in proc.stderr and "OpenGL_accelerate" not in proc.stderr
 
 
 def test_every_image_size_flag_checks_the_one_bound():
-    from pipelines.build_benchmark import GATE_IMAGE_MIN, BuildConfig
-    from pipelines.collect import TRAIN_IMAGE_MIN, DatasetConfig
-    from pipelines.evaluate import EvalConfig
-    from roboview_data.sim.cameras import IMAGE_SIZE_MAX, IMAGE_SIZE_MIN, check_image_size
+    from roboview.pipelines.build_benchmark import GATE_IMAGE_MIN, BuildConfig
+    from roboview.pipelines.collect import TRAIN_IMAGE_MIN, DatasetConfig
+    from roboview.pipelines.evaluate import EvalConfig
+    from roboview.sim.cameras import IMAGE_SIZE_MAX, IMAGE_SIZE_MIN, check_image_size
 
     assert (IMAGE_SIZE_MIN, TRAIN_IMAGE_MIN, GATE_IMAGE_MIN, IMAGE_SIZE_MAX) == (16, 32, 64, 640)
     check_image_size(IMAGE_SIZE_MIN)
@@ -238,11 +238,11 @@ def test_every_image_size_flag_checks_the_one_bound():
 
 
 def test_vlm_endpoint_flags_nest_and_the_flat_spelling_still_works_with_a_warning(capsys):
-    from pipelines._cli import parse
-    from pipelines.build_benchmark import BuildConfig
-    from pipelines.evaluate import EvaluateConfig
-    from policies.types import load_policy_types
-    from roboview_data.cli import flag_aliases, renamed_flags
+    from roboview.core.cli import flag_aliases, renamed_flags
+    from roboview.pipelines._cli import parse
+    from roboview.pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines.evaluate import EvaluateConfig
+    from roboview.policies.types import load_policy_types
 
     load_policy_types()
     base = ["--benchmark.path=b", "--policy.type=vlm_simple", "--sgl.enable=true"]

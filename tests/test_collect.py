@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines.collect import CollectConfig, DatasetConfig, run
+from roboview.pipelines.collect import CollectConfig, DatasetConfig, run
 
 REPO_ID = "roboview_test/demos"
 SMALL = ["--dataset.image_size=64", "--dataset.fps=10", "--max_steps=100"]
@@ -74,7 +74,7 @@ def test_dataset_loads_with_lerobot_and_matches_the_features(reference):
 
 
 def test_lerobots_trainer_trains_on_a_collected_dataset(tiny_checkpoint):
-    # The shared checkpoint: lerobot-train (through pipelines.train's recipe) on 2 demos collect wrote.
+    # The shared checkpoint: lerobot-train (through roboview.pipelines.train's recipe) on 2 demos collect wrote.
     config = json.loads((tiny_checkpoint / "config.json").read_text())
     assert config["type"] == "act"
     assert {"observation.images.left_top", "observation.images.wrist"} <= set(config["input_features"])
@@ -96,7 +96,7 @@ def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "pipelines.collect",
+        "roboview.pipelines.collect",
         f"--dataset.repo_id={REPO_ID}",
         f"--dataset.root={root}",
         "--dataset.num_episodes=4",
@@ -144,7 +144,7 @@ def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "pipelines.collect", *args],
+        [sys.executable, "-m", "roboview.pipelines.collect", *args],
         capture_output=True,
         text=True,
         timeout=120,
@@ -154,8 +154,8 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def _main(capsys, *args: str) -> subprocess.CompletedProcess:
-    """`_cli(*args)` through pipelines.collect's `main` in this process: its exit status and stderr."""
-    from pipelines.collect import main
+    """`_cli(*args)` through roboview.pipelines.collect's `main` in this process: its exit status and stderr."""
+    from roboview.pipelines.collect import main
 
     capsys.readouterr()
     with pytest.raises(SystemExit) as exit_:
@@ -219,8 +219,8 @@ def test_cli_refuses_foreign_or_mismatched_roots(reference, tmp_path, capsys):
 
 
 def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_actions(reference, tmp_path):
-    from roboview_data.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
-    from roboview_data.variation.factors.camera import ORBIT_RINGS
+    from roboview.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
+    from roboview.variation.factors.camera import ORBIT_RINGS
 
     root = tmp_path / "rand"
     cfg = small_cfg(root, 2, workers=1)
@@ -258,8 +258,8 @@ def test_randomized_collection_records_its_visuals_and_keeps_contexts_and_action
 
 
 def test_env_shows_the_recorded_visuals(env):
-    from roboview_data.tasks.env import baseline_instance
-    from roboview_data.variation.randomization import sample_randomization
+    from roboview.tasks.env import baseline_instance
+    from roboview.variation.randomization import sample_randomization
 
     visuals = sample_randomization(123, ("color", "camera_pose"))
     env.reset(

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from roboview_data.variation.colors import (
+from roboview.variation.colors import (
     CATEGORIES,
     COLORS,
     GREY_SPELLINGS,

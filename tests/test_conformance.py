@@ -1,4 +1,4 @@
-"""Benchmark identity over every cell, render/physics conformance, and `pipelines.verify` on benchmarks and
+"""Benchmark identity over every cell, render/physics conformance, and `roboview.pipelines.verify` on benchmarks and
 result bundles."""
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from roboview_data.benchmark import conformance
-from roboview_data.benchmark.format import BenchmarkError, instance_from_record, load_benchmark, read_rows
-from roboview_data.tasks.env import TaskEnv
+from roboview.benchmark import conformance
+from roboview.benchmark.format import BenchmarkError, instance_from_record, load_benchmark, read_rows
+from roboview.tasks.env import TaskEnv
 
 
 @pytest.fixture()
@@ -189,7 +189,13 @@ def test_softpipe_is_equivalent_with_its_drift_reported(tiny_benchmark):
     """Mesa's other software rasterizer draws edges differently: measured, within the tolerances."""
     env = {**os.environ, "GALLIUM_DRIVER": "softpipe", "MUJOCO_GL": "egl"}
     proc = subprocess.run(
-        [sys.executable, "-m", "pipelines.verify", f"--benchmark.path={tiny_benchmark}", "--sample=8"],
+        [
+            sys.executable,
+            "-m",
+            "roboview.pipelines.verify",
+            f"--benchmark.path={tiny_benchmark}",
+            "--sample=8",
+        ],
         capture_output=True,
         text=True,
         env=env,
@@ -206,7 +212,7 @@ def test_softpipe_is_equivalent_with_its_drift_reported(tiny_benchmark):
 
 
 def _evaluate(bench: Path, out: Path, *flags: str) -> None:
-    from pipelines.evaluate import main
+    from roboview.pipelines.evaluate import main
 
     main(
         [
@@ -238,8 +244,8 @@ def test_a_different_stack_stops_the_run_unless_drift_is_allowed(
     assert rows and {r["conformance"] for r in rows} == {"different"}
     entry = json.loads((tmp_path / "drift" / "provenance.json").read_text())[-1]["conformance"]
     assert entry["verdict"] == "different" and entry["drift"]["region_pixels_max"] > 0
-    from pipelines._cli import BenchmarkPath
-    from pipelines.verify import VerifyConfig, run
+    from roboview.pipelines._cli import BenchmarkPath
+    from roboview.pipelines.verify import VerifyConfig, run
 
     failed = [
         c
@@ -250,11 +256,11 @@ def test_a_different_stack_stops_the_run_unless_drift_is_allowed(
 
 
 def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, tmp_path):
-    from pipelines._cli import BenchmarkPath
-    from pipelines.verify import VerifyConfig, main
-    from pipelines.verify import run as verify
-    from roboview_data.tasks import load_preset
-    from roboview_data.variation.instances import generate_suite
+    from roboview.pipelines._cli import BenchmarkPath
+    from roboview.pipelines.verify import VerifyConfig, main
+    from roboview.pipelines.verify import run as verify
+    from roboview.tasks import load_preset
+    from roboview.variation.instances import generate_suite
 
     clean = tmp_path / "clean"
     _evaluate(tiny_benchmark, clean)
@@ -303,7 +309,7 @@ def test_verify_results_passes_a_clean_run_and_names_each_fault(tiny_benchmark, 
 
 
 def test_the_lerobot_eval_plugin_checks_conformance_before_making_envs(tiny_benchmark, tmp_path, monkeypatch):
-    from roboview_lerobot import RoboViewEnv
+    from roboview.integrations.lerobot import RoboViewEnv
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     _inject(monkeypatch, _camera)
@@ -315,7 +321,7 @@ def test_the_lerobot_eval_plugin_checks_conformance_before_making_envs(tiny_benc
 
 
 def test_publish_refuses_an_edited_benchmark(copy):
-    from pipelines.publish import PublishConfig
+    from roboview.pipelines.publish import PublishConfig
 
     _edit_cell(copy / "data" / "dist_scale.parquet", 0, "value", lambda v: "7")
     with pytest.raises(ValueError, match=r"--path: benchmark table 'data/dist_scale'.*'value' of row\(s\) 0"):

@@ -3,9 +3,9 @@
 import numpy as np
 import pandas as pd
 
-from eval.statistics.context import context_breakdown, context_factor_metrics
-from eval.statistics.metrics import MetricsConfig
-from roboview_data.variation.factors import FACTORS, baselines
+from roboview.eval.statistics.context import context_breakdown, context_factor_metrics
+from roboview.eval.statistics.metrics import MetricsConfig
+from roboview.variation.factors import FACTORS, baselines
 
 INSTRUCTIONS = FACTORS["instruction"].values
 COLORS = ("red", "gray", "gold", "navy", "teal", "pink", "tan")

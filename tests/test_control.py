@@ -4,10 +4,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from roboview_data.sim.control import EE_ACTION_NAMES, axis_angle, rotation_matrix
-from roboview_data.tasks import load_task
-from roboview_data.tasks.env import CONTROLS, EE_STATE_KEY, EE_STATE_NAMES, STATE_KEY, action_names
-from roboview_data.tasks.pick_place import PickPlaceEnv
+from roboview.sim.control import EE_ACTION_NAMES, axis_angle, rotation_matrix
+from roboview.tasks import load_task
+from roboview.tasks.env import CONTROLS, EE_STATE_KEY, EE_STATE_NAMES, STATE_KEY, action_names
+from roboview.tasks.pick_place import PickPlaceEnv
 
 OPEN, CLOSE = -1.0, 1.0
 EE_REPO = "t/ee_demos"
@@ -119,7 +119,7 @@ def test_same_actions_give_bit_identical_trajectories(envs, control):
 @pytest.fixture(scope="module")
 def ee_demos(tmp_path_factory):
     """2 expert demos collected with `--dataset.control=ee_delta` (front camera, 64²): the dataset root."""
-    from pipelines.collect import main
+    from roboview.pipelines.collect import main
 
     root = tmp_path_factory.mktemp("ee") / "ds"
     result = main(
@@ -144,8 +144,8 @@ def test_ee_delta_demos_read_back_with_lerobot_and_replay(ee_demos):
 
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from roboview_data.demos.dataset import PROGRESS_FILE, read_provenance
-    from roboview_data.demos.recorder import training_instance
+    from roboview.demos.dataset import PROGRESS_FILE, read_provenance
+    from roboview.demos.recorder import training_instance
 
     ds = LeRobotDataset(EE_REPO, root=ee_demos)
     features = ds.meta.features
@@ -173,13 +173,13 @@ def test_ee_delta_demos_read_back_with_lerobot_and_replay(ee_demos):
 
 
 def test_a_checkpoint_trained_on_ee_demos_acts_in_their_control(ee_demos, tmp_path):
-    """pipelines.train (1 step) on the ee_delta demos: the `lerobot` type reads ee_delta from the checkpoint, the env
+    """roboview.pipelines.train (1 step) on the ee_delta demos: the `lerobot` type reads ee_delta from the checkpoint, the env
     is made in it, and the model's observation.state is the env's EE state (not the joint state)."""
     import subprocess
     import sys
 
-    from policies.factory import make_policy
-    from policies.types import policy_config
+    from roboview.policies.factory import make_policy
+    from roboview.policies.types import policy_config
 
     out = tmp_path / "train"
     args = [f"--dataset.repo_id={EE_REPO}", f"--dataset.root={ee_demos}", f"--output_dir={out}"]
@@ -187,7 +187,7 @@ def test_a_checkpoint_trained_on_ee_demos_acts_in_their_control(ee_demos, tmp_pa
         [
             sys.executable,
             "-m",
-            "pipelines.train",
+            "roboview.pipelines.train",
             *args,
             "--batch_size=2",
             "--steps=1",
@@ -220,9 +220,9 @@ def test_a_checkpoint_trained_on_ee_demos_acts_in_their_control(ee_demos, tmp_pa
 
 
 def test_policy_types_act_in_the_control_they_are_given(envs):
-    from policies.base import Episode, JointPlanInEE
-    from policies.factory import make_policy
-    from policies.types import policy_config
+    from roboview.policies.base import Episode, JointPlanInEE
+    from roboview.policies.factory import make_policy
+    from roboview.policies.types import policy_config
 
     expert = policy_config("expert", control="ee_abs")
     assert expert.env_control() == expert.control == "ee_abs" and "control" not in expert.options()

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipelines.collect import CollectConfig, DatasetConfig
-from pipelines.collect import run as collect
-from roboview_data.demos.coverage import Radii, audit, load_training_visuals
+from roboview.demos.coverage import Radii, audit, load_training_visuals
+from roboview.pipelines.collect import CollectConfig, DatasetConfig
+from roboview.pipelines.collect import run as collect
 
 ROOT = Path(__file__).parents[1]
 
@@ -49,7 +49,7 @@ def datasets(tmp_path_factory) -> dict[str, Path]:
 
 
 def _records(bench: Path) -> list[dict]:
-    from roboview_data.benchmark.format import load_benchmark
+    from roboview.benchmark.format import load_benchmark
 
     return [item.record for items in load_benchmark(bench).splits.values() for item in items]
 
@@ -90,7 +90,7 @@ def test_randomized_data_is_never_exact_and_nearby_grows_with_the_radius(bench, 
     loose = audit(visuals, records, Radii(color_delta_e=500.0, pose_m=10.0, pose_deg=180.0))
     assert set(loose["status"]) == {"nearby"} and (loose["n_nearby"] == 3).all()
     # Distances reported are those to the nearest episode (checked against a direct computation).
-    from roboview_data.variation.colors import delta_e_2000
+    from roboview.variation.colors import delta_e_2000
 
     row = next(r for r in records if r["split"] == "color" and r["value"] == "blue")
     expected = delta_e_2000(visuals.lab, np.asarray(row["color_lab"])[None]).min()
@@ -105,7 +105,7 @@ def test_cli_writes_json_markdown_and_plot(bench, datasets, tmp_path):
         [
             sys.executable,
             "-m",
-            "pipelines.coverage",
+            "roboview.pipelines.coverage",
             f"--dataset.root={datasets['context']}",
             f"--benchmark.path={bench}",
             f"--output_dir={out}",
@@ -125,7 +125,7 @@ def test_cli_writes_json_markdown_and_plot(bench, datasets, tmp_path):
         [
             sys.executable,
             "-m",
-            "pipelines.coverage",
+            "roboview.pipelines.coverage",
             f"--dataset.root={tmp_path}",
             f"--benchmark.path={bench}",
         ],
@@ -134,4 +134,4 @@ def test_cli_writes_json_markdown_and_plot(bench, datasets, tmp_path):
         timeout=120,
         env=env,
     )
-    assert bad.returncode == 2 and "is not a pipelines.collect dataset" in bad.stderr
+    assert bad.returncode == 2 and "is not a roboview.pipelines.collect dataset" in bad.stderr

@@ -10,19 +10,13 @@ from pathlib import Path
 
 import pytest
 
+from roboview.pipelines._console import VERBS, script_name
 from tests.test_cli_help import help_run
 
 ROOT = Path(__file__).parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
-# Console scripts and the module each stands for (pyproject.toml [project.scripts]).
-SCRIPTS = {
-    "roboview-collect": "pipelines.collect",
-    "roboview-build": "pipelines.build_benchmark",
-    "roboview-eval": "pipelines.evaluate",
-    "roboview-report": "pipelines.report",
-    "roboview-publish": "pipelines.publish",
-    "roboview-train": "pipelines.train",
-}
+# Console scripts and the module each stands for (pyproject.toml [project.scripts], one per verb).
+SCRIPTS = {script_name(verb): f"roboview.pipelines.{verb}" for verb in VERBS}
 
 
 ASSIGNMENT = re.compile(r"^([A-Za-z_]\w*)=(\"[^\"]*\"|'[^']*'|\S*)$")
@@ -35,7 +29,7 @@ def _expand(command: str, variables: dict[str, str]) -> str:
 
 def bash_commands(page: Path) -> list[tuple[int, str]]:
     """(line, command) of every command in the page's ```bash blocks, backslash continuations joined and
-    variables assigned earlier in the block (E="python -m pipelines.evaluate ...") expanded."""
+    variables assigned earlier in the block (E="roboview-evaluate ...") expanded."""
     commands, block, start, pending, variables = [], False, 0, "", {}
     for number, line in enumerate(page.read_text().splitlines(), 1):
         if line.startswith("```"):
@@ -99,12 +93,7 @@ def _all_commands() -> list[tuple[str, int, str, str, list[str]]]:
     for page in PAGES:
         for line, command in bash_commands(page):
             parsed = _module_of(command)
-            if parsed and parsed[0].split(".")[0] in (
-                "pipelines",
-                "benchmarks",
-                "roboview_lerobot",
-                "roboview_vla_eval",
-            ):
+            if parsed and parsed[0].startswith(("roboview.", "benchmarks.")):
                 found.append((str(page.relative_to(ROOT)), line, command, *parsed))
     return found
 

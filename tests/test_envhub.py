@@ -1,4 +1,4 @@
-"""RoboView as a LeRobot EnvHub env: lerobot's own hub loader runs roboview_lerobot/hub/env.py from a hub
+"""RoboView as a LeRobot EnvHub env: lerobot's own hub loader runs roboview.integrations.lerobot/hub/env.py from a hub
 cache (offline, a local folder laid out as the hub cache is) and gets one vector env per split."""
 
 import subprocess
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).parents[1]
-ENV_PY = ROOT / "roboview_lerobot" / "hub" / "env.py"
+ENV_PY = ROOT / "roboview.integrations.lerobot" / "hub" / "env.py"
 REPO = "roboview/roboview-env"
 COMMIT = "0123456789abcdef0123456789abcdef01234567"
 
@@ -29,7 +29,7 @@ def hub_cache(tmp_path) -> Path:
 def test_lerobots_hub_loader_makes_one_vector_env_per_split(hub_cache, tiny_benchmark, monkeypatch):
     from lerobot.envs.factory import make_env
 
-    from roboview_data.benchmark.format import load_benchmark
+    from roboview.benchmark.format import load_benchmark
 
     monkeypatch.setenv("ROBOVIEW_BENCHMARK", str(tiny_benchmark))
     monkeypatch.setenv("ROBOVIEW_TASK", "color,dist_scale")
@@ -71,7 +71,7 @@ def test_publish_dry_run_lists_the_envhub_repo(tiny_benchmark):
         [
             sys.executable,
             "-m",
-            "pipelines.publish",
+            "roboview.pipelines.publish",
             f"--path={tiny_benchmark}",
             "--repo_id=org/roboview-bias",
             "--env_repo_id=org/roboview-env",
@@ -85,7 +85,7 @@ def test_publish_dry_run_lists_the_envhub_repo(tiny_benchmark):
     assert proc.returncode == 0, proc.stderr
     assert f"{len(ENV_PY.read_text().encode()):,}  org/roboview-env/env.py" in proc.stdout
     assert "org/roboview-env/README.md" in proc.stdout
-    from pipelines.publish import env_hub_files
+    from roboview.pipelines.publish import env_hub_files
 
     readme = env_hub_files("org/roboview-env", "org/roboview-bias", "v1")["README.md"]
     assert 'ROBOVIEW_BENCHMARK"] = "org/roboview-bias"' in readme and 'make_env("org/roboview-env"' in readme

@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import PolicyConfig
-from policies.types import policy_config
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from roboview.policies.base import PolicyConfig
+from roboview.policies.types import policy_config
 
 ROOT = Path(__file__).parents[1]
 RERUN = Path(sys.executable).parent / "rerun"
@@ -83,7 +83,7 @@ def test_expert_succeeds_on_a_sample_of_every_split(bench, tmp_path):
         assert sr >= 0.95, f"expert SR {sr:.0%} on {split}"
     assert (df["policy"] == "expert").all() and (df["failure_reason"] == "").all()
     # Episode seeds follow the documented derivation (docs/formats.md, "Identity and seeds").
-    from roboview_data.variation.instances import episode_seed
+    from roboview.variation.instances import episode_seed
 
     assert all(episode_seed(c, r) == s for c, r, s in zip(df["context_id"], df["repeat"], df["episode_seed"]))
 
@@ -95,7 +95,7 @@ def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "pipelines.evaluate",
+        "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
         "--policy.type=expert",
         "--benchmark.splits=color,dist_scale",
@@ -132,8 +132,8 @@ def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
 def test_end_effector_control_runs_and_is_recorded(bench, tmp_path):
     """`--policy.control=ee_delta`: envs made in it, the expert succeeds through it, run.json and provenance record
     it, and a resume asking for another control is refused."""
-    from eval.running import provenance
-    from eval.running.results import ResultsError
+    from roboview.eval.running import provenance
+    from roboview.eval.running.results import ResultsError
 
     out = tmp_path / "ee"
     cfg = EvaluateConfig(
@@ -219,11 +219,11 @@ def test_lerobot_adapter_runs_a_two_step_checkpoint(bench, tiny_checkpoint, tmp_
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    """pipelines.evaluate with `args` (the expert unless they name a --policy.type: there is no default)."""
+    """roboview.pipelines.evaluate with `args` (the expert unless they name a --policy.type: there is no default)."""
     if not any(a.startswith("--policy.type=") for a in args):
         args = ("--policy.type=expert", *args)
     return subprocess.run(
-        [sys.executable, "-m", "pipelines.evaluate", *args],
+        [sys.executable, "-m", "roboview.pipelines.evaluate", *args],
         capture_output=True,
         text=True,
         timeout=300,
@@ -232,8 +232,8 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
 
 
 def _main(capsys, *args: str) -> subprocess.CompletedProcess:
-    """`_cli(*args)` through pipelines.evaluate's `main` in this process: its exit status and stderr."""
-    from pipelines.evaluate import main
+    """`_cli(*args)` through roboview.pipelines.evaluate's `main` in this process: its exit status and stderr."""
+    from roboview.pipelines.evaluate import main
 
     if not any(a.startswith("--policy.type=") for a in args):
         args = ("--policy.type=expert", *args)
@@ -375,7 +375,7 @@ def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):
 
 
 def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench, tmp_path):
-    from roboview_data.benchmark.format import load_benchmark
+    from roboview.benchmark.format import load_benchmark
 
     full = load_benchmark(bench, ["camera_pose", "dist_scale"]).splits
     cfg = EvaluateConfig(
@@ -416,7 +416,7 @@ def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
         [
             sys.executable,
             "-m",
-            "pipelines.evaluate",
+            "roboview.pipelines.evaluate",
             f"--benchmark.path={bench}",
             "--policy.type=expert",
             "--eval.image_size=64",
@@ -484,8 +484,8 @@ class _Flaky:
     ],
 )
 def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, errors, steps, calls, reason):
-    import eval.running.rollout as rollout
-    from roboview_data.benchmark.format import load_benchmark
+    import roboview.eval.running.rollout as rollout
+    from roboview.benchmark.format import load_benchmark
 
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     policy = _Flaky(errors)
@@ -509,9 +509,9 @@ def test_a_policy_that_raises_becomes_a_failed_episode(bench, monkeypatch, error
 
 
 def test_lazy_observations_are_the_eager_pixels_and_render_only_what_is_read(bench):
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.sim.observation import StaleObservation
-    from roboview_data.tasks import load_task, make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.sim.observation import StaleObservation
+    from roboview.tasks import load_task, make_env
 
     item = load_benchmark(bench, ["camera_pose"]).splits["camera_pose"][1]
     lazy, eager = (make_env(cameras=("front", "wrist"), image_size=48, lazy=flag) for flag in (True, False))
@@ -556,10 +556,10 @@ def test_batched_lockstep_evaluation_agrees_row_for_row_with_one_env_per_worker(
 
 
 def test_one_checkpoint_batch_equals_separate_calls(bench, tiny_checkpoint):
-    from policies.base import Episode
-    from policies.lerobot_policy import LeRobotPolicy
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.base import Episode
+    from roboview.policies.lerobot_policy import LeRobotPolicy
+    from roboview.tasks import make_env
 
     items = load_benchmark(bench, ["color"]).splits["color"][:2]
     env = make_env(cameras=("left_top", "wrist"), image_size=64)
@@ -589,7 +589,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     import av
     import mujoco
 
-    from eval.running.provenance import checkpoint_hash
+    from roboview.eval.running.provenance import checkpoint_hash
 
     out = tmp_path / "ev"
     evaluate(
@@ -628,7 +628,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     assert entry["episodes_run"] == 2 and "context_id" in entry["seed_rule"]
     assert entry["roboview_commit"] is None or len(entry["roboview_commit"].split("+")[0]) == 40
     # The report links every video from its per-value table and prints the provenance.
-    from eval.reporting.markdown import load_results, write_report
+    from roboview.eval.reporting.markdown import load_results, write_report
 
     episodes, sources = load_results([out / "episodes.parquet"])
     report = (
@@ -657,7 +657,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
 
 
 def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpoint, tmp_path):
-    from roboview_lerobot.convert import convert
+    from roboview.integrations.lerobot.convert import convert
 
     # Two splits by name, as LeRobot's LIBERO integration takes suites; lerobot's default async vector envs.
     lerobot_eval = Path(sys.executable).parent / "lerobot-eval"
@@ -712,10 +712,10 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
     from lerobot.envs.factory import make_env as lerobot_make_env
     from lerobot.envs.utils import preprocess_observation
 
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
-    from roboview_data.variation.instances import episode_seed
-    from roboview_lerobot import RoboViewEnv
+    from roboview.benchmark.format import load_benchmark
+    from roboview.integrations.lerobot import RoboViewEnv
+    from roboview.tasks import make_env
+    from roboview.variation.instances import episode_seed
 
     cfg = RoboViewEnv(
         benchmark_path=str(bench), task="color", cameras="front", image_size=48, n_repeats=2, max_steps=50

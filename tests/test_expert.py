@@ -5,10 +5,10 @@ import itertools
 import numpy as np
 import pytest
 
-from roboview_data.tasks import ScriptedExpert
-from roboview_data.tasks.pick_place import PickPlaceEnv
-from roboview_data.variation.factors import FACTORS, baselines
-from roboview_data.variation.instances import TaskInstance
+from roboview.tasks import ScriptedExpert
+from roboview.tasks.pick_place import PickPlaceEnv
+from roboview.variation.factors import FACTORS, baselines
+from roboview.variation.instances import TaskInstance
 
 
 def sweep(env: PickPlaceEnv) -> tuple[list[bool], list[int]]:

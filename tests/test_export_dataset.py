@@ -1,4 +1,4 @@
-"""pipelines.export_dataset: a collected LeRobot v3.0 dataset, exported to v2.1 and turned back into v3.0 by
+"""roboview.pipelines.export_dataset: a collected LeRobot v3.0 dataset, exported to v2.1 and turned back into v3.0 by
 LeRobot's own converter (convert_dataset_v21_to_v30), equals the collection frame for frame: values, indices,
 timestamps, tasks, and decoded images bit for bit (videos are stream-copied, never re-encoded)."""
 
@@ -16,8 +16,8 @@ CAMERAS = ["left_top", "wrist"]
 
 @pytest.fixture(scope="module")
 def collected(tmp_path_factory) -> Path:
-    from pipelines.collect import CollectConfig, DatasetConfig
-    from pipelines.collect import run as collect
+    from roboview.pipelines.collect import CollectConfig, DatasetConfig
+    from roboview.pipelines.collect import run as collect
 
     root = tmp_path_factory.mktemp("export") / "ds"
     collect(
@@ -35,7 +35,7 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
     from lerobot.datasets.video_utils import decode_video_frames
     from lerobot.scripts.convert_dataset_v21_to_v30 import convert_dataset
 
-    from pipelines import export_dataset as export
+    from roboview.pipelines import export_dataset as export
 
     out = tmp_path / "t" / "demos"  # the converter works in place, with siblings demos_old / demos_v30
     result = export.run(export.ExportConfig(root=str(collected), output_dir=str(out)))
@@ -123,7 +123,7 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
 
 
 def _fails(capsys, args: list[str]) -> str:
-    from pipelines.export_dataset import main
+    from roboview.pipelines.export_dataset import main
 
     with pytest.raises(SystemExit) as exc:
         main(args)
@@ -163,7 +163,7 @@ def test_bad_input_fails_before_any_work(collected, tmp_path, capsys):
 def test_a_failed_export_removes_what_it_wrote(collected, tmp_path):
     import pyarrow as pa
 
-    from pipelines.export_dataset import ExportConfig, ExportError, run
+    from roboview.pipelines.export_dataset import ExportConfig, ExportError, run
 
     # Episode 1's wrist video said to start one frame late: found while cutting it, after episode 0 was written.
     broken = tmp_path / "broken"

@@ -8,16 +8,16 @@ import mujoco
 import numpy as np
 import pytest
 
-from roboview_data.benchmark.fairness import (
+from roboview.benchmark.fairness import (
     CameraFairness,
     FairnessThresholds,
     violations,
 )
-from roboview_data.tasks import ScriptedExpert, load_preset, make_env
-from roboview_data.tasks.env import IMAGE_KEY
-from roboview_data.variation.factors import FACTORS, baselines
-from roboview_data.variation.factors.distractors import BODIES
-from roboview_data.variation.instances import TaskInstance, episode_seed, generate_suite
+from roboview.tasks import ScriptedExpert, load_preset, make_env
+from roboview.tasks.env import IMAGE_KEY
+from roboview.variation.factors import FACTORS, baselines
+from roboview.variation.factors.distractors import BODIES
+from roboview.variation.instances import TaskInstance, episode_seed, generate_suite
 
 NEW = ("lighting", "table_texture", "distractors", "object_size")
 
@@ -152,7 +152,7 @@ def test_the_gate_judges_a_dim_light_by_contrast_not_by_colour_shift():
 
 
 def test_the_dose_response_trend_recovers_a_known_slope():
-    from eval.statistics.significance import logistic_trend
+    from roboview.eval.statistics.significance import logistic_trend
 
     rng = np.random.default_rng(0)
     x = np.arange(5.0)
@@ -171,8 +171,8 @@ def test_the_dose_response_trend_recovers_a_known_slope():
 def test_reports_draw_the_new_factors(tmp_path):
     import pandas as pd
 
-    from eval.reporting.markdown import write_report
-    from roboview_data.variation.instances import split_task
+    from roboview.eval.reporting.markdown import write_report
+    from roboview.variation.instances import split_task
 
     suite = [i for i in generate_suite(load_preset("extended")) if split_task(i.split)[1] in NEW]
     rng = np.random.default_rng(0)

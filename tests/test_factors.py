@@ -2,9 +2,9 @@
 
 import pytest
 
-from roboview_data.tasks.pick_place import OBJECT_POSITIONS
-from roboview_data.variation.colors import COLORS
-from roboview_data.variation.factors import (
+from roboview.tasks.pick_place import OBJECT_POSITIONS
+from roboview.variation.colors import COLORS
+from roboview.variation.factors import (
     FACTORS,
     baselines,
     context_factors,

@@ -18,7 +18,7 @@ FAST_REPORT = ["--plots=false", "--metrics.n_perm=50", "--metrics.n_glm=20"]
 
 
 def _evaluate(bench: Path, out: Path, *flags: str) -> None:
-    from pipelines.evaluate import main
+    from roboview.pipelines.evaluate import main
 
     main(
         [
@@ -83,8 +83,8 @@ def test_rerunning_keeps_every_rerun_recording(tiny_benchmark, tmp_path, capsys)
 
 
 def test_policy_type_is_required(tmp_path, capsys):
-    from pipelines.evaluate import main as evaluate
-    from pipelines.serve_policy import main as serve
+    from roboview.pipelines.evaluate import main as evaluate
+    from roboview.pipelines.serve_policy import main as serve
 
     for call, args in (
         (evaluate, [f"--benchmark.path={tmp_path}", f"--output_dir={tmp_path / 'out'}"]),
@@ -100,7 +100,7 @@ def test_policy_type_is_required(tmp_path, capsys):
 def test_the_expert_is_labelled_privileged_in_the_summary_and_the_report(
     evaluated, tiny_benchmark, tmp_path, capsys
 ):
-    from pipelines.report import main as report
+    from roboview.pipelines.report import main as report
 
     _evaluate(tiny_benchmark, evaluated, "--eval.limit=2")  # resumes: nothing new, the summary line again
     line = capsys.readouterr().out
@@ -147,7 +147,7 @@ REPORT_EXPECTS = {
 
 
 def test_report_names_every_input_that_is_not_results(evaluated, not_results, tmp_path, capsys):
-    from pipelines.report import main as report
+    from roboview.pipelines.report import main as report
 
     for kind, path in not_results.items():
         err = _one_line_error(capsys, report, f"--results={path}", f"--output_dir={tmp_path / 'rep'}")
@@ -164,9 +164,9 @@ def test_report_names_every_input_that_is_not_results(evaluated, not_results, tm
 def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(
     evaluated, not_results, tiny_benchmark, tmp_path, capsys
 ):
-    from pipelines.audit import main as audit
-    from pipelines.merge import main as merge
-    from pipelines.verify import main as verify
+    from roboview.pipelines.audit import main as audit
+    from roboview.pipelines.merge import main as merge
+    from roboview.pipelines.verify import main as verify
 
     mapping = [
         "--map.factor=task",
@@ -179,7 +179,7 @@ def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(
     (tmp_path / "empty.csv").write_text("")
     for path, expected in (
         (tiny_benchmark, "is a benchmark folder"),
-        (evaluated, "pipelines.report"),
+        (evaluated, "roboview.pipelines.report"),
         (not_results["bytes"], "unknown format '.bin'"),
         (not_results["folder"], "is a folder"),
         (not_results["fake_parquet"], "bytes are not parquet"),
@@ -189,7 +189,7 @@ def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(
     ):
         err = _one_line_error(capsys, audit, f"--results={path}", *mapping)
         assert str(path) in err and expected in err, err
-        assert "expected one row per episode" in err or "pipelines.report" in err, err
+        assert "expected one row per episode" in err or "roboview.pipelines.report" in err, err
 
     for path, expected in (
         (not_results["journal"], f"pass the folder, {evaluated}"),
@@ -232,7 +232,7 @@ def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(
 
 
 def test_a_training_run_folder_names_the_checkpoint_to_pass(tmp_path, capsys):
-    from policies.checkpoints import CheckpointError, checkpoint_dir
+    from roboview.policies.checkpoints import CheckpointError, checkpoint_dir
 
     run = tmp_path / "train_act96"
     for step in ("000002", "000004", "last"):
@@ -249,7 +249,7 @@ def test_a_training_run_folder_names_the_checkpoint_to_pass(tmp_path, capsys):
     with pytest.raises(CheckpointError, match="holds no LeRobot checkpoint"):
         checkpoint_dir(str(tmp_path))
     # Through the command line: one line, with the exact path.
-    from pipelines.evaluate import main as evaluate
+    from roboview.pipelines.evaluate import main as evaluate
 
     err = _one_line_error(
         capsys, evaluate, f"--benchmark.path={tmp_path}", "--policy.type=lerobot", f"--policy.path={run}"
@@ -279,6 +279,6 @@ def test_every_benchmark_a_command_reads_is_built_by_a_command_before_it(page):
             path = _value(words, flag)
             if path and not (path in built or (demo and path.startswith("outputs/demo/"))):
                 unbuilt.append(f"{page}:{line}: {flag}={path} before any command builds it")
-        if "pipelines.build_benchmark" in words:
+        if "roboview.pipelines.build_benchmark" in words:
             built.add(_value(words, "--output_dir") or "outputs/benchmark")
     assert not unbuilt, "\n".join(unbuilt)

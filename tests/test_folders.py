@@ -1,10 +1,10 @@
-"""The one folder guard every command's input and output folders go through (roboview_data.folders)."""
+"""The one folder guard every command's input and output folders go through (roboview.core.folders)."""
 
 from __future__ import annotations
 
 import pytest
 
-from roboview_data.folders import folder_problem
+from roboview.core.folders import folder_problem
 
 
 def test_a_folder_being_written_may_be_new_empty_or_marked(tmp_path):
@@ -40,8 +40,8 @@ def test_a_folder_being_read_must_exist_and_be_marked(tmp_path):
 
 @pytest.mark.parametrize("reader", ["results", "benchmark"])
 def test_the_commands_guards_say_the_same(tmp_path, reader):
-    from eval.running.inputs import benchmark_folder_problem, results_folder_problem
-    from roboview_data.benchmark.format import BenchmarkError, read_manifest
+    from roboview.benchmark.format import BenchmarkError, read_manifest
+    from roboview.eval.running.inputs import benchmark_folder_problem, results_folder_problem
 
     check = results_folder_problem if reader == "results" else benchmark_folder_problem
     marker = "run.json" if reader == "results" else "benchmark.json"

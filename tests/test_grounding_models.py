@@ -15,8 +15,8 @@ import torch
 
 transformers = pytest.importorskip("transformers")
 
-from policies.vlm.grounding import TransformersGrounder  # noqa: E402
-from policies.vlm.moka import keypoints  # noqa: E402
+from roboview.policies.vlm.grounding import TransformersGrounder  # noqa: E402
+from roboview.policies.vlm.moka import keypoints  # noqa: E402
 
 
 @pytest.fixture(scope="module")

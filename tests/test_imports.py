@@ -11,15 +11,8 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
-PACKAGES = (
-    "eval",
-    "policies",
-    "pipelines",
-    "roboview_data",
-    "roboview_lerobot",
-    "roboview_vla_eval",
-    "benchmarks",
-)
+# What is searched for modules: the one installed package and the throughput studies beside it.
+PACKAGES = ("roboview", "benchmarks")
 
 
 def _modules(packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
@@ -135,8 +128,8 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def private_imports(name: str, source: str, modules: set[str]) -> list[str]:
     """`from M import _x` lines of module `name` (its source) where M is another project module: one
-    "module:line: from M import _x" each. A private submodule of the importer's own package (pipelines._cli
-    for pipelines.evaluate) is the package's own and allowed; dunder names are not private."""
+    "module:line: from M import _x" each. A private submodule of the importer's own package (roboview.pipelines._cli
+    for roboview.pipelines.evaluate) is the package's own and allowed; dunder names are not private."""
     found = []
     package = name.rpartition(".")[0]
     for node in ast.walk(ast.parse(source)):
@@ -168,29 +161,27 @@ def test_no_module_imports_another_modules_private_name():
 
 def test_the_private_import_check_flags_a_private_import():
     modules = {
-        "eval.statistics.metrics",
-        "eval.statistics.context",
-        "pipelines",
-        "pipelines._cli",
-        "pipelines.evaluate",
+        "roboview.eval.statistics.metrics",
+        "roboview.eval.statistics.context",
+        "roboview.pipelines",
+        "roboview.pipelines._cli",
+        "roboview.pipelines.evaluate",
     }
-    old = "from eval.statistics.metrics import _interval, _lrt_fields, compute_metrics, __doc__\n"
-    assert private_imports("eval.statistics.context", old, modules) == [
-        "eval.statistics.context:1: from eval.statistics.metrics import _interval",
-        "eval.statistics.context:1: from eval.statistics.metrics import _lrt_fields",
+    old = "from roboview.eval.statistics.metrics import _interval, _lrt_fields, compute_metrics, __doc__\n"
+    assert private_imports("roboview.eval.statistics.context", old, modules) == [
+        "roboview.eval.statistics.context:1: from roboview.eval.statistics.metrics import _interval",
+        "roboview.eval.statistics.context:1: from roboview.eval.statistics.metrics import _lrt_fields",
     ]
     lazy = "def f():\n    from .metrics import _Table\n"  # relative and inside a function
-    assert private_imports("eval.statistics.context", lazy, modules) == [
-        "eval.statistics.context:2: from eval.statistics.metrics import _Table"
+    assert private_imports("roboview.eval.statistics.context", lazy, modules) == [
+        "roboview.eval.statistics.context:2: from roboview.eval.statistics.metrics import _Table"
     ]
     # A package's own private module, and third-party private names, are not the project's modules' privates.
-    fine = (
-        "from pipelines import _cli\nfrom pipelines._cli import main\nfrom lerobot.envs.utils import _Lazy\n"
-    )
-    assert private_imports("pipelines.evaluate", fine, modules) == []
-    assert private_imports("eval.statistics.context", "from pipelines import _cli\n", modules) == [
-        "eval.statistics.context:1: from pipelines import _cli"
-    ]
+    fine = "from roboview.pipelines import _cli\nfrom roboview.pipelines._cli import main\nfrom lerobot.envs.utils import _Lazy\n"
+    assert private_imports("roboview.pipelines.evaluate", fine, modules) == []
+    assert private_imports(
+        "roboview.eval.statistics.context", "from roboview.pipelines import _cli\n", modules
+    ) == ["roboview.eval.statistics.context:1: from roboview.pipelines import _cli"]
 
 
 def test_the_project_has_no_import_cycle():
@@ -199,25 +190,28 @@ def test_the_project_has_no_import_cycle():
 
 
 def test_imports_by_name_are_edges():
-    code = '''"""Docstring naming roboview_data.sim.env is no import."""
+    code = '''"""Docstring naming roboview.sim.env is no import."""
 import importlib
-MODULES = ("policies.vision", "not.a.module")
-TASK = dict(env="roboview_data.tasks.push:PushEnv")
+MODULES = ("roboview.policies.vision", "not.a.module")
+TASK = dict(env="roboview.tasks.push:PushEnv")
 importlib.import_module("eval")
-cmd = ["python", "-m", "pipelines.evaluate"]
+cmd = ["python", "-m", "roboview.pipelines.evaluate"]
 label = "a plain string, not.a.name:either"
 '''
     found = named_modules(ast.parse(code))
-    assert found == {"policies.vision", "not.a.module", "roboview_data.tasks.push", "eval"}
+    assert found == {"roboview.policies.vision", "not.a.module", "roboview.tasks.push", "eval"}
     # In the project: a registry's module list, "module:Class" targets, the console scripts' modules.
     graph = import_graph()
-    assert "policies.vision" in graph["policies.types"] and "policies.vision" not in graph["policies.base"]
-    assert {"roboview_data.tasks.pick_place", "roboview_data.tasks.push"} <= graph["roboview_data.tasks"]
+    assert (
+        "roboview.policies.vision" in graph["roboview.policies.types"]
+        and "roboview.policies.vision" not in graph["roboview.policies.base"]
+    )
+    assert {"roboview.tasks.pick_place", "roboview.tasks.push"} <= graph["roboview.tasks"]
     # the default expert, "module:Class"
-    assert "roboview_data.tasks.env" in graph["roboview_data.tasks.base"]
-    assert "roboview_data.variation.factors.color" in graph["roboview_data.variation.factors"]
-    assert "pipelines.collect" in graph["pipelines._console"]
-    assert "roboview_lerobot.env" in graph["roboview_lerobot"]
+    assert "roboview.tasks.env" in graph["roboview.tasks.base"]
+    assert "roboview.variation.factors.color" in graph["roboview.variation.factors"]
+    assert "roboview.pipelines.collect" in graph["roboview.pipelines._console"]
+    assert "roboview.integrations.lerobot.env" in graph["roboview.integrations.lerobot"]
 
 
 def test_the_cycle_finder_finds_a_cycle():
@@ -227,14 +221,16 @@ def test_the_cycle_finder_finds_a_cycle():
     # The real graph holds the edges the modules declare, lazy ones included.
     graph = import_graph()
     assert (
-        "eval.statistics.tables" in graph["eval.statistics.compare"]
-        and "policies.base" in graph["policies.vlm.sgl"]
+        "roboview.eval.statistics.tables" in graph["roboview.eval.statistics.compare"]
+        and "roboview.policies.base" in graph["roboview.policies.vlm.sgl"]
     )
     assert (
-        "eval.statistics.metrics" not in graph["eval.statistics.compare"]
-        and "policies.vlm.sgl" not in graph["policies.base"]
+        "roboview.eval.statistics.metrics" not in graph["roboview.eval.statistics.compare"]
+        and "roboview.policies.vlm.sgl" not in graph["roboview.policies.base"]
     )
-    assert "eval.statistics.adaptive" in graph["pipelines.evaluate"]  # imported inside a method
+    assert (
+        "roboview.eval.statistics.adaptive" in graph["roboview.pipelines.evaluate"]
+    )  # imported inside a method
 
 
 def test_importing_the_package_registers_the_gym_ids():
@@ -242,7 +238,7 @@ def test_importing_the_package_registers_the_gym_ids():
     import sys
 
     code = (
-        "import gymnasium, roboview_data; from roboview_data.tasks import TASKS; "
+        "import gymnasium, roboview.tasks; from roboview.tasks import TASKS; "
         "print(sorted(t.gym_id for t in TASKS.values() if t.gym_id in gymnasium.registry))"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
@@ -253,28 +249,31 @@ def test_importing_the_package_registers_the_gym_ids():
 # The floors, lowest first: a module imports only from its own floor or those below it.
 FLOORS = (
     (
-        "roboview_data.errors",
-        "roboview_data.files",
-        "roboview_data.folders",
-        "roboview_data.cli",
-        "roboview_data.cli_errors",
-        "roboview_data.workers",
+        "roboview.core.errors",
+        "roboview.core.files",
+        "roboview.core.folders",
+        "roboview.core.cli",
+        "roboview.core.cli_errors",
+        "roboview.core.workers",
     ),
-    ("roboview_data.sim",),
-    ("roboview_data.variation",),
-    ("roboview_data.tasks",),
-    ("roboview_data.benchmark", "roboview_data.demos", "roboview_data"),
-    ("policies",),
-    ("eval.running",),
-    ("eval.statistics",),
-    ("eval.reporting", "eval"),
-    ("roboview_lerobot", "roboview_vla_eval"),
-    ("pipelines", "benchmarks"),
+    ("roboview.sim",),
+    ("roboview.variation",),
+    ("roboview.tasks", "roboview.libero"),
+    ("roboview.benchmark", "roboview.demos"),
+    ("roboview.policies",),
+    ("roboview.eval.running",),
+    ("roboview.eval.statistics",),
+    ("roboview.eval.reporting", "roboview.eval"),
+    ("roboview.integrations",),
+    ("roboview.pipelines", "benchmarks"),
 )
 
 
 def floor_of(module: str) -> int:
-    """The floor of the longest prefix that names `module` or a package above it."""
+    """The floor of the longest prefix that names `module` or a package above it (`roboview` itself, which
+    imports nothing, is on the lowest)."""
+    if module == "roboview":
+        return 0
     best, floor = -1, None
     for level, prefixes in enumerate(FLOORS):
         for prefix in prefixes:
@@ -296,11 +295,11 @@ def upward_imports(graph: dict[str, set[str]]) -> list[str]:
 def test_no_module_imports_from_a_higher_floor():
     found = upward_imports(import_graph())
     assert not found, "imports from a higher floor: " + "; ".join(found)
-    assert upward_imports({"roboview_lerobot.convert": {"pipelines._cli"}}) == [
-        "roboview_lerobot.convert → pipelines._cli"
+    assert upward_imports({"roboview.integrations.lerobot.convert": {"roboview.pipelines._cli"}}) == [
+        "roboview.integrations.lerobot.convert → roboview.pipelines._cli"
     ]
     # The world importing the factor registry is an arrow back up; a factor importing the world is not.
-    assert upward_imports({"roboview_data.sim.scene": {"roboview_data.variation.factors"}}) == [
-        "roboview_data.sim.scene → roboview_data.variation.factors"
+    assert upward_imports({"roboview.sim.scene": {"roboview.variation.factors"}}) == [
+        "roboview.sim.scene → roboview.variation.factors"
     ]
-    assert upward_imports({"roboview_data.variation.factors.object_size": {"roboview_data.sim.scene"}}) == []
+    assert upward_imports({"roboview.variation.factors.object_size": {"roboview.sim.scene"}}) == []

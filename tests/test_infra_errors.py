@@ -4,7 +4,7 @@ In-process: a transient error still failing after its retries, an `InfraError`, 
 keeps dying become infra_error rows while a policy's own exception stays an `ok` failure; the evaluator re-runs
 infra rows after its pass and on a rerun (the new row replaces the old one); adaptive decisions, metrics and the
 report leave them out. Against real servers on 127.0.0.1 (openpi-server's `WebsocketPolicyServer` via
-`pipelines.serve_policy --server=openpi`, and lerobot's own `lerobot.async_inference.policy_server`): the server is
+`roboview.pipelines.serve_policy --server=openpi`, and lerobot's own `lerobot.async_inference.policy_server`): the server is
 killed mid-run and restarted within the client's reconnect window; the interrupted episode is recorded
 infra_error, left out of the report, re-run by the same command, and the final table is complete and all `ok`.
 """
@@ -25,12 +25,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.running.results import INFRA_ERROR, EpisodeStore, read_journal
-from eval.statistics.metrics import MetricsConfig, compute_all_metrics, policy_layouts
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import PolicyConfig, TransientPolicyError
-from policies.errors import InfraError, RenderError
-from policies.types import policy_config
+from roboview.eval.running.results import INFRA_ERROR, EpisodeStore, read_journal
+from roboview.eval.statistics.metrics import MetricsConfig, compute_all_metrics, policy_layouts
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from roboview.policies.base import PolicyConfig, TransientPolicyError
+from roboview.policies.errors import InfraError, RenderError
+from roboview.policies.types import policy_config
 
 FAST = MetricsConfig(n_perm=50, n_glm=10)
 
@@ -108,7 +108,7 @@ class ScriptedConfig(PolicyConfig):
 
 
 def _item(bench: Path, split: str = "color", index: int = 0):
-    from roboview_data.benchmark.format import load_benchmark
+    from roboview.benchmark.format import load_benchmark
 
     return load_benchmark(bench, [split]).splits[split][index]
 
@@ -143,7 +143,7 @@ def _rows(out: Path) -> pd.DataFrame:
 
 
 def test_an_outage_past_the_retries_is_infra_and_a_policy_bug_is_not(tiny_benchmark, monkeypatch):
-    import eval.running.rollout as rollout
+    import roboview.eval.running.rollout as rollout
 
     monkeypatch.setattr(rollout, "RETRY_BACKOFF_S", 0.0)
     config = ScriptedConfig()
@@ -175,7 +175,7 @@ def test_an_outage_past_the_retries_is_infra_and_a_policy_bug_is_not(tiny_benchm
 
 
 def test_a_render_failure_is_an_infra_error(tiny_benchmark):
-    import eval.running.rollout as rollout
+    import roboview.eval.running.rollout as rollout
 
     config = ScriptedConfig()
     config.policy = _Scripted([], look=True)
@@ -205,8 +205,8 @@ def test_a_render_failure_is_an_infra_error(tiny_benchmark):
 
 
 def test_a_worker_that_keeps_dying_becomes_an_infra_row_and_the_run_goes_on(tiny_benchmark):
-    from eval.running.backends import run_local
-    from eval.running.rollout import WorkerSpec, WorkItem
+    from roboview.eval.running.backends import run_local
+    from roboview.eval.running.rollout import WorkerSpec, WorkItem
 
     works = [WorkItem(_item(tiny_benchmark), 0)]
     got = list(run_local(WorkerSpec(DyingConfig(), image_size=32, max_steps=3), works, 1, max_retries=1))
@@ -223,7 +223,7 @@ def test_a_worker_that_keeps_dying_becomes_an_infra_row_and_the_run_goes_on(tiny
 def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_row(
     tiny_benchmark, tmp_path, monkeypatch, capsys
 ):
-    from pipelines.evaluate import summary
+    from roboview.pipelines.evaluate import summary
 
     monkeypatch.setitem(PolicyConfig.get_known_choices(), "infra_once", OnceConfig)
     # Re-queued after the pass: the final table holds the re-run row only.
@@ -257,8 +257,8 @@ def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_ro
 
 
 def test_adaptive_decisions_never_see_infra_rows(tiny_benchmark, tmp_path, monkeypatch):
-    import eval.statistics.adaptive as adaptive
-    from pipelines.evaluate import run_rounds
+    import roboview.eval.statistics.adaptive as adaptive
+    from roboview.pipelines.evaluate import run_rounds
 
     items = [_item(tiny_benchmark, "color", i) for i in range(4)]
     store = EpisodeStore(tmp_path / "ev", {"benchmark_version": "v", "policy": "still"})
@@ -308,8 +308,8 @@ def test_adaptive_decisions_never_see_infra_rows(tiny_benchmark, tmp_path, monke
 
 
 def test_metrics_and_report_leave_infra_rows_out_and_count_them(tmp_path):
-    from pipelines.report import ReportConfig
-    from pipelines.report import run as report
+    from roboview.pipelines.report import ReportConfig
+    from roboview.pipelines.report import run as report
     from tests.test_report import make_episodes, write
 
     ok = make_episodes("expert", 0, splits=("color", "color_x_camera_pose"), repeats=3)
@@ -411,8 +411,8 @@ def _kill_and_restart_mid_run(cfg: EvaluateConfig, kill, restart) -> tuple[list,
 
 
 def _check_interrupted_then_rerun(cfg: EvaluateConfig, errors: list, where: str, tmp_path: Path) -> None:
-    from pipelines.report import ReportConfig
-    from pipelines.report import run as report
+    from roboview.pipelines.report import ReportConfig
+    from roboview.pipelines.report import run as report
 
     out = Path(cfg.output_dir)
     assert not errors, errors
@@ -489,7 +489,7 @@ class _LeRobotServer:
     """`python -m lerobot.async_inference.policy_server` on 127.0.0.1:`port` (its logs/ folder goes to `cwd`)."""
 
     def __init__(self, cwd: Path, port: int, timeout_s: float = 120) -> None:
-        from policies.lerobot_async import check_reachable
+        from roboview.policies.lerobot_async import check_reachable
 
         self.address = f"127.0.0.1:{port}"
         with (cwd / "server.log").open("a") as log:

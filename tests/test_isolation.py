@@ -6,12 +6,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.running import isolation
-from eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
-from eval.statistics.metrics import compute_metrics
-from policies.types import policy_config
-from roboview_data.benchmark.format import load_benchmark, select_items
-from roboview_data.tasks.env import TaskEnv
+from roboview.benchmark.format import load_benchmark, select_items
+from roboview.eval.running import isolation
+from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+from roboview.eval.statistics.metrics import compute_metrics
+from roboview.policies.types import policy_config
+from roboview.tasks.env import TaskEnv
 
 
 def run_episodes(bench, splits, contexts=2, repeats=2):
@@ -86,7 +86,7 @@ def test_an_instruction_that_depends_on_the_value_is_flagged_and_left_out(tiny_b
     color = metrics["splits"]["color"]
     assert color["isolation"]["verified"] == 4 and len(color["isolation"]["violations"]) == 4
     assert color["n_episodes"] == len(clean[clean["split"] == "color"])  # only the clean blocks were tested
-    from eval.reporting.markdown import render_markdown
+    from roboview.eval.reporting.markdown import render_markdown
 
     text = render_markdown(metrics, {})
     assert "## Isolation certificate" in text and "instruction differ across" in text and "4 / 8" in text

@@ -18,8 +18,8 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from eval.statistics.ranking import rank_table
-from eval.statistics.significance import paired_success_test
+from roboview.eval.statistics.ranking import rank_table
+from roboview.eval.statistics.significance import paired_success_test
 
 SPLIT = "camera_pose"
 
@@ -71,9 +71,9 @@ def test_letters_of_a_known_order():
 @pytest.fixture(scope="module")
 def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
     """expert, random and vision evaluated on one split of the tiny benchmark, each a complete results folder."""
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.policies.types import policy_config
 
     root = tmp_path_factory.mktemp("board")
     out = {}
@@ -91,7 +91,7 @@ def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
 
 
 def _board(bundles, tmp_path, *extra, **kw):
-    from pipelines.leaderboard import LeaderboardConfig, run
+    from roboview.pipelines.leaderboard import LeaderboardConfig, run
 
     sources = ",".join([str(bundles[n]) for n in ("expert", "random", "vision")] + [str(e) for e in extra])
     return run(LeaderboardConfig(results=sources, output_dir=str(tmp_path / "board"), plots=False, **kw))
@@ -139,8 +139,8 @@ def _flip_success(parquet: Path, n: int = 3) -> None:
 
 
 def test_other_versions_tampered_and_missing_bundles_are_listed_apart(bundles, tmp_path):
-    from pipelines.publish import PublishConfig
-    from pipelines.publish import run as publish
+    from roboview.pipelines.publish import PublishConfig
+    from roboview.pipelines.publish import run as publish
 
     other = _retag(bundles["random"], tmp_path / "other", "tiny-000000000000")
     publish(
@@ -162,7 +162,7 @@ def test_other_versions_tampered_and_missing_bundles_are_listed_apart(bundles, t
 
 def test_replay_refuses_edited_rows(bundles, tmp_path):
     """Rows edited in place (no bundle.json to compare with) are caught by re-running them."""
-    from pipelines.verify import VerifyConfig, verify_results
+    from roboview.pipelines.verify import VerifyConfig, verify_results
 
     edited = tmp_path / "edited"
     shutil.copytree(bundles["random"], edited)
@@ -178,9 +178,9 @@ def test_replay_refuses_edited_rows(bundles, tmp_path):
 def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
     from huggingface_hub import EvalResultEntry, parse_eval_result_entries
 
-    from eval.reporting.bundle import BUNDLE_FILE, sha256_file
-    from pipelines.publish import PublishConfig, PublishError
-    from pipelines.publish import run as publish
+    from roboview.eval.reporting.bundle import BUNDLE_FILE, sha256_file
+    from roboview.pipelines.publish import PublishConfig, PublishError
+    from roboview.pipelines.publish import run as publish
 
     staging = tmp_path / "bundle"
     cfg = PublishConfig(
@@ -251,8 +251,8 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
 
 
 def test_publish_refuses_results_that_do_not_verify(bundles, tmp_path):
-    from pipelines.publish import PublishConfig, PublishError
-    from pipelines.publish import run as publish
+    from roboview.pipelines.publish import PublishConfig, PublishError
+    from roboview.pipelines.publish import run as publish
 
     partial = tmp_path / "partial"
     shutil.copytree(bundles["random"], partial)

@@ -1,7 +1,7 @@
 """lerobot_async: a checkpoint served by LeRobot's own policy server gives the in-process type's episodes and actions.
 
 The server is lerobot's real `lerobot.async_inference.policy_server`, started here as a subprocess on a free
-loopback port; the client is `policies.lerobot_async`.
+loopback port; the client is `roboview.policies.lerobot_async`.
 """
 
 import json
@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import AgentView, Episode, PolicyConfig
-from policies.errors import PolicyUnavailable
-from policies.types import policy_config
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from roboview.policies.base import AgentView, Episode, PolicyConfig
+from roboview.policies.errors import PolicyUnavailable
+from roboview.policies.types import policy_config
 
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
 
@@ -34,7 +34,7 @@ class Server:
     """`python -m lerobot.async_inference.policy_server` on 127.0.0.1 (its logs/ folder goes to `cwd`)."""
 
     def __init__(self, cwd: Path, timeout_s: float = 90) -> None:
-        from policies.lerobot_async import check_reachable
+        from roboview.policies.lerobot_async import check_reachable
 
         self.address = f"127.0.0.1:{free_port()}"
         self.log = cwd / "server.log"
@@ -128,9 +128,9 @@ def test_served_checkpoint_runs_the_in_process_episodes(tiny_benchmark, tiny_che
 
 def test_served_actions_equal_in_process_actions(tiny_benchmark, tiny_checkpoint, server):
     """Rows of a 2-step checkpoint all fail at max_steps, so compare what the model answers, step by step."""
-    from policies.lerobot_policy import LeRobotPolicy
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.lerobot_policy import LeRobotPolicy
+    from roboview.tasks import make_env
 
     config = policy_config("lerobot_async", server=server.address, path=str(tiny_checkpoint))
     items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:2]
@@ -163,7 +163,7 @@ def test_served_actions_equal_in_process_actions(tiny_benchmark, tiny_checkpoint
 
 
 def test_a_server_that_is_down_fails_before_any_rollout(tiny_benchmark, tiny_checkpoint, tmp_path, capsys):
-    from pipelines.evaluate import main
+    from roboview.pipelines.evaluate import main
 
     address = f"127.0.0.1:{free_port()}"
     out = tmp_path / "out"

@@ -1,6 +1,6 @@
 """RoboView as a LeRobot plugin: the installed `lerobot_env_roboview` distribution makes `--env.type=roboview`
 known to lerobot-train and lerobot-eval with no --env.discover_packages_path, and lerobot-train's periodic
-evaluation logs one success rate per RoboView split (pipelines.train passes the splits)."""
+evaluation logs one success rate per RoboView split (roboview.pipelines.train passes the splits)."""
 
 import ast
 import importlib.metadata
@@ -30,7 +30,7 @@ def test_the_plugin_distribution_is_one_lerobot_imports():
     register_third_party_plugins()
     from lerobot.envs.configs import EnvConfig
 
-    from roboview_lerobot import RoboViewEnv
+    from roboview.integrations.lerobot import RoboViewEnv
 
     assert EnvConfig.get_choice_class("roboview") is RoboViewEnv
 
@@ -48,7 +48,7 @@ def _suites(log: str) -> list[dict[str, dict]]:
 
 
 def test_lerobot_train_evaluates_every_split_while_training(tiny_benchmark, tiny_demos, tmp_path):
-    from roboview_data.benchmark.format import available_splits
+    from roboview.benchmark.format import available_splits
 
     out = tmp_path / "train"
     # A real lerobot-train with no --env.discover_packages_path: the plugin distribution registers the env.
@@ -115,9 +115,9 @@ def test_lerobot_train_evaluates_every_split_while_training(tiny_benchmark, tiny
 
 
 def test_pipelines_train_passes_the_splits_to_lerobot_train(tiny_benchmark, tiny_demos, tmp_path):
-    from pipelines._cli import BenchmarkPath
-    from pipelines.train import TrainConfig, TrainDatasetConfig, command
-    from roboview_data.benchmark.format import available_splits
+    from roboview.benchmark.format import available_splits
+    from roboview.pipelines._cli import BenchmarkPath
+    from roboview.pipelines.train import TrainConfig, TrainDatasetConfig, command
 
     def config(splits: str) -> TrainConfig:
         return TrainConfig(
@@ -150,9 +150,9 @@ def test_the_plugin_runs_an_end_effector_checkpoint_in_its_control(tiny_benchmar
     """`--env.control=ee_delta`: 7-d LIBERO-convention actions in, the end-effector state as agent_pos out."""
     from lerobot.utils.constants import ACTION
 
-    from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
-    from roboview_lerobot import RoboViewEnv
-    from roboview_lerobot.env import RoboViewEvalEnv
+    from roboview.integrations.lerobot import RoboViewEnv
+    from roboview.integrations.lerobot.env import RoboViewEvalEnv
+    from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
 
     config = RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), image_size=64, control="ee_delta")
     assert config.features[ACTION].shape == (7,) and config.split_kwargs("color")["control"] == "ee_delta"

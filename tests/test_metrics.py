@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.statistics.metrics import (
+from roboview.eval.statistics.metrics import (
     EpisodesError,
     MetricsConfig,
     compute_all_metrics,
@@ -284,7 +284,7 @@ def test_paper_sized_split():
 
 
 def test_per_value_p_value_is_exact_where_the_cmh_chi_square_is_not():
-    from eval.statistics.significance import exact_stratified_p
+    from roboview.eval.statistics.significance import exact_stratified_p
 
     # A value failing its 2 episodes where 5 of 141 fail per (context, repeat) block: the exact
     # conditional probability is (5/141)²; the asymptotic CMH χ² would say 1.6e-13.

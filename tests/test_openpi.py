@@ -2,7 +2,7 @@
 
 RoboView's `openpi` client against openpi-server's own `WebsocketPolicyServer` serving a tiny ACT
 checkpoint (rows equal to in-process evaluation; error frame, wrong chunk shape, a server killed mid-run
-and resumed); openpi-client's own `WebsocketClientPolicy` against `pipelines.serve_policy` (actions equal
+and resumed); openpi-client's own `WebsocketClientPolicy` against `roboview.pipelines.serve_policy` (actions equal
 to in-process, requests of several connections batched into one forward pass).
 """
 
@@ -22,10 +22,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
-from policies.base import Episode
-from policies.errors import PolicyUnavailable
-from policies.types import policy_config
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
+from roboview.policies.base import Episode
+from roboview.policies.errors import PolicyUnavailable
+from roboview.policies.types import policy_config
 
 COLS = ["instance_id", "repeat", "episode_seed", "success", "steps", "policy", "failure_reason"]
 
@@ -37,12 +37,12 @@ def free_port() -> int:
 
 
 def start_server(checkpoint: Path, port: int, *flags: str) -> subprocess.Popen:
-    """pipelines.serve_policy in its own process; returns once /healthz answers."""
+    """roboview.pipelines.serve_policy in its own process; returns once /healthz answers."""
     proc = subprocess.Popen(
         [
             sys.executable,
             "-m",
-            "pipelines.serve_policy",
+            "roboview.pipelines.serve_policy",
             "--policy.type=lerobot",
             f"--policy.path={checkpoint}",
             f"--port={port}",
@@ -136,7 +136,7 @@ def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(
     )
     assert "url" not in json.loads((tmp_path / "served" / "run.json").read_text())["policy_options"]
     # The report says where the policy was served and what the server said.
-    from eval.reporting.markdown import provenance_section
+    from roboview.eval.reporting.markdown import provenance_section
 
     lines = provenance_section([{"path": "served", "provenance": [entry]}])
     line = next(x for x in lines if "served elsewhere" in x)
@@ -144,10 +144,10 @@ def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(
 
 
 def test_client_actions_equal_the_checkpoint_in_process(tiny_benchmark, tiny_checkpoint, openpi_server):
-    from policies.base import AgentView
-    from policies.lerobot_policy import LeRobotPolicy
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.base import AgentView
+    from roboview.policies.lerobot_policy import LeRobotPolicy
+    from roboview.tasks import make_env
 
     item = load_benchmark(tiny_benchmark, ["color"]).splits["color"][1]
     env = make_env(cameras=("left_top", "wrist"), image_size=64)
@@ -203,8 +203,8 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
 
 
 def test_every_layout_carries_the_observation_there_and_back(env):
-    from policies.openpi import wire_format
-    from roboview_data.tasks.env import IMAGE_KEY, STATE_KEY
+    from roboview.policies.openpi import wire_format
+    from roboview.tasks.env import IMAGE_KEY, STATE_KEY
 
     obs, _ = env.reset(seed=5)
     cams = ("left_top", "wrist")
@@ -252,7 +252,7 @@ def _thread_server(policy, metadata=None) -> int:
 def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_over_urls(
     tiny_benchmark, env, tmp_path
 ):
-    from policies.base import AgentView
+    from roboview.policies.base import AgentView
 
     class Velocity:  # openpi-server's policy interface: a chunk of 3 joint velocities (rad/s) + gripper 0.7
         def __init__(self):
@@ -284,7 +284,7 @@ def test_velocity_actions_integrate_the_gripper_binarizes_and_workers_spread_ove
     assert action[7] == 1.0
     policy.close()
     # Two URLs: the worker of rank i talks to server i (mod 2).
-    from roboview_data.workers import set_worker_rank, worker_rank
+    from roboview.core.workers import set_worker_rank, worker_rank
 
     rank = worker_rank()
     try:
@@ -363,10 +363,10 @@ def test_a_server_killed_mid_run_stops_the_run_and_a_rerun_resumes(
 def test_openpi_client_against_serve_policy_batches_connections(tiny_benchmark, tiny_checkpoint):
     from openpi_client.websocket_client_policy import WebsocketClientPolicy
 
-    from policies.lerobot_policy import LeRobotPolicy
-    from policies.openpi import wire_format
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.lerobot_policy import LeRobotPolicy
+    from roboview.policies.openpi import wire_format
+    from roboview.tasks import make_env
 
     items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:4]
     env = make_env(cameras=("left_top", "wrist"), image_size=64)

@@ -6,10 +6,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from roboview_data.tasks import load_preset, load_task, make_env
-from roboview_data.tasks.push import PUSH_STARTS, ZONE_OFFSETS
-from roboview_data.variation.factors import baselines, context_factors
-from roboview_data.variation.instances import TaskInstance, episode_seed, generate_suite
+from roboview.tasks import load_preset, load_task, make_env
+from roboview.tasks.push import PUSH_STARTS, ZONE_OFFSETS
+from roboview.variation.factors import baselines, context_factors
+from roboview.variation.instances import TaskInstance, episode_seed, generate_suite
 
 
 def push_instance(**values):
@@ -69,8 +69,8 @@ def test_push_instances_have_their_own_contexts_and_ids():
 def test_collect_push_demos(tmp_path):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from pipelines.collect import CollectConfig, DatasetConfig
-    from pipelines.collect import run as collect
+    from roboview.pipelines.collect import CollectConfig, DatasetConfig
+    from roboview.pipelines.collect import run as collect
 
     root = tmp_path / "push"
     result = collect(
@@ -96,11 +96,11 @@ def test_collect_push_demos(tmp_path):
 def test_a_two_task_benchmark_builds_loads_and_evaluates(tmp_path):
     import datasets
 
-    from pipelines.build_benchmark import BuildConfig
-    from pipelines.build_benchmark import run as build
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
-    from policies.types import policy_config
+    from roboview.pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines.build_benchmark import run as build
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.policies.types import policy_config
 
     bench = tmp_path / "bench"
     result = build(BuildConfig(output_dir=str(bench), preset="tiny_extended", image_size=64))

@@ -4,8 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.statistics.metrics import MetricsConfig, compute_all_metrics
-from eval.statistics.ranking import compact_letters, holm, rank_table
+from roboview.eval.statistics.metrics import MetricsConfig, compute_all_metrics
+from roboview.eval.statistics.ranking import compact_letters, holm, rank_table
 
 FAST = MetricsConfig(n_perm=100, n_glm=20, max_perm=100)
 
@@ -78,7 +78,7 @@ def test_a_known_order_is_recovered_and_small_samples_claim_no_order():
 
 
 def test_equal_policies_are_split_no_more_often_than_alpha():
-    from eval.statistics.significance import paired_success_test
+    from roboview.eval.statistics.significance import paired_success_test
 
     rng = np.random.default_rng(5)
     claimed = 0
@@ -100,7 +100,7 @@ def test_two_policies_get_no_ranking():
 
 
 def test_the_report_prints_the_rankings():
-    from eval.reporting.markdown import render_markdown
+    from roboview.eval.reporting.markdown import render_markdown
 
     metrics = compute_all_metrics(policies({"p1": 0.95, "p2": 0.93, "p3": 0.55, "p4": 0.1}, repeats=8), FAST)
     text = render_markdown(metrics, {})

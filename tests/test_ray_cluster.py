@@ -59,7 +59,7 @@ def _evaluate(bench: Path, out: Path, cluster: Cluster, **popen) -> subprocess.P
     cmd = [
         sys.executable,
         "-m",
-        "pipelines.evaluate",
+        "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
         *ARGS,
         f"--eval.ray_address={cluster.address}",

@@ -1,4 +1,4 @@
-"""pipelines.report end to end on synthetic episode files of the tiny suite (no simulator needed)."""
+"""roboview.pipelines.report end to end on synthetic episode files of the tiny suite (no simulator needed)."""
 
 from __future__ import annotations
 
@@ -13,13 +13,13 @@ import pyarrow.parquet as pq
 import pytest
 from PIL import Image
 
-from eval.reporting.markdown import VERSION_KEY, load_results
-from eval.reporting.plots import PLOTS
-from eval.running.results import FORMAT_KEY
-from eval.statistics.metrics import EpisodesError, MetricsConfig, policy_layouts
-from pipelines.report import ReportConfig, main, run
-from roboview_data.tasks import load_preset
-from roboview_data.variation.instances import episode_seed, generate_suite
+from roboview.eval.reporting.markdown import VERSION_KEY, load_results
+from roboview.eval.reporting.plots import PLOTS
+from roboview.eval.running.results import FORMAT_KEY
+from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig, policy_layouts
+from roboview.pipelines.report import ReportConfig, main, run
+from roboview.tasks import load_preset
+from roboview.variation.instances import episode_seed, generate_suite
 
 FAST = {"metrics": MetricsConfig(n_glm=20, n_perm=50)}
 
@@ -91,7 +91,7 @@ def test_files_and_plots_are_written(report):
 
 
 def test_forest_plots_follow_the_factor_registry():
-    from roboview_data.variation.factors import visual_factors
+    from roboview.variation.factors import visual_factors
 
     forests = [
         split for name, (split, key, _) in PLOTS.items() if name == f"forest_{split}.png" and key == "splits"

@@ -9,8 +9,8 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from eval.reporting.format import bias_status, p_fmt, pct, pct_ci
-from pipelines.report import ReportConfig, run
+from roboview.eval.reporting.format import bias_status, p_fmt, pct, pct_ci
+from roboview.pipelines.report import ReportConfig, run
 from tests.browser import chromium_binary, load_page
 from tests.test_report import FAST, make_episodes, write
 
@@ -147,7 +147,7 @@ def _markdown_tables(markdown: str, heading: str) -> list[list[str]]:
 def test_report_md_and_html_print_the_same_tables(report):
     """Table 1, the summary and the video tables: the same headings and cells on both pages, bold included;
     a column one page dropped, renamed or printed differently fails here."""
-    from eval.reporting.format import split_title
+    from roboview.eval.reporting.format import split_title
 
     result, page = report
     markdown = (result.output_dir / "report.md").read_text()

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 
-from eval.reporting.format import bias_status
-from eval.reporting.plots import category_stats
-from pipelines.report import ReportConfig, run
+from roboview.eval.reporting.format import bias_status
+from roboview.eval.reporting.plots import category_stats
+from roboview.pipelines.report import ReportConfig, run
 from tests.test_report import FAST, make_episodes, write
 
 
@@ -47,9 +47,9 @@ def test_absent_color_categories_are_left_out_not_drawn_as_zero():
 def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
     from pathlib import Path
 
-    from pipelines.collect import CollectResult
-    from pipelines.collect import summary as collect_summary
-    from pipelines.evaluate import EvaluateResult, rate_text
+    from roboview.pipelines.collect import CollectResult
+    from roboview.pipelines.collect import summary as collect_summary
+    from roboview.pipelines.evaluate import EvaluateResult, rate_text
 
     assert (
         rate_text(EvaluateResult(Path("o"), 171, 0, 0.877, 3.0))

@@ -4,18 +4,18 @@ import mujoco
 import numpy as np
 import pytest
 
-from roboview_data.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
-from roboview_data.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY, baseline_instance
-from roboview_data.tasks.pick_place import PickPlaceEnv
-from roboview_data.variation.colors import COLORS
-from roboview_data.variation.factors import FACTORS, baselines
-from roboview_data.variation.factors.camera import (
+from roboview.sim.cameras import BASE_CAMERAS, WORKSPACE_CENTER
+from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY, baseline_instance
+from roboview.tasks.pick_place import PickPlaceEnv
+from roboview.variation.colors import COLORS
+from roboview.variation.factors import FACTORS, baselines
+from roboview.variation.factors.camera import (
     apply_distance,
     apply_euler,
     orbital_pose,
     scene_camera_poses,
 )
-from roboview_data.variation.instances import TaskInstance
+from roboview.variation.instances import TaskInstance
 
 OBSERVED = ("front", "left_top")
 

@@ -1,4 +1,4 @@
-"""Sharded runs: --eval.shard=i/N slices the work deterministically; pipelines.merge joins the folders."""
+"""Sharded runs: --eval.shard=i/N slices the work deterministically; roboview.pipelines.merge joins the folders."""
 
 from __future__ import annotations
 
@@ -10,22 +10,22 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from eval.running.results import ResultsError, shard_of
-from eval.statistics.metrics import MetricsConfig
-from pipelines.evaluate import EvalConfig
-from pipelines.merge import MergeConfig
-from pipelines.merge import main as merge_main
-from pipelines.merge import run as merge
-from pipelines.report import ReportConfig
-from pipelines.report import run as report
+from roboview.eval.running.results import ResultsError, shard_of
+from roboview.eval.statistics.metrics import MetricsConfig
+from roboview.pipelines.evaluate import EvalConfig
+from roboview.pipelines.merge import MergeConfig
+from roboview.pipelines.merge import main as merge_main
+from roboview.pipelines.merge import run as merge
+from roboview.pipelines.report import ReportConfig
+from roboview.pipelines.report import run as report
 from tests.test_evaluate import evaluate, rows
 
 SPLITS, LIMIT, REPEATS = "color,dist_scale", 3, 2  # 12 episodes
 
 
 def _evaluate_shard(bench: Path, out: Path, shard: str, policy: str = "expert"):
-    from pipelines.evaluate import BenchmarkConfig, EvaluateConfig, run
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvaluateConfig, run
+    from roboview.policies.types import policy_config
 
     return run(
         EvaluateConfig(

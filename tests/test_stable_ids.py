@@ -9,10 +9,10 @@ import hashlib
 
 import numpy as np
 
-from roboview_data.benchmark.format import suite_hash
-from roboview_data.tasks import load_preset
-from roboview_data.tasks.pick_place import PickPlaceEnv
-from roboview_data.variation.instances import generate_suite
+from roboview.benchmark.format import suite_hash
+from roboview.tasks import load_preset
+from roboview.tasks.pick_place import PickPlaceEnv
+from roboview.variation.instances import generate_suite
 
 # benchmark_version paper-2ea2d26d1ca1: every candidate passed the gate, so the hash over all
 # candidates is the published suite hash.

@@ -1,6 +1,6 @@
 """The statistics validated by simulation against known truth (synthetic tables; no simulator).
 
-Tables come from `eval.statistics.simulate` (a policy with logit-SD τ bias; τ = 0 is none). Tolerances are binomial: with N simulated tables a
+Tables come from `roboview.eval.statistics.simulate` (a policy with logit-SD τ bias; τ = 0 is none). Tolerances are binomial: with N simulated tables a
 rejection rate at level 0.05 has standard error √(0.05·0.95/N).
 """
 
@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.statistics.metrics import MetricsConfig, interaction_metrics, split_metrics
-from eval.statistics.significance import lrt_power, repeats_needed
-from eval.statistics.simulate import simulate_additive_factorial, simulate_split
-from roboview_data.tasks import load_preset
-from roboview_data.variation.instances import episode_seed, generate_suite
+from roboview.eval.statistics.metrics import MetricsConfig, interaction_metrics, split_metrics
+from roboview.eval.statistics.significance import lrt_power, repeats_needed
+from roboview.eval.statistics.simulate import simulate_additive_factorial, simulate_split
+from roboview.tasks import load_preset
+from roboview.variation.instances import episode_seed, generate_suite
 
 SIM = MetricsConfig(n_perm=100, n_glm=40, max_perm=100)  # fixed-B: what these simulations study
 
@@ -130,7 +130,7 @@ def test_common_random_numbers_share_seeds_across_values_and_splits():
 
 
 def test_plan_cli_prints_repeats_per_split(capsys):
-    from pipelines.plan import main
+    from roboview.pipelines.plan import main
 
     plans = {(p.split, p.factor): p for p in main(["--preset=paper", "--tau=0.3", "--sr=0.7"])}
     assert plans[("color", "color")].n_values == 141 and plans[("color", "color")].n_strata == 11
@@ -144,7 +144,7 @@ def test_plan_cli_prints_repeats_per_split(capsys):
 
 
 def test_paired_comparison_of_two_policies():
-    from eval.statistics.compare import compare_policies
+    from roboview.eval.statistics.compare import compare_policies
 
     table, _ = simulate_split(np.random.default_rng(7), n_values=6, n_contexts=8, repeats=5, tau=0.0, sr=0.99)
     a = table.assign(policy="a", success=True)
@@ -170,7 +170,7 @@ def test_paired_comparison_of_two_policies():
 def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
     from scipy import stats as sps
 
-    from eval.statistics.significance import sequential_p
+    from roboview.eval.statistics.significance import sequential_p
 
     rng = np.random.default_rng(7)
 
@@ -193,7 +193,7 @@ def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
 
 
 def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_binds():
-    from eval.reporting.markdown import p_fmt
+    from roboview.eval.reporting.markdown import p_fmt
 
     frame, _ = simulate_split(np.random.default_rng(3), 9, 4, 5, 2.0, 0.7)
     m = split_metrics(frame)  # default: up to 20,000 permutations

@@ -7,21 +7,21 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from roboview_data.tasks import PRESETS, load_preset
-from roboview_data.variation.factors import (
+from roboview.tasks import PRESETS, load_preset
+from roboview.variation.factors import (
     baselines,
     context_factors,
     load_factor,
     visual_factors,
 )
-from roboview_data.variation.instances import (
+from roboview.variation.instances import (
     DEFAULT_FACTORIAL_COLORS,
     SuiteConfig,
     TaskInstance,
     episode_seed,
     generate_suite,
 )
-from roboview_data.variation.svgf import (
+from roboview.variation.svgf import (
     ContextSampler,
     FactorSampler,
     FixedSampler,

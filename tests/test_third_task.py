@@ -21,11 +21,11 @@ LIFT_MODULE = textwrap.dedent('''
 
     import numpy as np
 
-    from roboview_data.sim.motion import CARRY_Z
-    from roboview_data.tasks import Task, TaskEnv, register_task
-    from roboview_data.tasks.presets import register_preset
-    from roboview_data.variation.factors import Factor, register_factor
-    from roboview_data.variation.instances import SuiteConfig
+    from roboview.sim.motion import CARRY_Z
+    from roboview.tasks import Task, TaskEnv, register_task
+    from roboview.tasks.presets import register_preset
+    from roboview.variation.factors import Factor, register_factor
+    from roboview.variation.instances import SuiteConfig
 
     POSITIONS = {"center": (0.50, 0.12), "left": (0.45, 0.22)}
     register_factor(Factor(name="lift_position", kind="context", task="lift", values=tuple(POSITIONS),
@@ -81,13 +81,13 @@ def _run(env: dict[str, str], module: str, *args: str) -> subprocess.CompletedPr
 def test_a_third_task_is_one_module_built_collected_and_evaluated(lift_package, tmp_path):
     env = lift_package
     # Registered by the entry point alone: a preset of it, its gymnasium id and its context in every suite.
-    probe = _run(env, "pipelines.plan", "--preset=lift_demo")
+    probe = _run(env, "roboview.pipelines.plan", "--preset=lift_demo")
     assert "lift" in probe.stdout + probe.stderr
 
     bench = tmp_path / "bench"
     _run(
         env,
-        "pipelines.build_benchmark",
+        "roboview.pipelines.build_benchmark",
         f"--output_dir={bench}",
         "--preset=lift_demo",
         "--num_workers=1",
@@ -103,7 +103,7 @@ def test_a_third_task_is_one_module_built_collected_and_evaluated(lift_package, 
     demos = tmp_path / "demos"
     _run(
         env,
-        "pipelines.collect",
+        "roboview.pipelines.collect",
         "--dataset.repo_id=t/lift",
         f"--dataset.root={demos}",
         "--dataset.task=lift",
@@ -118,7 +118,7 @@ def test_a_third_task_is_one_module_built_collected_and_evaluated(lift_package, 
     out = tmp_path / "eval"
     _run(
         env,
-        "pipelines.evaluate",
+        "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
         "--policy.type=expert",
         "--eval.n_repeats=1",
@@ -134,7 +134,7 @@ def test_a_third_task_is_one_module_built_collected_and_evaluated(lift_package, 
 
 
 def test_a_task_without_context_factors_is_refused():
-    from roboview_data.tasks import Task, register_task
+    from roboview.tasks import Task, register_task
 
     with pytest.raises(ValueError, match="'hover' has no context factors: register them first"):
         register_task(Task(name="hover", gym_id="X/Hover-v0", env="x:Y", success="-", timeout_reason="-"))

@@ -6,14 +6,14 @@ Privileged state (object pose, box center) is read here only to grade what the p
 import numpy as np
 import pytest
 
-from policies.base import Episode
-from policies.factory import make_policy
-from policies.perception import PerceptionError, perceive
-from policies.types import load_policy_types, policy_config
-from roboview_data.tasks.env import DEPTH_KEY, IMAGE_KEY
-from roboview_data.tasks.pick_place import BOX_CENTER, PickPlaceEnv
-from roboview_data.variation.factors import baselines
-from roboview_data.variation.instances import TaskInstance, episode_seed
+from roboview.policies.base import Episode
+from roboview.policies.factory import make_policy
+from roboview.policies.perception import PerceptionError, perceive
+from roboview.policies.types import load_policy_types, policy_config
+from roboview.tasks.env import DEPTH_KEY, IMAGE_KEY
+from roboview.tasks.pick_place import BOX_CENTER, PickPlaceEnv
+from roboview.variation.factors import baselines
+from roboview.variation.instances import TaskInstance, episode_seed
 
 CAMERA = "front"
 

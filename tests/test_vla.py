@@ -1,5 +1,5 @@
 """VLAs (SmolVLA and XVLA: tiny, random weights, nothing downloaded) trained by lerobot-train on RoboView demos,
-then evaluated through `pipelines.evaluate --policy.type=lerobot` and through `lerobot-eval --env.type=roboview`:
+then evaluated through `roboview.pipelines.evaluate --policy.type=lerobot` and through `lerobot-eval --env.type=roboview`:
 the instruction reaches the tokenizer, the four cameras the image inputs, the 8-D state the (padded) state."""
 
 import json
@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-from pipelines.evaluate import run as evaluate
-from policies.types import policy_config
-from policies.vlm.client import Endpoint
-from policies.vlm.sgl import SGLConfig
-from roboview_data.sim.cameras import ALL_CAMERAS
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+from roboview.pipelines.evaluate import run as evaluate
+from roboview.policies.types import policy_config
+from roboview.policies.vlm.client import Endpoint
+from roboview.policies.vlm.sgl import SGLConfig
+from roboview.sim.cameras import ALL_CAMERAS
 
 ROOT = Path(__file__).parents[1]
 BIN = Path(sys.executable).parent
@@ -27,8 +27,8 @@ ENV = os.environ | {"PYTHONPATH": str(ROOT)}
 @pytest.fixture(scope="module")
 def demos(tmp_path_factory) -> Path:
     """Two expert demos with all four cameras at 64²."""
-    from pipelines.collect import CollectConfig, DatasetConfig
-    from pipelines.collect import run as collect
+    from roboview.pipelines.collect import CollectConfig, DatasetConfig
+    from roboview.pipelines.collect import run as collect
 
     root = tmp_path_factory.mktemp("vla_demos") / "ds"
     collect(
@@ -65,7 +65,7 @@ def _train(demos: Path, out: Path, flags: list[str]) -> Path:
 @pytest.fixture(scope="module")
 def tiny_vlas(demos, tmp_path_factory):
     """kind -> (checkpoint, tokenizer folder): a tiny VLA of that type trained 2 steps by lerobot-train, once."""
-    from roboview_lerobot.tiny_vla import (
+    from roboview.integrations.lerobot.tiny_vla import (
         smolvla_train_flags,
         write_bart_tokenizer,
         write_smolvlm,
@@ -100,9 +100,9 @@ def smolvla(tiny_vlas) -> tuple[Path, Path]:
 
 
 def _observation(instruction: str):
-    from roboview_data.tasks import make_env
-    from roboview_data.variation.factors import baselines
-    from roboview_data.variation.instances import TaskInstance
+    from roboview.tasks import make_env
+    from roboview.variation.factors import baselines
+    from roboview.variation.instances import TaskInstance
 
     instance = TaskInstance(
         "color", ("color",), baselines() | {"instruction": instruction, "color": "blue"}, "base"
@@ -117,7 +117,7 @@ def _observation(instruction: str):
 def test_the_instruction_cameras_and_state_reach_the_vla(vla):
     from transformers import AutoTokenizer
 
-    from policies.lerobot_policy import LeRobotPolicy
+    from roboview.policies.lerobot_policy import LeRobotPolicy
 
     kind, checkpoint, tokenizer_dir = vla
     policy = LeRobotPolicy(str(checkpoint), "cpu")
@@ -164,7 +164,7 @@ def _evaluate(bench: Path, out: Path, checkpoint: Path, sgl: SGLConfig | None = 
 
 
 def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_benchmark, tmp_path):
-    from roboview_lerobot.convert import convert
+    from roboview.integrations.lerobot.convert import convert
 
     kind, checkpoint, _ = vla
     result = _evaluate(tiny_benchmark, tmp_path / "ours", checkpoint)
@@ -189,7 +189,7 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
     proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=ENV)
     if kind == "xvla":
         # lerobot-eval 0.6.1 gives every XVLA policy LIBERO's env processors, whatever the env
-        # (lerobot/envs/factory.py:50-53); they reject RoboView's images. XVLA runs through pipelines.evaluate.
+        # (lerobot/envs/factory.py:50-53); they reject RoboView's images. XVLA runs through roboview.pipelines.evaluate.
         assert proc.returncode != 0 and "outside [0, 255] range" in proc.stderr
         return
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -212,11 +212,11 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
 def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_benchmark, tmp_path):
     from transformers import AutoTokenizer
 
-    from policies.base import Episode
-    from policies.factory import make_policy
-    from policies.vlm.standin import MODEL_NAME, ClassicCVModel
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.base import Episode
+    from roboview.policies.factory import make_policy
+    from roboview.policies.vlm.standin import MODEL_NAME, ClassicCVModel
+    from roboview.tasks import make_env
     from tests.vlm_servers import ScriptedServer
 
     checkpoint, backbone = smolvla
@@ -261,7 +261,7 @@ def test_a_checkpoint_is_found_by_hub_id_in_the_hub_cache(smolvla, tiny_benchmar
     common = [
         sys.executable,
         "-m",
-        "pipelines.evaluate",
+        "roboview.pipelines.evaluate",
         f"--benchmark.path={tiny_benchmark}",
         "--policy.type=lerobot",
         "--policy.device=cpu",

@@ -1,5 +1,5 @@
 """RoboView inside vla-eval: vla-eval's own CLI runs the RoboView benchmark against model servers on 127.0.0.1,
-and its results, converted, equal a native pipelines.evaluate run of the same episodes."""
+and its results, converted, equal a native roboview.pipelines.evaluate run of the same episodes."""
 
 import contextlib
 import json
@@ -29,12 +29,12 @@ from vla_eval.specs import (
     STATE_JOINT,
 )
 
-from policies.vla_eval_specs import JOINT_TARGETS
-from roboview_data.benchmark.format import load_benchmark
-from roboview_data.tasks import load_task, make_env
-from roboview_data.variation.instances import episode_seed
-from roboview_vla_eval.benchmark import RoboViewBenchmark
-from roboview_vla_eval.convert import convert, read_aggregates
+from roboview.benchmark.format import load_benchmark
+from roboview.integrations.vla_eval.benchmark import RoboViewBenchmark
+from roboview.integrations.vla_eval.convert import convert, read_aggregates
+from roboview.policies.vla_eval_specs import JOINT_TARGETS
+from roboview.tasks import load_task, make_env
+from roboview.variation.instances import episode_seed
 
 ROOT = Path(__file__).parents[1]
 CONFIG = ROOT / "configs" / "vla_eval" / "roboview_tiny.yaml"
@@ -118,7 +118,7 @@ def served(server):
 
 
 def expert_actions(bench: Path, split: str, repeats: int, max_steps: int, control: str = "joint") -> dict:
-    """The scripted expert's actions in each (instance, repeat) of `split`, recorded as pipelines.evaluate runs it."""
+    """The scripted expert's actions in each (instance, repeat) of `split`, recorded as roboview.pipelines.evaluate runs it."""
     env = make_env(cameras=("left_top",), image_size=64, max_steps=max_steps, lazy=True, control=control)
     out = {}
     for item in load_benchmark(bench, [split]).splits[split]:
@@ -144,13 +144,13 @@ def table(path: Path) -> pd.DataFrame:
 
 
 def test_vla_eval_runs_the_benchmark_and_its_results_convert_to_the_native_run(tiny_benchmark, tmp_path):
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
-    from pipelines.report import ReportConfig
-    from pipelines.report import run as report
-    from pipelines.verify import VerifyConfig
-    from pipelines.verify import run as verify
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.pipelines.report import ReportConfig
+    from roboview.pipelines.report import run as report
+    from roboview.pipelines.verify import VerifyConfig
+    from roboview.pipelines.verify import run as verify
+    from roboview.policies.types import policy_config
 
     repeats, max_steps = 2, 60
     actions = expert_actions(tiny_benchmark, SPLIT, repeats, max_steps)
@@ -237,9 +237,9 @@ def test_vla_evals_lerobot_server_runs_a_roboview_checkpoint_as_roboview_does(
 ):
     from vla_eval.model_servers.lerobot import LeRobotModelServer
 
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.policies.types import policy_config
 
     server = LeRobotModelServer(
         "act",
@@ -279,7 +279,9 @@ def test_an_episode_the_model_server_failed_is_an_infrastructure_row(tiny_benchm
     )
     other = read_aggregates(tmp_path / "vla")[0] | {"config": {"benchmark": "x:Other"}}
     (tmp_path / "other.json").write_text(json.dumps(other))
-    with pytest.raises(ValueError, match="hold no roboview_vla_eval.benchmark:RoboViewBenchmark entry"):
+    with pytest.raises(
+        ValueError, match="hold no roboview.integrations.vla_eval.benchmark:RoboViewBenchmark entry"
+    ):
         convert(tmp_path / "other.json", str(tiny_benchmark), tmp_path / "other")
 
 
@@ -319,7 +321,7 @@ def test_specs_follow_the_control_and_bad_params_fail_before_any_episode(tiny_be
             RoboViewBenchmark(**({"benchmark_path": bench} | params))
     with pytest.raises(ValueError, match="set episodes_per_task: 1"):
         joint.reset(tasks[0] | {"episode_idx": 1})
-    # A malformed action ends the episode as the policy's failure (as in pipelines.evaluate), not as an error.
+    # A malformed action ends the episode as the policy's failure (as in roboview.pipelines.evaluate), not as an error.
 
     async def malformed_action() -> dict:
         await joint.start_episode(joint.get_tasks()[0])
@@ -336,9 +338,9 @@ def test_specs_follow_the_control_and_bad_params_fail_before_any_episode(tiny_be
 def test_vla_eval_runs_the_benchmark_in_end_effector_control(tiny_benchmark, tmp_path):
     """`params.control: ee_delta`: a server in LIBERO's conventions (the expert's EE actions, replayed) gives the
     rows of the expert run natively in ee_delta."""
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
-    from policies.types import policy_config
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.policies.types import policy_config
 
     max_steps = 60
     actions = expert_actions(tiny_benchmark, SPLIT, 1, max_steps, control="ee_delta")

@@ -37,12 +37,12 @@ from vla_eval.specs import (
     DimSpec,
 )
 
-from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, main, run
-from policies.base import Episode
-from policies.errors import InfraError, PolicyUnavailable
-from policies.types import policy_config
-from policies.vla_eval_specs import SpecMismatch
-from roboview_data.tasks.env import EE_STATE_KEY, STATE_KEY
+from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, main, run
+from roboview.policies.base import Episode
+from roboview.policies.errors import InfraError, PolicyUnavailable
+from roboview.policies.types import policy_config
+from roboview.policies.vla_eval_specs import SpecMismatch
+from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
 
 ROOT = Path(__file__).resolve().parents[1]
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
@@ -128,7 +128,7 @@ def rows(out: Path) -> pd.DataFrame:
 
 
 def test_joint_server_negotiated_and_its_actions_reach_the_env(tiny_benchmark, tmp_path):
-    from roboview_data.tasks import make_env
+    from roboview.tasks import make_env
 
     server = joint_server()
     with serving(server) as url:
@@ -186,9 +186,9 @@ def test_lerobot_model_server_gives_the_in_process_rows_and_actions(
 ):
     from vla_eval.model_servers.lerobot import LeRobotModelServer
 
-    from policies.lerobot_policy import LeRobotPolicy
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import make_env
+    from roboview.benchmark.format import load_benchmark
+    from roboview.policies.lerobot_policy import LeRobotPolicy
+    from roboview.tasks import make_env
 
     model = LeRobotModelServer("act", str(tiny_checkpoint), device="cpu")
     with serving(model) as url:
@@ -449,9 +449,9 @@ def test_a_libero_convention_server_drives_the_end_effector_as_the_native_expert
 ):
     """End to end in end-effector control: a server declaring LIBERO's specs is negotiated to `ee_delta`, sent the EE
     state, and its actions (the expert's, replayed) give exactly the rows of the expert run natively in ee_delta."""
-    from roboview_data.benchmark.format import load_benchmark
-    from roboview_data.tasks import load_task, make_env
-    from roboview_data.variation.instances import episode_seed
+    from roboview.benchmark.format import load_benchmark
+    from roboview.tasks import load_task, make_env
+    from roboview.variation.instances import episode_seed
 
     split, max_steps = "color_x_camera_pose", 60  # one context: every instance of a repeat shares its seed
     env = make_env(cameras=("front",), image_size=64, max_steps=max_steps, lazy=True, control="ee_delta")

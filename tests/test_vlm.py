@@ -12,17 +12,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from policies.base import Episode
-from policies.errors import TransientPolicyError
-from policies.factory import make_policy
-from policies.types import policy_config
-from policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
-from policies.vlm.common import check_point
-from policies.vlm.sgl import SGLConfig, refine
-from policies.vlm.standin import MODEL_NAME, ClassicCVModel
-from roboview_data.tasks import make_env
-from roboview_data.variation.factors import baselines
-from roboview_data.variation.instances import TaskInstance, episode_seed
+from roboview.policies.base import Episode
+from roboview.policies.errors import TransientPolicyError
+from roboview.policies.factory import make_policy
+from roboview.policies.types import policy_config
+from roboview.policies.vlm.client import Endpoint, VLMAnswerError, VLMClient
+from roboview.policies.vlm.common import check_point
+from roboview.policies.vlm.sgl import SGLConfig, refine
+from roboview.policies.vlm.standin import MODEL_NAME, ClassicCVModel
+from roboview.tasks import make_env
+from roboview.variation.factors import baselines
+from roboview.variation.instances import TaskInstance, episode_seed
 from tests.vlm_servers import ScriptedServer
 
 POINTS = {"object_point": [10, 20], "target_point": [30, 40]}
@@ -295,8 +295,8 @@ def tiny_bench(tiny_benchmark):
 
 
 def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_nothing(tiny_bench, tmp_path):
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
 
     bench = tiny_bench
     # Episode by episode (one worker, in order): prose twice, a refusal, a 500 storm, then answers.
@@ -341,8 +341,8 @@ def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_noth
 
 
 def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tmp_path):
-    from pipelines.build_benchmark import BuildConfig
-    from pipelines.build_benchmark import run as build
+    from roboview.pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines.build_benchmark import run as build
 
     no = ("text", json.dumps({"analysis": "The object is hard to make out.", "final_answer": "no"}))
     s = ScriptedServer(ClassicCVModel(), [no] * 3 + [("text", "not json"), ("text", "still not")])
@@ -389,9 +389,9 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
 
 
 def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path):
-    from eval.running.agents import color_words, describe_agents, head_noun
-    from pipelines.probe_grounding import BenchmarkPath, ProbeConfig, neighbours
-    from pipelines.probe_grounding import run as probe
+    from roboview.eval.running.agents import color_words, describe_agents, head_noun
+    from roboview.pipelines.probe_grounding import BenchmarkPath, ProbeConfig, neighbours
+    from roboview.pipelines.probe_grounding import run as probe
 
     assert color_words("small dark red cube") == ["darkred"] and color_words("small object") == []
     assert head_noun("small gray cube") == "cube"
@@ -409,8 +409,8 @@ def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path)
     assert agents["descriptions"]["without_color"] == round(1 / 3, 4)
     # The probe re-renders the frames of a real MOKA run and regrounds with neighbouring colour names.
     assert len(neighbours("red", 2)) == 2 and "red" not in neighbours("red", 2)
-    from pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
-    from pipelines.evaluate import run as evaluate
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
 
     bench = tiny_bench
     endpoint = Endpoint(standin.url, MODEL_NAME, cache_dir=str(tmp_path / "c"))

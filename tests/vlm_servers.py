@@ -12,7 +12,7 @@ import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-from policies.vlm.server import completion, last_user_turn
+from roboview.policies.vlm.server import completion, last_user_turn
 
 
 class ScriptedServer:

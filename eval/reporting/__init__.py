@@ -1,2 +1,0 @@
-"""Reporting: report.md (`markdown`), report.html (`html`) and the plots, rendered from the metrics
-that `eval.statistics` computes; the tables both pages print are declared once (`tables`)."""

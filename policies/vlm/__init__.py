@@ -1,2 +1,0 @@
-"""VLM-driven agents (the paper's SimpleAgent and MOKA), the Semantic Grounding Layer, and the one
-OpenAI-compatible client they all speak through (`policies.vlm.client`)."""

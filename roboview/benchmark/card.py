@@ -1,0 +1,149 @@
+"""The benchmark's dataset card (README.md with Hugging Face YAML front matter) and its statistics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from roboview.variation.factors import DEFAULT_TASK
+from roboview.variation.instances import split_task
+
+
+def _size_category(n: int) -> str:
+    for bound, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K")):
+        if n < bound:
+            return name
+    return "100K<n<1M"
+
+
+def fairness_stats(records: list[dict]) -> dict[str, dict[str, float]]:
+    """Per observed camera: quantiles of the measured fairness numbers over all candidates."""
+    out: dict[str, dict[str, float]] = {}
+    for cam in sorted({c["camera"] for r in records for c in r["fairness"]["cameras"]}):
+        rows = [c for r in records for c in r["fairness"]["cameras"] if c["camera"] == cam]
+        for key in ("object_visible", "box_visible", "object_pixels", "delta_e_table", "delta_e_nominal"):
+            vals = np.array([c[key] for c in rows], dtype=float)
+            vals = vals[~np.isnan(vals)]
+            if vals.size:
+                out.setdefault(cam, {})[key] = [round(float(q), 3) for q in np.percentile(vals, [5, 50, 95])]
+    return out
+
+
+def write_card(out: Path, manifest: dict) -> None:
+    splits = manifest["splits"]
+    total = sum(s["accepted"] for s in splits.values())
+    # One config per task (their context columns differ): `default` holds pick_place, the paper's task.
+    by_task: dict[str, list[str]] = {}
+    for split in splits:
+        by_task.setdefault(split_task(split)[0], []).append(split)
+    configs = []
+    for task, names in sorted(by_task.items(), key=lambda kv: kv[0] != DEFAULT_TASK):
+        configs += [f"- config_name: {'default' if task == DEFAULT_TASK else task}", "  data_files:"]
+        for split in names:
+            configs += [f"  - split: {split}", f"    path: data/{split}.parquet"]
+    for name in manifest.get("rejected_tables", ["rejected"] if manifest["rejected"] else []):
+        configs += [
+            f"- config_name: {name}",
+            "  data_files:",
+            f"  - split: {name}",
+            f"    path: rejected/{name}.parquet",
+        ]
+    table = [
+        "| split | candidates | accepted | rejected (gate) | rejected (review) | accepted over gate |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, s in splits.items():
+        table.append(
+            f"| {name} | {s['candidates']} | {s['accepted']} | {s['rejected_gate']} | "
+            f"{s['rejected_review']} | {s['accepted_over_gate']} |"
+        )
+    stats = ["| camera | measure | p5 | median | p95 |", "|---|---|---|---|---|"]
+    for cam, measures in manifest["fairness_stats"].items():
+        for key, (p5, p50, p95) in measures.items():
+            stats.append(f"| {cam} | {key} | {p5} | {p50} | {p95} |")
+    suite = manifest["suite"]
+    text = f"""---
+license: apache-2.0
+task_categories:
+- robotics
+tags:
+- roboview
+- visual-bias
+- benchmark
+- mujoco
+- lerobot
+size_categories:
+- {_size_category(total)}
+pretty_name: RoboView-Bias benchmark instances ({suite["preset"]})
+configs:
+{chr(10).join(configs)}
+---
+
+# RoboView-Bias benchmark instances — preset `{suite["preset"]}`
+
+Frozen task instances of the RoboView-Bias benchmark: a simulated Franka Panda (MuJoCo) puts one
+small object into a yellow box while exactly one visual factor varies per split. Every row is one
+instance (see the RoboView docs, "Instance record"); `preview` shows the observed cameras (front, left_top, wrist)
+at t = 0. Load a split with `datasets.load_dataset(PATH, split="color")`; another task's splits are its own
+config: `datasets.load_dataset(PATH, "push", split="push_color")`.
+
+**Suite hash** (SHA-256 over the accepted instance ids per split): `{manifest["suite_hash"]}`
+**Benchmark version**: `{manifest["benchmark_version"]}`
+
+## Counts
+
+{chr(10).join(table)}
+
+Total accepted: {total}.
+
+## How the instances were built
+
+Structured Variant-Generation Framework with the `{suite["preset"]}` preset: union mode
+`{suite["union_mode"]}` for the generalization context space C_Gen (Structured Union over initial
+position × shape × instruction), each visual split V_i × C_Gen(V_i) with every other visual factor
+at its baseline (color red, camera pose original, Euler 0,0, distance 0); factorial split
+color × camera_pose over colors {", ".join(suite["factorial_colors"])} in the baseline context c*.
+Extra Cartesian splits: {suite["cartesian"] or "none"}. Value subsets: {suite["value_subsets"] or "none (full factor sets)"}.
+`instance_id` is the first 16 hex digits of SHA-256 over the canonical JSON of the instance's
+parameters; `seed` (used by env reset) is the repeat-0 seed of the instance's context (common random numbers).
+
+## Perceptual fairness
+
+Stage 1 (programmatic, at t = 0, from every observed camera): segmentation renders give the
+object's and box's visible fraction (visible pixels / pixels covered when rendered unoccluded),
+pixel area and whether they lie wholly in frame; CIEDE2000 compares the object's rendered color
+with its nominal color and with the table. Thresholds: `{json.dumps(manifest["thresholds"])}`.
+Stage-1 pass rate: {manifest["gate_pass_rate"]:.2%} of {manifest["candidates"]} candidates (the build
+requires ≥ {manifest["min_pass_rate"]:.0%}). Stage 2 (review): {manifest["decisions"]} decision(s)
+applied from a decisions file (reviewers: {", ".join(manifest["reviewers"]) or "none"}).
+Rejected instances are kept in the `rejected` config with the reason and who rejected them.
+{_screen_section(manifest)}
+
+Measured over all candidates (p5 / median / p95):
+
+{chr(10).join(stats)}
+"""
+    (out / "README.md").write_text(text)
+
+
+def _screen_section(manifest: dict) -> str:
+    screen = manifest.get("vlm_screen")
+    if not screen:
+        return ""
+    t = screen["table"]
+    kappa = (
+        "undefined (one rater gave one answer to everything)"
+        if screen["cohens_kappa"] is None
+        else screen["cohens_kappa"]
+    )
+    return f"""
+Stage 1b (VLM screen, `{screen["model"]}` at `{screen["base_url"]}`, the paper's appendix prompt on the
+`front` image): {screen["pass_rate"]:.2%} "yes" over {screen["screened"]} screened ({screen["errors"]} errors); the
+paper's loop target of ≥ 95 % is {"met" if screen["meets_paper_target"] else "not met"}. The screen rejects
+nothing itself. Agreement with the programmatic gate: {screen["observed_agreement"]:.2%}, Cohen's κ {kappa}
+(gate pass & VLM yes {t["gate_pass_vlm_yes"]}, gate pass & VLM no {t["gate_pass_vlm_no"]}, gate fail & VLM yes
+{t["gate_fail_vlm_yes"]}, gate fail & VLM no {t["gate_fail_vlm_no"]}); {len(screen["disagreements"])} disagreements are
+flagged in the contact sheet, and the answers are in `vlm_screen.csv` (a decisions file).
+"""

@@ -1,0 +1,191 @@
+"""Perceptual-fairness gate, stage 1: measure, at t = 0 and from every observed camera, whether the
+object and the receiver box are clearly visible — instead of asking a VLM.
+
+For each observed camera we render segmentation twice: the scene as is, and the scene with every
+geom but the target made invisible (alpha 0, material detached, restored right after — an
+in-place edit). Visible fraction = visible pixels / pixels the target covers unoccluded. The
+object's rendered color (mean sRGB over its visible pixels) is compared with its nominal color and
+with the table's rendered color by CIEDE2000.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import mujoco
+import numpy as np
+
+from roboview.tasks.env import TaskEnv
+from roboview.variation.colors import delta_e_2000, get_color, srgb_to_lab
+from roboview.variation.factors import FACTORS
+
+# Cameras a policy observes: VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
+OBSERVED_CAMERAS = ("front", "left_top", "wrist")
+
+
+@dataclass(frozen=True)
+class FairnessThresholds:
+    """Pass criteria. The wrist view is local by design, so the box is not required in it."""
+
+    # Minimum share of the object's unoccluded pixels that must be visible, per observed camera.
+    min_object_visible: float = 0.6
+    # Minimum share of the box's unoccluded pixels visible in the scene cameras (front, left_top).
+    min_box_visible: float = 0.5
+    # Minimum object area in pixels of a 224² frame (scaled by area for other image sizes).
+    min_object_pixels: int = 25
+    # Object must lie wholly inside the frame (no object pixel on the border when unoccluded).
+    require_in_frame: bool = True
+    # Minimum CIEDE2000 between the object's and the table's rendered colors.
+    min_delta_e_table: float = 3.0
+    # Maximum CIEDE2000 between the object's rendered and nominal colors (catches lighting failures).
+    max_delta_e_nominal: float = 45.0
+
+    def __post_init__(self) -> None:
+        for name in ("min_object_visible", "min_box_visible"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name}={getattr(self, name)} must lie in [0, 1]")
+        if self.min_object_pixels < 1 or self.min_delta_e_table < 0 or self.max_delta_e_nominal <= 0:
+            raise ValueError("pixel and ΔE thresholds must be positive")
+
+
+@dataclass(frozen=True)
+class CameraFairness:
+    camera: str
+    object_visible: float
+    object_pixels: int
+    object_in_frame: bool
+    box_visible: float
+    box_pixels: int
+    box_in_frame: bool
+    delta_e_nominal: float
+    delta_e_table: float
+
+
+@dataclass(frozen=True)
+class FairnessReport:
+    cameras: tuple[CameraFairness, ...]
+    passed: bool
+    reject_reason: str
+
+    def to_record(self) -> dict:
+        return {
+            "cameras": [asdict(c) for c in self.cameras],
+            "passed": self.passed,
+            "reject_reason": self.reject_reason,
+        }
+
+
+class FairnessProbe:
+    """Owns one segmentation renderer for an env; measures the env's current state."""
+
+    def __init__(self, env: TaskEnv, cameras: tuple[str, ...] = OBSERVED_CAMERAS) -> None:
+        self.env = env
+        self.cameras = cameras
+        self._seg = env.new_renderer()
+        self._seg.enable_segmentation_rendering()
+
+    def _segment(self, camera: str) -> np.ndarray:
+        self._seg.update_scene(self.env.data, camera=self.env.scene.ids.cameras[camera])
+        seg = self._seg.render()
+        return np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
+
+    def _segment_alone(self, camera: str, geoms: list[int]) -> np.ndarray:
+        model = self.env.model
+        rgba, matid = model.geom_rgba.copy(), model.geom_matid.copy()
+        try:
+            model.geom_rgba[:, 3] = 0.0
+            model.geom_matid[:] = -1
+            model.geom_rgba[geoms, 3] = 1.0
+            return self._segment(camera)
+        finally:
+            model.geom_rgba[:] = rgba
+            model.geom_matid[:] = matid
+
+    def measure(self, rgb: dict[str, np.ndarray], thresholds: FairnessThresholds) -> FairnessReport:
+        """Measure the current scene; `rgb` holds the already rendered RGB frame of each camera."""
+        ids = self.env.scene.ids
+        obj = ids.shape_geom[self.env.shape]
+        # The task's target (pick_place's receiver box, push's marked zone); the record's box_* fields
+        # measure it. A task without one has nothing there to hide.
+        box = list(self.env.target_geoms())
+        nominal_lab = np.asarray(get_color(self.env.instance.get("color")).lab)
+        # Under a non-default light the rendered colour moves away from the nominal one by design: only
+        # the object-table contrast (which a light that hides the object still fails) is judged.
+        judge_nominal = all(
+            FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
+            for name, value in self.env.instance.factors
+        )
+        results, reasons = [], []
+        for cam in self.cameras:
+            seg = self._segment(cam)
+            obj_alone = self._segment_alone(cam, [obj]) == obj
+            box_alone = np.isin(self._segment_alone(cam, box), box) if box else np.zeros_like(obj_alone)
+            obj_mask, box_mask = seg == obj, np.isin(seg, box)
+            obj_lab = _mean_lab(rgb[cam], obj_mask)
+            table_lab = _mean_lab(rgb[cam], seg == ids.table_geom)
+            result = CameraFairness(
+                camera=cam,
+                object_visible=_fraction(obj_mask, obj_alone),
+                object_pixels=int(obj_mask.sum()),
+                object_in_frame=_in_frame(obj_alone),
+                box_visible=_fraction(box_mask, box_alone) if box else 1.0,
+                box_pixels=int(box_mask.sum()),
+                box_in_frame=_in_frame(box_alone) if box else True,
+                delta_e_nominal=_delta_e(obj_lab, nominal_lab),
+                delta_e_table=_delta_e(obj_lab, table_lab),
+            )
+            results.append(result)
+            min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
+            reasons += violations(
+                result, thresholds, min_pixels, scene_camera=cam != "wrist", judge_nominal=judge_nominal
+            )
+        return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
+
+
+def _fraction(visible: np.ndarray, alone: np.ndarray) -> float:
+    total = int(alone.sum())
+    return float(min(visible.sum(), total) / total) if total else 0.0
+
+
+def _in_frame(mask: np.ndarray) -> bool:
+    if not mask.any():
+        return False
+    return not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+
+
+def _mean_lab(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray | None:
+    if not mask.any():
+        return None
+    return srgb_to_lab(rgb[mask].astype(np.float64).mean(0) / 255.0)
+
+
+def _delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
+    return float(delta_e_2000(a, b)) if a is not None and b is not None else float("nan")
+
+
+def violations(
+    r: CameraFairness,
+    t: FairnessThresholds,
+    min_pixels: float,
+    scene_camera: bool,
+    judge_nominal: bool = True,
+) -> list[str]:
+    """Why one camera's measurements fail the thresholds, one reason each (empty when they pass); the box is
+    judged only by a `scene_camera`, the object's colour shift only with `judge_nominal`."""
+    out = []
+    if r.object_visible < t.min_object_visible:
+        out.append(f"{r.camera}: object visible {r.object_visible:.2f} < {t.min_object_visible}")
+    if r.object_pixels < min_pixels:
+        out.append(f"{r.camera}: object area {r.object_pixels} px < {min_pixels:.0f}")
+    if t.require_in_frame and not r.object_in_frame:
+        out.append(f"{r.camera}: object not wholly in frame")
+    if scene_camera:
+        if r.box_visible < t.min_box_visible:
+            out.append(f"{r.camera}: box visible {r.box_visible:.2f} < {t.min_box_visible}")
+        if t.require_in_frame and not r.box_in_frame:
+            out.append(f"{r.camera}: box not wholly in frame")
+    if not np.isnan(r.delta_e_table) and r.delta_e_table < t.min_delta_e_table:
+        out.append(f"{r.camera}: object-table ΔE2000 {r.delta_e_table:.1f} < {t.min_delta_e_table}")
+    if judge_nominal and not np.isnan(r.delta_e_nominal) and r.delta_e_nominal > t.max_delta_e_nominal:
+        out.append(f"{r.camera}: rendered-nominal ΔE2000 {r.delta_e_nominal:.1f} > {t.max_delta_e_nominal}")
+    return out

@@ -1,0 +1,386 @@
+"""The frozen benchmark folder — written and read here, nowhere else.
+
+A benchmark is a Hugging Face dataset folder:
+
+    benchmark.json             manifest: format, suite, thresholds, counts, suite hash, content hashes,
+                               the simulation stack that built it, version
+    checksums.json             per table: a SHA-256 per column and a short one per row
+    data/<split>.parquet       one row per accepted instance (the instance record + fairness + preview)
+    rejected/rejected.parquet  rejected instances, with who rejected them
+    conformance/               the reference sample roboview.pipelines.verify re-renders (roboview.benchmark.conformance)
+    README.md                  the dataset card (roboview.benchmark.card)
+
+Everything written is a pure function of the instance records and the stack that rendered them: no
+timestamps, no machine paths, so building twice on one stack gives the same bytes.
+
+Identity: every cell of every table is hashed (`content_checksums`); a table's hash covers its column and row
+hashes, and the benchmark version derives from every table's hash and the conformance reference. Loading a
+split recomputes its hashes and refuses a table edited after the build, naming the row and the column; each
+row must also rebuild into an instance whose id, value, context and seed are the stored ones.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import datasets
+import pyarrow.parquet as pq
+
+from roboview.core.files import files_sha256
+from roboview.core.folders import folder_problem
+from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
+from roboview.variation.instances import TaskInstance, canonical_json
+
+MANIFEST = "benchmark.json"
+CHECKSUMS = "checksums.json"
+# The conformance reference (roboview.benchmark.conformance writes and checks it).
+CONFORMANCE = "conformance"
+REFERENCE = "reference.json"
+# 4: content hashes over every cell, the simulation stack and the conformance reference. 3: rows store `task`
+# and `context_subspace`. 2: `context_subspace` recovered by hashing. 1: the `seed` column hashed instance_id.
+# Formats before 4 carry no content hashes, so an edit would pass: they are not read.
+FORMAT_VERSION = 4
+READABLE_FORMATS = (4,)
+# Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
+NOT_IN_EPISODES = ("fairness", "preview")
+
+_CAMERA = {
+    "name": datasets.Value("string"),
+    "pos": datasets.List(datasets.Value("float64")),
+    "quat": datasets.List(datasets.Value("float64")),
+    "fovy": datasets.Value("float64"),
+}
+_FAIR_CAMERA = {
+    "camera": datasets.Value("string"),
+    "object_visible": datasets.Value("float64"),
+    "object_pixels": datasets.Value("int64"),
+    "object_in_frame": datasets.Value("bool"),
+    "box_visible": datasets.Value("float64"),
+    "box_pixels": datasets.Value("int64"),
+    "box_in_frame": datasets.Value("bool"),
+    "delta_e_nominal": datasets.Value("float64"),
+    "delta_e_table": datasets.Value("float64"),
+}
+
+
+class BenchmarkError(ValueError):
+    """A folder that is not a readable RoboView benchmark (missing, failed, edited, other format)."""
+
+
+def _feature(example: Any) -> Any:
+    if isinstance(example, bool):
+        return datasets.Value("bool")
+    if isinstance(example, int):
+        return datasets.Value("int64")
+    if isinstance(example, float):
+        return datasets.Value("float64")
+    if isinstance(example, (list, tuple)):
+        return datasets.List(_feature(example[0]))
+    return datasets.Value("string")
+
+
+def instance_features(task: str, rejected: bool = False) -> datasets.Features:
+    """The instance record's schema for `task`: ids, every factor, each factor's extra columns."""
+    cols = {
+        name: datasets.Value("string")
+        for name in (
+            "instance_id",
+            "task",
+            "split",
+            "factor",
+            "value",
+            "context_id",
+            "context_subspace",
+            *factor_names(task),
+        )
+    }
+    examples = record_columns({name: FACTORS[name].baseline for name in factor_names(task)})
+    cols |= {name: _feature(value) for name, value in examples.items()}
+    cols |= {
+        "cameras": datasets.List(_CAMERA),
+        "seed": datasets.Value("int64"),
+        "fairness": {
+            "cameras": datasets.List(_FAIR_CAMERA),
+            "passed": datasets.Value("bool"),
+            "reject_reason": datasets.Value("string"),
+            # stage 1b (optional): the VLM screen's yes / no / error and its analysis
+            "vlm_answer": datasets.Value("string"),
+            "vlm_analysis": datasets.Value("string"),
+        },
+        "preview": datasets.Image(),
+    }
+    if rejected:
+        cols["rejected_by"] = datasets.Value("string")
+    return datasets.Features(cols)
+
+
+def suite_hash(accepted: dict[str, list[dict]]) -> str:
+    """SHA-256 over the accepted instance ids per split: ids hash every parameter of an instance."""
+    payload = {split: sorted(r["instance_id"] for r in rows) for split, rows in accepted.items()}
+    return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
+
+
+def write_split(rows: list[dict], path: Path, rejected: bool = False) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    task = rows[0].get("task", DEFAULT_TASK)
+    ds = datasets.Dataset.from_list(rows, features=instance_features(task, rejected))
+    ds.to_parquet(str(path))
+
+
+# --- content identity ---------------------------------------------------------------------------------
+
+
+def _plain(value: Any) -> Any:
+    """A cell as JSON values: bytes (a preview's PNG) by their SHA-256."""
+    if isinstance(value, bytes):
+        return {"sha256": hashlib.sha256(value).hexdigest()}
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _cell_digest(value: Any) -> bytes:
+    return hashlib.sha256(json.dumps(_plain(value), sort_keys=True, separators=(",", ":")).encode()).digest()
+
+
+def content_checksums(rows: list[dict], columns: list[str]) -> dict:
+    """Per column a SHA-256 over its cells in row order, per row a short SHA-256 over its cells, and the
+    table's SHA-256 over both (floats hashed exactly, as stored)."""
+    per_column = {c: hashlib.sha256() for c in columns}
+    per_row = []
+    for row in rows:
+        digest = hashlib.sha256()
+        for c in columns:
+            cell = _cell_digest(row[c])
+            per_column[c].update(cell)
+            digest.update(c.encode() + b"\0" + cell)
+        per_row.append(digest.hexdigest()[:16])
+    checksums = {"columns": {c: h.hexdigest() for c, h in per_column.items()}, "rows": per_row}
+    return {"sha256": hashlib.sha256(canonical_json(checksums).encode()).hexdigest(), **checksums}
+
+
+def read_rows(path: Path) -> list[dict]:
+    """A benchmark table's rows, every column, as stored."""
+    return pq.read_table(path).to_pylist()
+
+
+def table_checksums(path: Path) -> dict:
+    """`content_checksums` of a parquet table as stored (what loading recomputes)."""
+    return _read_checked(path)[1]
+
+
+def _read_checked(path: Path) -> tuple[list[dict], dict]:
+    """A table's rows and their `content_checksums`, from one read."""
+    table = pq.read_table(path)
+    rows = table.to_pylist()
+    return rows, content_checksums(rows, table.column_names)
+
+
+def table_name(root: Path, path: Path) -> str:
+    """A table's name in checksums.json: its path under the benchmark folder without .parquet."""
+    return path.relative_to(root).with_suffix("").as_posix()
+
+
+def write_checksums(root: Path) -> dict[str, str]:
+    """checksums.json for every table under root/data and root/rejected; returns table → SHA-256."""
+    root = Path(root)
+    tables = sorted([*root.glob("data/*.parquet"), *root.glob("rejected/*.parquet")])
+    sums = {table_name(root, path): table_checksums(path) for path in tables}
+    (root / CHECKSUMS).write_text(json.dumps(sums, indent=1, sort_keys=True) + "\n")
+    return {name: entry["sha256"] for name, entry in sums.items()}
+
+
+def reference_hash(root: Path) -> str | None:
+    """SHA-256 over the conformance reference's files (names and bytes, sorted); None when the folder has none."""
+    folder = Path(root) / CONFORMANCE
+    if not (folder / REFERENCE).is_file():
+        return None
+    return files_sha256(folder, sorted(folder.iterdir()))
+
+
+def benchmark_version(preset: str, content: dict[str, str], conformance: str | None) -> str:
+    """`<preset>-<12 hex>`: SHA-256 over every table's content hash and the conformance reference's."""
+    digest = hashlib.sha256(
+        canonical_json({"content": content, "conformance": conformance}).encode()
+    ).hexdigest()
+    return f"{preset}-{digest[:12]}"
+
+
+def _edited(root: Path, table: str, found: dict, stored: dict | None) -> str:
+    """What no longer matches in `table`: columns added, missing or changed, and the rows they changed in."""
+    where = f"benchmark table {table!r} in {root}"
+    if stored is None:
+        return f"{where} is not in {CHECKSUMS}"
+    added = sorted(set(found["columns"]) - set(stored["columns"]))
+    missing = sorted(set(stored["columns"]) - set(found["columns"]))
+    if added or missing:
+        return f"{where} has column(s) {added} added and {missing} removed since it was built"
+    if len(found["rows"]) != len(stored["rows"]):
+        return f"{where} holds {len(found['rows'])} rows; it was built with {len(stored['rows'])}"
+    columns = [c for c in stored["columns"] if found["columns"][c] != stored["columns"][c]]
+    rows = [i for i, (a, b) in enumerate(zip(found["rows"], stored["rows"])) if a != b]
+    if not columns and not rows:
+        return f"{where}: {CHECKSUMS} itself no longer matches the manifest"
+    return (
+        f"{where} was edited after it was built: column(s) {', '.join(map(repr, columns))} of row(s) "
+        f"{', '.join(map(str, rows[:10]))}{' …' if len(rows) > 10 else ''} no longer match their checksums"
+    )
+
+
+def verify_table(root: Path, path: Path, manifest: dict) -> list[dict]:
+    """The rows of a benchmark table, after checking every cell against the build's checksums."""
+    root = Path(root)
+    name = table_name(root, path)
+    rows, found = _read_checked(path)
+    if found["sha256"] != manifest.get("content", {}).get(name):
+        sums_path = root / CHECKSUMS
+        stored = json.loads(sums_path.read_text()).get(name) if sums_path.is_file() else None
+        raise BenchmarkError(
+            _edited(root, name, found, stored) + "; rebuild it with `roboview-build-benchmark` "
+            "or download the published benchmark again"
+        )
+    return rows
+
+
+def write_manifest(out: Path, manifest: dict) -> None:
+    (out / MANIFEST).write_text(
+        json.dumps({**manifest, "format": FORMAT_VERSION}, indent=2, sort_keys=True) + "\n"
+    )
+
+
+def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[str]) -> dict[str, dict]:
+    counts: dict[str, Counter] = {}
+    for r, ok, who in zip(records, accepted, rejected_by):
+        c = counts.setdefault(r["split"], Counter())
+        c["candidates"] += 1
+        c["accepted"] += ok
+        c["rejected_gate"] += (not ok) and who == "gate"
+        c["rejected_review"] += (not ok) and who != "gate"
+        c["accepted_over_gate"] += ok and not r["fairness"]["passed"]
+    keys = ("candidates", "accepted", "rejected_gate", "rejected_review", "accepted_over_gate")
+    return {split: {k: int(c[k]) for k in keys} for split, c in counts.items()}
+
+
+# --- reading ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BenchmarkItem:
+    instance: TaskInstance
+    record: dict  # the row's columns but fairness and preview: they travel into every episode row
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    path: Path
+    version: str
+    splits: dict[str, list[BenchmarkItem]]
+
+
+def read_manifest(root: Path) -> dict:
+    """The manifest of a finished, readable benchmark folder (else BenchmarkError saying what to do)."""
+    problem = folder_problem(Path(root), "benchmark", MANIFEST, "build one with `roboview-build-benchmark`")
+    if problem:
+        raise BenchmarkError(problem)
+    path = Path(root) / MANIFEST
+    manifest = json.loads(path.read_text())
+    if manifest.get("format") not in READABLE_FORMATS:
+        raise BenchmarkError(
+            f"{root} has benchmark format {manifest.get('format')!r}; this version reads formats "
+            f"{', '.join(map(str, READABLE_FORMATS))} (episode seeds shared per context and repeat); "
+            "rebuild it with `roboview-build-benchmark`"
+        )
+    if manifest.get("status") != "ok":
+        raise BenchmarkError(f"{root} is a failed build; rebuild it")
+    expected = benchmark_version(
+        manifest["suite"]["preset"], manifest.get("content", {}), reference_hash(root)
+    )
+    if manifest.get("benchmark_version") != expected:
+        raise BenchmarkError(
+            f"{root}/{MANIFEST} names version {manifest.get('benchmark_version')!r} but its content "
+            f"hashes and conformance reference give {expected!r}: the manifest or the conformance "
+            "folder was edited after the build; rebuild it or download it again"
+        )
+    return manifest
+
+
+# Columns an instance derives from its parameters; a row must carry exactly these values.
+DERIVED = ("value", "context_id", "seed", "task")
+
+
+def instance_from_record(record: dict) -> TaskInstance:
+    """Rebuild the instance; its id, value, context and seed must reproduce the stored ones (else the row was
+    edited: a `value` that names another color, a `context_id` or `seed` that leaves its context's common random
+    numbers)."""
+    task = record.get("task") or DEFAULT_TASK
+    factors = {name: record[name] for name in factor_names(task) if name in record}
+    try:
+        instance = TaskInstance(
+            record["split"], tuple(record["factor"].split("|")), factors, record["context_subspace"], task
+        )
+    except (KeyError, ValueError) as exc:
+        raise BenchmarkError(
+            f"benchmark row {record.get('instance_id')} is not a valid instance ({exc}); "
+            "rebuild the benchmark with roboview.pipelines.build_benchmark"
+        ) from None
+    if instance.instance_id != record["instance_id"]:
+        raise BenchmarkError(
+            f"benchmark row {record['instance_id']} does not hash to its id: its factor columns "
+            "were modified after it was built; rebuild it with roboview.pipelines.build_benchmark"
+        )
+    for column in DERIVED:
+        if column in record and record[column] != getattr(instance, column):
+            raise BenchmarkError(
+                f"benchmark row {record['instance_id']}: column {column!r} holds "
+                f"{record[column]!r} but the instance's parameters give {getattr(instance, column)!r}; "
+                "the row was edited after it was built: rebuild it with roboview.pipelines.build_benchmark"
+            )
+    return instance
+
+
+def available_splits(path: str | Path, manifest: dict | None = None) -> list[str]:
+    """The splits the benchmark folder at `path` holds, in its manifest's order (`manifest`: already read)."""
+    root = Path(path)
+    return [
+        s for s in (manifest or read_manifest(root))["splits"] if (root / "data" / f"{s}.parquet").is_file()
+    ]
+
+
+def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchmark:
+    """The instances of `splits` (default: all) of the benchmark folder at `path`."""
+    root = Path(path)
+    manifest = read_manifest(root)
+    available = available_splits(root, manifest)
+    chosen = splits or available
+    unknown = [s for s in chosen if s not in available]
+    if unknown:
+        raise BenchmarkError(
+            f"unknown split(s) {unknown}; the benchmark at {root} has: {', '.join(available)}"
+        )
+    out: dict[str, list[BenchmarkItem]] = {}
+    for split in chosen:
+        rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
+        out[split] = [
+            BenchmarkItem(
+                instance_from_record(row), {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
+            )
+            for row in rows
+        ]
+    return Benchmark(root, manifest["benchmark_version"], out)
+
+
+def select_items(items: list[BenchmarkItem], contexts: int = 0, limit: int = 0) -> list[BenchmarkItem]:
+    """The items an evaluation runs, in the split's fixed order: those of the first `contexts` task contexts
+    (every value of each; 0 = all), then the first `limit` of those (0 = all). roboview.pipelines.evaluate and the
+    lerobot-eval plugin both use it, so episode i means the same (instance, repeat) in both."""
+    if contexts:
+        first = set(list(dict.fromkeys(i.record["context_id"] for i in items))[:contexts])
+        items = [i for i in items if i.record["context_id"] in first]
+    return items[:limit] if limit else items

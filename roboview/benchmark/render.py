@@ -1,0 +1,82 @@
+"""Turn a task instance into its benchmark record: camera extrinsics, fairness numbers, preview.
+
+One `InstanceRenderer` per process (one compiled scene, one set of renderers); each instance is
+applied in place by the env's reset — no recompiles.
+"""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+import numpy as np
+from PIL import Image
+
+from roboview.benchmark.fairness import (
+    OBSERVED_CAMERAS,
+    FairnessProbe,
+    FairnessThresholds,
+)
+from roboview.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_image
+from roboview.sim.cameras import ALL_CAMERAS
+from roboview.tasks import DEFAULT_TASK, make_env
+from roboview.tasks.env import IMAGE_KEY
+from roboview.variation.instances import TaskInstance
+
+PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
+
+
+def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
+    """Observed cameras side by side, PNG-encoded deterministically (no timestamps, fixed settings)."""
+    tiles = [Image.fromarray(f).resize((size, size), Image.Resampling.BILINEAR) for f in frames]
+    sheet = Image.new("RGB", (size * len(tiles), size))
+    for i, tile in enumerate(tiles):
+        sheet.paste(tile, (i * size, 0))
+    buf = io.BytesIO()
+    sheet.save(buf, format="PNG", optimize=False, compress_level=6)
+    return buf.getvalue()
+
+
+class InstanceRenderer:
+    """One env (and fairness probe) per task, made on first use; every instance applied in place."""
+
+    def __init__(
+        self,
+        image_size: int,
+        thresholds: FairnessThresholds,
+        task: str = DEFAULT_TASK,
+        screen: tuple[Any, Any] | None = None,
+    ) -> None:
+        """`screen`: (client class, endpoint) of the stage-1b VLM fairness screen, built here in the worker."""
+        self.image_size = image_size
+        self.envs: dict[str, Any] = {}
+        self.probes: dict[str, FairnessProbe] = {}
+        self.screen = screen[0](screen[1]) if screen is not None else None
+        self.thresholds = thresholds
+        self._use(task)
+
+    def _use(self, task: str) -> None:
+        if task not in self.envs:
+            self.envs[task] = make_env(task, cameras=OBSERVED_CAMERAS, image_size=self.image_size)
+            self.probes[task] = FairnessProbe(self.envs[task])
+        self.env, self.probe = self.envs[task], self.probes[task]
+
+    def record(self, instance: TaskInstance) -> dict:
+        self._use(instance.task)
+        obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
+        rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in OBSERVED_CAMERAS}
+        fairness = self.probe.measure(rgb, self.thresholds).to_record()
+        vlm = (
+            screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
+        )
+        fairness |= {"vlm_answer": vlm.get("answer", ""), "vlm_analysis": vlm.get("analysis", "")}
+        return {
+            **instance.to_record(),
+            "cameras": [self.env.scene.camera_pose(cam).to_record() for cam in ALL_CAMERAS],
+            "fairness": fairness,
+            "preview": {"bytes": preview_png([rgb[c] for c in OBSERVED_CAMERAS]), "path": None},
+        }
+
+    def close(self) -> None:
+        for env in self.envs.values():
+            env.close()

@@ -1,0 +1,196 @@
+"""A result bundle: what `roboview.pipelines.publish --results` uploads as a Hub dataset, and the Hub's eval-results file.
+
+The bundle folder holds the results as evaluated (episodes.parquet, run.json, provenance.json and any adaptive
+record), the report computed from them (report/metrics.json, report.md, report.html), `verify.json` (every check
+`roboview.pipelines.verify --results` made, with the conformance verdicts and simulation stacks the episodes ran on), a
+dataset card (README.md: policy, benchmark id, version and content hash, Table 1) and `bundle.json`, the SHA-256
+of every other file. `roboview.pipelines.verify` checks a bundle's files against bundle.json, so a file edited after
+publication is refused.
+
+`eval_result_entries` writes the Hub's `.eval_results/<benchmark>.yaml` for a model repo: one entry per split,
+dataset id = the published benchmark, task id = the split, value = the success rate ×100, source = the bundle
+(huggingface_hub's `EvalResultEntry`, https://huggingface.co/docs/hub/eval-results).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+BUNDLE_FILE = "bundle.json"
+VERIFY_FILE = "verify.json"
+REPORT_DIR = "report"
+CARD_FILE = "README.md"
+BUNDLE_FORMAT = 1
+# What a results folder holds that a bundle leaves out: the evaluation's journal (episodes.parquet holds every row
+# it does), Rerun recordings and a previous bundle manifest.
+SKIPPED = ("episodes.jsonl", "*.rrd", BUNDLE_FILE, VERIFY_FILE, CARD_FILE, f"{REPORT_DIR}/*")
+HUB = "https://huggingface.co"
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def content_hash(benchmark_manifest: dict[str, Any]) -> str:
+    """One SHA-256 over the benchmark's per-table content hashes (every cell of every table)."""
+    return hashlib.sha256(json.dumps(benchmark_manifest["content"], sort_keys=True).encode()).hexdigest()
+
+
+def bundle_files(root: Path) -> list[Path]:
+    """Every file of a bundle but bundle.json, relative to its root, sorted."""
+    return sorted(p.relative_to(root) for p in root.rglob("*") if p.is_file() and p.name != BUNDLE_FILE)
+
+
+def write_manifest(root: Path, identity: dict[str, Any]) -> dict[str, Any]:
+    manifest = {
+        "format": BUNDLE_FORMAT,
+        **identity,
+        "files": {str(rel): sha256_file(root / rel) for rel in bundle_files(root)},
+    }
+    (root / BUNDLE_FILE).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    return manifest
+
+
+def manifest_problems(root: Path) -> list[str] | None:
+    """None for a folder without bundle.json (a results folder); else the files that differ from it (empty: none)."""
+    path = root / BUNDLE_FILE
+    if not path.is_file():
+        return None
+    recorded = json.loads(path.read_text()).get("files", {})
+    present = {str(p) for p in bundle_files(root)}
+    problems = [f"{rel}: missing" for rel in sorted(set(recorded) - present)]
+    problems += [f"{rel}: not in {BUNDLE_FILE}" for rel in sorted(present - set(recorded))]
+    problems += [
+        f"{rel}: edited (SHA-256 differs from {BUNDLE_FILE})"
+        for rel in sorted(set(recorded) & present)
+        if sha256_file(root / rel) != recorded[rel]
+    ]
+    return problems
+
+
+def _skipped(rel: Path) -> bool:
+    return any(rel.match(pattern) or str(rel).startswith(pattern.rstrip("*")) for pattern in SKIPPED)
+
+
+def copy_results(results: Path, staging: Path) -> None:
+    for path in sorted(results.rglob("*")):
+        rel = path.relative_to(results)
+        if path.is_file() and not _skipped(rel):
+            (staging / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(path, staging / rel)
+
+
+def table1(report_md: str) -> str:
+    """Table 1 of report.md (its heading, table and legend), for the card."""
+    match = re.search(r"^## Table 1.*?(?=^## )", report_md, flags=re.S | re.M)
+    return match.group(0).strip() if match else ""
+
+
+def card(
+    *,
+    policy: str,
+    repo_id: str,
+    identity: dict[str, Any],
+    checks: Sequence[dict[str, Any]],
+    report_md: str,
+    privileged: bool,
+) -> str:
+    """The bundle's dataset card (README.md): Hub metadata, then what was evaluated, on what, and Table 1."""
+    front = {
+        "license": "apache-2.0",
+        "pretty_name": f"RoboView-Bias results: {policy}",
+        "tags": ["roboview", "robotics", "evaluation", "visual-bias", "leaderboard"],
+        "configs": [{"config_name": "episodes", "data_files": "episodes.parquet"}],
+    }
+    bench = identity["benchmark_repo_id"]
+    bench_line = (
+        f"[`{bench}`]({HUB}/datasets/{bench})" if bench else "a local benchmark folder (not published)"
+    )
+    lines = [
+        "---",
+        yaml.safe_dump(front, sort_keys=False).strip(),
+        "---",
+        "",
+        f"# RoboView-Bias results: `{policy}`" + (" (privileged)" if privileged else ""),
+        "",
+        "Per-episode results of one policy on the RoboView-Bias benchmark, verified by `roboview.pipelines.verify` before "
+        "they were published. Rank several bundles with `roboview-leaderboard "
+        f"--results={repo_id},...`.",
+        "",
+        "| | |",
+        "|---|---|",
+        f"| Policy | `{policy}`"
+        + (" — the privileged scripted expert (reads the simulator state)" if privileged else "")
+        + " |",
+        f"| Benchmark | {bench_line} |",
+        f"| Benchmark version | `{identity['benchmark_version']}` |",
+        f"| Benchmark content hash | `{identity['benchmark_content_hash']}` |",
+        f"| Episodes | {identity['episodes']} |",
+        f"| Conformance | {', '.join(identity['conformance'])} |",
+        "",
+        "## Verification",
+        "",
+        "| Check | Result | Detail |",
+        "|---|---|---|",
+        *(f"| {c['name']} | {'pass' if c['passed'] else 'FAIL'} | {c['detail']} |" for c in checks),
+        "",
+        table1(report_md),
+        "",
+        "## Files",
+        "",
+        "`episodes.parquet` (one row per episode), `run.json`, `provenance.json` (commands, packages, machine, the "
+        "simulation stack and its conformance verdict), `report/` (metrics.json, report.md, report.html), "
+        f"`{VERIFY_FILE}` (the checks above), `{BUNDLE_FILE}` (the SHA-256 of every file).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def eval_result_entries(
+    metrics: dict[str, Any],
+    *,
+    benchmark_repo_id: str,
+    results_repo_id: str,
+    date: str,
+    revision: str | None = None,
+) -> list[Any]:
+    """One `huggingface_hub.EvalResultEntry` per split of one policy's metrics: the success rate ×100."""
+    from huggingface_hub import EvalResultEntry
+
+    return [
+        EvalResultEntry(
+            dataset_id=benchmark_repo_id,
+            task_id=split,
+            value=round(100 * m["sr"], 2),
+            dataset_revision=revision,
+            date=date,
+            source_url=f"{HUB}/datasets/{results_repo_id}",
+            source_name="RoboView-Bias result bundle (per-episode, verified)",
+            notes=f"{m['n_episodes']} episodes; 95% CI [{100 * m['sr_ci95'][0]:.2f}, {100 * m['sr_ci95'][1]:.2f}]; "
+            f"cv_excess {'N/A' if m['cv_excess'] is None else f'{100 * m["cv_excess"]:.2f}'}",
+        )
+        for split, m in metrics["splits"].items()
+    ]
+
+
+def eval_results_yaml(entries: Sequence[Any]) -> str:
+    from huggingface_hub import eval_result_entries_to_yaml
+
+    return yaml.safe_dump(eval_result_entries_to_yaml(list(entries)), sort_keys=False, allow_unicode=True)
+
+
+def eval_results_name(benchmark_repo_id: str) -> str:
+    """The file name in a model repo's `.eval_results/`: the benchmark's repo name."""
+    return f"{benchmark_repo_id.split('/')[-1]}.yaml"

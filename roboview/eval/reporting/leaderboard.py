@@ -1,0 +1,311 @@
+"""A leaderboard that ranks only what the episodes support: leaderboard.json and one static leaderboard.html.
+
+The board is built from result bundles of one benchmark version that `roboview.pipelines.verify` passed (the command,
+`roboview.pipelines.leaderboard`, verifies them and lists the rest apart with the reason). Their episodes are
+pooled and measured exactly as `roboview.pipelines.report` measures several policies (`compute_all_metrics`): per
+split the success rate with its Wilson 95 % interval and `cv_excess` (bias beyond binomial noise) with its
+interval; paired tests between every two policies on the episodes they share (McNemar for SR, the swap
+permutation test for cv_excess), Holm-adjusted per split and metric. The ranks follow the values; the
+**groups** are a compact letter display of those tests: two policies that share a letter are not
+significantly different at `alpha` (roboview.eval.statistics.ranking). Overall, SR pools every paired episode of every
+split; cv_excess is the mean over splits with no overall test (its differences are tested per split), so
+every policy shares its letter there.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from roboview.eval.reporting.format import PRIVILEGED_POLICIES, pct, pct_ci, split_title
+from roboview.eval.statistics.ranking import ALPHA, pooled_p_sr, rank_table
+from roboview.eval.statistics.tables import wilson_ci95
+
+BOARD_JSON = "leaderboard.json"
+BOARD_HTML = "leaderboard.html"
+BOARD_FORMAT = 1
+
+
+@dataclass
+class Entry:
+    """One bundle on the board: its label (the policy's name on the board), where it came from and its report."""
+
+    label: str
+    source: str
+    policy: str
+    report: str  # report.html, relative to the board's folder
+    episodes: int = 0
+    privileged: bool = False
+
+
+@dataclass
+class Rejected:
+    """A bundle the board lists apart, never ranked, and why."""
+
+    source: str
+    reason: str
+
+
+@dataclass
+class Board:
+    benchmark_version: str
+    entries: list[Entry]
+    rejected: list[Rejected] = field(default_factory=list)
+    overall: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    splits: dict[str, dict[str, list[dict[str, Any]]]] = field(default_factory=dict)
+    alpha: float = ALPHA
+    resampling: dict[str, Any] = field(default_factory=dict)
+    generated: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {"format": BOARD_FORMAT, "adjustment": "holm"} | asdict(self)
+
+
+def is_privileged(policy: str) -> bool:
+    return str(policy).partition("+")[0] in PRIVILEGED_POLICIES
+
+
+def _rows(
+    values: dict[str, float],
+    pvalues: dict[frozenset[str], float | None],
+    higher_better: bool,
+    ci: dict[str, Any],
+    episodes: dict[str, int],
+    alpha: float,
+) -> list[dict[str, Any]]:
+    ranked = rank_table(values, pvalues, higher_better, alpha)
+    # Tied values share a rank (1, 1, 3): the order among them is alphabetical, not a claim.
+    return [
+        r
+        | {
+            "ci95": ci.get(r["policy"]),
+            "episodes": episodes[r["policy"]],
+            "rank": 1 + sum((v > r["value"]) if higher_better else (v < r["value"]) for v in values.values()),
+        }
+        for r in ranked
+    ]
+
+
+def rank_metrics(
+    metrics: dict[str, Any], episodes: pd.DataFrame, alpha: float = ALPHA
+) -> tuple[dict[str, list], dict[str, dict[str, list]]]:
+    """Per split and overall, the board's rows for SR and cv_excess from `compute_all_metrics` of two or more
+    policies (`policies`, `comparisons`) and the episodes they came from (infrastructure errors left out)."""
+    layouts = metrics["policies"]
+    counted = episodes[episodes.get("status", pd.Series("ok", index=episodes.index)) != "infra_error"]
+    splits: dict[str, dict[str, list]] = {}
+    for split in sorted({s for layout in layouts.values() for s in layout["splits"]}):
+        comps = {frozenset(c["policies"]): c for c in metrics["comparisons"] if c["split"] == split}
+        have = {n: layout["splits"][split] for n, layout in layouts.items() if split in layout["splits"]}
+        n_eps = {n: int(m["n_episodes"]) for n, m in have.items()}
+        entry: dict[str, list] = {}
+        for metric, p_key, higher in (("sr", "p_sr", True), ("cv_excess", "p_cv_excess", False)):
+            values = {n: m[metric] for n, m in have.items() if m[metric] is not None}
+            if values:
+                entry[metric] = _rows(
+                    values,
+                    {pair: c[p_key] for pair, c in comps.items()},
+                    higher,
+                    {n: have[n][f"{metric}_ci95"] for n in values},
+                    n_eps,
+                    alpha,
+                )
+        splits[split] = entry
+    names = sorted(layouts)
+    k = {n: int(counted.loc[counted["policy"] == n, "success"].sum()) for n in names}
+    n = {n: int((counted["policy"] == n).sum()) for n in names}
+    pooled = {
+        frozenset((a, b)): pooled_p_sr(counted, a, b) for i, a in enumerate(names) for b in names[i + 1 :]
+    }
+    overall = {
+        "sr": _rows(
+            {x: k[x] / n[x] for x in names if n[x]},
+            pooled,
+            True,
+            {x: list(wilson_ci95(k[x], n[x])) for x in names if n[x]},
+            n,
+            alpha,
+        )
+    }
+    mean_cv = {
+        x: float(np.mean(v))
+        for x in names
+        if (v := [m["cv_excess"] for m in layouts[x]["splits"].values() if m["cv_excess"] is not None])
+    }
+    if mean_cv:  # no overall test of cv_excess: one group, every rank possible
+        overall["cv_excess"] = _rows(mean_cv, {}, False, {}, n, alpha)
+    return overall, splits
+
+
+def single_policy_rows(metrics: dict[str, Any]) -> tuple[dict[str, list], dict[str, dict[str, list]]]:
+    """The board of one policy: its numbers, rank 1, group a."""
+    name = metrics["policy"]
+
+    def row(value: float, ci: Any, episodes: int) -> list[dict[str, Any]]:
+        return [
+            {
+                "policy": name,
+                "value": value,
+                "group": "a",
+                "rank_range": [1, 1],
+                "ci95": ci,
+                "episodes": episodes,
+                "rank": 1,
+            }
+        ]
+
+    splits = {
+        s: {
+            metric: row(m[metric], m[f"{metric}_ci95"], m["n_episodes"])
+            for metric in ("sr", "cv_excess")
+            if m[metric] is not None
+        }
+        for s, m in metrics["splits"].items()
+    }
+    n = sum(m["n_episodes"] for m in metrics["splits"].values())
+    k = sum(round(m["sr"] * m["n_episodes"]) for m in metrics["splits"].values())
+    overall = {"sr": row(k / n, list(wilson_ci95(k, n)), n)} if n else {}
+    if metrics["average"]["cv_excess"] is not None:
+        overall["cv_excess"] = row(metrics["average"]["cv_excess"], None, n)
+    return overall, splits
+
+
+def write_board(board: Board, output_dir: Path) -> tuple[Path, Path]:
+    output_dir.mkdir(parents=True, exist_ok=True)
+    json_path, html_path = output_dir / BOARD_JSON, output_dir / BOARD_HTML
+    json_path.write_text(json.dumps(board.to_json(), indent=2, default=float) + "\n")
+    html_path.write_text(render_board(board))
+    return json_path, html_path
+
+
+# --- the page ---------------------------------------------------------------------------------------
+
+_CSS = """
+body { font: 15px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1100px;
+       padding: 0 1em; color: #222; }
+h1 { font-size: 1.6em; margin-bottom: .2em; } h2 { margin-top: 2em; } h3 { margin: 1.2em 0 .3em; }
+table { border-collapse: collapse; margin: .4em 0 1em; font-variant-numeric: tabular-nums; }
+th, td { padding: .3em .7em; border-bottom: 1px solid #ddd; text-align: right; }
+th { background: #f4f4f4; cursor: pointer; user-select: none; white-space: nowrap; }
+th.sorted-asc::after { content: " ▲"; } th.sorted-desc::after { content: " ▼"; }
+td.name, th.name { text-align: left; } td.group { font-family: ui-monospace, monospace; text-align: center; }
+tr.privileged td { color: #777; font-style: italic; }
+.note { color: #555; max-width: 60em; } .rejected td { text-align: left; }
+"""
+
+# Sort a table by the clicked column: numbers by their data-sort value, text by its text; a second click reverses.
+_JS = """
+document.querySelectorAll('table.ranked').forEach(function (table) {
+  table.querySelectorAll('th').forEach(function (th, col) {
+    th.addEventListener('click', function () {
+      var asc = !th.classList.contains('sorted-asc');
+      table.querySelectorAll('th').forEach(function (h) { h.classList.remove('sorted-asc', 'sorted-desc'); });
+      th.classList.add(asc ? 'sorted-asc' : 'sorted-desc');
+      var body = table.tBodies[0];
+      var rows = Array.prototype.slice.call(body.rows);
+      rows.sort(function (a, b) {
+        var x = a.cells[col].dataset.sort, y = b.cells[col].dataset.sort;
+        var nx = parseFloat(x), ny = parseFloat(y);
+        var d = (isNaN(nx) || isNaN(ny)) ? String(x).localeCompare(String(y)) : nx - ny;
+        return asc ? d : -d;
+      });
+      rows.forEach(function (r) { body.appendChild(r); });
+    });
+  });
+});
+"""
+
+_METRIC_TITLES = {
+    "sr": ("Success rate", "SR ×100 [95 % CI]", "higher is better"),
+    "cv_excess": ("Bias beyond noise", "cv_excess ×100 [95 % CI]", "lower is better"),
+}
+
+
+def _table(rows: list[dict[str, Any]], metric: str, entries: dict[str, Entry]) -> str:
+    _, column, _ = _METRIC_TITLES[metric]
+    head = (
+        '<tr><th data-key="rank">Rank</th><th class="name" data-key="policy">Policy</th>'
+        f'<th data-key="value">{column}</th><th data-key="group">Group</th>'
+        '<th data-key="range">Possible ranks</th><th data-key="episodes">Episodes</th></tr>'
+    )
+    body = []
+    for r in rows:
+        e = entries.get(r["policy"])
+        label = html.escape(r["policy"]) + (" (privileged)" if e and e.privileged else "")
+        name = f'<a href="{html.escape(e.report)}">{label}</a>' if e and e.report else label
+        lo, hi = r["rank_range"]
+        body.append(
+            f'<tr class="{"privileged" if e and e.privileged else ""}">'
+            f'<td data-sort="{r["rank"]}">{r["rank"]}</td>'
+            f'<td class="name" data-sort="{html.escape(r["policy"])}">{name}</td>'
+            f'<td data-sort="{r["value"]:.10g}">{pct(r["value"])}{html.escape(pct_ci(r["ci95"]))}</td>'
+            f'<td class="group" data-sort="{html.escape(r["group"])}">{html.escape(r["group"])}</td>'
+            f'<td data-sort="{lo}">{lo}–{hi}</td>'
+            f'<td data-sort="{r["episodes"]}">{r["episodes"]}</td></tr>'
+        )
+    return f'<table class="ranked" data-metric="{metric}"><thead>{head}</thead><tbody>{"".join(body)}</tbody></table>'
+
+
+def _section(title: str, tables: dict[str, list], entries: dict[str, Entry], level: str = "h3") -> list[str]:
+    out = []
+    for metric in ("sr", "cv_excess"):
+        if metric in tables:
+            name, _, direction = _METRIC_TITLES[metric]
+            out.append(f"<{level}>{html.escape(title)}: {name} ({direction})</{level}>")
+            out.append(_table(tables[metric], metric, entries))
+    return out
+
+
+def render_board(board: Board) -> str:
+    entries = {e.label: e for e in board.entries}
+    parts = [
+        "<!doctype html><html lang=en><head><meta charset=utf-8>",
+        f"<title>RoboView-Bias leaderboard — {html.escape(board.benchmark_version)}</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>RoboView-Bias leaderboard</h1>",
+        f"<p class=note>Benchmark <code>{html.escape(board.benchmark_version)}</code>; "
+        f"{len(board.entries)} verified bundle(s), {len(board.rejected)} listed apart; generated "
+        f"{html.escape(board.generated)}.</p>",
+        "<p class=note>Ranked by success rate (higher first) and by <code>cv_excess</code>, the spread of "
+        "success across the factor's values beyond what binomial noise explains (lower first), each with its "
+        "95 % interval. <b>Group</b>: policies that share a letter are not significantly different "
+        f"(paired tests on the same instances and seeds, Holm-adjusted, α = {board.alpha}); "
+        "<b>possible ranks</b>: the ranks those tests leave open. Overall cv_excess is the mean over splits "
+        "and has no overall test: its differences are tested per split. Click a column to sort. Each name "
+        "links to the bundle's report.</p>",
+    ]
+    parts += _section("Overall", board.overall, entries, "h2")
+    if board.splits:
+        parts.append("<h2>Per split</h2>")
+        for split, tables in board.splits.items():
+            parts += _section(split_title(split), tables, entries)
+    if board.rejected:
+        parts.append(
+            "<h2>Listed apart (not ranked)</h2><table class=rejected><tr><th>Bundle</th><th>Why</th></tr>"
+        )
+        parts += [
+            f"<tr><td>{html.escape(r.source)}</td><td>{html.escape(r.reason)}</td></tr>"
+            for r in board.rejected
+        ]
+        parts.append("</table>")
+    parts.append(f"<script>{_JS}</script></body></html>\n")
+    return "\n".join(parts)
+
+
+def labels_for(policies: Sequence[str], sources: Sequence[str]) -> list[str]:
+    """Board labels: each bundle's policy name, made unique by its folder's name where two bundles share one."""
+    counts = pd.Series(list(policies)).value_counts()
+    out = []
+    for policy, source in zip(policies, sources):
+        label = policy if counts[policy] == 1 else f"{policy}@{Path(source).name}"
+        out.append(label)
+    if len(set(out)) != len(out):
+        raise ValueError(f"bundles with the same policy and folder name: {sorted(out)}; rename a folder")
+    return out

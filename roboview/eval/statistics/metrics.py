@@ -1,0 +1,367 @@
+"""Bias metrics of paper §5.4 made exact, and the statistics that say whether they are more than noise.
+
+Every key computed here is defined once, in docs/statistics.md ("metrics.json keys"); the episode columns it
+reads are docs/formats.md's "Episode records". Everything is a pure function of an episodes table. Notation: a
+*cell* is a value v (or a value pair (a, b) in a factorial split) in a context c; SR(v, c) is the mean success
+over every episode of the instances in that cell.
+
+Output (`compute_metrics`, one policy): `epsilon`, `policy`, `resampling` (n_perm, n_glm, seed), `control`,
+`splits`, `interactions` and `average` (mean SR, CV and cv_excess over the single-factor splits present).
+`compute_all_metrics` returns that dict for a single policy and {"epsilon", "resampling", "policies": {name:
+dict}, "comparisons" (`roboview.eval.statistics.compare`), "rankings" (three policies or more)} for several; `policy_layouts`
+reads either shape back.
+
+Episodes that infrastructure ended (`status` `infra_error`, docs/evaluation.md "Infrastructure errors") enter
+no number: both functions drop them (`roboview.eval.running.results.counted`) and count them, per split `n_infra_errors` and per
+policy `n_infra_errors` (their total).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from roboview.eval.running import isolation
+from roboview.eval.running.results import counted, infra_mask
+from roboview.eval.statistics import ranking
+from roboview.eval.statistics import significance as stats
+from roboview.eval.statistics.compare import baseline_retest, compare_policies
+from roboview.eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
+    EPSILON,
+    SEQUENTIAL_H,
+    Z95,
+    CellTable,
+    MetricsConfig,
+    codes,
+    conditional_cv,
+    excess,
+    group_sum,
+    value_order,
+    wilson_ci95,
+    wilson_interval,
+)
+
+log = logging.getLogger(__name__)
+
+# Columns the metrics read; the rest of the episode record is carried along untouched.
+METRIC_COLUMNS = ("policy", "split", "factor", "value", "context_id", "instance_id", "repeat", "success")
+
+
+def _table(episodes: pd.DataFrame, factors: tuple[str, ...]) -> CellTable:
+    """Cells (value(s) × context) of one split (`check_episodes` has vouched for its consistency)."""
+    eps = episodes[["value", "context_id", "repeat", "success", "instance_id"]].copy()
+    parts = eps["value"].astype(str).str.split("|", regex=False)
+    for i, name in enumerate(factors):
+        eps[name] = parts.str[i]
+    return CellTable.build(eps, factors, [*factors, "context_id"])
+
+
+def _per_value_tests(table: CellTable, factor: str) -> dict[str, stats.ValueTest]:
+    """CMH odds ratio of each value against the rest, stratified by block (context, repeat)."""
+    eps = table.episodes
+    grid = eps.groupby(["context_id", "repeat", factor], sort=True)["success"].agg(["sum", "size"])
+    k = grid["sum"].unstack(factor, fill_value=0)
+    n = grid["size"].unstack(factor, fill_value=0)
+    k_all, n_all = k.sum(axis=1).to_numpy(), n.sum(axis=1).to_numpy()
+    return {str(v): stats.value_vs_rest(k[v].to_numpy(), n[v].to_numpy(), k_all, n_all) for v in k.columns}
+
+
+def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
+    """SR, CV and its statistics, and per-value numbers of one single-factor split.
+
+    `episodes` holds one split of one policy, validated by `check_episodes`. per_value[v]:
+    `sr` = successes / episodes of v over all contexts; `signed_dev` = mean over the contexts c
+    that hold v of SR(v, c) − μ_v' SR(v', c) (μ over the values present in c) — how much easier
+    (> 0) or harder (< 0) v is than the other values of its contexts; then the CMH numbers.
+    """
+    split = str(episodes["split"].iloc[0])
+    factor = str(episodes["factor"].iloc[0])
+    table = _table(episodes, (factor,))
+    n, k = len(episodes), int(episodes["success"].sum())
+    ctx = table.codes(["context_id"])
+    sr_cell = table.sr
+    ctx_k = np.bincount(ctx, weights=table.k)
+    dev = sr_cell - (group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
+    tests = _per_value_tests(table, factor) if k else {}
+    grouped = table.cells.assign(dev=dev).groupby(factor)
+    per_value: dict[str, dict[str, Any]] = {}
+    for value in value_order(factor, list(grouped.groups)):
+        rows = grouped.get_group(value)
+        test = tests.get(value, stats.ValueTest(None, None, None))
+        per_value[value] = {
+            "sr": float(rows["k"].sum() / rows["n"].sum()),
+            "n_episodes": int(rows["n"].sum()),
+            "signed_dev": float(rows["dev"].mean()),
+            "odds_ratio": test.odds_ratio,
+            "odds_ratio_ci95": test.odds_ratio_ci95,
+            "p_value": test.p_value,
+        }
+    for value, q in zip(per_value, stats.benjamini_hochberg([m["p_value"] for m in per_value.values()])):
+        per_value[value]["q_value"] = q
+    out: dict[str, Any] = {
+        "factor": factor,
+        "n_instances": int(episodes["instance_id"].nunique()),
+        "n_episodes": n,
+        "n_contexts": int(ctx.max() + 1),
+        "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
+        "sr": k / n,
+        "sr_ci95": wilson_ci95(k, n),
+        "cv": None,
+        "cv_null": None,
+        "cv_excess": None,
+        "cv_excess_ci95": None,
+        **stats.lrt_fields(None),
+        "p_value_cv": None,
+        "p_value_cv_draws": None,
+        "p_value_cv_at_floor": None,
+        "per_value": per_value,
+    }
+    if k == 0:
+        return out
+
+    def statistic(sr: np.ndarray) -> np.ndarray:
+        return conditional_cv(sr, ctx, cfg.epsilon).mean(axis=-1)
+
+    rng = cfg.rng(split, "perm")
+    permuted = table.permuted_k(["context_id"], cfg.n_perm, rng)
+    null = statistic(permuted / table.n)
+    out["cv"] = float(statistic(sr_cell))
+    out["cv_null"] = float(null.mean())
+    out["cv_excess"] = excess(out["cv"], out["cv_null"])
+    mc = stats.sequential_p(
+        out["cv"],
+        null,
+        lambda b: statistic(table.permuted_k(["context_id"], b, rng) / table.n),
+        SEQUENTIAL_H,
+        cfg.max_perm,
+    )
+    out |= {"p_value_cv": mc.p_value, "p_value_cv_draws": mc.draws, "p_value_cv_at_floor": mc.at_floor}
+    value_codes = table.codes([factor])
+    out |= stats.lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
+    return out
+
+
+def _factorial_statistics(table: CellTable, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
+    """(cell SRs (..., n_cells) → {A, B, "A|B", "B|A"} arrays; each factor's cell groups (b, c) / (a, c))."""
+    a, b = table.factors
+    by = {a: table.codes([b, "context_id"]), b: table.codes([a, "context_id"])}
+    # Context of each (b, c) / (a, c) group, to average CV(A|b,c) over b within c for IEC.
+    group_ctx = {f: codes(table.cells.assign(g=by[f]).groupby("g").first(), ["context_id"]) for f in (a, b)}
+
+    def statistics(sr: np.ndarray) -> dict[str, np.ndarray]:
+        res: dict[str, np.ndarray] = {}
+        for f, other in ((a, b), (b, a)):
+            ccv = conditional_cv(sr, by[f], epsilon)
+            res[f] = ccv.mean(axis=-1)
+            res[f"{f}|{other}"] = conditional_cv(ccv, group_ctx[f], epsilon).mean(axis=-1)
+        return res
+
+    return statistics, by
+
+
+def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
+    """SR, CV per factor, IEC both ways, each against its null, and the tests of a two-factor split."""
+    split = str(episodes["split"].iloc[0])
+    a, b = str(episodes["factor"].iloc[0]).split("|")
+    table = _table(episodes, (a, b))
+    n, k = len(episodes), int(episodes["success"].sum())
+    pooled = table.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
+    order = {f: {v: i for i, v in enumerate(value_order(f, table.cells[f].unique()))} for f in (a, b)}
+    keys = sorted(pooled.index, key=lambda ab: (order[a][ab[0]], order[b][ab[1]]))
+    per_value = {
+        f"{va}|{vb}": {
+            "sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
+            "n_episodes": int(pooled.loc[(va, vb), "n"]),
+        }
+        for va, vb in keys
+    }
+    iec_names = (f"{a}|{b}", f"{b}|{a}")
+    out: dict[str, Any] = {
+        "factors": [a, b],
+        "n_instances": int(episodes["instance_id"].nunique()),
+        "sr": k / n,
+        "sr_ci95": wilson_ci95(k, n),
+        "n_episodes": n,
+        **{
+            key: dict.fromkeys((a, b))
+            for key in ("cv", "cv_null", "cv_excess", "p_value", "p_value_method", "p_value_cv")
+        },
+        **{key: dict.fromkeys(iec_names) for key in ("iec", "iec_null", "iec_excess", "p_iec")},
+        "p_interaction": None,
+        "p_interaction_method": None,
+        "per_value": per_value,
+    }
+    if k == 0:
+        return out
+    statistics, by = _factorial_statistics(table, cfg.epsilon)
+    point = statistics(table.sr)
+    for f, other in ((a, b), (b, a)):
+        permuted = table.permuted_k([other, "context_id"], cfg.n_perm, cfg.rng(split, f"perm:{f}"))
+        null = statistics(permuted / table.n)[f]
+        out["cv"][f] = float(point[f])
+        out["cv_null"][f] = float(null.mean())
+        out["cv_excess"][f] = excess(out["cv"][f], out["cv_null"][f])
+        out["p_value_cv"][f] = stats.permutation_p(out["cv"][f], null)
+        test = stats.factor_lrt(table.k, table.n, table.codes([f]), by[f], permuted[: cfg.n_glm])
+        out["p_value"][f] = None if test is None else test.p_value
+        out["p_value_method"][f] = None if test is None else test.method
+    test, draws = stats.interaction_lrt(
+        table.k,
+        table.n,
+        table.codes([a]),
+        table.codes([b]),
+        table.codes(["context_id"]),
+        cfg.n_glm,
+        cfg.rng(split, "additive"),
+    )
+    if test is not None:
+        out["p_interaction"], out["p_interaction_method"] = test.p_value, test.method
+    null_iec = statistics(draws / table.n) if draws is not None else None
+    for name in iec_names:
+        out["iec"][name] = float(point[name])
+        if null_iec is not None:
+            out["iec_null"][name] = float(null_iec[name].mean())
+            out["iec_excess"][name] = excess(out["iec"][name], out["iec_null"][name])
+            out["p_iec"][name] = stats.permutation_p(out["iec"][name], null_iec[name])
+    return out
+
+
+class EpisodesError(ValueError):
+    """An episodes table the metrics cannot be computed from; the message names what is wrong."""
+
+
+def check_episodes(
+    episodes: pd.DataFrame, required: Sequence[str] = METRIC_COLUMNS, source: str = "episodes"
+) -> None:
+    """Raise EpisodesError unless every metric's assumption about the table holds.
+
+    Required columns present and non-null, success boolean, one factor per split with values of
+    as many '|'-joined parts, and one split, value and context per instance (per policy).
+    """
+    missing = [c for c in required if c not in episodes.columns]
+    if missing:
+        raise EpisodesError(
+            f"{source} lacks column(s) {', '.join(missing)} (docs/formats.md, 'Episode records')"
+        )
+    nulls = [c for c in required if episodes[c].isna().any()]
+    if nulls:
+        raise EpisodesError(f"{source} has null values in column(s) {', '.join(nulls)}")
+    if episodes.empty:
+        raise EpisodesError(f"{source} holds no episodes")
+    bad = ~episodes["success"].isin([0, 1])
+    if bad.any():
+        raise EpisodesError(
+            f"{source}: column success must be boolean; found {episodes['success'][bad].iloc[0]!r}"
+        )
+    factors = episodes.groupby("split")["factor"].unique()
+    for split, names in factors.items():
+        if len(names) != 1:
+            raise EpisodesError(f"{source}: split {split!r} mixes factors {sorted(map(str, names))}")
+        n_parts = episodes.loc[episodes["split"] == split, "value"].astype(str).str.count(r"\|") + 1
+        if (n_parts != len(str(names[0]).split("|"))).any():
+            raise EpisodesError(
+                f"{source}: split {split!r} has values that do not match factor {names[0]!r} "
+                "('|'-joined, one part per factor)"
+            )
+    per_instance = episodes.groupby(["policy", "instance_id"])[["split", "value", "context_id"]].nunique()
+    mixed = per_instance.index[(per_instance > 1).any(axis=1)]
+    if len(mixed):
+        raise EpisodesError(
+            f"{source}: instance {mixed[0][1]!r} of policy {mixed[0][0]!r} has episodes with "
+            "different split, value or context_id; an instance fixes all three"
+        )
+
+
+def _counted_episodes(episodes: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
+    """The episodes that count, and split → episodes infrastructure ended (left out)."""
+    infra = episodes.loc[infra_mask(episodes), "split"].astype(str).value_counts()
+    kept = counted(episodes)
+    if kept.empty:
+        raise EpisodesError(
+            f"all {len(episodes)} episode(s) ended by infrastructure (status infra_error), not by "
+            "the policy: nothing to measure; rerun the evaluation command to run them again"
+        )
+    return kept, {str(split): int(n) for split, n in infra.items()}
+
+
+def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
+    """metrics.json layout (docs/formats.md, "Metrics") for the episodes of one policy (episodes infrastructure
+    ended are left out, and counted per split in `n_infra_errors`)."""
+    check_episodes(episodes)
+    episodes, infra = _counted_episodes(episodes)
+    policies = episodes["policy"].unique()
+    if len(policies) != 1:
+        raise ValueError(
+            f"compute_metrics takes one policy, got {sorted(map(str, policies))}; use compute_all_metrics"
+        )
+    # The isolation certificate first: blocks in which more than the factor changed leave the tests.
+    certificate = isolation.verify(episodes)
+    episodes = isolation.drop_violations(episodes, certificate)
+    episodes = episodes.assign(success=episodes["success"].astype(np.int64))
+    splits: dict[str, Any] = {}
+    interactions: dict[str, Any] = {}
+    for split, rows in episodes.groupby("split", sort=False):
+        n_factors = len(str(rows["factor"].iloc[0]).split("|"))
+        extra = {"isolation": certificate[str(split)], "n_infra_errors": infra.get(str(split), 0)}
+        if n_factors == 1:
+            splits[str(split)] = split_metrics(rows, cfg) | extra
+        elif n_factors == 2:
+            interactions[str(split)] = interaction_metrics(rows, cfg) | extra
+        else:
+            log.warning("split %s crosses %d factors; IEC is pairwise, so it is left out", split, n_factors)
+    average: dict[str, float | None] = {"sr": None, "cv": None, "cv_excess": None}
+    for key in average:
+        values = [s[key] for s in splits.values()]
+        average[key] = float(np.mean(values)) if values and None not in values else None
+    return {
+        "epsilon": cfg.epsilon,
+        "policy": str(policies[0]),
+        "resampling": _resampling(cfg),
+        "control": baseline_retest(episodes),
+        "splits": splits,
+        "interactions": interactions,
+        "average": average,
+        "n_infra_errors": sum(infra.values()),
+    }
+
+
+def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
+    """One policy: `compute_metrics`. Several: {"epsilon", "resampling", "policies": {name: …}}. Episodes that
+    infrastructure ended are left out of every number (and counted)."""
+    check_episodes(episodes)
+    kept, _ = _counted_episodes(episodes)
+    names = sorted(map(str, kept["policy"].unique()))
+    if len(names) == 1:
+        return compute_metrics(episodes, cfg)
+    # Paired comparisons see only the blocks each policy's certificate verified.
+    certified = pd.concat(
+        [
+            isolation.drop_violations(rows, isolation.verify(rows))
+            for _, rows in kept.groupby("policy", sort=False)
+        ]
+    )
+    out = {
+        "epsilon": cfg.epsilon,
+        "resampling": _resampling(cfg),
+        "policies": {name: compute_metrics(episodes[episodes["policy"] == name], cfg) for name in names},
+        "comparisons": compare_policies(certified, cfg),
+    }
+    ranked = ranking.rankings(out, certified)
+    if ranked is not None:  # three or more policies
+        out["rankings"] = ranked
+    return out
+
+
+def _resampling(cfg: MetricsConfig) -> dict[str, int]:
+    return {"n_perm": cfg.n_perm, "n_glm": cfg.n_glm, "max_perm": cfg.max_perm, "seed": cfg.seed}
+
+
+def policy_layouts(metrics: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """policy name → single-policy layout, for either shape `compute_all_metrics` returns."""
+    if "policies" in metrics:
+        return dict(metrics["policies"])
+    return {metrics["policy"]: metrics}

@@ -1,0 +1,199 @@
+"""RoboView inside lerobot's own tools, unpatched: `lerobot-eval --env.type=roboview`.
+
+    lerobot-eval --env.type=roboview \
+        --env.benchmark_path=outputs/benchmark --env.task=color,camera_pose --env.cameras=left_top,wrist \
+        --env.image_size=96 --policy.path=CKPT/pretrained_model --eval.n_episodes=141 --eval.batch_size=8 \
+        --output_dir=outputs/lerobot_eval
+    python -m roboview.integrations.lerobot.convert --eval_info=outputs/lerobot_eval/eval_info.json \
+        --env.benchmark_path=outputs/benchmark --output_dir=outputs/eval/lerobot_eval
+
+As LeRobot's LIBERO / RoboCasa integrations do with their suites, `--env.task` names the benchmark's splits
+to run (comma-separated, or `all`): each split is one task group of `eval_info.json` (`per_group.<split>`
+holds its success rate), and its episodes are the split's instances × `--env.n_repeats` in the order
+`roboview.pipelines.evaluate` uses. lerobot-eval resets episode i of a group with seed `--seed + i` (lerobot's
+rule); the env maps that to the split's i-th (instance, repeat) and runs it with RoboView's own episode
+seed, so both tools run the same episodes. Every sub-env exposes `task` (the split), `task_description`
+(the episode's instruction, which reaches language-conditioned policies) and `_max_episode_steps`.
+
+Importing this package registers the `roboview` `EnvConfig` and the gymnasium id `RoboView/LeRobotEval-v0`.
+lerobot-eval and lerobot-train import it at start-up through the `lerobot_env_roboview` distribution
+(plugins/lerobot_env_roboview, installed by `make install`: LeRobot imports every installed `lerobot_env_*`),
+so no flag is needed; `--env.discover_packages_path=roboview.integrations.lerobot` still works where that distribution is
+not installed. `lerobot-train --env.type=roboview --env_eval_freq=N` takes the same flags for its periodic
+evals, one success rate per split. The same env is offered as a LeRobot EnvHub env: `roboview.integrations.lerobot/hub/`.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import gymnasium as gym
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+
+GYM_ID = "RoboView/LeRobotEval-v0"
+
+if GYM_ID not in gym.registry:
+    # No TimeLimit/OrderEnforcing wrappers: the env truncates at max_steps itself and exposes
+    # `_max_episode_steps`, `task` and `task_description`, which lerobot's loop reads from each sub-env.
+    gym.register(
+        id=GYM_ID, entry_point="roboview.integrations.lerobot.env:RoboViewEvalEnv", order_enforce=False
+    )
+
+
+@EnvConfig.register_subclass("roboview")
+@dataclass
+class RoboViewEnv(EnvConfig):
+    """Splits of a frozen RoboView benchmark as lerobot envs (`--env.type=roboview`)."""
+
+    # Splits to run, comma-separated (color,camera_pose), or `all`: one task group per split.
+    task: str | None = "color"
+    # Control rate (Hz) of the env, as the benchmark's episodes run.
+    fps: int = 10
+    # Benchmark folder (roboview.pipelines.build_benchmark).
+    benchmark_path: str = "outputs/benchmark"
+    # The checkpoint's cameras (comma-separated): what it was trained on.
+    cameras: str = "left_top,wrist"
+    # The checkpoint's square image side (pixels): what it was trained on.
+    image_size: int = 96
+    # Episodes of a split: its selected instances × n_repeats, in the order roboview.pipelines.evaluate uses
+    # (--eval.n_episodes runs that many per split; the count is printed when the envs are made).
+    n_repeats: int = 1
+    # Only the first N task contexts of each split, every value of each (as --eval.contexts); 0: all.
+    contexts: int = 0
+    # Only the first N instances of each split (as --eval.limit); 0: all.
+    limit: int = 0
+    # Steps before an episode is cut (lerobot reads it as the env's _max_episode_steps).
+    max_steps: int = 120
+    # The checkpoint's control: joint (8-d action: 7 joint targets + gripper; agent_pos the joint state) or ee_delta /
+    # ee_abs (7-d LIBERO-convention action; agent_pos the end-effector state), as its dataset was collected.
+    control: str = "joint"
+    # Must equal lerobot-eval's --seed (default 1000): episode i is the one reset with seed start_seed + i.
+    start_seed: int = 1000
+    # Run even when this machine renders or simulates the benchmark `different`ly from the machine that built it
+    # (the conformance check that runs before the first episode; `roboview-verify` shows its figures).
+    allow_drift: bool = False
+    features: dict[str, PolicyFeature] = field(default_factory=dict)
+    features_map: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        from roboview.sim.cameras import ALL_CAMERAS, check_image_size
+
+        cams = self.camera_list
+        unknown = [c for c in cams if c not in ALL_CAMERAS]
+        if unknown or not cams:
+            raise ValueError(
+                f"--env.cameras={self.cameras!r}: unknown camera(s) {unknown or cams}; "
+                f"allowed: {', '.join(ALL_CAMERAS)}"
+            )
+        for name in ("n_repeats", "max_steps", "fps"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
+        check_image_size(self.image_size, "--env.image_size")
+        from roboview.sim.control import CONTROLS
+
+        if self.control not in CONTROLS:
+            raise ValueError(f"--env.control={self.control!r} unknown; allowed: {', '.join(CONTROLS)}")
+        if not self.split_names_given:
+            raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
+        self.features = {
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,) if self.control == "joint" else (7,)),
+            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(8,)),
+        }
+        self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
+        for cam in cams:
+            self.features[f"pixels/{cam}"] = PolicyFeature(
+                type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3)
+            )
+            self.features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
+
+    @property
+    def camera_list(self) -> tuple[str, ...]:
+        return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
+
+    @property
+    def split_names_given(self) -> tuple[str, ...]:
+        return tuple(s.strip() for s in (self.task or "").split(",") if s.strip())
+
+    def splits(self) -> list[str]:
+        """The splits `--env.task` names, checked against the benchmark (an unknown one fails here)."""
+        from roboview.benchmark.format import available_splits
+
+        available = available_splits(self.benchmark_path)
+        names = self.split_names_given
+        if names == ("all",):
+            return available
+        unknown = [s for s in names if s not in available]
+        if unknown:
+            raise ValueError(
+                f"--env.task: unknown split(s) {unknown}; the benchmark at {self.benchmark_path} has: "
+                f"{', '.join(available)} (or `all`)"
+            )
+        return list(names)
+
+    @property
+    def package_name(self) -> str:
+        return "roboview.integrations.lerobot"
+
+    @property
+    def gym_id(self) -> str:
+        return GYM_ID
+
+    @property
+    def gym_kwargs(self) -> dict:
+        """The env's arguments for the first split (`create_envs` makes one env set per split)."""
+        return self.split_kwargs(self.splits()[0])
+
+    def split_kwargs(self, split: str) -> dict:
+        return {
+            "benchmark_path": self.benchmark_path,
+            "split": split,
+            "cameras": self.camera_list,
+            "image_size": self.image_size,
+            "n_repeats": self.n_repeats,
+            "contexts": self.contexts,
+            "limit": self.limit,
+            "max_steps": self.max_steps,
+            "start_seed": self.start_seed,
+            "fps": self.fps,
+            "control": self.control,
+        }
+
+    def check_conformance(self) -> dict:
+        """roboview.pipelines.evaluate's start-of-run check: `different` raises (unless --env.allow_drift=true) before any
+        env is made; the verdict and drift are logged."""
+        from roboview.benchmark import conformance
+        from roboview.benchmark.format import read_manifest
+
+        root = Path(self.benchmark_path)
+        return conformance.gate(
+            root, read_manifest(root)["benchmark_version"], self.allow_drift, "--env.allow_drift"
+        ).record()
+
+    def create_envs(
+        self, n_envs: int, use_async_envs: bool = False
+    ) -> dict[str, dict[int, gym.vector.VectorEnv]]:
+        """{split: {0: VectorEnv of n_envs}}: lerobot-eval runs --eval.n_episodes episodes of each split.
+
+        Async envs start their worker processes only when lerobot reaches that split (lerobot's lazy
+        wrapper, as its LIBERO integration uses), so at most n_envs simulators are alive at a time."""
+        from lerobot.envs.utils import _LazyAsyncVectorEnv
+
+        from roboview.integrations.lerobot.env import RoboViewEvalEnv
+
+        self.check_conformance()
+
+        envs: dict[str, dict[int, gym.vector.VectorEnv]] = {}
+        spaces: tuple = (None, None, None)  # probed from one env of the first split; every split shares them
+        for split in self.splits():
+            fns = [functools.partial(RoboViewEvalEnv, **self.split_kwargs(split)) for _ in range(n_envs)]
+            if use_async_envs and n_envs > 1:
+                vec = _LazyAsyncVectorEnv(fns, *spaces)
+                spaces = (vec.observation_space, vec.action_space, vec.metadata)
+            else:
+                vec = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP)
+            envs[split] = {0: vec}
+        return envs

@@ -1,0 +1,226 @@
+"""vla-eval's results of a RoboView benchmark → a RoboView results folder (`episodes.parquet`).
+
+    python -m roboview.integrations.vla_eval.convert --results=results/vla_eval/RoboView_aggregate.json \
+        --benchmark.path=outputs/benchmark --output_dir=outputs/eval/vla_eval [--policy_name=NAME]
+
+`--results` takes what `vla-eval run` writes: its aggregate JSON (`<name>_aggregate.json`), its SQLite
+recording (`recording-<eval_id>.sqlite`, read through vla-eval's own exporter, e.g. for a sharded run before
+`vla-eval export`) or the output folder holding them. Every episode of a `RoboViewBenchmark` entry becomes the
+row `roboview.pipelines.evaluate` writes for its (instance, repeat): the instance's record, the episode seed, success,
+steps, failure reason, isolation certificate and conformance verdict as the benchmark measured them. An
+episode vla-eval itself recorded as errored (server unreachable, connection closed, timeout, an exception)
+is a row with status `infra_error`, counted in no rate, as in `roboview.pipelines.evaluate`. `provenance.json` records
+vla-eval's run (eval id, harness version, model server, config) and the conformance record of each process
+that ran episodes; `roboview.pipelines.report` and `roboview.pipelines.verify --results=OUT` read the folder as any other.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from roboview.benchmark.format import load_benchmark
+from roboview.eval.running import provenance
+from roboview.eval.running.results import INFRA_ERROR, EpisodeStore
+from roboview.integrations.vla_eval.benchmark import RoboViewBenchmark
+
+BENCHMARK_CLASS = f"{RoboViewBenchmark.__module__}:{RoboViewBenchmark.__name__}"
+PARAM_DEFAULTS = {
+    name: p.default
+    for name, p in inspect.signature(RoboViewBenchmark.__init__).parameters.items()
+    if p.default is not inspect.Parameter.empty
+}
+
+
+def read_aggregates(path: Path) -> list[dict]:
+    """vla-eval's aggregates from an aggregate JSON, a recording SQLite (vla-eval's exporter) or a folder: the reader
+    `roboview.pipelines.audit --format=vla_eval` uses."""
+    from roboview.eval.running.harnesses.vla_eval_results import read_results
+
+    return [body for _, body in read_results(path)]
+
+
+def roboview_entries(aggregates: list[dict]) -> list[dict]:
+    """The aggregates of RoboViewBenchmark entries (a config may list other benchmarks too)."""
+    ours = [a for a in aggregates if (a.get("config") or {}).get("benchmark") == BENCHMARK_CLASS]
+    if not ours:
+        names = sorted({(a.get("config") or {}).get("benchmark", "?") for a in aggregates})
+        raise ValueError(
+            f"the vla-eval results hold no {BENCHMARK_CLASS} entry (they hold: {', '.join(names)})"
+        )
+    return ours
+
+
+def episode_row(episode: dict, record: dict, policy: str, verdict: str) -> dict:
+    """The RoboView row of one vla-eval episode (its task fields sit at the top, the result under metrics);
+    `verdict`: the conformance verdict of the process that ran it, for an episode that returned no result."""
+    metrics = episode.get("metrics") or {}
+    repeat = int(episode["repeat"])
+    row = {
+        **record,
+        "repeat": repeat,
+        # The seed the episode was reset with (roboview.pipelines.verify checks it is its (context, repeat)'s).
+        "episode_seed": int(episode["episode_seed"]),
+        "duration_s": episode.get("elapsed_sec"),
+        "policy": policy,
+    }
+    if episode.get("failure_reason") or "steps" not in metrics:  # vla-eval recorded the episode as errored
+        detail = (episode.get("failure_detail") or "").strip().splitlines()
+        reason = episode.get("failure_reason") or "no result"
+        return row | {
+            "success": False,
+            "steps": int(episode.get("steps") or 0),
+            "failure_reason": f"infrastructure error: vla-eval {reason}"
+            + (f": {detail[-1]}" if detail else ""),
+            "isolation": None,
+            "status": INFRA_ERROR,
+            "conformance": verdict,
+        }
+    return row | {
+        "success": bool(metrics["success"]),
+        "steps": int(metrics["steps"]),
+        "failure_reason": metrics["failure_reason"],
+        "isolation": metrics["isolation"],
+        "status": "ok",
+        "conformance": metrics["conformance"],
+    }
+
+
+def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: str = "") -> Path:
+    entries = roboview_entries(read_aggregates(Path(results)))
+    params = [PARAM_DEFAULTS | (a["config"].get("params") or {}) for a in entries]
+    root = benchmark_path or params[0].get("benchmark_path", "")
+    if not root or not Path(root).is_dir():
+        raise ValueError(
+            f"--benchmark.path={root!r}: no such folder; pass the benchmark folder vla-eval ran "
+            "(params.benchmark_path)"
+        )
+    bench = load_benchmark(root)
+    records = {i.record["instance_id"]: i.record for items in bench.splits.values() for i in items}
+    episodes = [(a, e) for a in entries for t in a["tasks"] for e in t["episodes"]]
+    versions = sorted({str(e.get("benchmark_version")) for _, e in episodes} - {bench.version})
+    if versions:
+        raise ValueError(
+            f"the vla-eval episodes ran benchmark version(s) {', '.join(versions)}; {root} is version "
+            f"{bench.version}: pass the benchmark folder they ran"
+        )
+    unknown = sorted({e["instance_id"] for _, e in episodes if e["instance_id"] not in records})
+    if unknown:
+        raise ValueError(
+            f"{len(unknown)} instance(s) of the vla-eval results are not in {root}: {unknown[:3]}"
+        )
+    counts = Counter((e["instance_id"], int(e["repeat"])) for _, e in episodes)
+    twice = sorted(k for k, n in counts.items() if n > 1)
+    if twice:
+        raise ValueError(
+            f"(instance, repeat) {twice[0]} ran {counts[twice[0]]} times: run the benchmark with "
+            "episodes_per_task: 1 (repeats come from params.n_repeats)"
+        )
+    first = params[0]
+    for name in ("n_repeats", "max_steps", "image_size", "control"):
+        if len({p[name] for p in params}) > 1:
+            raise ValueError(
+                f"the RoboView entries were run with different params.{name}: convert them apart"
+            )
+    policy = policy_name or entries[0].get("server_info", {}).get("model_server") or "vla-eval"
+    splits = list(dict.fromkeys(e["split"] for _, e in episodes))
+    store = EpisodeStore(
+        Path(output_dir),
+        {
+            "benchmark_version": bench.version,
+            "values": None,
+            "policy": policy,
+            "policy_path": None,
+            "policy_options": {
+                "source": "vla-eval",
+                "results": str(Path(results).resolve()),
+                "server_url": (entries[0]["config"].get("server") or {}).get("url"),
+                "control": first["control"],
+                "cameras": first["cameras"],
+            },
+            "n_repeats": {split: first["n_repeats"] for split in splits},
+            "max_steps": first["max_steps"],
+            "image_size": first["image_size"],
+        },
+    )
+    verdicts = {
+        e.get("sid"): e["metrics"]["conformance"] for _, e in episodes if "conformance" in e["metrics"]
+    }
+    for _, episode in episodes:
+        verdict = verdicts.get(episode.get("sid"), "")
+        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict))
+    store.close()
+    provenance.write(Path(output_dir), provenance_entries(entries, episodes, bench.version, root))
+    return Path(output_dir) / "episodes.parquet"
+
+
+def provenance_entries(entries: list[dict], episodes: list, version: str, root: str) -> list[dict]:
+    """One entry per process that ran episodes (its conformance record), naming vla-eval's run."""
+    base = provenance.start_entry(version, None) | {
+        "ended": provenance.now(),
+        "benchmark_path": str(Path(root).resolve()),
+    }
+    out = []
+    for aggregate, episode in episodes:
+        record = (episode.get("metrics") or {}).get("conformance_record")
+        if record is None:
+            continue
+        out.append(
+            base
+            | {
+                "conformance": record,
+                "vla_eval": {
+                    "eval_id": aggregate.get("eval_id"),
+                    "harness_version": aggregate.get("harness_version"),
+                    "created_at": aggregate.get("created_at"),
+                    "server_info": aggregate.get("server_info"),
+                    "config": aggregate.get("config"),
+                    "process": episode.get("sid"),  # vla-eval's id of the process that ran it
+                },
+                "episodes_run": sum(1 for _, e in episodes if e.get("sid") == episode.get("sid")),
+            }
+        )
+    return out
+
+
+@dataclass
+class BenchmarkFolder:
+    # The benchmark folder vla-eval ran (params.benchmark_path); empty: the one its config names.
+    path: str = ""
+
+
+@dataclass
+class ConvertConfig:
+    # vla-eval's results: <name>_aggregate.json, recording-<eval_id>.sqlite, or vla-eval run's output_dir.
+    results: str = ""
+    # The benchmark vla-eval ran.
+    benchmark: BenchmarkFolder = field(default_factory=BenchmarkFolder)
+    # RoboView results folder to write.
+    output_dir: str = ""
+    # The results' policy column; empty: the model server's class name as vla-eval recorded it.
+    policy_name: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.results or not Path(self.results).exists():
+            raise ValueError(
+                f"--results={self.results!r}: no such file or folder (vla-eval run writes "
+                "OUTPUT_DIR/<name>_aggregate.json and OUTPUT_DIR/recording-<eval_id>.sqlite)"
+            )
+        if not self.output_dir:
+            raise ValueError("--output_dir is required: the RoboView results folder to write")
+
+
+def run(cfg: ConvertConfig) -> Path:
+    return convert(Path(cfg.results), cfg.benchmark.path, Path(cfg.output_dir), cfg.policy_name)
+
+
+def main(argv: list[str] | None = None) -> Path:
+    from roboview.core.cli import cli_main
+
+    return cli_main(ConvertConfig, run, lambda cfg, path: print(f"[convert] {path}"), args=argv)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,22 @@
+"""The pipelines' command-line layer: `roboview.core.cli` (parsing, `--help`, errors, Ctrl-C, the one `main`
+helper) and the flag groups the pipelines share."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from roboview.core.cli import (  # noqa: F401  (the pipelines import the command-line helpers from here)
+    cli_main,
+    format_help,
+    interrupted,
+    parse,
+    setup_environment,
+)
+
+
+@dataclass
+class BenchmarkPath:
+    """`--benchmark.path`: the one spelling of a benchmark folder across RoboView's commands."""
+
+    # Benchmark folder written by roboview.pipelines.build_benchmark.
+    path: str = ""

@@ -1,0 +1,236 @@
+"""Train a reference policy on `roboview.pipelines.collect` demos: lerobot's own trainer, the recipe that works here.
+
+    roboview-train --dataset.repo_id=roboview/pick_place_96 --dataset.root=outputs/demos96 \
+        --output_dir=outputs/train_act96 [--steps=6000] [--device=auto] \
+        [--benchmark.path=outputs/benchmark --eval_splits=color,camera_pose --eval_freq=1000]
+
+A thin layer over `lerobot-train`: it checks the dataset, then runs lerobot's trainer with
+ACT-small (dim_model 256, feed-forward 1024, 2 encoder layers, chunk 20 executing 10, lr 1e-4 for
+the backbone too, batch 16) and *no* pretrained backbone (the default downloads ImageNet weights,
+which fails offline). Images are used at the size they were collected (`--dataset.image_size` of
+collect): ACT has no resize step, and evaluation renders the checkpoint's own size. Checkpoints
+land in OUTPUT/checkpoints/<step>/pretrained_model every `--save_freq` steps; rerunning the same
+command resumes from the last one (lerobot's `--resume`). Measured step time: docs/results/act_ref.md.
+With `--benchmark.path`, lerobot-train evaluates the policy every `--eval_freq` steps on the RoboView splits
+`--eval_splits` names (the `roboview` env of the lerobot_env_roboview plugin) and logs each split's success.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from roboview.core.cli_errors import flag_errors
+from roboview.pipelines._cli import BenchmarkPath, cli_main
+from roboview.policies.devices import DEVICES, resolve_device
+
+
+@dataclass
+class TrainDatasetConfig:
+    # repo_id the dataset was collected under (--dataset.repo_id of roboview.pipelines.collect).
+    repo_id: str = "roboview/pick_place"
+    # Local dataset folder written by roboview.pipelines.collect.
+    root: str = ""
+
+
+@dataclass
+class TrainConfig:
+    dataset: TrainDatasetConfig = field(default_factory=TrainDatasetConfig)
+    # Run folder: checkpoints, logs; rerun the same command to resume from its last checkpoint.
+    output_dir: str = "outputs/train_act"
+    # Optimizer steps in total (a resumed run continues towards the same total).
+    steps: int = 6000
+    # Save a checkpoint every this many steps.
+    save_freq: int = 1000
+    # Batch size.
+    batch_size: int = 16
+    # Learning rate of the transformer and of the ResNet-18 backbone.
+    lr: float = 1e-4
+    # auto (CUDA when present), cpu or cuda.
+    device: str = "auto"
+    # ACT action chunk length: actions predicted per inference.
+    chunk_size: int = 20
+    # Actions of each chunk run before the next inference (at most chunk_size).
+    n_action_steps: int = 10
+    # Periodic evaluation while training, through lerobot-train's own eval loop on frozen RoboView splits
+    # (`--env.type=roboview`, the lerobot_env_roboview plugin); no --benchmark.path: no periodic evaluation.
+    # lerobot-train logs each split's success rate (`Suite per_group aggregated`) and the overall one; the
+    # episode videos land in OUT/eval/.
+    benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
+    # Periodic evaluation: the benchmark splits it runs (comma-separated, or `all`), one success rate each.
+    eval_splits: str = "color"
+    # Periodic evaluation: episodes per split per evaluation (the split's first instances, once each).
+    eval_episodes: int = 10
+    # Periodic evaluation: run one every this many optimizer steps.
+    eval_freq: int = 1000
+    # CPU threads of the trainer's torch (OMP_NUM_THREADS); 0: one fewer than this machine's cores, at least 1.
+    # torch's own default (every core) spins threads that fight anything else on the CPU: measured on 2 cores
+    # with other work running, 9.3 s per step with the default and 1.1 s with one thread, same losses.
+    num_threads: int = 0
+    # Print lerobot-train's command line instead of running it.
+    dry_run: bool = False
+
+    def __post_init__(self) -> None:
+        if self.device not in DEVICES:
+            raise ValueError(f"unknown --device={self.device!r}; allowed: {', '.join(DEVICES)}")
+        for name in (
+            "steps",
+            "save_freq",
+            "batch_size",
+            "chunk_size",
+            "n_action_steps",
+            "eval_episodes",
+            "eval_freq",
+        ):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
+        if self.num_threads < 0:
+            raise ValueError(f"--num_threads={self.num_threads} must be ≥ 0 (0 = one fewer than the cores)")
+        if self.n_action_steps > self.chunk_size:
+            raise ValueError(
+                f"--n_action_steps={self.n_action_steps} cannot exceed --chunk_size={self.chunk_size}"
+            )
+        info = Path(self.dataset.root) / "meta" / "info.json"
+        if not self.dataset.root or not info.is_file():
+            raise ValueError(
+                f"--dataset.root={self.dataset.root!r} holds no LeRobot dataset (meta/info.json "
+                "missing); collect one with `roboview-collect`"
+            )
+        cameras = [k for k in json.loads(info.read_text())["features"] if k.startswith("observation.images.")]
+        if not cameras:
+            raise ValueError(
+                f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one"
+            )
+        if self.benchmark.path:
+            from roboview.benchmark.format import available_splits, load_benchmark
+
+            # An unknown folder or split fails now, not at the first periodic evaluation.
+            with flag_errors("--benchmark.path"):
+                available = available_splits(self.benchmark.path)
+            splits = [s.strip() for s in self.eval_splits.split(",") if s.strip()]
+            unknown = [s for s in splits if s not in available] if splits != ["all"] else []
+            if unknown or not splits:
+                raise ValueError(
+                    f"--eval_splits={self.eval_splits!r}: unknown split(s) {unknown}; the benchmark at "
+                    f"{self.benchmark.path} has: {', '.join(available)} (comma-separated, or `all`)"
+                )
+            with flag_errors("--benchmark.path"):
+                load_benchmark(self.benchmark.path, None if splits == ["all"] else splits)  # checksums
+
+    def eval_flags(self) -> list[str]:
+        """lerobot-train's flags for periodic evals on the RoboView split (the dataset's cameras and size)."""
+        if not self.benchmark.path:
+            return []
+        features = json.loads((Path(self.dataset.root) / "meta" / "info.json").read_text())["features"]
+        images = {
+            k.removeprefix("observation.images."): v["shape"]
+            for k, v in features.items()
+            if k.startswith("observation.images.")
+        }
+        side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
+        return [
+            "--env.type=roboview",
+            f"--env.benchmark_path={self.benchmark.path}",
+            f"--env.task={self.eval_splits.replace(' ', '')}",
+            f"--env.limit={self.eval_episodes}",
+            f"--env.cameras={','.join(images)}",
+            f"--env.image_size={side}",
+            f"--env_eval_freq={self.eval_freq}",
+            f"--eval.n_episodes={self.eval_episodes}",
+            f"--eval.batch_size={min(self.eval_episodes, 8)}",
+        ]
+
+    @property
+    def threads(self) -> int:
+        """The trainer's torch threads: --num_threads, else one fewer than the cores (at least 1)."""
+        return self.num_threads or max(1, (os.cpu_count() or 1) - 1)
+
+
+def last_checkpoint(output_dir: Path) -> Path | None:
+    config = output_dir / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    return config if config.is_file() else None
+
+
+def _device(device: str) -> str:
+    with flag_errors("--device"):
+        return resolve_device(device)
+
+
+def command(cfg: TrainConfig) -> list[str]:
+    """lerobot-train's argument list: a fresh run, or a resume from the run folder's last checkpoint."""
+    out = Path(cfg.output_dir)
+    trainer = [sys.executable, "-m", "lerobot.scripts.lerobot_train"]
+    resume = last_checkpoint(out)
+    if resume is not None:
+        return [*trainer, f"--config_path={resume}", "--resume=true", f"--steps={cfg.steps}"]
+    if out.exists() and any(out.iterdir()):
+        raise ValueError(
+            f"--output_dir={out} is not empty and holds no checkpoint to resume; choose a new folder"
+        )
+    return [
+        *trainer,
+        f"--dataset.repo_id={cfg.dataset.repo_id}",
+        f"--dataset.root={cfg.dataset.root}",
+        "--policy.type=act",
+        "--policy.pretrained_backbone_weights=null",
+        "--policy.push_to_hub=false",
+        f"--policy.device={_device(cfg.device)}",
+        "--policy.dim_model=256",
+        "--policy.dim_feedforward=1024",
+        "--policy.n_encoder_layers=2",
+        "--policy.n_vae_encoder_layers=2",
+        f"--policy.chunk_size={cfg.chunk_size}",
+        f"--policy.n_action_steps={cfg.n_action_steps}",
+        f"--policy.optimizer_lr={cfg.lr}",
+        f"--policy.optimizer_lr_backbone={cfg.lr}",
+        f"--batch_size={cfg.batch_size}",
+        f"--steps={cfg.steps}",
+        f"--save_freq={cfg.save_freq}",
+        f"--log_freq={min(100, cfg.save_freq)}",
+        "--num_workers=0",
+        "--wandb.enable=false",
+        f"--output_dir={out}",
+        f"--job_name={out.name}",
+        *cfg.eval_flags(),
+    ]
+
+
+def run(cfg: TrainConfig) -> Path:
+    """Train (or resume); returns the last checkpoint's pretrained_model folder."""
+    cmd = command(cfg)
+    threads = {"OMP_NUM_THREADS": str(cfg.threads), "MKL_NUM_THREADS": str(cfg.threads)}
+    if cfg.dry_run:
+        print(" ".join([*(f"{k}={v}" for k, v in threads.items()), *cmd]))
+        return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
+    # lerobot imports roboview.integrations.lerobot by name (its lerobot_env_roboview plugin): this checkout's, first.
+    root = str(Path(__file__).resolve().parents[2])
+    env = (
+        os.environ
+        | threads
+        | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
+    )
+    print(f"[train] lerobot-train with {cfg.threads} CPU thread(s) (--num_threads)", flush=True)
+    proc = subprocess.run(cmd, env=env)
+    if proc.returncode != 0:
+        raise RuntimeError(f"lerobot-train exited with {proc.returncode}; its log is above")
+    return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
+
+
+def _summary(cfg: TrainConfig, checkpoint: Path) -> None:
+    if not cfg.dry_run:
+        print(
+            f"[train] checkpoint: {checkpoint} (evaluate: roboview-evaluate --policy.type=lerobot "
+            f"--policy.path={checkpoint} ...)"
+        )
+
+
+def main(args: list[str] | None = None) -> Path:
+    return cli_main(TrainConfig, run, _summary, (ValueError, RuntimeError), args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,601 @@
+"""A policy served over openpi's websocket protocol: π0 / π0.5 / π0-FAST in openpi, or any server that speaks it.
+
+    roboview-evaluate --benchmark.path=outputs/benchmark --policy.type=openpi \\
+        --policy.url=ws://gpu-host:8000 --policy.obs_format=droid --policy.cameras=left_top,wrist \\
+        --policy.image_size=224 --output_dir=outputs/eval/pi05
+
+The protocol (openpi's `WebsocketPolicyServer` / `WebsocketClientPolicy`): on connect the server sends one
+msgpack frame of metadata; each request is one observation dict (msgpack, arrays as openpi-client's
+`msgpack_numpy` encodes them), each answer `{"actions": (H, D), ...}`; a server error is a text frame with
+the traceback, then close code 1011. There is no reset message: a new episode is a new instruction.
+
+The wire codec is openpi-client's own (`openpi_client.msgpack_numpy`); the connection is the same
+`websockets` call its `WebsocketClientPolicy` makes, with what that class lacks for a benchmark run: an
+open and a receive timeout, and bounded reconnects.
+
+**Observation layouts** (`--policy.obs_format`), RoboView's robot being DROID's (Franka Panda + Robotiq
+2F-85, joint positions):
+
+    droid   observation/exterior_image_1_left (first scene camera), observation/exterior_image_2_left
+            (second, if any), observation/wrist_image_left (wrist), observation/joint_position (7),
+            observation/gripper_position (1; 0 open … 1 closed), prompt
+    libero  observation/image, observation/wrist_image, observation/state (8: joints + gripper), prompt
+    aloha   images: {cam_high, cam_low, cam_left_wrist} (3×H×W), state (8), prompt
+    custom  --policy.key_map='wire_key=SOURCE,…' with SOURCE one of camera:NAME (H×W×3 uint8),
+            camera_chw:NAME (3×H×W), depth:NAME (H×W float32, metres), state[i:j] (float32),
+            instruction
+
+Images are rendered at `--policy.image_size`, never resized. LIBERO and ALOHA checkpoints were trained
+on other robots (end-effector state, two arms): these layouts are for servers fine-tuned on RoboView
+data with those keys. **A served policy's randomness lives on the server**: the episode seed does not
+reach it, so a stochastic server policy is not reproducible from RoboView's seeds.
+
+Failures: a server that is down fails before any rollout, naming the URL. During a run, an error frame
+or a chunk of the wrong shape fails that episode with the reason (the policy's failure); a connection that
+drops is reopened (`--policy.reconnects` times) and the episode in flight ends with an `InfraError` (recorded
+as `infra_error`, counted in no rate, and re-run: the restarted server holds none of that episode's state); if
+the server stays unreachable the run stops with `PolicyUnavailable` and rerunning the same command resumes it
+(no episode is counted against the policy for it). An answer that does not come within `--policy.timeout_s`
+is retried by the evaluator; one still missing after its retries is an infrastructure error too.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import os
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from roboview.core.workers import worker_rank
+from roboview.policies.base import AgentView, ControlledConfig, Episode, PolicyConfig, control_field
+from roboview.policies.errors import InfraError, open_with_retries
+from roboview.sim.cameras import ALL_CAMERAS
+from roboview.sim.control import EE_ACTION_NAMES
+from roboview.tasks.env import ACTION_NAMES, DEPTH_KEY, EE_STATE_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
+
+log = logging.getLogger(__name__)
+
+OBS_FORMATS = ("droid", "libero", "aloha", "custom")
+ACTION_SPACES = ("joint_position", "joint_velocity")
+GRIPPER_MODES = ("continuous", "binary")
+# RoboView's own server advertises itself under this metadata key; its clients then send the episode's
+# details (task, seed, camera calibration) under EPISODE_KEY with each new episode's first request.
+ROBOVIEW_KEY = "roboview"
+EPISODE_KEY = "roboview/episode"
+WIRE_DIMS = len(ACTION_NAMES)  # 7 joints + gripper
+EE_WIRE_DIMS = len(EE_ACTION_NAMES["ee_delta"])  # end-effector pose (6) + gripper
+_SLICE = re.compile(r"^state\[(\d*):(\d*)\]$")
+
+
+class ProtocolError(RuntimeError):
+    """The server answered something that is not a usable action chunk (fails that episode)."""
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Wire formats: RoboView observation <-> openpi request
+
+
+@dataclass(frozen=True)
+class WireFormat:
+    """Where each part of a RoboView observation goes in a request: (wire path, source) pairs.
+
+    A wire path is a tuple of keys (ALOHA nests its images under "images"); a source is `camera:NAME`,
+    `camera_chw:NAME`, `depth:NAME`, `state[i:j]` or `instruction`."""
+
+    name: str
+    entries: tuple[tuple[tuple[str, ...], str], ...]
+
+    @property
+    def cameras(self) -> tuple[str, ...]:
+        return tuple(
+            dict.fromkeys(
+                src.split(":", 1)[1] for _, src in self.entries if src.startswith(("camera:", "camera_chw:"))
+            )
+        )
+
+    @property
+    def depth_cameras(self) -> tuple[str, ...]:
+        return tuple(src.split(":", 1)[1] for _, src in self.entries if src.startswith("depth:"))
+
+    def encode(self, observation: dict, instruction: str, state_key: str = STATE_KEY) -> dict:
+        """The request for one observation (only the cameras named are read, so only those render); `state`
+        sources read `state_key` (the EE state for an end-effector control)."""
+        request: dict[str, Any] = {}
+        for path, src in self.entries:
+            node = request
+            for key in path[:-1]:
+                node = node.setdefault(key, {})
+            node[path[-1]] = _read(observation, src, instruction, state_key)
+        return request
+
+    def decode(self, request: dict, image_size: int, state_key: str = STATE_KEY) -> tuple[dict, str]:
+        """(RoboView observation, instruction) from a request; a missing key or a wrong image size is named. The
+        state goes under `state_key` (the EE state's key for a policy acting in an end-effector control)."""
+        obs: dict[str, np.ndarray] = {}
+        state = np.full(len(STATE_NAMES), np.nan, np.float32)
+        instruction = ""
+        for path, src in self.entries:
+            node: Any = request
+            for key in path:
+                if not isinstance(node, dict) or key not in node:
+                    raise ValueError(
+                        f"request has no {'/'.join(path)!r} ({self.name} layout); keys: {sorted(request)}"
+                    )
+                node = node[key]
+            if src == "instruction":
+                instruction = str(node)
+            elif src.startswith("state"):
+                lo, hi = _state_range(src)
+                state[lo:hi] = np.asarray(node, np.float32).reshape(-1)
+            else:
+                kind, cam = src.split(":", 1)
+                array = np.asarray(node)
+                if kind == "camera_chw":
+                    array = array.transpose(1, 2, 0)
+                expected = (image_size, image_size, 3) if kind != "depth" else (image_size, image_size)
+                if array.shape != expected:
+                    raise ValueError(
+                        f"{'/'.join(path)} has shape {array.shape}; this server's policy takes "
+                        f"{expected} (images are not resized: render them at {image_size}²)"
+                    )
+                key = DEPTH_KEY.format(cam) if kind == "depth" else IMAGE_KEY.format(cam)
+                obs[key] = array.astype(np.float32 if kind == "depth" else np.uint8, copy=False)
+        if np.isnan(state).any():
+            raise ValueError(
+                f"the {self.name} layout leaves state entries {np.flatnonzero(np.isnan(state)).tolist()} "
+                f"unset (RoboView's state is {len(STATE_NAMES)}: {', '.join(STATE_NAMES)})"
+            )
+        obs[state_key] = state
+        return obs, instruction
+
+
+def _state_range(src: str) -> tuple[int, int]:
+    if src == "state":
+        return 0, len(STATE_NAMES)
+    match = _SLICE.match(src)
+    lo, hi = int(match.group(1) or 0), int(match.group(2) or len(STATE_NAMES))
+    return lo, hi
+
+
+def _read(observation: dict, src: str, instruction: str, state_key: str = STATE_KEY):
+    if src == "instruction":
+        return instruction
+    if src.startswith("state"):
+        lo, hi = _state_range(src)
+        return np.asarray(observation[state_key], np.float32)[lo:hi].copy()
+    kind, cam = src.split(":", 1)
+    if kind == "depth":
+        return np.ascontiguousarray(observation[DEPTH_KEY.format(cam)], np.float32)
+    image = np.asarray(observation[IMAGE_KEY.format(cam)], np.uint8)
+    return np.ascontiguousarray(image.transpose(2, 0, 1) if kind == "camera_chw" else image)
+
+
+def parse_key_map(text: str) -> tuple[tuple[tuple[str, ...], str], ...]:
+    """`wire_key=SOURCE,…` (custom layout) → entries; every source checked, errors name the entry."""
+    entries = []
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        wire, sep, src = item.partition("=")
+        wire, src = wire.strip(), src.strip()
+        if not sep or not wire or not src:
+            raise ValueError(f"--policy.key_map entry {item!r} must be wire_key=SOURCE")
+        if src.startswith(("camera:", "camera_chw:", "depth:")):
+            cam = src.split(":", 1)[1]
+            if cam not in ALL_CAMERAS:
+                raise ValueError(
+                    f"--policy.key_map entry {item!r}: unknown camera {cam!r}; "
+                    f"allowed: {', '.join(ALL_CAMERAS)}"
+                )
+        elif src.startswith("state"):
+            match = _SLICE.match(src)
+            if src != "state" and (
+                match is None or not (0 <= int(match.group(1) or 0) < int(match.group(2) or 8) <= 8)
+            ):
+                raise ValueError(
+                    f"--policy.key_map entry {item!r}: state slices are state[i:j] with "
+                    f"0 ≤ i < j ≤ {len(STATE_NAMES)} ({', '.join(STATE_NAMES)})"
+                )
+        elif src != "instruction":
+            raise ValueError(
+                f"--policy.key_map entry {item!r}: unknown source {src!r}; allowed: camera:NAME, "
+                "camera_chw:NAME, depth:NAME, state, state[i:j], instruction"
+            )
+        entries.append(((wire,), src))
+    if not entries:
+        raise ValueError(
+            "--policy.obs_format=custom needs --policy.key_map='wire_key=SOURCE,…' (e.g. "
+            "'observation/image=camera:left_top,observation/state=state[0:8],prompt=instruction')"
+        )
+    return tuple(entries)
+
+
+def wire_format(
+    obs_format: str, cameras: tuple[str, ...], key_map: str = "", depth: bool = False
+) -> WireFormat:
+    """The layout `obs_format` for these cameras (scene cameras in order, then the wrist)."""
+    if obs_format not in OBS_FORMATS:
+        raise ValueError(f"unknown --policy.obs_format={obs_format!r}; allowed: {', '.join(OBS_FORMATS)}")
+    if obs_format == "custom":
+        return WireFormat("custom", parse_key_map(key_map))
+    scene = [c for c in cameras if c != "wrist"]
+    wrist = "wrist" in cameras
+    if not scene:
+        raise ValueError(
+            f"--policy.obs_format={obs_format} needs a scene camera among --policy.cameras "
+            f"(got {','.join(cameras)}; scene cameras: {', '.join(c for c in ALL_CAMERAS if c != 'wrist')})"
+        )
+    limit = {"droid": 2, "libero": 1, "aloha": 2}[obs_format]
+    if len(scene) > limit:
+        raise ValueError(
+            f"--policy.obs_format={obs_format} carries {limit} scene camera(s), got {', '.join(scene)}"
+        )
+    entries: list[tuple[tuple[str, ...], str]] = []
+    if obs_format == "droid":
+        entries += [(("observation/exterior_image_1_left",), f"camera:{scene[0]}")]
+        if len(scene) > 1:
+            entries += [(("observation/exterior_image_2_left",), f"camera:{scene[1]}")]
+        if wrist:
+            entries += [(("observation/wrist_image_left",), "camera:wrist")]
+        entries += [
+            (("observation/joint_position",), "state[0:7]"),
+            (("observation/gripper_position",), "state[7:8]"),
+        ]
+    elif obs_format == "libero":
+        entries += [(("observation/image",), f"camera:{scene[0]}")]
+        if wrist:
+            entries += [(("observation/wrist_image",), "camera:wrist")]
+        entries += [(("observation/state",), "state")]
+    else:
+        entries += [
+            (("images", name), f"camera_chw:{cam}") for name, cam in zip(("cam_high", "cam_low"), scene)
+        ]
+        if wrist:
+            entries += [(("images", "cam_left_wrist"), "camera_chw:wrist")]
+        entries += [(("state",), "state")]
+    entries += [(("prompt",), "instruction")]
+    if depth:
+        entries += [((f"roboview/depth/{cam}",), f"depth:{cam}") for cam in cameras]
+    return WireFormat(obs_format, tuple(entries))
+
+
+def episode_message(episode: Episode) -> dict:
+    """What RoboView's own server needs to reset a stateful policy (sent only to a server that asks)."""
+    return {
+        "task": episode.task,
+        "seed": episode.seed,
+        "image_size": episode.image_size,
+        "cameras": {
+            name: {"pos": list(p.pos), "quat": list(p.quat), "fovy": p.fovy}
+            for name, p in episode.cameras.items()
+        },
+    }
+
+
+def episode_from_message(message: dict, instruction: str) -> Episode:
+    from roboview.sim.cameras import CameraPose
+
+    cameras = {
+        name: CameraPose(name, tuple(c["pos"]), tuple(c["quat"]), float(c["fovy"]))
+        for name, c in message.get("cameras", {}).items()
+    }
+    return Episode(
+        str(message["task"]), instruction, int(message["seed"]), cameras, int(message["image_size"])
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The connection
+
+
+def _plain(value):
+    """Metadata made JSON-safe for provenance.json (arrays as lists, bytes as their length)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, bytes):
+        return f"<{len(value)} bytes>"
+    return value
+
+
+class Connection:
+    """One websocket to an openpi server: handshake metadata, request → answer, with timeouts."""
+
+    def __init__(self, url: str, api_key: str | None, open_timeout_s: float, timeout_s: float) -> None:
+        from openpi_client import msgpack_numpy
+        from websockets.sync.client import connect
+
+        self.url, self.timeout_s = url, timeout_s
+        self._codec = msgpack_numpy
+        self._packer = msgpack_numpy.Packer()
+        headers = {"Authorization": f"Api-Key {api_key}"} if api_key else None
+        self.ws = connect(
+            url,
+            compression=None,
+            max_size=None,
+            additional_headers=headers,
+            open_timeout=open_timeout_s,
+            close_timeout=1,
+            legacy=True,
+        )
+        try:
+            self.metadata = msgpack_numpy.unpackb(self.ws.recv(timeout=open_timeout_s))
+        except Exception:
+            self.ws.close()
+            raise
+
+    def infer(self, request: dict) -> dict:
+        self.ws.send(self._packer.pack(request))
+        answer = self.ws.recv(timeout=self.timeout_s)
+        if isinstance(answer, str):  # openpi's servers send the traceback as text, then close (1011)
+            last = [line for line in answer.strip().splitlines() if line.strip()]
+            raise ProtocolError(f"server error: {last[-1] if last else answer}")
+        return self._codec.unpackb(answer)
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+def connect(url: str, api_key_env: str, open_timeout_s: float, timeout_s: float) -> Connection:
+    return Connection(url, os.environ.get(api_key_env) or None, open_timeout_s, timeout_s)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The policy
+
+
+class OpenPIPolicy:
+    """One worker's client: it keeps the action chunk, and asks the server when `replan_steps` are used."""
+
+    def __init__(self, config: OpenPIConfig, view: AgentView) -> None:
+        self.config = config
+        urls = config.url_list
+        self.url = urls[worker_rank() % len(urls)]
+        self.format = config.wire_format()
+        self.dt = 1.0 / view.fps
+        self.joint = config.env_control() == "joint"
+        # What the model reads as its state and answers: joints, or (end-effector control) the EE state and pose.
+        self.state_key = STATE_KEY if self.joint else EE_STATE_KEY
+        self.action_dims = WIRE_DIMS if self.joint else EE_WIRE_DIMS
+        self.name = f"openpi:{config.obs_format}"
+        self.failure_reason = ""
+        self.queue: collections.deque = collections.deque()
+        self.instruction = ""
+        self.pending_episode: dict | None = None
+        self.requests = 0
+        self.conn: Connection | None = None
+        self._connect()
+
+    def _connect(self) -> None:
+        """Open the connection, trying `reconnects` more times; if it cannot be opened the server is down."""
+        cfg = self.config
+        self.conn = open_with_retries(
+            lambda: connect(self.url, cfg.api_key_env, cfg.open_timeout_s, cfg.timeout_s),
+            f"openpi server {self.url}",
+            cfg.reconnects,
+            cfg.reconnect_backoff_s,
+        )
+
+    def reset(self, episode: Episode) -> None:
+        self.queue.clear()
+        self.instruction = episode.instruction
+        self.failure_reason = ""
+        if self.conn is not None and ROBOVIEW_KEY in self.conn.metadata:
+            self.pending_episode = episode_message(episode)
+
+    def _request(self, observation: dict) -> np.ndarray:
+        from websockets.exceptions import ConnectionClosed
+
+        if self.conn is None:
+            self._connect()
+        request = self.format.encode(observation, self.instruction, self.state_key)
+        if self.pending_episode is not None:
+            request[EPISODE_KEY] = self.pending_episode
+        try:
+            answer = self.conn.infer(request)
+        except ProtocolError:
+            self.conn.close()  # the server closes after an error frame; the next request reconnects
+            self.conn = None
+            raise
+        except TimeoutError as exc:  # an answer may still come: a fresh connection keeps requests in order
+            self.conn.close()
+            self.conn = None
+            raise TimeoutError(
+                f"openpi server {self.url} did not answer within {self.config.timeout_s:g} s"
+            ) from exc
+        except (ConnectionClosed, OSError) as exc:
+            self.conn = None
+            self.queue.clear()
+            self._connect()  # PolicyUnavailable (the run stops) if the server stays away
+            raise InfraError(
+                f"lost the openpi server {self.url} mid-episode: it closed the connection ({exc}); "
+                "reconnected, so only this episode is lost (it runs again)"
+            ) from None
+        self.pending_episode = None
+        self.requests += 1
+        return self._chunk(answer)
+
+    def _chunk(self, answer) -> np.ndarray:
+        actions = answer.get("actions") if isinstance(answer, dict) else None
+        if actions is None:
+            keys = sorted(answer) if isinstance(answer, dict) else type(answer).__name__
+            raise ProtocolError(f"openpi server {self.url} answered without 'actions' (got {keys})")
+        chunk = np.asarray(actions, np.float32)
+        if chunk.ndim == 1:
+            chunk = chunk[None]
+        if (
+            chunk.ndim != 2
+            or chunk.shape[0] < 1
+            or chunk.shape[1] != self.action_dims
+            or not np.isfinite(chunk).all()
+        ):
+            meaning = (
+                f"7 joint {self.config.action_space}s + gripper"
+                if self.joint
+                else f"{self.config.env_control()} end-effector pose + gripper"
+            )
+            raise ProtocolError(
+                f"openpi server {self.url} answered actions of shape {np.shape(actions)}; RoboView "
+                f"takes (H, {self.action_dims}) finite values: {meaning}"
+            )
+        steps = self.config.replan_steps or len(chunk)
+        return chunk[:steps]
+
+    def select_action(self, observation: dict) -> np.ndarray:
+        if not self.queue:
+            self.queue.extend(self._request(observation))
+        action = self.queue.popleft().copy()
+        if self.config.action_space == "joint_velocity":  # rad/s, integrated over one control period
+            action[:7] = np.asarray(observation[STATE_KEY], np.float32)[:7] + action[:7] * self.dt
+        if self.config.gripper == "binary":  # joint: 0 open … 1 closed; EE: −1 open … +1 close
+            if self.joint:
+                action[7] = 1.0 if action[7] > 0.5 else 0.0
+            else:
+                action[6] = 1.0 if action[6] > 0.0 else -1.0
+        return action
+
+    def episode_record(self) -> dict:
+        return {}
+
+    def close(self) -> None:
+        if self.conn is not None:
+            self.conn.close()
+            self.conn = None
+
+
+@PolicyConfig.register_subclass("openpi")
+@dataclass
+class OpenPIConfig(ControlledConfig):
+    """A policy behind openpi's websocket protocol (openpi's serve_policy.py, roboview.pipelines.serve_policy, …)."""
+
+    # ws://HOST:PORT of the server; a comma-separated list spreads workers over several (worker i → entry i mod n).
+    url: str = ""
+    # Observation layout on the wire: droid, libero, aloha, or custom (with --policy.key_map).
+    obs_format: str = "droid"
+    # custom layout: comma-separated wire_key=SOURCE, SOURCE = camera:NAME, camera_chw:NAME, depth:NAME,
+    # state, state[i:j] or instruction.
+    key_map: str = ""
+    # Cameras to render and send, scene cameras first (front, left_top, right_top; wrist).
+    cameras: str = "left_top,wrist"
+    # Side of the square images sent (rendered at that size, not resized).
+    image_size: int = 224
+    # Also send each camera's depth (roboview/depth/<camera>, metres; for servers of RoboView's depth policies).
+    send_depth: bool = False
+    # Actions used from each chunk before asking again; 0: the whole chunk (openpi's LIBERO example uses 5, DROID 8).
+    replan_steps: int = 0
+    # What the server's actions are with --policy.control=joint: joint_position (targets, RoboView's action) or
+    # joint_velocity (rad/s, integrated at the control rate from the observed joints). With an end-effector
+    # control the model reads the EE state as its state and answers 7-d EE actions.
+    action_space: str = "joint_position"
+    # Gripper action: continuous (as sent; the env clips it to 0 open … 1 closed, or −1 … +1 in EE controls) or
+    # binary (closed above 0.5; in EE controls above 0).
+    gripper: str = "continuous"
+    # Name of the environment variable holding the API key (sent as `Authorization: Api-Key …`; never recorded).
+    api_key_env: str = "OPENPI_API_KEY"
+    # Seconds to open a connection and receive the metadata frame.
+    open_timeout_s: float = 10.0
+    # Seconds to wait for one answer.
+    timeout_s: float = 60.0
+    # Further attempts to open a dropped connection (waiting reconnect_backoff_s, doubling) before the run stops.
+    reconnects: int = 3
+    # Seconds before the first reconnection attempt (doubling with each further one).
+    reconnect_backoff_s: float = 0.5
+
+    doc = "a policy served over openpi's websocket protocol (--policy.url=ws://HOST:PORT)"
+
+    def __post_init__(self) -> None:
+        control_field(self)
+        if not self.url_list:
+            raise ValueError(
+                "--policy.url is required: ws://HOST:PORT of the openpi server (comma-separated for several)"
+            )
+        for url in self.url_list:
+            if not url.startswith(("ws://", "wss://")):
+                raise ValueError(
+                    f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)"
+                )
+        for name, value, allowed in (
+            ("action_space", self.action_space, ACTION_SPACES),
+            ("gripper", self.gripper, GRIPPER_MODES),
+        ):
+            if value not in allowed:
+                raise ValueError(f"unknown --policy.{name}={value!r}; allowed: {', '.join(allowed)}")
+        if self.control != "joint" and self.action_space != "joint_position":
+            raise ValueError(
+                f"--policy.action_space={self.action_space!r} is a joint action; with --policy.control="
+                f"{self.control} the server answers end-effector actions (leave --policy.action_space unset)"
+            )
+        unknown = [c for c in self.camera_list if c not in ALL_CAMERAS]
+        if unknown or not self.camera_list:
+            raise ValueError(
+                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
+                f"{', '.join(ALL_CAMERAS)}"
+            )
+        for name in ("image_size", "open_timeout_s", "timeout_s"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
+        for name in ("replan_steps", "reconnects"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
+        fmt = self.wire_format()  # validates obs_format / key_map against the cameras
+        missing = [c for c in fmt.cameras if c not in self.camera_list]
+        if missing:
+            raise ValueError(
+                f"--policy.key_map reads camera(s) {missing} not in --policy.cameras={self.cameras}"
+            )
+        # A server that is down fails here, before any rollout; its metadata goes into provenance.json.
+        self._metadata = {}
+        for url in self.url_list:
+            try:
+                conn = connect(url, self.api_key_env, self.open_timeout_s, self.timeout_s)
+            except Exception as exc:
+                raise ValueError(
+                    f"cannot reach the openpi server at --policy.url={url} ({type(exc).__name__}: "
+                    f"{exc}); is it running, and is the port right?"
+                ) from None
+            self._metadata[url] = _plain(conn.metadata)
+            conn.close()
+        super().__post_init__()
+
+    @property
+    def url_list(self) -> list[str]:
+        return [u.strip() for u in self.url.split(",") if u.strip()]
+
+    @property
+    def camera_list(self) -> tuple[str, ...]:
+        return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
+
+    @property
+    def depth(self) -> bool:  # type: ignore[override]
+        return self.send_depth
+
+    def wire_format(self) -> WireFormat:
+        return wire_format(self.obs_format, self.camera_list, self.key_map, self.send_depth)
+
+    def served_by(self) -> dict:
+        return {
+            "protocol": "openpi",
+            "urls": self.url_list,
+            "obs_format": self.obs_format,
+            "metadata": getattr(self, "_metadata", {}),
+        }
+
+    def observed_cameras(self) -> tuple[str, ...]:
+        return self.camera_list
+
+    def input_image_size(self) -> int | None:
+        return self.image_size
+
+    def options(self) -> dict[str, Any]:
+        # The URL is where the policy lives, not what it is: a resume may point at a restarted server.
+        return {k: v for k, v in super().options().items() if k != "url"}
+
+    def build(self, view: AgentView) -> OpenPIPolicy:
+        return OpenPIPolicy(self, view)

@@ -1,0 +1,46 @@
+"""The policy types: the modules that define them, loaded by name, and a config by type name.
+
+Each module listed here (or named by a `roboview.policies` entry point of another package) defines and
+registers a `PolicyConfig` subclass of `roboview.policies.base`; they import `roboview.policies.base`, so the list lives
+here, above them, and they are imported on demand, never when `roboview.policies.base` is.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+from typing import Any
+
+from roboview.policies.base import PolicyConfig, registered_types
+
+# Builtin policy types: modules that define and register a PolicyConfig subclass.
+BUILTIN_MODULES = (
+    "roboview.policies.adapters",
+    "roboview.policies.vision",
+    "roboview.policies.lerobot_policy",
+    "roboview.policies.vlm.simple",
+    "roboview.policies.vlm.moka",
+    "roboview.policies.openpi",
+    "roboview.policies.lerobot_async",
+    "roboview.policies.vla_eval",
+)
+# Third-party packages add types through entry points in this group, each naming such a module.
+ENTRY_POINT_GROUP = "roboview.policies"
+
+
+def load_policy_types() -> tuple[str, ...]:
+    """Import the builtin policy modules and every `roboview.policies` entry point; the type names."""
+    for module in BUILTIN_MODULES:
+        importlib.import_module(module)
+    for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        importlib.import_module(entry.value.split(":")[0])
+    return registered_types()
+
+
+def policy_config(type_name: str, **settings: Any) -> PolicyConfig:
+    """The config of policy type `type_name` with `settings` (what `--policy.type=… --policy.x=…`
+    gives)."""
+    known = load_policy_types()
+    if type_name not in known:
+        raise ValueError(f"unknown policy type {type_name!r}; allowed: {', '.join(known)}")
+    return PolicyConfig.get_choice_class(type_name)(**settings)

@@ -1,0 +1,106 @@
+"""What a task is, and the live registry of tasks.
+
+A task is what a policy is asked to do in the shared world (`roboview.sim`). A `Task` names its
+gymnasium id and env class, its privileged scripted expert, and the small context subsets the
+`tiny` presets use; everything else a task declares lives on its env class (`roboview.tasks.env.
+TaskEnv`): what it adds to the scene (`add_target`), its target (`target`, `target_geoms`,
+`target_xy`), how its context factors place the scene (`place_context`), its success test
+(`is_success`) and its scripted solution (`plan`). Its context factors are registered with
+`task=<name>` in the factor registry (`roboview.variation.factors.register_factor`). Envs are
+made through gymnasium (`make_env`), never by naming a class.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from roboview.sim.motion import PickPlacePlanner
+from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS
+from roboview.variation.factors import DEFAULT_TASK, context_factors
+
+
+def resolve(target: str) -> Any:
+    """The object a "module:attr" string names."""
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+@dataclass(frozen=True)
+class Task:
+    name: str
+    # Gymnasium id, registered with `max_episode_steps`.
+    gym_id: str
+    # "module:Class" of the gymnasium env, a `TaskEnv` (its scene additions, target, reset and success test).
+    env: str
+    # One line: when an episode of this task succeeds.
+    success: str
+    # What an episode that runs out of steps is recorded as ("… within N steps").
+    timeout_reason: str
+    # "module:Class" of the privileged scripted expert: `Expert(env)`, `.reset()`, `.select_action(obs)`.
+    # The default plans the env's own `plan` from the object's true pose.
+    expert: str = "roboview.tasks.env:ScriptedExpert"
+    # Context values of the small presets (`tiny`, `tiny_extended`), as (factor, values) pairs.
+    small_contexts: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    max_episode_steps: int = DEFAULT_MAX_STEPS
+
+    def context_factors(self) -> tuple[str, ...]:
+        return context_factors(self.name)
+
+    def env_class(self) -> type:
+        return resolve(self.env)
+
+    @property
+    def target(self) -> str | None:
+        """What besides the object a policy must find: "box", "zone", … or None."""
+        return self.env_class().target
+
+    def solve(
+        self,
+        planner: PickPlacePlanner,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        target_xy: np.ndarray | None,
+        arm_qpos: np.ndarray,
+    ) -> None:
+        """The task's scripted solution (its env's `plan`) from perceived poses, as a non-privileged agent
+        runs it: the object's extent is assumed (`ASSUMED_REACH_M`), the pinch point computed from the joints."""
+        self.env_class().plan(planner, obj_pos, obj_yaw, symmetry, ASSUMED_REACH_M, target_xy, arm_qpos)
+
+    def make_expert(self, env: gym.Env) -> Any:
+        return resolve(self.expert)(env)
+
+
+TASKS: dict[str, Task] = {}
+
+
+def register_task(task: Task) -> Task:
+    """Add `task` to the registry and gymnasium's (a name can be registered once)."""
+    if task.name in TASKS:
+        raise ValueError(f"task {task.name!r} is already registered")
+    if not context_factors(task.name):
+        raise ValueError(
+            f"task {task.name!r} has no context factors: register them first with "
+            f"register_factor(Factor(..., kind='context', task={task.name!r}))"
+        )
+    TASKS[task.name] = task
+    if task.gym_id not in gym.registry:
+        gym.register(id=task.gym_id, entry_point=task.env, max_episode_steps=task.max_episode_steps)
+    return task
+
+
+def load_task(name: str = DEFAULT_TASK) -> Task:
+    try:
+        return TASKS[name]
+    except KeyError:
+        raise ValueError(f"unknown task {name!r}; allowed: {', '.join(TASKS)}") from None
+
+
+def make_env(task: str = DEFAULT_TASK, **kwargs: Any) -> gym.Env:
+    """The task's env through `gym.make` (unwrapped: RoboView's loops read its scene and step counter)."""
+    return gym.make(load_task(task).gym_id, disable_env_checker=True, **kwargs).unwrapped

@@ -1,0 +1,480 @@
+"""The env every task builds on (`TaskEnv`), and the scripted expert that plans a task from ground truth.
+
+`TaskEnv` is the shared world as a gymnasium env: the robot, the cameras, rendering, the visual
+factors applied at every reset, stepping. A task subclasses it (`roboview.tasks.pick_place`,
+`roboview.tasks.push`) with what is its own: what it adds to the scene (`add_target`), where
+its context puts things (`place_context`), its success test (`is_success`), its target for the
+fairness gate and for perception (`target`, `target_geoms`, `target_xy`) and its scripted solution
+(`plan`), which the privileged `ScriptedExpert` drives from the true object pose and the `vision`
+policy from a perceived one.
+"""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import logging
+from collections.abc import Sequence
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from roboview.core.errors import RenderError
+from roboview.sim.cameras import ALL_CAMERAS, BASE_CAMERAS, check_image_size
+from roboview.sim.control import (
+    CONTROLS as CONTROLS,  # re-exported: the control modes a TaskEnv takes
+)
+from roboview.sim.control import (
+    EE_ACTION_NAMES,
+    EE_CONTROLS,
+    EE_STATE_NAMES,
+    EEController,
+    EndEffector,
+    JointToEE,
+    check_control,
+    ee_action_space_bounds,
+)
+from roboview.sim.motion import PickPlacePlanner, yaw_of
+from roboview.sim.observation import LazyObservation
+from roboview.sim.scene import (
+    GRIPPER_DRIVER_CLOSED,
+    HOME_QPOS,
+    SHAPES,
+    RenderQuality,
+    Scene,
+)
+from roboview.variation.factors import (
+    DEFAULT_TASK,
+    FACTORS,
+    SceneApplier,
+    baselines,
+    load_factor,
+    visual_factors,
+)
+from roboview.variation.instances import TaskInstance
+
+log = logging.getLogger(__name__)
+
+DEFAULT_MAX_STEPS = 120
+# The object's extent across the gripper (along a push) a non-privileged agent assumes, not knowing the
+# shape: a 4 cm solid.
+ASSUMED_REACH_M = 0.04
+STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
+ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
+IMAGE_KEY = "observation.images.{}"
+DEPTH_KEY = "observation.depth.{}"
+STATE_KEY = "observation.state"
+# The end-effector state (8: EE_STATE_NAMES), in every control mode's observations.
+EE_STATE_KEY = "observation.ee_state"
+
+# Per-episode jitter drawn from the episode seed (kept small so the named position stays meaningful).
+POSITION_JITTER_M = 0.01
+YAW_JITTER_RAD = 0.35
+# Success: the object is this still (m/s) and the gripper this open (0 open … 1 closed).
+REST_SPEED = 0.05
+UNSTABLE_REASON = "simulation unstable"
+RELEASED_GRIPPER = 0.25
+
+
+def action_names(control: str) -> tuple[str, ...]:
+    """The names of a control mode's action entries (a dataset's `action` feature names)."""
+    return ACTION_NAMES if check_control(control) == "joint" else EE_ACTION_NAMES[control]
+
+
+def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
+    """Every factor at its baseline: the scene the expert demos are rendered in."""
+    return TaskInstance(
+        split="baseline", varied=("color",), factors=baselines(task), context_subspace="base", task=task
+    )
+
+
+class TaskEnv(gym.Env):
+    """Franka Panda + Robotiq 2F-85 and one small object on a table, seen by four cameras; a task subclasses it.
+
+    **Observations** (keys are the LeRobot dataset's feature keys): ``observation.images.<camera>``
+    uint8 H×W×3 for each requested camera (``front``, ``left_top``, ``right_top``, ``wrist``),
+    optionally ``observation.depth.<camera>`` float32 H×W metres, ``observation.state`` float32
+    (8,) = 7 arm joint positions (rad) + gripper closure (0 open … 1 closed), and
+    ``observation.ee_state`` float32 (8,) = pinch-point position (m) + orientation axis-angle (rad), both
+    in the robot base frame, + the two finger openings (m) (`roboview.sim.control`).
+
+    **Actions** (`control`): ``joint`` float32 (8,): absolute target positions (rad) of the 7 arm joints,
+    tracked by joint position servos, and the gripper command (0 open … 1 closed), held for one control
+    period (1/fps s). ``ee_delta`` float32 (7,) in [-1, 1]: pinch-point position delta × 0.05 m and
+    axis-angle rotation delta × 0.5 rad (base frame, from the current pose), gripper +1 close / −1 open;
+    ``ee_abs`` float32 (7,): target pinch position (m) and axis-angle (rad), base frame, and the gripper.
+    Both end-effector modes become joint targets through inverse kinematics (`EEController`). Should
+    MuJoCo find the simulation unstable (NaN/Inf accelerations, after which it resets the state on its
+    own), the step truncates the episode with ``info["failure_reason"] == "simulation unstable"``.
+
+    **Randomizations** — the instance fixes every factor (the visual ones: object color, camera
+    pose / Euler perturbation / distance, …; the task's context: where the object starts, its
+    shape, the instruction). The episode seed adds only what the task's `place_context` draws (a
+    small jitter: object xy ± 1 cm and heading ± 0.35 rad for the built-in tasks) from a
+    `numpy.random.Generator` seeded by `reset(seed=...)` (default: the instance's seed).
+    Training-time domain randomization overrides the instance's visuals through reset options:
+    ``object_rgb`` (sRGB in [0, 1]) and ``cameras`` (scene camera name -> `CameraPose`).
+
+    **Success conditions** — the task's (`is_success`). The episode terminates on success and
+    truncates after `max_steps`.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    # The task this env runs (its name in roboview.tasks) and the context factor naming its instruction.
+    task: str = ""
+    instruction_factor: str = ""
+    # What the task adds for a policy to find besides the object ("box", "zone"; None: nothing). The
+    # fairness gate measures `target_geoms()` under the record's box_* fields; the `vision` policy's
+    # perception looks for it by this name.
+    target: str | None = None
+
+    # -- what a task declares ----------------------------------------------------------------
+    @staticmethod
+    def add_target(spec: mujoco.MjSpec) -> None:
+        """Add the task's own bodies/geoms to the scene spec (made once, before it is compiled)."""
+
+    def bind_target(self) -> None:
+        """Look up, once after compiling, the ids of what `add_target` added."""
+
+    def place_context(self, values: dict[str, str], rng: np.random.Generator) -> None:
+        """Put the object (`self.scene.place_object`) and the target where the instance's context says."""
+        raise NotImplementedError(f"{type(self).__name__} must define place_context")
+
+    def is_success(self) -> bool:
+        raise NotImplementedError(f"{type(self).__name__} must define is_success")
+
+    def target_geoms(self) -> tuple[int, ...]:
+        """Geom ids of the target the fairness gate requires visible (empty: none)."""
+        return ()
+
+    def target_xy(self) -> np.ndarray | None:
+        """Privileged: the target's world xy now (None when the task has no target)."""
+        return None
+
+    @staticmethod
+    def plan(
+        planner: PickPlacePlanner,
+        obj_pos: np.ndarray,
+        obj_yaw: float,
+        symmetry: float,
+        reach: float,
+        target_xy: np.ndarray | None,
+        arm_qpos: np.ndarray,
+        ee_pos: np.ndarray | None = None,
+    ) -> None:
+        """Lay out the task's scripted solution on `planner` from an object pose and the target's xy.
+
+        `reach` is the object's extent across the gripper (m); `ee_pos` the pinch point now (computed
+        from `arm_qpos` when None). The expert passes the true values, the `vision` policy perceived ones.
+        """
+        raise NotImplementedError("this task has no scripted solution")
+
+    def __init__(
+        self,
+        cameras: Sequence[str] = ALL_CAMERAS,
+        image_size: int = 224,
+        fps: int = 10,
+        max_steps: int = DEFAULT_MAX_STEPS,
+        depth: bool = False,
+        quality: RenderQuality = "fast",
+        render_mode: str | None = "rgb_array",
+        lazy: bool = False,
+        control: str = "joint",
+    ) -> None:
+        check_control(control)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(
+                f"render_mode={render_mode!r} unsupported; allowed: None, "
+                f"{', '.join(map(repr, self.metadata['render_modes']))}"
+            )
+        self.render_mode = render_mode
+        unknown = [c for c in cameras if c not in ALL_CAMERAS]
+        if unknown or not cameras:
+            raise ValueError(
+                f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}"
+            )
+        check_image_size(image_size)
+        if fps <= 0 or 500 % fps:
+            raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
+        if max_steps <= 0:
+            raise ValueError(f"max_steps={max_steps} must be positive")
+        self.cameras = tuple(cameras)
+        self.image_size = image_size
+        self.fps = fps
+        self.max_steps = max_steps
+        self.depth = depth
+        self.control = control
+        # Lazy: observations render their cameras when read (roboview.sim.observation), so steps
+        # whose images no one reads cost physics only; the pixels are those eager rendering gives.
+        self.lazy = lazy
+        self._generation = 0  # bumped on every reset/step: a lazy observation is readable only at its own
+        extras = [f.extend_spec for f in FACTORS.values() if f.extend_spec is not None]
+        self.scene = Scene(quality, target=type(self).add_target, extras=extras)
+        self.model, self.data = self.scene.model, self.scene.data
+        self.n_substeps = round(1.0 / (fps * self.model.opt.timestep))
+        self._renderer: mujoco.Renderer | None = None
+        self._depth_renderer: mujoco.Renderer | None = None
+        self._open_renderers: list[mujoco.Renderer] = []
+        self._appliers: dict[str, SceneApplier] = {}
+        self.bind_target()
+        self.end_effector = EndEffector(self.model)
+        self.controller = (
+            EEController(self.model, control, self.end_effector) if control in EE_CONTROLS else None
+        )
+        self.instance = baseline_instance(self.task)
+        self.instruction = self.instance.get(self.instruction_factor)
+        self.steps = 0
+
+        arm_range = self.scene.ids.arm_range
+        low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
+        high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
+        # The joint-target action (what the scripted planners plan in, whatever the control).
+        self.joint_action_space = gym.spaces.Box(low, high, dtype=np.float32)
+        if control == "joint":
+            self.action_space = self.joint_action_space
+        else:
+            self.action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
+        spaces = {
+            IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
+            for c in self.cameras
+        }
+        if depth:
+            spaces |= {
+                DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
+                for c in self.cameras
+            }
+        spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
+        spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(EE_STATE_NAMES),), np.float32)
+        self.observation_space = gym.spaces.Dict(spaces)
+
+    # -- rendering ---------------------------------------------------------------------------
+    def new_renderer(self) -> mujoco.Renderer:
+        """A renderer at the env's image size, closed with the env (or at exit, while EGL is up)."""
+        return self._track(mujoco.Renderer(self.model, self.image_size, self.image_size))
+
+    def _track(self, renderer: mujoco.Renderer) -> mujoco.Renderer:
+        # GL contexts must be freed before interpreter teardown, not by __del__ during it; the
+        # hook is registered after mujoco.egl's own (made with the first context), so it runs first.
+        if not self._open_renderers:
+            atexit.register(TaskEnv._close_renderers, self._open_renderers)
+        self._open_renderers.append(renderer)
+        return renderer
+
+    @property
+    def renderer(self) -> mujoco.Renderer:
+        # Created lazily and reused: a Renderer costs ~0.7 s and must live in the process using it.
+        if self._renderer is None:
+            self._renderer = self.new_renderer()
+        return self._renderer
+
+    def render_camera(self, camera: str, depth: bool = False) -> np.ndarray:
+        """One camera's image (or depth map) now. A renderer that fails (a lost GL context, out of GPU memory)
+        raises `RenderError`: the evaluator records that episode as ended by infrastructure."""
+        # an unknown camera is the caller's error, not a render failure
+        camera_id = self.scene.ids.cameras[camera]
+        try:
+            if depth:
+                if self._depth_renderer is None:
+                    self._depth_renderer = self.new_renderer()
+                    self._depth_renderer.enable_depth_rendering()
+                renderer = self._depth_renderer
+            else:
+                renderer = self.renderer
+            renderer.update_scene(self.data, camera=camera_id)
+            return renderer.render()
+        except Exception as exc:
+            raise RenderError(
+                f"rendering camera {camera!r}{' (depth)' if depth else ''} failed: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+
+    def render(self) -> np.ndarray:
+        return self.render_camera(self.cameras[0])
+
+    # -- gym API -----------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        options = options or {}
+        instance = options.get("instance", self.instance)
+        if not isinstance(instance, TaskInstance):
+            raise TypeError(f"options['instance'] must be a TaskInstance, got {type(instance).__name__}")
+        episode_seed = instance.seed if seed is None else seed
+        super().reset(seed=episode_seed)
+        rng = np.random.default_rng(episode_seed)
+        if instance.task != self.task:
+            raise ValueError(
+                f"instance {instance.instance_id} is a {instance.task!r} instance; this env runs "
+                f"{self.task!r} (make the env with make_env({instance.task!r}))"
+            )
+        self.instance = instance
+        self.instruction = instance.get(self.instruction_factor)
+        self.steps = 0
+
+        cameras = options.get("cameras", {})
+        for name, pose in cameras.items():
+            if name not in BASE_CAMERAS or pose.name != name:
+                raise ValueError(
+                    f"options['cameras'][{name!r}]: only the scene cameras {sorted(BASE_CAMERAS)} can "
+                    f"be posed (pose named {pose.name!r})"
+                )
+        rgb = np.asarray(options.get("object_rgb", (0.0, 0.0, 0.0)), dtype=float)
+        if rgb.shape != (3,) or not np.all((rgb >= 0) & (rgb <= 1)):
+            raise ValueError(
+                f"options['object_rgb']={options['object_rgb']!r} must be 3 sRGB values in [0, 1]"
+            )
+
+        mujoco.mj_resetData(self.model, self.data)
+        values = instance.factor_values
+        # Context (the task's own): where the object starts, with the episode's jitter, and the rest.
+        self.place_context(values, rng)
+        # Visual factors: every registered one writes its value into the compiled model, in order.
+        for pose in BASE_CAMERAS.values():
+            self.scene.set_camera(pose)
+        for name in visual_factors():
+            self.applier(name).apply(values[name], rng)
+        # Training-time domain randomization overrides the instance's visuals.
+        for pose in cameras.values():
+            self.scene.set_camera(pose)
+        if "object_rgb" in options:
+            self.model.geom_rgba[self.scene.active_geom] = [*rgb, 1.0]
+        self.scene.reset_robot(HOME_QPOS)
+        mujoco.mj_forward(self.model, self.data)
+        self._generation += 1
+        return self._observation(), self._info()
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != self.action_space.shape or not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be {self.action_space.shape} finite values, got {action!r}")
+        action = np.clip(action, self.action_space.low, self.action_space.high)
+        if self.controller is not None:
+            action = self.controller.joint_action(self.data.qpos, action)
+        self.data.ctrl[self.scene.ids.arm_actuators] = action[:7]
+        self.data.ctrl[self.scene.ids.gripper_actuator] = 255.0 * action[7]
+        self._generation += 1  # before the state changes: any lazy observation still unread is now stale
+        mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
+        self.steps += 1
+        if self.unstable:
+            # MuJoCo found NaN/Inf accelerations and silently reset the state to the model's defaults:
+            # what follows is no longer this episode, so it ends here as a failure.
+            info = self._info() | {"failure_reason": UNSTABLE_REASON}
+            return self._observation(), 0.0, False, True, info
+        success = self.is_success()
+        truncated = self.steps >= self.max_steps and not success
+        return self._observation(), float(success), success, truncated, self._info(success)
+
+    def applier(self, factor: str) -> SceneApplier:
+        """The factor's applier bound to this env's scene (bound on first use, then reused)."""
+        if factor not in self._appliers:
+            self._appliers[factor] = load_factor(factor).bind(self.scene)
+        return self._appliers[factor]
+
+    @property
+    def unstable(self) -> bool:
+        """True once MuJoCo reported an unstable simulation (bad accelerations) this episode."""
+        return self.data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
+
+    # -- state -------------------------------------------------------------------------------
+    @property
+    def shape(self) -> str:
+        return self.scene.active_shape
+
+    def gripper_closure(self) -> float:
+        return float(np.clip(self.data.qpos[self.scene.ids.gripper_qpos] / GRIPPER_DRIVER_CLOSED, 0.0, 1.0))
+
+    def state(self) -> np.ndarray:
+        q = self.data.qpos[self.scene.ids.arm_qpos]
+        return np.append(q, self.gripper_closure()).astype(np.float32)
+
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Privileged: world position and quaternion [w,x,y,z] of the active object."""
+        body = self.scene.ids.shape_body[self.shape]
+        return self.data.xpos[body].copy(), self.data.xquat[body].copy()
+
+    def ee_state(self) -> np.ndarray:
+        """float32 (8): pinch position + orientation axis-angle (base frame) + finger openings (EE_STATE_NAMES)."""
+        return self.end_effector.state(self.data.qpos)
+
+    def ee_position(self) -> np.ndarray:
+        return self.data.site_xpos[self.scene.ids.pinch_site].copy()
+
+    def object_touches_robot(self) -> bool:
+        geom = self.scene.ids.shape_geom[self.shape]
+        robot = self.scene.ids.robot_geoms
+        for c in self.data.contact[: self.data.ncon]:
+            if (c.geom1 == geom and c.geom2 in robot) or (c.geom2 == geom and c.geom1 in robot):
+                return True
+        return False
+
+    def object_speed(self) -> float:
+        """Privileged: the active object's linear speed (m/s)."""
+        dof = self.scene.ids.shape_dof[self.shape]
+        return float(np.linalg.norm(self.data.qvel[dof : dof + 3]))
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}
+        if self.depth:
+            renders |= {DEPTH_KEY.format(c): functools.partial(self._render_depth, c) for c in self.cameras}
+        state = {STATE_KEY: self.state(), EE_STATE_KEY: self.ee_state()}
+        if self.lazy:
+            generation = self._generation
+            return LazyObservation(state, renders, lambda: self._generation == generation)
+        return {key: render() for key, render in renders.items()} | state
+
+    def _render_depth(self, camera: str) -> np.ndarray:
+        return self.render_camera(camera, depth=True).astype(np.float32)
+
+    def _info(self, success: bool = False) -> dict:
+        return {
+            "is_success": success,
+            "instance_id": self.instance.instance_id,
+            "task": self.instruction,
+            "steps": self.steps,
+        }
+
+    @staticmethod
+    def _close_renderers(renderers: list[mujoco.Renderer]) -> None:
+        while renderers:
+            renderers.pop().close()
+
+    def close(self) -> None:
+        self._close_renderers(self._open_renderers)
+        self._renderer = self._depth_renderer = None
+
+
+class ScriptedExpert:
+    """Privileged: reads the object's true pose and the target's, then follows the task's `plan`.
+
+    It solves every context at baseline visuals, so a benchmark that biases it is broken. It plans joint
+    targets; an env with end-effector control gets the EE action commanding the same pinch pose
+    (`JointToEE`: the targets' forward kinematics for ee_abs, their difference from the EE state for ee_delta).
+    """
+
+    name = "expert"
+
+    def __init__(self, env: TaskEnv) -> None:
+        self.env = env
+        self.planner = PickPlacePlanner(env.model)
+        self._to_ee = (
+            JointToEE(env.model, env.control, self.planner.ik) if env.control in EE_CONTROLS else None
+        )
+
+    def reset(self) -> None:
+        """Plan from the current (just reset) simulator state."""
+        env = self.env
+        obj_pos, obj_quat = env.object_pose()
+        shape = SHAPES[env.shape]
+        env.plan(
+            self.planner,
+            obj_pos,
+            yaw_of(obj_quat),
+            shape.symmetry,
+            shape.grasp_width,
+            env.target_xy(),
+            env.data.qpos[env.scene.ids.arm_qpos],
+            ee_pos=env.ee_position(),
+        )
+
+    def select_action(self, observation: dict | None = None) -> np.ndarray:
+        action = self.planner.next_action()
+        return action if self._to_ee is None else self._to_ee(action, self.env.ee_state())

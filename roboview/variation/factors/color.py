@@ -1,0 +1,39 @@
+"""`color`: the manipulated object's RGB, one of 141 CSS named colors (roboview.variation.colors)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from roboview.variation.colors import COLORS, get_color
+from roboview.variation.factors.base import Factor, register_factor
+
+
+class ObjectColor:
+    """Writes the color into the rgba of the object the task placed (`scene.active_geom`)."""
+
+    def __init__(self, scene) -> None:
+        self.scene = scene
+        self.geom_rgba = scene.model.geom_rgba  # a view: writes go straight into the compiled model
+
+    def apply(self, value: str, rng: np.random.Generator) -> None:
+        self.geom_rgba[self.scene.active_geom] = [*get_color(value).rgb, 1.0]
+
+
+def _columns(value: str) -> dict:
+    color = get_color(value)
+    return {"color_hex": color.hex, "color_rgb": list(color.rgb), "color_lab": list(color.lab)}
+
+
+COLOR = register_factor(
+    Factor(
+        name="color",
+        kind="visual",
+        values=tuple(sorted(COLORS)),
+        baseline="red",
+        doc="RGB of the manipulated object: a CSS named color (roboview.variation.colors).",
+        title="Color",
+        bind=ObjectColor,
+        record_columns=_columns,
+        always_in_id=True,
+    )
+)
