@@ -261,7 +261,7 @@ def requests_per_second(cfg: ServingConfig, port: int, observations: list[dict])
 def observations_for(cfg: ServingConfig, bench: str, image_size: int, cameras: tuple[str, ...]) -> list[dict]:
     """Real first observations of the split's instances, in the droid wire layout."""
     from roboview.benchmark.format import load_benchmark
-    from roboview.policies.openpi import wire_format
+    from roboview.policies.serving.openpi_wire import wire_format
     from roboview.tasks import make_env
 
     items = load_benchmark(bench, [cfg.split]).splits[cfg.split][:16]

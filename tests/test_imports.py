@@ -263,7 +263,8 @@ FLOORS = (
     ("roboview.policies",),
     ("roboview.eval.running",),
     ("roboview.eval.statistics",),
-    ("roboview.eval.reporting", "roboview.eval"),
+    ("roboview.eval.reporting",),
+    ("roboview.eval.verification", "roboview.eval"),
     ("roboview.integrations",),
     ("roboview.pipelines", "benchmarks"),
 )

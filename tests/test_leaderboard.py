@@ -162,16 +162,16 @@ def test_other_versions_tampered_and_missing_bundles_are_listed_apart(bundles, t
 
 def test_replay_refuses_edited_rows(bundles, tmp_path):
     """Rows edited in place (no bundle.json to compare with) are caught by re-running them."""
-    from roboview.pipelines.verify import VerifyConfig, verify_results
+    from roboview.eval.verification import verify_results
 
     edited = tmp_path / "edited"
     shutil.copytree(bundles["random"], edited)
     _flip_success(edited / "episodes.parquet", n=18)
-    result = verify_results(VerifyConfig(results=str(edited), replay=6))
+    result = verify_results(edited, replay=6)
     replay = {c.name: c for c in result.checks}["replay"]
     assert not replay.passed and "6 of 6 re-run episodes end differently" in replay.detail
     assert "success True → False" in replay.detail
-    honest = verify_results(VerifyConfig(results=str(bundles["random"]), replay=3))
+    honest = verify_results(bundles["random"], replay=3)
     assert {c.name: c for c in honest.checks}["replay"].passed
 
 

@@ -203,7 +203,7 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
 
 
 def test_every_layout_carries_the_observation_there_and_back(env):
-    from roboview.policies.openpi import wire_format
+    from roboview.policies.serving.openpi_wire import wire_format
     from roboview.tasks.env import IMAGE_KEY, STATE_KEY
 
     obs, _ = env.reset(seed=5)
@@ -365,7 +365,7 @@ def test_openpi_client_against_serve_policy_batches_connections(tiny_benchmark, 
 
     from roboview.benchmark.format import load_benchmark
     from roboview.policies.lerobot_policy import LeRobotPolicy
-    from roboview.policies.openpi import wire_format
+    from roboview.policies.serving.openpi_wire import wire_format
     from roboview.tasks import make_env
 
     items = load_benchmark(tiny_benchmark, ["color"]).splits["color"][:4]

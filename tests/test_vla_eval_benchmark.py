@@ -32,7 +32,7 @@ from vla_eval.specs import (
 from roboview.benchmark.format import load_benchmark
 from roboview.integrations.vla_eval.benchmark import RoboViewBenchmark
 from roboview.integrations.vla_eval.convert import convert, read_aggregates
-from roboview.policies.vla_eval_specs import JOINT_TARGETS
+from roboview.policies.serving.vla_eval_specs import JOINT_TARGETS
 from roboview.tasks import load_task, make_env
 from roboview.variation.instances import episode_seed
 

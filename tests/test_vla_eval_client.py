@@ -40,8 +40,8 @@ from vla_eval.specs import (
 from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, main, run
 from roboview.policies.base import Episode
 from roboview.policies.errors import InfraError, PolicyUnavailable
+from roboview.policies.serving.vla_eval_specs import SpecMismatch
 from roboview.policies.types import policy_config
-from roboview.policies.vla_eval_specs import SpecMismatch
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
 
 ROOT = Path(__file__).resolve().parents[1]

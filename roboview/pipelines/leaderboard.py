@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import datetime
+import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,6 @@ from roboview.eval.reporting.leaderboard import (
     Board,
     Entry,
     Rejected,
-    is_privileged,
     labels_for,
     write_board,
 )
@@ -100,14 +100,14 @@ def check_bundle(path: Path, benchmark: Path, version: str) -> str | None:
     """Why the bundle at `path` cannot be ranked on the board of `benchmark` (version `version`); None: it can."""
     from roboview.eval.running.inputs import results_folder_problem
     from roboview.eval.running.results import PARQUET, read_version
-    from roboview.pipelines.verify import VerifyConfig, verify_results
+    from roboview.eval.verification import verify_results
 
     if problem := results_folder_problem(path):
         return problem
     recorded = read_version(path / PARQUET)
     if recorded != version:
         return f"results of benchmark {recorded}; this board ranks {version}"
-    result = verify_results(VerifyConfig(benchmark=BenchmarkPath(str(benchmark)), results=str(path)))
+    result = verify_results(path, benchmark)
     failed = [f"{c.name}: {c.detail}" for c in result.checks if not c.passed]
     return "verification failed — " + "; ".join(failed) if failed else None
 
@@ -134,7 +134,7 @@ def run(cfg: LeaderboardConfig) -> Board:
     from roboview.benchmark.format import load_benchmark
     from roboview.eval.reporting.leaderboard import rank_metrics, single_policy_rows
     from roboview.eval.reporting.markdown import HTML_FILE, load_results, write_report
-    from roboview.eval.running.results import PARQUET, STATUS, counted
+    from roboview.eval.running.results import PARQUET, RUN_FILE, STATUS, counted, is_privileged_run
     from roboview.eval.statistics.metrics import compute_all_metrics
 
     rejected: list[Rejected] = []
@@ -176,7 +176,7 @@ def run(cfg: LeaderboardConfig) -> Board:
         episodes, sources = load_results([p / PARQUET for p in accepted.values()], labels)
         metrics = compute_all_metrics(episodes, cfg.metrics)
         several = "policies" in metrics
-        for label, policy, source, src in zip(labels, policies, accepted, sources):
+        for label, policy, (source, path), src in zip(labels, policies, accepted.items(), sources):
             own = episodes[episodes["policy"] == label]
             report_dir = out / "reports" / label.replace("/", "_")
             # The bundle's own metrics are those just computed for it among the others: not computed again.
@@ -189,7 +189,7 @@ def run(cfg: LeaderboardConfig) -> Board:
                     policy,
                     str((report_dir / HTML_FILE).relative_to(out)),
                     int((counted(own)).shape[0]),
-                    is_privileged(policy),
+                    is_privileged_run(json.loads((path / RUN_FILE).read_text())),
                 )
             )
         if several:

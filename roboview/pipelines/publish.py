@@ -256,14 +256,13 @@ def stage_results(cfg: PublishConfig) -> tuple[Path, dict[str, Any], str | None]
     import pandas as pd
 
     from roboview.eval.reporting import bundle
-    from roboview.eval.reporting.format import PRIVILEGED_POLICIES
     from roboview.eval.reporting.markdown import HTML_FILE, REPORT_FILE, load_results, write_report
     from roboview.eval.running import provenance
-    from roboview.eval.running.results import PARQUET, counted
-    from roboview.pipelines.verify import VerifyConfig, benchmark_path, verify_results
+    from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
+    from roboview.eval.verification import benchmark_path, verify_results
 
     results = Path(cfg.results)
-    verified = verify_results(VerifyConfig(benchmark=cfg.benchmark, results=cfg.results))
+    verified = verify_results(results, cfg.benchmark.path or None)
     failed = [c for c in verified.checks if not c.passed]
     if failed:
         raise PublishError(
@@ -287,7 +286,7 @@ def stage_results(cfg: PublishConfig) -> tuple[Path, dict[str, Any], str | None]
     bundle.copy_results(results, staging)
     report = write_report(episodes, staging / bundle.REPORT_DIR, sources=sources)
     entries = provenance.read(results)
-    bench_root = benchmark_path(VerifyConfig(benchmark=cfg.benchmark, results=cfg.results), results)
+    bench_root = benchmark_path(results, cfg.benchmark.path or None)
     manifest = json.loads((bench_root / MANIFEST).read_text())
     checks = [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in verified.checks]
     identity = {
@@ -318,7 +317,7 @@ def stage_results(cfg: PublishConfig) -> tuple[Path, dict[str, Any], str | None]
             identity=identity,
             checks=checks,
             report_md=(report.output_dir / REPORT_FILE).read_text(),
-            privileged=policy.partition("+")[0] in PRIVILEGED_POLICIES,
+            privileged=is_privileged_run(json.loads((results / RUN_FILE).read_text())),
         )
     )
     assert (report.output_dir / HTML_FILE).is_file()

@@ -8,7 +8,7 @@
 The protocol is vla-eval's (allenai/vla-evaluation-harness): a websocket of msgpack frames built and read by
 vla-eval's own `pack_message` / `unpack_message` (arrays by its numpy codec, images as `--policy.image_format`).
 HELLO first; the answer carries the server's action and observation specs, which are negotiated
-(`roboview.policies.vla_eval_specs`) before any episode: the env control, the cameras, the state. Then, per env slot,
+(`roboview.policies.serving.vla_eval_specs`) before any episode: the env control, the cameras, the state. Then, per env slot,
 one websocket: EPISODE_START with the instance's instruction, task and episode seed, one
 OBSERVATION per step (`images` {camera: H×W×3 uint8}, `task_description`, the state as `states` and `state`,
 the two spellings vla-eval's servers read), one ACTION back, EPISODE_END when the next episode starts. As in
@@ -42,7 +42,7 @@ import numpy as np
 from roboview.core.workers import worker_rank
 from roboview.policies.base import AgentView, Episode, PolicyConfig
 from roboview.policies.errors import InfraError, open_with_retries
-from roboview.policies.vla_eval_specs import Negotiated, negotiate
+from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
 from roboview.sim.cameras import ALL_CAMERAS
 from roboview.sim.control import CONTROLS
 from roboview.tasks.env import IMAGE_KEY

@@ -51,6 +51,10 @@ class Task:
     def context_factors(self) -> tuple[str, ...]:
         return context_factors(self.name)
 
+    def timeout_failure(self, max_steps: int) -> str:
+        """The failure reason of an episode that ran out of steps: "<timeout_reason> within N steps"."""
+        return f"{self.timeout_reason} within {max_steps} steps"
+
     def env_class(self) -> type:
         return resolve(self.env)
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from roboview.eval.reporting.format import PRIVILEGED_POLICIES, pct, pct_ci, split_title
+from roboview.eval.reporting.format import pct, pct_ci, split_title
 from roboview.eval.statistics.ranking import ALPHA, pooled_p_sr, rank_table
 from roboview.eval.statistics.tables import wilson_ci95
 
@@ -66,10 +66,6 @@ class Board:
 
     def to_json(self) -> dict[str, Any]:
         return {"format": BOARD_FORMAT, "adjustment": "holm"} | asdict(self)
-
-
-def is_privileged(policy: str) -> bool:
-    return str(policy).partition("+")[0] in PRIVILEGED_POLICIES
 
 
 def _rows(

@@ -35,19 +35,21 @@ import pyarrow.parquet as pq
 
 from roboview.core.folders import folder_problem
 from roboview.eval.running import provenance
+from roboview.eval.running.row import INFRA_ERROR, STATUS  # noqa: F401  (re-exported: readers of results)
 
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
 RUN_FILE = "run.json"
 # run.json keys added later, with the value every run written before them had (a resume of such a run matches).
 RUN_DEFAULTS = {"control": "joint"}
+# run.json keys added later that follow from the others (`privileged` from the policy type): a run.json without
+# them matches whatever this run records.
+RUN_DERIVED = ("privileged",)
 VERSION_KEY = "roboview_benchmark_version"  # parquet metadata key: the benchmark version a results file ran
 FORMAT_KEY = b"roboview_results_format"
 # 2: episode seeds from (context_id, repeat), shared by every value of a context (common random
 # numbers); 1 (or no key): seeds hashed from instance_id. The two must never be mixed.
 RESULTS_FORMAT = 2
-STATUS = "status"
-INFRA_ERROR = "infra_error"
 
 
 class ResultsError(ValueError):
@@ -84,7 +86,7 @@ class EpisodeStore:
             diffs = [
                 f"{k}: existing {previous.get(k, RUN_DEFAULTS.get(k))!r} vs requested {v!r}"
                 for k, v in self.run_info.items()
-                if previous.get(k, RUN_DEFAULTS.get(k)) != v
+                if previous.get(k, RUN_DEFAULTS.get(k)) != v and (k in previous or k not in RUN_DERIVED)
             ]
             if diffs:
                 raise ResultsError(
@@ -297,3 +299,15 @@ def merge_folders(
     provenance.write(Path(out), entries)
     store.close()
     return store, {k: len(v) for k, v in per_folder.items()}
+
+
+def is_privileged_run(run: dict) -> bool:
+    """Whether a results folder's run.json records a privileged policy (one that reads the simulator state).
+    run.json written before the `privileged` key: the recorded type's `PolicyConfig.privileged`."""
+    if "privileged" in run:
+        return bool(run["privileged"])
+    from roboview.policies.base import PolicyConfig
+    from roboview.policies.types import load_policy_types
+
+    kind = str(run.get("policy") or "")
+    return kind in load_policy_types() and PolicyConfig.get_choice_class(kind).privileged

@@ -25,7 +25,7 @@ from roboview.benchmark.format import BenchmarkItem
 from roboview.core.workers import set_worker_rank
 from roboview.eval.running import isolation
 from roboview.eval.running.policy_server import RemotePolicy, ServerHandle
-from roboview.eval.running.results import INFRA_ERROR
+from roboview.eval.running.row import INFRA_ERROR, STATUS_OK, EpisodeRow
 from roboview.policies.base import Episode, PolicyConfig, TransientPolicyError
 from roboview.policies.errors import InfraError, PolicyUnavailable
 from roboview.policies.factory import make_policy_batch
@@ -42,7 +42,6 @@ TRANSIENT_ERRORS = (TimeoutError, ConnectionError, TransientPolicyError)
 POLICY_RETRIES = 2
 RETRY_BACKOFF_S = 0.5
 # The `status` column of an episode row (roboview.eval.running.results reads it: `counted`).
-STATUS_OK, STATUS_INFRA = "ok", INFRA_ERROR
 
 
 class PolicyFailed(Exception):
@@ -317,23 +316,24 @@ class EvalWorker:
                 ep.error
                 or ep.info.get("failure_reason")
                 or self.batch.failure_reason(slot)
-                or f"{load_task(self.spec.task).timeout_reason} within {env.max_steps} steps"
+                or load_task(self.spec.task).timeout_failure(env.max_steps)
             )
         )
-        row = {
-            **record,
-            "repeat": ep.work.repeat,
-            "episode_seed": ep.seed,
-            "success": bool(ep.success),
-            "steps": env.steps,
-            "duration_s": time.perf_counter() - ep.start,
-            "policy": self.spec.policy.name or self.batch.name,
-            "failure_reason": reason,
-            "isolation": ep.isolation,
-            "status": STATUS_INFRA if ep.infra else STATUS_OK,
-        }
-        # A policy's own columns (VLM usage, the refined instruction, ...).
-        row |= {k: v for k, v in self.batch.episode_record(slot).items() if k not in row}
+        row = EpisodeRow(
+            record,
+            repeat=ep.work.repeat,
+            episode_seed=ep.seed,
+            success=bool(ep.success),
+            steps=env.steps,
+            duration_s=time.perf_counter() - ep.start,
+            policy=self.spec.policy.name or self.batch.name,
+            failure_reason=reason,
+            isolation=ep.isolation,
+            status=INFRA_ERROR if ep.infra else STATUS_OK,
+            extra=self.batch.episode_record(
+                slot
+            ),  # a policy's own columns (VLM usage, the refined instruction, ...)
+        ).as_dict()
         result = EpisodeResult(row)
         if self.spec.record_media:
             result.frames, result.ee_path, result.object_path = ep.frames, np.array(ep.ee), np.array(ep.obj)
@@ -356,15 +356,14 @@ def lost_row(work: WorkItem, reason: str, policy: str | None) -> dict:
     """The row of an episode whose worker died (no worker is left to say more): status infra_error, `policy`
     the run's policy name where known (else None: the evaluator fills it in)."""
     record = work.item.record
-    return {
-        **record,
-        "repeat": work.repeat,
-        "episode_seed": episode_seed(record["context_id"], work.repeat),
-        "success": False,
-        "steps": 0,
-        "duration_s": 0.0,
-        "policy": policy,
-        "failure_reason": reason,
-        "isolation": None,
-        "status": STATUS_INFRA,
-    }
+    return EpisodeRow(
+        record,
+        repeat=work.repeat,
+        episode_seed=episode_seed(record["context_id"], work.repeat),
+        success=False,
+        steps=0,
+        duration_s=0.0,
+        policy=policy,
+        failure_reason=reason,
+        status=INFRA_ERROR,
+    ).as_dict()

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from roboview.eval.running.results import EpisodeStore
+from roboview.eval.running.row import EpisodeRow
 from roboview.integrations.lerobot import RoboViewEnv
 from roboview.integrations.lerobot.env import episode_plan
 from roboview.variation.instances import episode_seed
@@ -79,16 +80,16 @@ def convert(
     for split, done in per_split.items():
         for (item, repeat), success in zip(plans[split][1], done):
             store.add(
-                {
-                    **item.record,
-                    "repeat": repeat,
-                    "episode_seed": episode_seed(item.record["context_id"], repeat),
-                    "success": success,
-                    "steps": None,
-                    "duration_s": None,
-                    "policy": policy_name,
-                    "failure_reason": "" if success else NO_REASON,
-                }
+                EpisodeRow(
+                    item.record,
+                    repeat=repeat,
+                    episode_seed=episode_seed(item.record["context_id"], repeat),
+                    success=success,
+                    steps=None,
+                    duration_s=None,
+                    policy=policy_name,
+                    failure_reason="" if success else NO_REASON,
+                ).as_dict()
             )
     store.close()
     return Path(output_dir) / "episodes.parquet"

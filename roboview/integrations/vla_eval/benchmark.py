@@ -29,7 +29,7 @@ from vla_eval.benchmarks.base import StepBenchmark, StepResult
 from vla_eval.specs import IMAGE_RGB, LANGUAGE, DimSpec
 from vla_eval.types import Action, EpisodeResult, Observation, Task
 
-from roboview.policies.vla_eval_specs import ACTION_SPECS, STATE_SPECS
+from roboview.policies.serving.vla_eval_specs import ACTION_SPECS, STATE_SPECS
 
 log = logging.getLogger(__name__)
 
@@ -243,7 +243,7 @@ class RoboViewBenchmark(StepBenchmark):
         elif self._error or self._info.get("failure_reason"):
             reason = self._error or self._info["failure_reason"]
         elif env.steps >= env.max_steps:
-            reason = f"{load_task(env.task).timeout_reason} within {env.max_steps} steps"
+            reason = load_task(env.task).timeout_failure(env.max_steps)
         else:
             reason = f"stopped by vla-eval's max_steps after {env.steps} of {env.max_steps} steps"
         result = {

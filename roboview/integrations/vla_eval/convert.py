@@ -23,7 +23,8 @@ from pathlib import Path
 
 from roboview.benchmark.format import load_benchmark
 from roboview.eval.running import provenance
-from roboview.eval.running.results import INFRA_ERROR, EpisodeStore
+from roboview.eval.running.results import EpisodeStore
+from roboview.eval.running.row import INFRA_ERROR, EpisodeRow
 from roboview.integrations.vla_eval.benchmark import RoboViewBenchmark
 
 BENCHMARK_CLASS = f"{RoboViewBenchmark.__module__}:{RoboViewBenchmark.__name__}"
@@ -57,35 +58,33 @@ def episode_row(episode: dict, record: dict, policy: str, verdict: str) -> dict:
     """The RoboView row of one vla-eval episode (its task fields sit at the top, the result under metrics);
     `verdict`: the conformance verdict of the process that ran it, for an episode that returned no result."""
     metrics = episode.get("metrics") or {}
-    repeat = int(episode["repeat"])
-    row = {
-        **record,
-        "repeat": repeat,
-        # The seed the episode was reset with (roboview.pipelines.verify checks it is its (context, repeat)'s).
-        "episode_seed": int(episode["episode_seed"]),
-        "duration_s": episode.get("elapsed_sec"),
-        "policy": policy,
-    }
+    common = dict(
+        record=record,
+        repeat=int(episode["repeat"]),
+        # The seed the episode was reset with (roboview-verify checks it is its (context, repeat)'s).
+        episode_seed=int(episode["episode_seed"]),
+        duration_s=episode.get("elapsed_sec"),
+        policy=policy,
+    )
     if episode.get("failure_reason") or "steps" not in metrics:  # vla-eval recorded the episode as errored
         detail = (episode.get("failure_detail") or "").strip().splitlines()
         reason = episode.get("failure_reason") or "no result"
-        return row | {
-            "success": False,
-            "steps": int(episode.get("steps") or 0),
-            "failure_reason": f"infrastructure error: vla-eval {reason}"
-            + (f": {detail[-1]}" if detail else ""),
-            "isolation": None,
-            "status": INFRA_ERROR,
-            "conformance": verdict,
-        }
-    return row | {
-        "success": bool(metrics["success"]),
-        "steps": int(metrics["steps"]),
-        "failure_reason": metrics["failure_reason"],
-        "isolation": metrics["isolation"],
-        "status": "ok",
-        "conformance": metrics["conformance"],
-    }
+        return EpisodeRow(
+            **common,
+            success=False,
+            steps=int(episode.get("steps") or 0),
+            failure_reason=f"infrastructure error: vla-eval {reason}" + (f": {detail[-1]}" if detail else ""),
+            status=INFRA_ERROR,
+            conformance=verdict,
+        ).as_dict()
+    return EpisodeRow(
+        **common,
+        success=bool(metrics["success"]),
+        steps=int(metrics["steps"]),
+        failure_reason=metrics["failure_reason"],
+        isolation=metrics["isolation"],
+        conformance=metrics["conformance"],
+    ).as_dict()
 
 
 def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: str = "") -> Path:

@@ -1,0 +1,222 @@
+"""The configuration of an evaluation: the benchmark and its selection (`--benchmark.*`), the run
+(`--eval.*`: repeats, protocol, workers, backend, adaptive design, shards, recordings) and the policy
+(`--policy.*`, one config class per type). `roboview-evaluate` parses it; `roboview.eval.runner` runs it."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+from roboview.core.cli_errors import flag_errors
+from roboview.eval.running import videos
+from roboview.eval.running.backends import BACKENDS
+from roboview.policies.base import PolicyConfig, missing_policy_type
+from roboview.policies.vlm.sgl import SGLConfig
+from roboview.sim.cameras import check_image_size
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class BenchmarkConfig:
+    # Benchmark folder written by roboview.pipelines.build_benchmark.
+    path: str = "outputs/benchmark"
+    # Comma-separated splits to evaluate; empty: every split of the benchmark.
+    splits: str = ""
+    # Comma-separated values to keep (the `value` column, e.g. red for the baseline color);
+    # empty: every value.
+    values: str = ""
+    # Run even when this machine's conformance check says it renders or simulates the benchmark `different`ly
+    # from the machine that built it (roboview.pipelines.verify shows the figures); every row is then marked `different`.
+    allow_drift: bool = False
+
+    @property
+    def split_list(self) -> list[str] | None:
+        return [s.strip() for s in self.splits.split(",") if s.strip()] or None
+
+    @property
+    def value_list(self) -> list[str] | None:
+        return [v.strip() for v in self.values.split(",") if v.strip()] or None
+
+
+DEFAULT_IMAGE_SIZE = 224
+VIDEO_FPS = 10  # the env's control rate: videos play in real time
+# protocol → (repeats for splits not listed (0: n_repeats), per-split repeats)
+PROTOCOLS: dict[str, tuple[int, dict[str, int]]] = {"": (0, {}), "paper": (5, {"color_x_camera_pose": 10})}
+
+
+@dataclass
+class EvalConfig:
+    # Episodes per instance, every split without its own entry in split_repeats.
+    n_repeats: int = 5
+    # Per-split repeats overriding n_repeats, comma-separated split=N (e.g. color_x_camera_pose=10).
+    # `roboview-plan` says how many a split needs to detect a given bias.
+    split_repeats: str = ""
+    # paper: the paper's protocol, 5 repeats per single-factor instance and 10 per factorial
+    # instance (sets n_repeats and split_repeats; explicit split_repeats entries still win).
+    protocol: str = ""
+    # Evaluate only the first N instances of each chosen split (fixed order); 0 = all.
+    limit: int = 0
+    # Evaluate only the first N task contexts of each chosen split, every value of each (a sample
+    # that keeps every value, e.g. --eval.contexts=2 for a quick bias profile); 0 = all.
+    contexts: int = 0
+    # Worker processes (local) or actors (ray).
+    num_workers: int = 2
+    # Envs per worker, stepped in lockstep: the policy is called once per step on their batch of
+    # observations (one model copy per worker, batched forward passes for checkpoints; see docs/evaluation.md,
+    # "Fast evaluation"). 1: one env per worker.
+    envs_per_worker: int = 1
+    # One policy server process holds the only model copy and answers every worker's envs in one batched
+    # forward pass per chunk (the GPU layout: many CPU render workers, one GPU model; local backend,
+    # chunked checkpoints). See eval/running/policy_server.py and docs/evaluation.md.
+    policy_server: bool = False
+    # Episode videos (MP4 per observed camera, linked from the report): N (the first N episodes run),
+    # failures, all; empty: none. A video episode renders every camera at every step.
+    videos: str = ""
+    # Render every camera at every step instead of when a policy reads it (same rows; slower): for
+    # measuring what lazy rendering saves.
+    eager_render: bool = False
+    # local (process pool, spawn) or ray.
+    backend: str = "local"
+    # Address of an existing Ray cluster (host:port of its head); empty starts a local one.
+    ray_address: str = ""
+    # i/N: run only shard i of N (0 ≤ i < N): the instances whose id hashes to i, every repeat of each, so N
+    # machines or CI jobs each run one deterministic slice; `roboview-merge` joins their folders.
+    shard: str = ""
+    # Write a Rerun recording of every episode to this .rrd file; when it exists (an earlier run's), the new
+    # episodes go to NAME-2.rrd, NAME-3.rrd, … and the earlier recording is kept.
+    rerun: str = ""
+    # Control steps before an episode counts as a failure.
+    max_steps: int = 120
+    # Episodes ended by infrastructure, not by the policy (a policy server lost mid-episode, an endpoint still
+    # failing after its retries, a worker that died, a render failure) are recorded with status infra_error and
+    # counted in no rate; after the pass they run again, at most this many times (0: not in this run). Rerunning
+    # the same command runs the ones left again.
+    max_infra_retries: int = 2
+    # Camera image side (pixels); 0: the policy's own (a checkpoint's input size), else 224.
+    # A size that disagrees with the checkpoint's fails before any rollout.
+    image_size: int = 0
+    # Adaptive evaluation (docs/adaptive.md): repeats run in rounds over every instance of a split; from the
+    # second round on, a group-sequential likelihood-ratio test stops the split for "bias" (type-I error
+    # ≤ alpha over every look), for "no_bias" (a bias of logit SD tau would have shown, at the target power)
+    # or at max_repeats. Two-factor splits run their fixed repeats.
+    adaptive: bool = False
+    # Adaptive: the most rounds (repeats per instance) a split runs before it stops undecided.
+    max_repeats: int = 10
+    # Adaptive: type-I error of the "bias" verdict, spent over every look at the split.
+    alpha: float = 0.05
+    # Adaptive: the bias of interest, as the logit SD of the value effects (as in roboview.pipelines.plan).
+    tau: float = 0.3
+    # Adaptive: power kept against a bias of size tau before a split may stop for "no_bias".
+    power: float = 0.8
+
+    # --help lists these fields after the common ones, under these headings.
+    help_groups = {
+        "advanced --eval.* (speed, scale and recovery; docs/evaluation.md, docs/scaling.md)": (
+            "envs_per_worker",
+            "policy_server",
+            "eager_render",
+            "backend",
+            "ray_address",
+            "shard",
+            "rerun",
+            "max_infra_retries",
+        ),
+        "adaptive evaluation, --eval.adaptive=true (docs/adaptive.md)": (
+            "adaptive",
+            "max_repeats",
+            "alpha",
+            "tau",
+            "power",
+        ),
+    }
+
+    def __post_init__(self) -> None:
+        if self.image_size:  # 0: the policy's own size
+            check_image_size(self.image_size, "--eval.image_size", why="or 0 for the policy's own size")
+        for name in ("n_repeats", "num_workers", "max_steps", "envs_per_worker"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
+        if self.limit < 0:
+            raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")
+        if self.max_infra_retries < 0:
+            raise ValueError(
+                f"--eval.max_infra_retries={self.max_infra_retries} must be ≥ 0 (0 = no re-run in this run)"
+            )
+        if self.contexts < 0:
+            raise ValueError(f"--eval.contexts={self.contexts} must be ≥ 0 (0 = every context)")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"unknown --eval.backend={self.backend!r}; allowed: {', '.join(BACKENDS)}")
+        if self.rerun and not self.rerun.endswith(".rrd"):
+            raise ValueError(f"--eval.rerun={self.rerun!r} must name a .rrd file")
+        if self.protocol not in PROTOCOLS:
+            raise ValueError(
+                f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}"
+            )
+        self.split_repeat_table  # noqa: B018  (parses split_repeats now, so a typo fails before any work)
+        self.shard_index  # noqa: B018  (parses shard now)
+        if self.shard and self.adaptive:
+            raise ValueError(
+                f"--eval.shard={self.shard} with --eval.adaptive=true: an adaptive split decides on all of "
+                "its instances at once, so it cannot be sharded; drop one of the two"
+            )
+        self.video_mode  # noqa: B018  (parses videos now)
+        if self.adaptive:
+            self.design  # noqa: B018  (validates alpha, tau, power, max_repeats)
+
+    @property
+    def shard_index(self) -> tuple[int, int] | None:
+        """(i, N) of --eval.shard=i/N; None when not sharded."""
+        if not self.shard:
+            return None
+        i, sep, n = self.shard.partition("/")
+        if not (sep and i.strip().isdigit() and n.strip().isdigit() and 0 <= int(i) < int(n)):
+            raise ValueError(
+                f"--eval.shard={self.shard!r} must be i/N with 0 ≤ i < N, e.g. 0/4 (the first of four)"
+            )
+        return int(i), int(n)
+
+    @property
+    def design(self):
+        from roboview.eval.statistics.adaptive import Design
+
+        return Design(alpha=self.alpha, tau=self.tau, power=self.power, max_repeats=self.max_repeats)
+
+    @property
+    def video_mode(self) -> str | int:
+        with flag_errors("--eval.videos"):
+            return videos.parse(self.videos)
+
+    @property
+    def split_repeat_table(self) -> dict[str, int]:
+        """split → repeats as given by --eval.split_repeats."""
+        table = {}
+        for item in filter(None, (x.strip() for x in self.split_repeats.split(","))):
+            name, sep, count = item.partition("=")
+            if not sep or not count.strip().isdigit() or int(count) <= 0:
+                raise ValueError(f"--eval.split_repeats entry {item!r} must be split=N with N ≥ 1")
+            table[name.strip()] = int(count)
+        return table
+
+    def repeats_for(self, split: str) -> int:
+        """Repeats for `split`: split_repeats entry, else the protocol's, else n_repeats."""
+        default, table = PROTOCOLS[self.protocol]
+        return {**table, **self.split_repeat_table}.get(split, default or self.n_repeats)
+
+
+@dataclass
+class EvaluateConfig:
+    # The benchmark to evaluate, and which of its splits and values.
+    benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    # Required: --policy.type=NAME (no default; `expert` is the privileged scripted expert, a ceiling).
+    policy: PolicyConfig = None  # type: ignore[assignment]
+    # How many episodes run, and how.
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    # Folder for episodes.parquet (and its journal); rerun the same command to resume.
+    output_dir: str = "outputs/eval"
+    # The Semantic Grounding Layer around the policy: --sgl.enable=true (docs/vlm.md).
+    sgl: SGLConfig = field(default_factory=SGLConfig)
+
+    def __post_init__(self) -> None:
+        if self.policy is None:
+            raise ValueError(missing_policy_type())

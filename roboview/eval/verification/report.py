@@ -1,0 +1,28 @@
+"""What a verification returns: named checks, each passed or not with its measured figure."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class Check:
+    name: str
+    passed: bool
+    detail: str
+
+
+@dataclass
+class Report:
+    checks: list[Check]
+    seconds: float
+    verdict: str | None = None  # the conformance verdict (a benchmark's verification)
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+def listed(items: list, limit: int = 3) -> str:
+    """The first `limit` items, comma-separated, and how many there are in all when more."""
+    return ", ".join(map(str, items[:limit])) + (f" … ({len(items)} in all)" if len(items) > limit else "")
