@@ -15,6 +15,7 @@ import pyarrow.parquet as pq
 
 from roboview.core.folders import folder_problem
 from roboview.eval.reporting.bundle import BUNDLE_FILE, manifest_problems
+from roboview.eval.running.row import INFRA_ERROR, STATUS
 from roboview.eval.verification.report import Check, Report, listed
 
 
@@ -175,7 +176,6 @@ def verify_results(results: str | Path, benchmark: str | Path | None = None, rep
     > 0 that many episodes re-run here. ResultsError for a folder that holds no results; ValueError when no
     benchmark can be found."""
     from roboview.benchmark.format import BenchmarkError, load_benchmark
-    from roboview.eval.running import isolation, provenance
     from roboview.eval.running.results import read_version
     from roboview.eval.verification.replay import check_replay
 
@@ -200,68 +200,77 @@ def verify_results(results: str | Path, benchmark: str | Path | None = None, rep
             )
         )
     recorded = read_version(results / "episodes.parquet")
+    same = recorded == bench.version == run.get("benchmark_version")
     checks.append(
         Check(
             "identity",
-            recorded == bench.version == run.get("benchmark_version"),
+            same,
             f"results of benchmark {recorded}"
-            + (
-                ""
-                if recorded == bench.version == run.get("benchmark_version")
-                else f", not of {bench.version} (another benchmark or version)"
-            ),
+            + ("" if same else f", not of {bench.version} (another benchmark or version)"),
         )
     )
     checks += check_rows(rows, bench)
-    frame = pd.DataFrame(rows)
-    certificate = isolation.verify(frame) if rows else {}
+    checks.append(check_isolation(rows))
+    checks.append(check_complete(rows, bench, run, results))
+    checks.append(check_infrastructure(rows))
+    checks.append(check_conformance(rows, results))
+    if replay > 0:
+        checks.append(check_replay(rows, bench, run, replay))
+    return Report(checks, time.perf_counter() - start)
+
+
+def check_isolation(rows: list[dict]) -> Check:
+    """The isolation certificate: in every (context, repeat) block only the factor differs."""
+    from roboview.eval.running import isolation
+
+    certificate = isolation.verify(pd.DataFrame(rows)) if rows else {}
     unrecorded = [s for s, r in certificate.items() if not r["recorded"]]
     violations = {s: len(r["violations"]) for s, r in certificate.items() if r["violations"]}
-    checks.append(
-        Check(
-            "isolation",
-            not unrecorded and not violations,
-            f"{sum(r['blocks'] for r in certificate.values())} blocks, only the factor differs in each"
-            if not unrecorded and not violations
-            else "; ".join(
-                [f"{s}: no certificate recorded" for s in unrecorded]
-                + [f"{s}: {n} blocks where more than the factor differs" for s, n in violations.items()]
-            ),
-        )
+    return Check(
+        "isolation",
+        not unrecorded and not violations,
+        f"{sum(r['blocks'] for r in certificate.values())} blocks, only the factor differs in each"
+        if not unrecorded and not violations
+        else "; ".join(
+            [f"{s}: no certificate recorded" for s in unrecorded]
+            + [f"{s}: {n} blocks where more than the factor differs" for s, n in violations.items()]
+        ),
     )
-    checks.append(check_complete(rows, bench, run, results))
-    infra = Counter(r["split"] for r in rows if r.get("status") == "infra_error")
-    checks.append(
-        Check(
-            "infrastructure",
-            not infra,
-            "no episode ended by infrastructure"
-            if not infra
-            else f"{sum(infra.values())} episodes ended by infrastructure, not results ("
-            + ", ".join(f"{s}: {n}" for s, n in infra.items())
-            + "); rerun the same command to re-run them",
-        )
+
+
+def check_infrastructure(rows: list[dict]) -> Check:
+    """No episode that infrastructure ended: such rows are no results (a rerun runs them)."""
+    infra = Counter(r["split"] for r in rows if r.get(STATUS) == INFRA_ERROR)
+    return Check(
+        "infrastructure",
+        not infra,
+        "no episode ended by infrastructure"
+        if not infra
+        else f"{sum(infra.values())} episodes ended by infrastructure, not results ("
+        + ", ".join(f"{s}: {n}" for s, n in infra.items())
+        + "); rerun the same command to re-run them",
     )
+
+
+def check_conformance(rows: list[dict], results: Path) -> Check:
+    """Every row from a stack whose conformance was identical or equivalent, as provenance.json records it."""
+    from roboview.eval.running import provenance
+
     verdicts = Counter(r.get("conformance") or "not recorded" for r in rows)
     entries = [e for e in provenance.read(results) if e.get("conformance")]
     ok = bool(rows) and set(verdicts) <= {"identical", "equivalent"} and bool(entries)
     stacks = sorted(
         {json.dumps(e["conformance"].get("stack", {}).get("renderer", {}), sort_keys=True) for e in entries}
     )
-    checks.append(
-        Check(
-            "conformance",
-            ok,
-            ", ".join(f"{n} rows {v}" for v, n in sorted(verdicts.items()))
-            + f"; {len(entries)} run(s) recorded their stack ({len(stacks)} renderer(s))"
-            + (
-                ""
-                if ok
-                else " — every row must come from a stack whose conformance is identical or "
-                "equivalent, recorded in provenance.json"
-            ),
-        )
+    return Check(
+        "conformance",
+        ok,
+        ", ".join(f"{n} rows {v}" for v, n in sorted(verdicts.items()))
+        + f"; {len(entries)} run(s) recorded their stack ({len(stacks)} renderer(s))"
+        + (
+            ""
+            if ok
+            else " — every row must come from a stack whose conformance is identical or "
+            "equivalent, recorded in provenance.json"
+        ),
     )
-    if replay > 0:
-        checks.append(check_replay(rows, bench, run, replay))
-    return Report(checks, time.perf_counter() - start)

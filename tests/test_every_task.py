@@ -1,0 +1,62 @@
+"""Checks every registered task gets for free (as dm_control's suite tests run over ALL_TASKS): it makes through
+gymnasium, a seeded reset twice gives identical observations, its privileged expert succeeds at baseline
+visuals, and its object is visible in every observed camera at reset (its target too, whole, in the scene
+cameras), as the fairness gate judges. A third-party task registered
+through the `roboview.tasks` entry points is collected here too."""
+
+import numpy as np
+import pytest
+
+from roboview.benchmark.fairness import OBSERVED_CAMERAS, FairnessProbe, FairnessThresholds
+from roboview.tasks import TASKS, load_task, make_env
+from roboview.tasks.base import resolve
+from roboview.tasks.env import IMAGE_KEY, baseline_instance
+
+IMAGE = 64
+
+
+@pytest.fixture(scope="module", params=sorted(TASKS))
+def env(request):
+    env = make_env(request.param, cameras=OBSERVED_CAMERAS, image_size=IMAGE, lazy=True)
+    yield env
+    env.close()
+
+
+def test_a_seeded_reset_twice_gives_identical_observations(env):
+    instance = baseline_instance(env.task)
+    first, _ = env.reset(seed=11, options={"instance": instance})
+    first = {k: np.array(v) for k, v in first.items()}
+    again, _ = env.reset(seed=11, options={"instance": instance})
+    assert first.keys() == again.keys()
+    for key, value in first.items():
+        assert np.array_equal(value, np.asarray(again[key])), key
+    other, _ = env.reset(seed=12, options={"instance": instance})
+    assert any(not np.array_equal(v, np.asarray(other[k])) for k, v in first.items())  # the seed matters
+
+
+def test_the_expert_succeeds_at_baseline(env):
+    task = load_task(env.task)
+    expert = resolve(task.expert)(env)
+    outcomes = []
+    for seed in range(3):
+        obs, _ = env.reset(seed=100 + seed, options={"instance": baseline_instance(env.task)})
+        expert.reset()
+        for _ in range(env.max_steps):
+            obs, _, terminated, truncated, _ = env.step(expert.select_action(obs))
+            if terminated or truncated:
+                break
+        outcomes.append(bool(terminated) and env.is_success())
+    assert all(outcomes), f"{env.task}: the expert solved {sum(outcomes)} of 3 baseline episodes"
+
+
+def test_object_and_target_are_visible_in_every_observed_camera(env):
+    obs, _ = env.reset(seed=5, options={"instance": baseline_instance(env.task)})
+    rgb = {cam: np.asarray(obs[IMAGE_KEY.format(cam)]) for cam in OBSERVED_CAMERAS}
+    report = FairnessProbe(env, OBSERVED_CAMERAS).measure(rgb, FairnessThresholds())
+    for cam in report.cameras:
+        assert cam.object_pixels > 0 and cam.object_visible > 0.5, (env.task, cam)
+        if cam.camera != "wrist":  # the wrist camera sees the target partly, as the gate allows
+            assert cam.object_in_frame, (env.task, cam)
+            if env.target_geoms():
+                assert cam.box_in_frame and cam.box_pixels > 0, (env.task, cam)
+    assert report.passed, report.reject_reason
