@@ -628,7 +628,7 @@ def test_failure_videos_decode_and_provenance_is_true(bench, tiny_checkpoint, tm
     assert entry["episodes_run"] == 2 and "context_id" in entry["seed_rule"]
     assert entry["roboview_commit"] is None or len(entry["roboview_commit"].split("+")[0]) == 40
     # The report links every video from its per-value table and prints the provenance.
-    from roboview.eval.reporting.markdown import load_results, write_report
+    from roboview.eval.reporting.report import load_results, write_report
 
     episodes, sources = load_results([out / "episodes.parquet"])
     report = (

@@ -171,7 +171,7 @@ def test_the_dose_response_trend_recovers_a_known_slope():
 def test_reports_draw_the_new_factors(tmp_path):
     import pandas as pd
 
-    from roboview.eval.reporting.markdown import write_report
+    from roboview.eval.reporting.report import write_report
     from roboview.variation.instances import split_task
 
     suite = [i for i in generate_suite(load_preset("extended")) if split_task(i.split)[1] in NEW]

@@ -13,8 +13,8 @@ import pyarrow.parquet as pq
 import pytest
 from PIL import Image
 
-from roboview.eval.reporting.markdown import VERSION_KEY, load_results
 from roboview.eval.reporting.plots import PLOTS
+from roboview.eval.reporting.report import VERSION_KEY, load_results
 from roboview.eval.running.results import FORMAT_KEY
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig, policy_layouts
 from roboview.pipelines.report import ReportConfig, main, run

@@ -16,7 +16,7 @@ OVERSIZE_FUNCTIONS = {
     "roboview.benchmark.card:write_card": 95,
     "roboview.demos.export_v21:check_source": 78,
     "roboview.eval.reporting.html:render_html": 74,
-    "roboview.eval.reporting.markdown:load_results": 76,
+    "roboview.eval.reporting.report:load_results": 76,
     "roboview.eval.runner:run_rounds": 62,
     "roboview.eval.running.backends:run_ray": 121,
     "roboview.eval.running.results:merge_folders": 76,
@@ -37,7 +37,7 @@ OVERSIZE_FUNCTIONS = {
 }
 OVERSIZE_MODULES = {
     "roboview.core.cli": 550,
-    "roboview.eval.reporting.markdown": 820,
+    "roboview.eval.reporting.report": 820,
     "roboview.policies.lerobot_async": 591,
 }
 

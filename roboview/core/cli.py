@@ -1,4 +1,4 @@
-"""Command-line plumbing every RoboView command shares (pipelines, benchmarks, roboview.integrations.lerobot's tools):
+"""Command-line plumbing every RoboView command shares (the verbs, the throughput studies, the integrations' tools):
 draccus parsing with readable errors, quiet third-party logs, one `--help` layout for every command, and
 Ctrl-C that ends with one line saying what was kept. `roboview.pipelines._cli` adds the flag groups the pipelines
 share."""
@@ -452,15 +452,7 @@ def parse[T](config_class: type[T], args: list[str] | None = None) -> T:
 # RoboView's own loggers (`__main__`: a pipeline run with `python -m`) log at INFO; every other library's only
 # warnings and errors (their INFO lines, such as PyOpenGL's "No OpenGL_accelerate module loaded", say nothing about
 # the run).
-OWN_LOGGERS = (
-    "__main__",
-    "pipelines",
-    "eval",
-    "policies",
-    "roboview",
-    "roboview.integrations.lerobot",
-    "benchmarks",
-)
+OWN_LOGGERS = ("__main__", "roboview", "benchmarks")
 
 
 def setup_environment() -> None:

@@ -328,7 +328,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         else:
             runner.execute([w for w in work if not store.done(w.key)])
     except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
-        from roboview.pipelines._cli import interrupted
+        from roboview.core.cli import interrupted
 
         n = len(store.rows)
         raise interrupted(

@@ -42,8 +42,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from roboview.eval.reporting.markdown import REPORT_FILE, write_report
-from roboview.eval.running.harnesses import HARNESSES, load
+from roboview.eval.reporting.report import REPORT_FILE, write_report
+from roboview.eval.running.harnesses import harness_names, load
 from roboview.eval.running.harnesses.base import MAP_FIELDS, REQUIRED, HarnessTable
 from roboview.eval.statistics.metrics import MetricsConfig, policy_layouts
 from roboview.eval.statistics.significance import lrt_power
@@ -111,7 +111,7 @@ class AuditConfig:
         if missing:
             raise ValueError(
                 f"missing {', '.join(missing)}: name the columns of {self.results} that hold them (or read "
-                f"another harness's files with --format={'|'.join(HARNESSES)})"
+                f"another harness's files with --format={'|'.join(harness_names())})"
             )
 
 

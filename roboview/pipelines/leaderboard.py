@@ -133,7 +133,7 @@ def run(cfg: LeaderboardConfig) -> Board:
 
     from roboview.benchmark.format import load_benchmark
     from roboview.eval.reporting.leaderboard import rank_metrics, single_policy_rows
-    from roboview.eval.reporting.markdown import HTML_FILE, load_results, write_report
+    from roboview.eval.reporting.report import HTML_FILE, load_results, write_report
     from roboview.eval.running.results import PARQUET, RUN_FILE, STATUS, counted, is_privileged_run
     from roboview.eval.statistics.metrics import compute_all_metrics
 

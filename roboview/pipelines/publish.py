@@ -256,7 +256,7 @@ def stage_results(cfg: PublishConfig) -> tuple[Path, dict[str, Any], str | None]
     import pandas as pd
 
     from roboview.eval.reporting import bundle
-    from roboview.eval.reporting.markdown import HTML_FILE, REPORT_FILE, load_results, write_report
+    from roboview.eval.reporting.report import HTML_FILE, REPORT_FILE, load_results, write_report
     from roboview.eval.running import provenance
     from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
     from roboview.eval.verification import benchmark_path, verify_results

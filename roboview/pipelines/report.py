@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from roboview.eval.reporting.markdown import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
+from roboview.eval.reporting.report import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
 from roboview.pipelines._cli import cli_main
 

@@ -22,7 +22,7 @@ import numpy as np
 from roboview.policies.base import AgentView, ControlledConfig, Episode, PolicyConfig
 from roboview.policies.perception import Perception, PerceptionError, perceive
 from roboview.sim.cameras import ALL_CAMERAS, CameraPose
-from roboview.sim.motion import PickPlacePlanner
+from roboview.sim.motion import MotionPlanner
 from roboview.tasks import load_task
 from roboview.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
@@ -75,7 +75,7 @@ class VisionPolicy:
                 f"{view.cameras} with depth={view.depth}"
             )
         self.camera = camera
-        self._motion = PickPlacePlanner(view.kinematic_model())
+        self._motion = MotionPlanner(view.kinematic_model())
         self._calibration: CameraPose | None = None
         self._task = load_task()
         self.perception: Perception | None = None

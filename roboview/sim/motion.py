@@ -1,6 +1,6 @@
 """Pick-and-place motion planner: minimum-jerk Cartesian waypoints + damped-least-squares IK.
 
-`PickPlacePlanner.plan` takes an object pose (center, heading, rotational symmetry) and where to
+`MotionPlanner.plan` takes an object pose (center, heading, rotational symmetry) and where to
 release it, and lays out the gripper's pinch-point path through fixed waypoints (hover, descend, close,
 lift, carry, lower, open, retreat), each segment interpolated with a minimum-jerk profile. Each
 `next_action` solves inverse kinematics (position + "pointing down at yaw ψ"; `ArmIK`, which the
@@ -104,7 +104,7 @@ class ArmIK:
         return q
 
 
-class PickPlacePlanner:
+class MotionPlanner:
     """Plans a grasp-carry-release path for a given object pose and follows it, one action per step."""
 
     def __init__(self, model: mujoco.MjModel) -> None:

@@ -19,7 +19,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from roboview.sim.motion import PickPlacePlanner
+from roboview.sim.motion import MotionPlanner
 from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS
 from roboview.variation.factors import DEFAULT_TASK, context_factors
 
@@ -65,7 +65,7 @@ class Task:
 
     def solve(
         self,
-        planner: PickPlacePlanner,
+        planner: MotionPlanner,
         obj_pos: np.ndarray,
         obj_yaw: float,
         symmetry: float,

@@ -35,7 +35,7 @@ from roboview.sim.control import (
     check_control,
     ee_action_space_bounds,
 )
-from roboview.sim.motion import PickPlacePlanner, yaw_of
+from roboview.sim.motion import MotionPlanner, yaw_of
 from roboview.sim.observation import LazyObservation
 from roboview.sim.scene import (
     GRIPPER_DRIVER_CLOSED,
@@ -154,7 +154,7 @@ class TaskEnv(gym.Env):
 
     @staticmethod
     def plan(
-        planner: PickPlacePlanner,
+        planner: MotionPlanner,
         obj_pos: np.ndarray,
         obj_yaw: float,
         symmetry: float,
@@ -454,7 +454,7 @@ class ScriptedExpert:
 
     def __init__(self, env: TaskEnv) -> None:
         self.env = env
-        self.planner = PickPlacePlanner(env.model)
+        self.planner = MotionPlanner(env.model)
         self._to_ee = (
             JointToEE(env.model, env.control, self.planner.ik) if env.control in EE_CONTROLS else None
         )

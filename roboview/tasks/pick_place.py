@@ -11,7 +11,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from roboview.sim.motion import PickPlacePlanner
+from roboview.sim.motion import MotionPlanner
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.env import POSITION_JITTER_M, RELEASED_GRIPPER, REST_SPEED, YAW_JITTER_RAD, TaskEnv
 from roboview.variation.factors import DEFAULT_TASK, Factor, register_factor
@@ -140,7 +140,7 @@ class PickPlaceEnv(TaskEnv):
 
     @staticmethod
     def plan(
-        planner: PickPlacePlanner,
+        planner: MotionPlanner,
         obj_pos: np.ndarray,
         obj_yaw: float,
         symmetry: float,
@@ -149,7 +149,7 @@ class PickPlaceEnv(TaskEnv):
         arm_qpos: np.ndarray,
         ee_pos: np.ndarray | None = None,
     ) -> None:
-        """Grasp, carry over the box, lower, open, retreat (`PickPlacePlanner.plan`)."""
+        """Grasp, carry over the box, lower, open, retreat (`MotionPlanner.plan`)."""
         planner.plan(
             obj_pos, obj_yaw, symmetry, arm_qpos, box_xy=target_xy, release_z=RELEASE_Z, ee_pos=ee_pos
         )

@@ -14,7 +14,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from roboview.sim.motion import PickPlacePlanner, Segment
+from roboview.sim.motion import MotionPlanner, Segment
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.env import POSITION_JITTER_M, REST_SPEED, YAW_JITTER_RAD, TaskEnv
 from roboview.variation.factors import Factor, register_factor
@@ -139,7 +139,7 @@ class PushEnv(TaskEnv):
 
     @staticmethod
     def plan(
-        planner: PickPlacePlanner,
+        planner: MotionPlanner,
         obj_pos: np.ndarray,
         obj_yaw: float,
         symmetry: float,
@@ -154,7 +154,7 @@ class PushEnv(TaskEnv):
 
 
 def push_segments(
-    planner: PickPlacePlanner, obj_xy: np.ndarray, zone_xy: np.ndarray, reach: float
+    planner: MotionPlanner, obj_xy: np.ndarray, zone_xy: np.ndarray, reach: float
 ) -> list[Segment]:
     """Come down behind the object on the line to the zone center, slide it there, back off, lift.
 

@@ -140,7 +140,7 @@ def render_html(
     metrics: dict[str, Any], plots: dict[str, str | None], out: Path, sections_md: dict[str, list[str]]
 ) -> str:
     """The page for a metrics dict (every number is read from it) and report.md's sections (`sections_md`,
-    roboview.eval.reporting.markdown.markdown_sections); figures are read from `out` and inlined."""
+    roboview.eval.reporting.report.markdown_sections); figures are read from `out` and inlined."""
     layouts = policy_layouts(metrics)
     settings = metrics["resampling"]
     figures = _figure_splits(plots)

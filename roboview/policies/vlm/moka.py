@@ -31,7 +31,7 @@ from roboview.policies.vlm.grounding import (
 )
 from roboview.policies.vlm.marks import draw_marks
 from roboview.policies.vlm.prompts import MOKA_MARKS, MOKA_PLAN
-from roboview.sim.motion import PickPlacePlanner
+from roboview.sim.motion import MotionPlanner
 from roboview.tasks import load_task
 from roboview.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
@@ -99,7 +99,7 @@ class MokaAgent:
         self.camera = config.camera
         self.client = VLMClient(config.endpoint)
         self.grounder = grounder
-        self.planner = PickPlacePlanner(view.kinematic_model())
+        self.planner = MotionPlanner(view.kinematic_model())
         self.failure_reason = ""
         self._episode: Episode | None = None
         self._hold: np.ndarray | None = None

@@ -17,7 +17,7 @@ from roboview.policies.base import AgentView, Episode, PolicyConfig
 from roboview.policies.vlm.client import VLMClient
 from roboview.policies.vlm.common import VLMConfig, check_point, object_from_point, world_point
 from roboview.policies.vlm.prompts import SIMPLE_POINTS
-from roboview.sim.motion import PickPlacePlanner
+from roboview.sim.motion import MotionPlanner
 from roboview.tasks import load_task
 from roboview.tasks.env import DEPTH_KEY, IMAGE_KEY, STATE_KEY
 
@@ -40,7 +40,7 @@ class SimpleAgent:
     def __init__(self, view: AgentView, config: SimpleAgentConfig) -> None:
         self.camera = config.camera
         self.client = VLMClient(config.endpoint)
-        self.planner = PickPlacePlanner(view.kinematic_model())
+        self.planner = MotionPlanner(view.kinematic_model())
         self.failure_reason = ""
         self._episode: Episode | None = None
         self._hold: np.ndarray | None = None

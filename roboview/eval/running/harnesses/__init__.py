@@ -5,11 +5,14 @@ plus the columns RoboView's factor, value, context and success default to (`robo
   (a folder: the ones it holds) — LIBERO-plus, LIBERO-Pro and RoboTwin results map without flags.
 - `inspect_robots`: Inspect Robots' JSON `EvalLog`s (a folder: its logs); a scene's metadata names the factor.
 
-docs/audit.md has each harness's field mapping.
+docs/audit.md has each harness's field mapping. Another harness's reader is added from its own package under the
+`roboview.harnesses` entry-point group: `name = "module:reader"`, a callable `reader(path) -> HarnessTable`
+(docs/extending.md).
 """
 
 from __future__ import annotations
 
+import importlib.metadata
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,8 +26,23 @@ HARNESSES: dict[str, Callable[[Path], HarnessTable]] = {
 }
 
 
+# Third-party packages add readers through entry points in this group: `name = "module:reader"`.
+ENTRY_POINT_GROUP = "roboview.harnesses"
+
+
+def harness_names() -> tuple[str, ...]:
+    """The builtin harnesses and every `roboview.harnesses` entry point."""
+    return (*HARNESSES, *(e.name for e in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)))
+
+
 def load(name: str) -> Callable[[Path], HarnessTable]:
-    """The reader of harness `name`; an unknown name raises ValueError listing the known ones."""
+    """The reader of harness `name` (builtin, else a `roboview.harnesses` entry point); an unknown name raises
+    ValueError listing the known ones."""
+    for entry in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP, name=name):
+        if name not in HARNESSES:
+            return entry.load()
     if name not in HARNESSES:
-        raise ValueError(f"--format={name!r} is not a harness audit reads; known: {', '.join(HARNESSES)}")
+        raise ValueError(
+            f"--format={name!r} is not a harness audit reads; known: {', '.join(harness_names())}"
+        )
     return HARNESSES[name]
