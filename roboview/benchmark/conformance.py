@@ -36,6 +36,7 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
+from roboview.benchmark.fairness import WORLD_CAMERAS
 from roboview.benchmark.format import CONFORMANCE as FOLDER
 from roboview.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
 from roboview.core import files
@@ -49,7 +50,7 @@ SAMPLE_SIZE = 24  # instances whose reset images are compared
 PHYSICS_SAMPLE = 12  # of those, instances whose expert rollout is compared
 ROLLOUT_STEPS = 40  # control steps: approach, grasp and lift (the object is in the air by step 30)
 STORED_SIDE = 112  # stored images are box-downsampled by an integer factor to at most this side
-CAMERAS = ("front", "left_top", "wrist")
+CAMERAS = ("front", "left_top", "wrist")  # RoboView's scene; another world's: WORLD_CAMERAS
 VERDICTS = ("identical", "equivalent", "different")
 
 
@@ -127,7 +128,7 @@ def observe(env, expert, instance, steps: int = 0) -> tuple[list[np.ndarray], di
     from roboview.tasks.env import IMAGE_KEY
 
     obs, _ = env.reset(seed=instance.seed, options={"instance": instance})
-    images = [downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in CAMERAS]
+    images = [downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in WORLD_CAMERAS[env.world]]
     if not steps:
         return images, None
     expert.reset()
@@ -148,13 +149,15 @@ class _Envs:
     def __init__(self, image_size: int) -> None:
         self.image_size, self.envs, self.experts = image_size, {}, {}
         self.stack: dict | None = None  # the stack, described from the first env before any instance
+        self.cameras: tuple[str, ...] = CAMERAS  # the observed cameras of the benchmark's world
 
     def __call__(self, task: str):
         from roboview.sim import stack
         from roboview.tasks import load_task, make_env
 
         if task not in self.envs:
-            self.envs[task] = make_env(task, cameras=CAMERAS, image_size=self.image_size, lazy=True)
+            self.cameras = WORLD_CAMERAS[load_task(task).env_class().world]
+            self.envs[task] = make_env(task, cameras=self.cameras, image_size=self.image_size, lazy=True)
             self.experts[task] = load_task(task).make_expert(self.envs[task])
             if self.stack is None:
                 self.stack = stack.describe(self.envs[task])
@@ -190,7 +193,7 @@ def write_reference(
         envs.close()
     reference = {
         "format": FORMAT,
-        "cameras": list(CAMERAS),
+        "cameras": list(envs.cameras),
         "image_size": image_size,
         "stored_side": STORED_SIDE,
         "rollout_steps": ROLLOUT_STEPS,

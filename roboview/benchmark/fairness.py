@@ -21,6 +21,8 @@ from roboview.variation.factors import FACTORS
 
 # Cameras a policy observes: VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
 OBSERVED_CAMERAS = ("front", "left_top", "wrist")
+# LIBERO's scenes (roboview.tasks.libero): the scene camera and the wrist camera.
+LIBERO_CAMERAS = ("agentview", "wrist")
 
 
 @dataclass(frozen=True)
@@ -189,3 +191,98 @@ def violations(
     if judge_nominal and not np.isnan(r.delta_e_nominal) and r.delta_e_nominal > t.max_delta_e_nominal:
         out.append(f"{r.camera}: rendered-nominal ΔE2000 {r.delta_e_nominal:.1f} > {t.max_delta_e_nominal}")
     return out
+
+
+VISUAL_GROUP = 1  # robosuite's visual geoms
+
+
+class LiberoFairnessProbe:
+    """The gate in LIBERO's scenes: the task's target object (LIBERO's `obj_of_interest[0]`) must be visible, whole
+    and distinct from what surrounds it in `agentview`; the wrist camera, which at t = 0 looks down past the
+    gripper, is measured and recorded but not judged. There is no second target (box) to find."""
+
+    cameras = LIBERO_CAMERAS
+    judged = ("agentview",)
+
+    def __init__(self, env) -> None:
+        self.env = env
+        self._seg: mujoco.Renderer | None = None
+
+    def _segment(self, camera: str, alone: list[int] | None = None) -> np.ndarray:
+        from roboview.tasks.libero import CAMERAS
+
+        model, data = self.env.model, self.env.data
+        if self._seg is None or self._seg.model is not model:  # a hard reset compiled a new model
+            if self._seg is not None:
+                self._seg.close()
+            self._seg = mujoco.Renderer(model, self.env.image_size, self.env.image_size)
+            self._seg.enable_segmentation_rendering()
+            # What robosuite renders: the visual geoms (group 1), not the collision geoms that coincide with them.
+            self._option = mujoco.MjvOption()
+            self._option.geomgroup[:] = 0
+            self._option.geomgroup[VISUAL_GROUP] = 1
+        rgba = model.geom_rgba.copy()
+        try:
+            if alone is not None:
+                model.geom_rgba[:, 3] = 0.0
+                model.geom_rgba[alone, 3] = 1.0
+            self._seg.update_scene(data, camera=model.camera(CAMERAS[camera]).id, scene_option=self._option)
+            seg = self._seg.render()
+        finally:
+            model.geom_rgba[:] = rgba
+        ids = np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
+        return ids[::-1, ::-1]  # upright, as the observations
+
+    def measure(self, rgb: dict[str, np.ndarray], thresholds: FairnessThresholds) -> FairnessReport:
+        geoms = list(self.env.target_geoms())
+        color = self.env.instance.get("color")
+        # At its baseline the object wears LIBERO's own texture, as LIBERO's scene shows it to every policy: there is
+        # no nominal color to compare with, and its contrast with the surface is LIBERO's design (a black bowl on a
+        # dark table), not the factor's doing. Both color checks judge the re-skinned object only.
+        recolored = color != FACTORS["color"].baseline
+        judge_nominal = recolored and all(
+            FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
+            for name, value in self.env.instance.factors
+        )
+        nominal = np.asarray(get_color(color).lab)
+        results, reasons = [], []
+        for cam in self.cameras:
+            obj_mask = np.isin(self._segment(cam), geoms)
+            alone = np.isin(self._segment(cam, geoms), geoms)
+            obj_lab = _mean_lab(rgb[cam], obj_mask)
+            result = CameraFairness(
+                camera=cam,
+                object_visible=_fraction(obj_mask, alone),
+                object_pixels=int(obj_mask.sum()),
+                object_in_frame=_in_frame(alone),
+                box_visible=1.0,
+                box_pixels=0,
+                box_in_frame=True,
+                delta_e_nominal=_delta_e(obj_lab, nominal),
+                delta_e_table=_delta_e(obj_lab, _mean_lab(rgb[cam], _ring(obj_mask)))
+                if recolored
+                else float("nan"),
+            )
+            results.append(result)
+            if cam in self.judged:
+                min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
+                reasons += violations(result, thresholds, min_pixels, False, judge_nominal)
+        return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
+
+    def close(self) -> None:
+        if self._seg is not None:
+            self._seg.close()
+
+
+def _ring(mask: np.ndarray, width: int = 4) -> np.ndarray:
+    """The pixels within `width` of `mask` but outside it: what the object is seen against."""
+    grown = mask.copy()
+    for axis in (0, 1):
+        for shift in range(1, width + 1):
+            grown |= np.roll(mask, shift, axis) | np.roll(mask, -shift, axis)
+    return grown & ~mask
+
+
+# The gate of each world: its probe class and the cameras it renders.
+PROBES = {"roboview": FairnessProbe, "libero": LiberoFairnessProbe}
+WORLD_CAMERAS = {"roboview": OBSERVED_CAMERAS, "libero": LIBERO_CAMERAS}

@@ -12,14 +12,10 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from roboview.benchmark.fairness import (
-    OBSERVED_CAMERAS,
-    FairnessProbe,
-    FairnessThresholds,
-)
+from roboview.benchmark.fairness import PROBES, WORLD_CAMERAS, FairnessThresholds
 from roboview.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_image
 from roboview.sim.cameras import ALL_CAMERAS
-from roboview.tasks import DEFAULT_TASK, make_env
+from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import IMAGE_KEY
 from roboview.variation.instances import TaskInstance
 
@@ -50,21 +46,23 @@ class InstanceRenderer:
         """`screen`: (client class, endpoint) of the stage-1b VLM fairness screen, built here in the worker."""
         self.image_size = image_size
         self.envs: dict[str, Any] = {}
-        self.probes: dict[str, FairnessProbe] = {}
+        self.probes: dict[str, Any] = {}
         self.screen = screen[0](screen[1]) if screen is not None else None
         self.thresholds = thresholds
         self._use(task)
 
     def _use(self, task: str) -> None:
         if task not in self.envs:
-            self.envs[task] = make_env(task, cameras=OBSERVED_CAMERAS, image_size=self.image_size)
-            self.probes[task] = FairnessProbe(self.envs[task])
+            world = load_task(task).env_class().world
+            self.envs[task] = make_env(task, cameras=WORLD_CAMERAS[world], image_size=self.image_size)
+            self.probes[task] = PROBES[world](self.envs[task])
         self.env, self.probe = self.envs[task], self.probes[task]
 
     def record(self, instance: TaskInstance) -> dict:
         self._use(instance.task)
         obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
-        rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in OBSERVED_CAMERAS}
+        cameras = self.probe.cameras
+        rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in cameras}
         fairness = self.probe.measure(rgb, self.thresholds).to_record()
         vlm = (
             screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
@@ -72,10 +70,14 @@ class InstanceRenderer:
         fairness |= {"vlm_answer": vlm.get("answer", ""), "vlm_analysis": vlm.get("analysis", "")}
         return {
             **instance.to_record(),
-            "cameras": [self.env.scene.camera_pose(cam).to_record() for cam in ALL_CAMERAS],
+            "cameras": [self.env.scene.camera_pose(cam).to_record() for cam in self._recorded_cameras()],
             "fairness": fairness,
-            "preview": {"bytes": preview_png([rgb[c] for c in OBSERVED_CAMERAS]), "path": None},
+            "preview": {"bytes": preview_png([rgb[c] for c in cameras]), "path": None},
         }
+
+    def _recorded_cameras(self) -> tuple[str, ...]:
+        """Every camera of RoboView's scene (the observed ones and `right_top`); LIBERO's two."""
+        return ALL_CAMERAS if self.env.world == "roboview" else self.probe.cameras
 
     def close(self) -> None:
         for env in self.envs.values():

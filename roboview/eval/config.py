@@ -86,8 +86,9 @@ class EvalConfig:
     # Write a Rerun recording of every episode to this .rrd file; when it exists (an earlier run's), the new
     # episodes go to NAME-2.rrd, NAME-3.rrd, … and the earlier recording is kept.
     rerun: str = ""
-    # Control steps before an episode counts as a failure.
-    max_steps: int = 120
+    # Control steps before an episode counts as a failure; unset: each task's own (120 in RoboView's scene; in
+    # LIBERO's, LeRobot's max steps of the episode's suite).
+    max_steps: int | None = None
     # Episodes ended by infrastructure, not by the policy (a policy server lost mid-episode, an endpoint still
     # failing after its retries, a worker that died, a render failure) are recorded with status infra_error and
     # counted in no rate; after the pass they run again, at most this many times (0: not in this run). Rerunning
@@ -135,7 +136,7 @@ class EvalConfig:
         if self.image_size:  # 0: the policy's own size
             check_image_size(self.image_size, "--eval.image_size", why="or 0 for the policy's own size")
         for name in ("n_repeats", "num_workers", "max_steps", "envs_per_worker"):
-            if getattr(self, name) <= 0:
+            if getattr(self, name) is not None and getattr(self, name) <= 0:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
         if self.limit < 0:
             raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")

@@ -21,7 +21,7 @@ from roboview.eval.running.backends import run_local, run_ray
 from roboview.eval.running.results import EpisodeStore, is_counted, shard_of
 from roboview.eval.running.rollout import WorkerSpec, WorkItem
 from roboview.policies.base import PolicyConfig
-from roboview.tasks import DEFAULT_TASK
+from roboview.tasks import DEFAULT_TASK, load_task
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
         "policy_options": policy.options(),
         "control": policy.env_control(),
         "n_repeats": p.repeats,
-        "max_steps": cfg.eval.max_steps,
+        "max_steps": max_steps(cfg, p.tasks),
         "image_size": p.image_size,
         **(
             {
@@ -170,6 +170,14 @@ def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
         ),
         **({"shard": cfg.eval.shard} if cfg.eval.shard else {}),
     }
+
+
+def max_steps(cfg: EvaluateConfig, tasks: list[str]) -> int | None:
+    """The step budget run.json records: --eval.max_steps, else the tasks' own (None where it is per context)."""
+    if cfg.eval.max_steps:
+        return cfg.eval.max_steps
+    budgets = {load_task(task).default_steps() for task in tasks or [DEFAULT_TASK]}
+    return None if None in budgets else max(budgets)
 
 
 class Runner:
@@ -207,7 +215,7 @@ class Runner:
             spec = WorkerSpec(
                 cfg.policy,
                 self.plan.image_size,
-                cfg.eval.max_steps,
+                cfg.eval.max_steps or load_task(task).default_steps(),
                 record_media=self.rerun is not None,
                 torch_threads=self.threads,
                 task=task,

@@ -230,6 +230,11 @@ class LiberoWorld:
             raise ValueError(f"unknown camera {camera!r}; allowed: {', '.join(CAMERAS)}")
         return np.array(self._frames.renderers[camera]({}))
 
+    def set_init_state(self, init_state_id: int) -> None:
+        """Start from LIBERO's init state `init_state_id` of this task from the next reset on."""
+        self._init_state = init_state(self.task.suite, self.task.task_id, init_state_id)
+        self.init_state_id = init_state_id
+
     def set_factors(self, factors: Sequence[Any]) -> None:
         """Appliers used from the next reset on (a reset rebuilds the model, so they apply there)."""
         self.factors = tuple(factors)

@@ -260,7 +260,12 @@ def support_texture(world) -> int:
 
 
 def texture_pixels(pattern: str, height: int, width: int, channels: int) -> np.ndarray:
-    """A procedural (height, width, channels) uint8 texture; deterministic (fixed seed for `noise`)."""
+    """A procedural (height, width, channels) uint8 texture; deterministic (fixed seed for `noise`). `pattern` is
+    one of TEXTURE_PATTERNS or a value of RoboView's `table_texture` factor (its colors and pattern, drawn here)."""
+    from roboview.variation.factors.table_texture import TEXTURES
+
+    if pattern in TEXTURES:
+        return _named_texture(pattern, height, width, channels)
     y, x = np.mgrid[0:height, 0:width]
     cells = max(height, width) // 16 or 1
     if pattern == "checker":
@@ -272,8 +277,39 @@ def texture_pixels(pattern: str, height: int, width: int, channels: int) -> np.n
     elif pattern == "gray":
         gray = np.full((height, width), 128)
     else:
-        raise ValueError(f"texture pattern {pattern!r} unknown; allowed: {', '.join(TEXTURE_PATTERNS)}")
+        allowed = (*TEXTURE_PATTERNS, *TEXTURES)
+        raise ValueError(f"texture pattern {pattern!r} unknown; allowed: {', '.join(allowed)}")
     return np.repeat(gray[..., None], channels, axis=2).astype(np.uint8)
+
+
+def _named_texture(name: str, height: int, width: int, channels: int) -> np.ndarray:
+    """RoboView's `table_texture` value `name` drawn as pixels: its builtin (checker, gradient, flat), its two
+    colors, its mark (edge lines, random speckle, crosses) and its repeat count over the texture."""
+    from roboview.variation.factors.table_texture import TEXTURES
+
+    builtin, mark, rgb1, rgb2, markrgb, random, repeat = TEXTURES[name]
+    y, x = np.mgrid[0:height, 0:width]
+    cell = max(1, max(height, width) // (2 * repeat))
+    c1, c2, cm = (np.asarray(c, float) for c in (rgb1, rgb2, markrgb))
+    if builtin == "checker":
+        rgb = np.where(((x // cell + y // cell) % 2)[..., None], c1, c2)
+    elif builtin == "gradient":
+        rgb = c1 + (c2 - c1) * (y / max(1, height - 1))[..., None]
+    else:
+        rgb = np.broadcast_to(c1, (height, width, 3)).copy()
+    if mark == "edge":
+        rgb[(x % cell < 2) | (y % cell < 2)] = cm
+    elif mark == "random":
+        rgb[np.random.default_rng(0).random((height, width)) < random] = cm
+    elif mark == "cross":
+        rgb[(np.abs(x % cell - cell // 2) < 2) & (np.abs(y % cell - cell // 2) < cell // 4)] = cm
+        rgb[(np.abs(y % cell - cell // 2) < 2) & (np.abs(x % cell - cell // 2) < cell // 4)] = cm
+    pixels = np.clip(np.round(rgb * 255), 0, 255).astype(np.uint8)
+    return (
+        pixels[..., :channels]
+        if channels <= 3
+        else np.concatenate([pixels, np.full((height, width, channels - 3), 255, np.uint8)], axis=2)
+    )
 
 
 @dataclass(frozen=True)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 
 # Infrastructure failures live on the lowest floor (the simulator raises RenderError); part of the policy API.
 from roboview.core.errors import InfraError, RenderError  # noqa: F401
+
+log = logging.getLogger(__name__)
 
 
 class TransientPolicyError(RuntimeError):
@@ -29,20 +32,28 @@ class PolicyUnavailable(RuntimeError):
 
 
 def open_with_retries[T](
-    open_fn: Callable[[], T], server: str, reconnects: int, backoff_s: float, lost: str = ""
+    open_fn: Callable[[], T],
+    server: str,
+    reconnects: int,
+    backoff_s: float,
+    lost: str = "",
+    retry_on: tuple[type[BaseException], ...] = (Exception,),
+    flag: str = "--policy.url",
 ) -> T:
-    """`open_fn()` (a served policy's connection), tried `reconnects` more times, `backoff_s` apart and doubling;
-    `PolicyUnavailable` naming `server` (and what was `lost`) when every try fails."""
-    last: Exception | None = None
+    """`open_fn()` (a served policy's connection), tried `reconnects` more times on `retry_on` errors, `backoff_s`
+    apart and doubling; `PolicyUnavailable` naming `server` (and what was `lost`) when every try fails. The one
+    retry loop of every served policy (openpi, vla_eval, lerobot_async); any other error propagates at once."""
+    last: BaseException | None = None
     for attempt in range(reconnects + 1):
         try:
             return open_fn()
-        except Exception as exc:  # refused, timed out, bad handshake
+        except retry_on as exc:  # refused, timed out, bad handshake
             last = exc
+            log.warning("%s unreachable (%s); attempt %d/%d", server, exc, attempt + 1, reconnects + 1)
             if attempt < reconnects:
                 time.sleep(backoff_s * 2**attempt)
     raise PolicyUnavailable(
         f"{server} is unreachable after {reconnects + 1} attempts ({lost + '; ' if lost else ''}"
-        f"{type(last).__name__}: {last}); start it (or fix --policy.url) and rerun the same command: finished "
+        f"{type(last).__name__}: {last}); start it (or fix {flag}) and rerun the same command: finished "
         "episodes are kept and the run resumes"
     )

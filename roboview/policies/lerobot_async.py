@@ -81,7 +81,7 @@ from roboview.policies.base import (
     PolicyConfig,
     control_field,
 )
-from roboview.policies.errors import InfraError, PolicyUnavailable
+from roboview.policies.errors import InfraError, PolicyUnavailable, open_with_retries
 from roboview.policies.lerobot_policy import CHUNKED_TYPES, checkpoint_image_size, is_chunked, load_config
 from roboview.sim.cameras import ALL_CAMERAS
 from roboview.tasks.env import EE_STATE_KEY, EE_STATE_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
@@ -257,31 +257,29 @@ class LeRobotAsyncPolicy:
         self.connected = True
 
     def _connect(self, lost: str = "") -> None:
-        """(Re)connect with up to `reconnects` retries; PolicyUnavailable if the server stays away."""
-        attempts = 1 + self.spec.reconnects
-        reason = lost
-        for attempt in range(attempts):
-            if attempt:
-                time.sleep(self.spec.reconnect_backoff_s * 2 ** (attempt - 1))
+        """(Re)connect with up to `reconnects` retries, each on a fresh channel; PolicyUnavailable if the server
+        stays away (open_with_retries, the served policies' one retry loop)."""
+        attempts = []
+
+        def load() -> None:
+            if attempts:
                 self._drop_channel()
-            try:
-                self._load()
-                return
-            except _ConnectionLost as exc:
-                reason = str(exc)
-                log.warning(
-                    "policy server %s unreachable (%s); attempt %d/%d",
-                    self.spec.address,
-                    reason,
-                    attempt + 1,
-                    attempts,
-                )
-        self.connected = False
-        raise PolicyUnavailable(
-            f"the LeRobot policy server at {self.spec.address} is unreachable ({reason}; {attempts} connection "
-            f"attempt(s) failed); {_down(self.spec.address)}, then rerun the same command to resume (finished "
-            "episodes are kept)"
-        )
+            attempts.append(1)
+            self._load()
+
+        try:
+            open_with_retries(
+                load,
+                f"the LeRobot policy server at {self.spec.address}",
+                self.spec.reconnects,
+                self.spec.reconnect_backoff_s,
+                lost,
+                retry_on=(_ConnectionLost,),
+                flag="--policy.server",
+            )
+        except PolicyUnavailable as exc:
+            self.connected = False
+            raise PolicyUnavailable(f"{exc}; {_down(self.spec.address)}") from None
 
     # -- the policy protocol ------------------------------------------------------------------------
     def reset(self, episode: Episode, slot: int = 0) -> None:

@@ -94,7 +94,13 @@ def describe(env) -> dict[str, Any]:
     model = env.model
     return {
         "mujoco": mujoco.__version__,
-        "assets": {"gym_hil": _version("gym-hil"), "sha256": assets_hash(model)},
+        "assets": {
+            **{
+                name.replace("-", "_"): _version(name)
+                for name in getattr(env, "asset_packages", ("gym-hil",))
+            },
+            "sha256": assets_hash(model),
+        },
         "scene": {"task": env.task, "sha256": hashlib.sha256(env.scene.spec.to_xml().encode()).hexdigest()},
         "physics": physics_options(model),
         "renderer": {

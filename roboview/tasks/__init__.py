@@ -33,7 +33,7 @@ from roboview.tasks.env import ScriptedExpert, TaskEnv
 from roboview.variation.factors import DEFAULT_TASK
 
 # Registry lines: imported in this order, the order of the tasks in a suite that names several.
-BUILTIN_MODULES = ("roboview.tasks.pick_place", "roboview.tasks.push")
+BUILTIN_MODULES = ("roboview.tasks.pick_place", "roboview.tasks.push", "roboview.tasks.libero")
 # Third-party tasks: a package lists its task modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.tasks"
 for _module in BUILTIN_MODULES:

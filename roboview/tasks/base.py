@@ -47,6 +47,13 @@ class Task:
     # Context values of the small presets (`tiny`, `tiny_extended`), as (factor, values) pairs.
     small_contexts: tuple[tuple[str, tuple[str, ...]], ...] = ()
     max_episode_steps: int = DEFAULT_MAX_STEPS
+    # Whether an episode's step budget depends on its context (LIBERO: its suite's); the env then sets it per
+    # reset, and an evaluation without --eval.max_steps records none.
+    steps_per_context: bool = False
+
+    def default_steps(self) -> int | None:
+        """The step budget of an evaluation that sets none: the task's, or None when each context has its own."""
+        return None if self.steps_per_context else self.max_episode_steps
 
     def context_factors(self) -> tuple[str, ...]:
         return context_factors(self.name)

@@ -128,6 +128,10 @@ class TaskEnv(gym.Env):
     # fairness gate measures `target_geoms()` under the record's box_* fields; the `vision` policy's
     # perception looks for it by this name.
     target: str | None = None
+    # The simulated world the task runs in (the fairness gate and the builder pick its probe and cameras by it).
+    world: str = "roboview"
+    # The cameras a privileged policy (which reads the simulator's state) is given; empty: the policy's own choice.
+    observed_cameras: tuple[str, ...] = ()
 
     # -- what a task declares ----------------------------------------------------------------
     @staticmethod

@@ -93,3 +93,35 @@ register_preset(
         ),
     )
 )
+
+# LIBERO's scenes (roboview.tasks.libero; docs/libero.md). Their factors: every visual factor but distractors and
+# object_size. `libero_tiny`: one context (libero_object task 0, init state 0) and a few values: 4 instances,
+# for tests and `make demo-libero`. `libero`: the 40 tasks of the four suites (init state 0) × every value of the
+# six factors, 7,880 instances (a GPU-scale study; docs/libero.md says how to run a share of it).
+LIBERO_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture")
+register_preset(
+    SuiteConfig(
+        preset="libero_tiny",
+        tasks=("libero",),
+        union_mode="dedupe",
+        splits=("color", "camera_pose", "lighting"),
+        factorial_colors=(),
+        value_subsets=(
+            ("color", ("red", "blue")),
+            ("camera_pose", ("orbit_r1_3",)),
+            ("lighting", ("dim_left",)),
+            ("libero_task", ("libero_object/0",)),
+            ("init_state", ("0",)),
+        ),
+    )
+)
+register_preset(
+    SuiteConfig(
+        preset="libero",
+        tasks=("libero",),
+        union_mode="dedupe",
+        splits=LIBERO_SPLITS,
+        factorial_colors=(),
+        value_subsets=(("init_state", ("0",)),),
+    )
+)

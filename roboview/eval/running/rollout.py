@@ -57,7 +57,8 @@ class PolicyFailed(Exception):
 class WorkerSpec:
     policy: PolicyConfig
     image_size: int = 224
-    max_steps: int = 120
+    # None: the env's own (LIBERO's: its suite's, set at every reset).
+    max_steps: int | None = 120
     # Keep compressed frames and trajectories for the Rerun recording.
     record_media: bool = False
     # Intra-op threads of a torch policy in this worker (cores / workers); 0 leaves torch's default.
@@ -156,15 +157,22 @@ class EvalWorker:
         if rank is not None:  # Ray actors are told their rank; pool workers take theirs at start
             set_worker_rank(rank)
         self.spec = spec
+        task = load_task(spec.task)
+        # A privileged policy reads the simulator's state, no image: it watches the world's own cameras (the videos).
+        world_cameras = task.env_class().observed_cameras
+        cameras = (
+            world_cameras if spec.policy.privileged and world_cameras else spec.policy.observed_cameras()
+        )
+        steps = {} if spec.max_steps is None else {"max_steps": spec.max_steps}
         self.envs = [
             make_env(
                 spec.task,
-                cameras=spec.policy.observed_cameras(),
+                cameras=cameras,
                 image_size=spec.image_size,
-                max_steps=spec.max_steps,
                 depth=spec.policy.depth,
                 lazy=not spec.eager,
                 control=spec.policy.env_control(),
+                **steps,
             )
             for _ in range(spec.envs_per_worker)
         ]

