@@ -40,7 +40,13 @@ def test_the_baseline_is_lerobots_libero_episode(env):
     from libero.libero import benchmark
 
     suite, task_id = parse_libero_task(CONTEXT)
-    ref = LiberoEnv(benchmark.get_benchmark_dict()[suite](), task_id, suite, episode_index=int(INIT))
+    ref = LiberoEnv(
+        benchmark.get_benchmark_dict()[suite](),
+        task_id,
+        suite,
+        obs_type="pixels_agent_pos",
+        episode_index=int(INIT),
+    )
     try:
         ref_obs, _ = ref.reset(seed=SEED)
         ours, _ = env.reset(seed=SEED, options={"instance": instance()})
@@ -85,7 +91,7 @@ def test_a_factor_changes_only_itself(env):
     assert red == blue  # instruction, robot, object pose, seed, context and both cameras: identical
     assert {k for k in original if original[k] != orbit[k]} == {"camera:agentview"}  # what camera_pose alters
     obs, _ = env.reset(seed=SEED, options={"instance": instance(color="blue")})
-    assert np.array_equal(obs["observation.images.agentview"], blue)  # a reset repeats bit for bit
+    assert np.array_equal(obs["observation.images.agentview"], recolored)  # a reset repeats bit for bit
 
 
 def test_what_libero_cannot_take_is_refused_in_one_line(env):

@@ -234,7 +234,7 @@ class LiberoFairnessProbe:
         return ids[::-1, ::-1]  # upright, as the observations
 
     def measure(self, rgb: dict[str, np.ndarray], thresholds: FairnessThresholds) -> FairnessReport:
-        geoms = list(self.env.target_geoms())
+        geoms = list(self.env.object_geoms())
         color = self.env.instance.get("color")
         # At its baseline the object wears LIBERO's own texture, as LIBERO's scene shows it to every policy: there is
         # no nominal color to compare with, and its contrast with the surface is LIBERO's design (a black bowl on a

@@ -228,11 +228,15 @@ class LiberoTaskEnv(gym.Env):
         robot = self.libero_world.inner.robots[0]
         return np.asarray(robot.controller.ee_pos, dtype=float).copy()
 
-    def target_geoms(self) -> tuple[int, ...]:
-        """The target object's visual geoms (what the fairness gate requires visible)."""
+    def object_geoms(self) -> tuple[int, ...]:
+        """The task's object's visual geoms (LIBERO's `obj_of_interest[0]`: what the fairness gate requires visible)."""
         from roboview.libero.factors import object_geoms, target_object
 
         return tuple(object_geoms(self.libero_world, target_object(self.libero_world)))
+
+    def target_geoms(self) -> tuple[int, ...]:
+        """What a policy must find besides the object: nothing the gate judges (LIBERO's scenes have no box)."""
+        return ()
 
     def render(self):
         return self.render_camera("agentview")
