@@ -31,6 +31,7 @@ HARNESSES = (
     "collect_rate",
     "conformance_drift",
     "gpu",
+    "libero_expert",
     "render_rate",
     "serving",
     "stats_calibration",

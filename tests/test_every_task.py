@@ -33,7 +33,9 @@ def test_a_seeded_reset_twice_gives_identical_observations(env):
     assert first.keys() == again.keys()
     for key, value in first.items():
         assert np.array_equal(value, np.asarray(again[key])), key
-    if env.world == "roboview":  # the seed jitters the object (LIBERO's objects start at the fixed init state)
+    if (
+        env.world == "roboview"
+    ):  # the seed jitters the object (LIBERO's objects start at the fixed init state)
         other, _ = env.reset(seed=12, options={"instance": instance})
         assert any(not np.array_equal(v, np.asarray(other[k])) for k, v in first.items())
 
@@ -42,7 +44,9 @@ def test_the_expert_succeeds_at_baseline(env):
     task = load_task(env.task)
     expert = resolve(task.expert)(env)
     outcomes = []
-    for seed in range(3):
+    # Three seeds jitter RoboView's object three ways; LIBERO's objects start at the init state whatever the seed.
+    seeds = range(3) if env.world == "roboview" else range(1)
+    for seed in seeds:
         obs, _ = env.reset(seed=100 + seed, options={"instance": baseline_instance(env.task)})
         expert.reset()
         for _ in range(env.max_steps):
@@ -50,7 +54,9 @@ def test_the_expert_succeeds_at_baseline(env):
             if terminated or truncated:
                 break
         outcomes.append(bool(terminated) and env.is_success())
-    assert all(outcomes), f"{env.task}: the expert solved {sum(outcomes)} of 3 baseline episodes"
+    assert all(outcomes), (
+        f"{env.task}: the expert solved {sum(outcomes)} of {len(outcomes)} baseline episodes"
+    )
 
 
 def test_object_and_target_are_visible_in_every_observed_camera(env):
@@ -60,7 +66,9 @@ def test_object_and_target_are_visible_in_every_observed_camera(env):
     report = probe.measure(rgb, FairnessThresholds())
     for cam in report.cameras:
         assert cam.object_pixels > 0 and cam.object_visible > 0.5, (env.task, cam)
-        if cam.camera != "wrist":  # the wrist camera sees the target partly (or not: LIBERO), as the gate allows
+        if (
+            cam.camera != "wrist"
+        ):  # the wrist camera sees the target partly (or not: LIBERO), as the gate allows
             assert cam.object_in_frame, (env.task, cam)
             if env.target_geoms():
                 assert cam.box_in_frame and cam.box_pixels > 0, (env.task, cam)

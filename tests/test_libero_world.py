@@ -22,9 +22,10 @@ from roboview.libero.env import LiberoWorld, lerobot_view  # noqa: E402
 SUITE, TASK, INIT, SEED = "libero_object", 0, 3, 7
 # A few steps exercising translation, rotation and both gripper commands.
 ACTIONS = [np.array([0.5, -0.2, 0.1, 0, 0.1, 0, -1.0]), np.array([0, 0.5, -0.3, 0.2, 0, 0, 1.0])] * 2
-# Fidelity builds LeRobot's env beside ours (~30 s a suite here); the module's world covers libero_object, and
-# ROBOVIEW_LIBERO_ALL_SUITES=1 adds the other three (all four are bit-identical as of hf-libero 0.1.4 / LeRobot 0.6.1).
-FIDELITY_SUITES = suites.SUITES if os.environ.get("ROBOVIEW_LIBERO_ALL_SUITES") else (SUITE,)
+# Fidelity builds LeRobot's env beside ours (~30 s a suite here). tests/test_libero_task.py checks libero_object
+# through the `libero` task on every run; ROBOVIEW_LIBERO_ALL_SUITES=1 checks the world itself on all four suites
+# (all four are bit-identical as of hf-libero 0.1.4 / LeRobot 0.6.1).
+FIDELITY_SUITES = suites.SUITES if os.environ.get("ROBOVIEW_LIBERO_ALL_SUITES") else ()
 
 
 @pytest.fixture(scope="module")

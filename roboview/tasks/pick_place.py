@@ -4,6 +4,13 @@ Everything of the task in one module: its context factors D (where the object st
 it is, the words: they diversify its scenarios, no bias is measured over them), its receiver box
 (the target), how a context places the scene, its success test, its scripted solution (grasp,
 carry, release above the box) and its registry line.
+
+**Randomizations.** Per episode, from the episode seed: the object's start ± 1 cm in x and y around its named
+position and its heading ± 0.35 rad (`POSITION_JITTER_M`, `YAW_JITTER_RAD`); every value of one (context,
+repeat) draws the same. The context factors (`initial_position`, `shape`, `instruction`) are fixed per context.
+
+**Success.** The object's center lies inside the box's inner walls, below the rim (+1 cm), it moves slower than
+the rest speed, the gripper has released it and no part of the robot touches it (`PickPlaceEnv.is_success`).
 """
 
 from __future__ import annotations

@@ -4,9 +4,15 @@ Same world, robot, cameras, observations and actions as pick_place (so every vis
 unchanged); its target is a flat marked square on the table — the zone — placed relative to the
 object's start, so every context pushes the object about 15 cm across open table (sideways toward
 the robot's right, away from the robot, or diagonally).
-Success: the object's center lies inside the zone and it is at rest (slower than 5 cm/s), untouched
-by the robot. Its scripted expert pushes with the closed gripper: it comes down behind the object on
-the line to the zone center, slides it there, backs off and lifts.
+Its scripted expert pushes with the closed gripper: it comes down behind the object on the line to the zone
+center, slides it there, backs off and lifts.
+
+**Randomizations.** Per episode, from the episode seed: the object's start jittered around its named start
+(`POSITION_JITTER_M`) and its heading (`YAW_JITTER_RAD`); the zone sits at its offset from the named start. Every value of
+one (context, repeat) draws the same. The context factors (start, zone, shape, instruction) are fixed per context.
+
+**Success.** The object's center lies inside the zone and it is at rest (slower than 5 cm/s), untouched by the
+robot (`PushEnv.is_success`).
 """
 
 from __future__ import annotations
