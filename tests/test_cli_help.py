@@ -32,6 +32,7 @@ HARNESSES = (
     "conformance_drift",
     "gpu",
     "libero_expert",
+    "libero_render",
     "render_rate",
     "serving",
     "stats_calibration",
