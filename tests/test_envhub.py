@@ -1,4 +1,4 @@
-"""RoboView as a LeRobot EnvHub env: lerobot's own hub loader runs roboview.integrations.lerobot/hub/env.py from a hub
+"""RoboView as a LeRobot EnvHub env: lerobot's own hub loader runs roboview/integrations/lerobot/hub/env.py from a hub
 cache (offline, a local folder laid out as the hub cache is) and gets one vector env per split."""
 
 import subprocess
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).parents[1]
-ENV_PY = ROOT / "roboview.integrations.lerobot" / "hub" / "env.py"
+ENV_PY = ROOT / "roboview" / "integrations" / "lerobot" / "hub" / "env.py"
 REPO = "roboview/roboview-env"
 COMMIT = "0123456789abcdef0123456789abcdef01234567"
 

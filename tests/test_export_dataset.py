@@ -35,6 +35,7 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
     from lerobot.datasets.video_utils import decode_video_frames
     from lerobot.scripts.convert_dataset_v21_to_v30 import convert_dataset
 
+    from roboview.demos import export_v21
     from roboview.pipelines import export_dataset as export
 
     out = tmp_path / "t" / "demos"  # the converter works in place, with siblings demos_old / demos_v30
@@ -48,13 +49,13 @@ def test_export_round_trips_through_lerobots_v21_converter(collected, tmp_path):
     )
 
     # The v2.1 layout, with the metadata file names LeRobot's converter reads.
-    assert (export.V21_TASKS_PATH, export.V21_EPISODES_PATH, export.V21_EPISODES_STATS_PATH) == (
+    assert (export_v21.V21_TASKS_PATH, export_v21.V21_EPISODES_PATH, export_v21.V21_EPISODES_STATS_PATH) == (
         lerobot_utils.LEGACY_TASKS_PATH,
         lerobot_utils.LEGACY_EPISODES_PATH,
         lerobot_utils.LEGACY_EPISODES_STATS_PATH,
     )
     info = json.loads((out / "meta/info.json").read_text())
-    assert info["codebase_version"] == "v2.1" and info["data_path"] == export.V21_DATA_PATH
+    assert info["codebase_version"] == "v2.1" and info["data_path"] == export_v21.V21_DATA_PATH
     assert (info["total_episodes"], info["total_frames"], info["total_videos"], info["total_chunks"]) == (
         2,
         native.num_frames,

@@ -166,8 +166,11 @@ class Section:
 def field_help(cls: type, name: str) -> str:
     """Field `name`'s description: the comment above it (else a docstring below it, else an inline comment), then
     what `cls.help_details[name]()` adds."""
+    # The class that declares the field (a mixin's field, e.g. a served policy's connection block, is commented
+    # in the mixin's source).
+    owner = next((k for k in cls.__mro__ if name in getattr(k, "__annotations__", {})), cls)
     try:
-        doc = docstring.get_attribute_docstring(cls, name)
+        doc = docstring.get_attribute_docstring(owner, name)
     except (RuntimeWarning, OSError, TypeError):
         doc = docstring.AttributeDocString()
     inline = "" if _PRAGMA.match(doc.comment_inline) else doc.comment_inline

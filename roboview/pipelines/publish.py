@@ -14,7 +14,7 @@ as a pull request. `--dry_run=true` writes the exact folder and lists what would
 
 Creates the dataset repo if missing, uploads the folder, and tags the upload with the benchmark
 version from `benchmark.json`. `--env_repo_id=ORG/NAME` also publishes RoboView as a LeRobot EnvHub env
-(`roboview.integrations.lerobot/hub/env.py` and a README pointing it at the benchmark repo). `--dry_run=true` lists exactly what would be uploaded and touches
+(`roboview/integrations/lerobot/hub/env.py` and a README pointing it at the benchmark repo). `--dry_run=true` lists exactly what would be uploaded and touches
 nothing. Without a token, in offline mode or without network it fails before changing anything.
 """
 

@@ -251,6 +251,31 @@ def control_field(config: PolicyConfig) -> None:
 
 
 @dataclass
+class ServedConnection:
+    """The connection block every served policy type shares (openpi, vla_eval, lerobot_async): how long to wait for
+    the server and how often to reach it again. Its fields are `--policy.<field>` flags of those types; the one
+    retry loop that reads them is `roboview.policies.errors.open_with_retries`."""
+
+    # Seconds to open a connection to the server and receive its greeting (metadata, HELLO, `Ready`).
+    open_timeout_s: float = 10.0
+    # Seconds to wait for one answer (an action chunk).
+    timeout_s: float = 60.0
+    # Further attempts to open a dropped connection (waiting reconnect_backoff_s, doubling) before the run stops.
+    reconnects: int = 3
+    # Seconds before the first reconnection attempt (doubling with each further one).
+    reconnect_backoff_s: float = 0.5
+
+    def check_connection(self) -> None:
+        """One-line errors for a timeout that is not positive or a negative retry count or backoff."""
+        for name in ("open_timeout_s", "timeout_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
+        for name in ("reconnects", "reconnect_backoff_s"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
+
+
+@dataclass
 class ControlledConfig(PolicyConfig):
     """A policy type whose control mode is chosen with `--policy.control` (default joint)."""
 

@@ -79,6 +79,7 @@ from roboview.policies.base import (
     ControlledConfig,
     Episode,
     PolicyConfig,
+    ServedConnection,
     control_field,
 )
 from roboview.policies.errors import InfraError, PolicyUnavailable, open_with_retries
@@ -169,6 +170,7 @@ class _Spec:
     actions_per_chunk: int
     cameras: tuple[str, ...]
     image_size: int
+    open_timeout_s: float
     timeout_s: float
     load_timeout_s: float
     reconnects: int
@@ -236,7 +238,7 @@ class LeRobotAsyncPolicy:
             device=s.device,
         )
         try:
-            self._stub.Ready(services_pb2.Empty(), timeout=CONNECT_TIMEOUT_S)
+            self._stub.Ready(services_pb2.Empty(), timeout=s.open_timeout_s)
             start = time.perf_counter()
             self._stub.SendPolicyInstructions(
                 services_pb2.PolicySetup(data=pickle.dumps(instructions)), timeout=s.load_timeout_s
@@ -394,7 +396,7 @@ class LeRobotAsyncPolicy:
 
 @PolicyConfig.register_subclass("lerobot_async")
 @dataclass
-class LeRobotAsyncConfig(ControlledConfig):
+class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
     """A LeRobot checkpoint served by `python -m lerobot.async_inference.policy_server` (gRPC)."""
 
     # The server: HOST:PORT, or a comma-separated list (worker i talks to entry i mod n; one client per server).
@@ -414,14 +416,8 @@ class LeRobotAsyncConfig(ControlledConfig):
     cameras: str = ""
     # For a checkpoint not readable here: its image side (pixels); 0: read from the checkpoint.
     image_size: int = 0
-    # Seconds to wait for one chunk (observation sent, inference, actions back).
-    timeout_s: float = 60.0
     # Seconds the server may take to load the checkpoint (SendPolicyInstructions).
     load_timeout_s: float = 600.0
-    # Further attempts to reach a server that went away (reconnect_backoff_s apart, doubling) before the run stops.
-    reconnects: int = 3
-    # Seconds before the first reconnection attempt (doubling with each further one).
-    reconnect_backoff_s: float = 1.0
 
     doc = "a LeRobot checkpoint served by lerobot.async_inference.policy_server (--policy.server=HOST:PORT)"
 
@@ -432,16 +428,17 @@ class LeRobotAsyncConfig(ControlledConfig):
         with flag_errors(f"--policy.device={self.device!r}"):
             if not SERVER_DEVICE.match(self.device):
                 raise ValueError("the server's device must be cpu, cuda, cuda:N or mps")
-        for name in ("timeout_s", "load_timeout_s"):
+        self.check_connection()
+        for name in ("load_timeout_s",):
             if not getattr(self, name) > 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
-        for name in ("reconnects", "reconnect_backoff_s", "actions_per_chunk", "image_size"):
+        for name in ("actions_per_chunk", "image_size"):
             if getattr(self, name) < 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
         self._resolve()  # the checkpoint's facts, before any connection
         for server in servers:  # reachable before any rollout
             with flag_errors("--policy.server"):
-                check_reachable(server)
+                check_reachable(server, self.open_timeout_s)
         super().__post_init__()
 
     # -- the checkpoint: read here when it is a folder here, else from the flags --------------------
@@ -544,6 +541,7 @@ class LeRobotAsyncConfig(ControlledConfig):
             per_chunk,
             cameras,
             side,
+            self.open_timeout_s,
             self.timeout_s,
             self.load_timeout_s,
             self.reconnects,

@@ -50,7 +50,14 @@ from typing import Any
 import numpy as np
 
 from roboview.core.workers import worker_rank
-from roboview.policies.base import AgentView, ControlledConfig, Episode, PolicyConfig, control_field
+from roboview.policies.base import (
+    AgentView,
+    ControlledConfig,
+    Episode,
+    PolicyConfig,
+    ServedConnection,
+    control_field,
+)
 from roboview.policies.errors import InfraError, open_with_retries
 from roboview.policies.serving.openpi_wire import (
     ACTION_SPACES,
@@ -254,7 +261,7 @@ class OpenPIPolicy:
 
 @PolicyConfig.register_subclass("openpi")
 @dataclass
-class OpenPIConfig(ControlledConfig):
+class OpenPIConfig(ControlledConfig, ServedConnection):
     """A policy behind openpi's websocket protocol (openpi's serve_policy.py, roboview.pipelines.serve_policy, …)."""
 
     # ws://HOST:PORT of the server; a comma-separated list spreads workers over several (worker i → entry i mod n).
@@ -281,14 +288,6 @@ class OpenPIConfig(ControlledConfig):
     gripper: str = "continuous"
     # Name of the environment variable holding the API key (sent as `Authorization: Api-Key …`; never recorded).
     api_key_env: str = "OPENPI_API_KEY"
-    # Seconds to open a connection and receive the metadata frame.
-    open_timeout_s: float = 10.0
-    # Seconds to wait for one answer.
-    timeout_s: float = 60.0
-    # Further attempts to open a dropped connection (waiting reconnect_backoff_s, doubling) before the run stops.
-    reconnects: int = 3
-    # Seconds before the first reconnection attempt (doubling with each further one).
-    reconnect_backoff_s: float = 0.5
 
     doc = "a policy served over openpi's websocket protocol (--policy.url=ws://HOST:PORT)"
 
@@ -320,10 +319,10 @@ class OpenPIConfig(ControlledConfig):
                 f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
                 f"{', '.join(ALL_CAMERAS)}"
             )
-        for name in ("image_size", "open_timeout_s", "timeout_s"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
-        for name in ("replan_steps", "reconnects"):
+        self.check_connection()
+        if self.image_size <= 0:
+            raise ValueError(f"--policy.image_size={self.image_size} must be positive")
+        for name in ("replan_steps",):
             if getattr(self, name) < 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
         fmt = self.wire_format()  # validates obs_format / key_map against the cameras

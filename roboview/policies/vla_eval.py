@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from roboview.core.workers import worker_rank
-from roboview.policies.base import AgentView, Episode, PolicyConfig
+from roboview.policies.base import AgentView, Episode, PolicyConfig, ServedConnection
 from roboview.policies.errors import InfraError, open_with_retries
 from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
 from roboview.sim.cameras import ALL_CAMERAS
@@ -289,7 +289,7 @@ def _pairs(text: str, flag: str) -> dict[str, str]:
 
 @PolicyConfig.register_subclass("vla_eval")
 @dataclass
-class VlaEvalConfig(PolicyConfig):
+class VlaEvalConfig(PolicyConfig, ServedConnection):
     """A policy behind a vla-eval model server (`vla_eval.model_servers`: LeRobot, π0, OpenVLA, GR00T, …)."""
 
     # ws://HOST:PORT of the server; a comma-separated list spreads workers over several (worker i → entry i mod n).
@@ -311,14 +311,6 @@ class VlaEvalConfig(PolicyConfig):
     # chunk buffer without reading them, so those steps render no camera. 1: every step (a server that runs its
     # model on a step without images answers an error, which fails the episode with its message).
     images_every: int = 1
-    # Seconds to open a connection and exchange HELLO.
-    open_timeout_s: float = 10.0
-    # Seconds to wait for one answer.
-    timeout_s: float = 60.0
-    # Further attempts to open a dropped connection (waiting reconnect_backoff_s, doubling) before the run stops.
-    reconnects: int = 3
-    # Seconds before the first reconnection attempt (doubling with each further one).
-    reconnect_backoff_s: float = 0.5
 
     doc = "any vla-eval model server (--policy.url=ws://HOST:PORT)"
 
@@ -344,12 +336,9 @@ class VlaEvalConfig(PolicyConfig):
             )
         if self.images_every < 1:
             raise ValueError(f"--policy.images_every={self.images_every} must be 1 or more (1: every step)")
-        for name in ("image_size", "open_timeout_s", "timeout_s"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
-        for name in ("reconnects", "reconnect_backoff_s"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
+        self.check_connection()
+        if self.image_size <= 0:
+            raise ValueError(f"--policy.image_size={self.image_size} must be positive")
         # Every server is reached and negotiated here, before any rollout; all must agree.
         self._hello: dict[str, dict] = {}
         agreed = None

@@ -20,7 +20,7 @@ lerobot-eval and lerobot-train import it at start-up through the `lerobot_env_ro
 (plugins/lerobot_env_roboview, installed by `make install`: LeRobot imports every installed `lerobot_env_*`),
 so no flag is needed; `--env.discover_packages_path=roboview.integrations.lerobot` still works where that distribution is
 not installed. `lerobot-train --env.type=roboview --env_eval_freq=N` takes the same flags for its periodic
-evals, one success rate per split. The same env is offered as a LeRobot EnvHub env: `roboview.integrations.lerobot/hub/`.
+evals, one success rate per split. The same env is offered as a LeRobot EnvHub env: `roboview/integrations/lerobot/hub/`.
 """
 
 from __future__ import annotations
