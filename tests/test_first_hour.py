@@ -179,7 +179,7 @@ def test_audit_verify_and_merge_name_every_input_that_is_not_theirs(
     (tmp_path / "empty.csv").write_text("")
     for path, expected in (
         (tiny_benchmark, "is a benchmark folder"),
-        (evaluated, "roboview.pipelines.report"),
+        (evaluated, "roboview-report"),
         (not_results["bytes"], "unknown format '.bin'"),
         (not_results["folder"], "is a folder"),
         (not_results["fake_parquet"], "bytes are not parquet"),
