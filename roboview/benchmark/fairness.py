@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
+from scipy import ndimage
 
 from roboview.tasks.env import TaskEnv
 from roboview.variation.colors import delta_e_2000, get_color, srgb_to_lab
@@ -193,9 +194,6 @@ def violations(
     return out
 
 
-VISUAL_GROUP = 1  # robosuite's visual geoms
-
-
 class LiberoFairnessProbe:
     """The gate in LIBERO's scenes: the task's target object (LIBERO's `obj_of_interest[0]`) must be visible, whole
     and distinct from what surrounds it in `agentview`; the wrist camera, which at t = 0 looks down past the
@@ -209,6 +207,7 @@ class LiberoFairnessProbe:
         self._seg: mujoco.Renderer | None = None
 
     def _segment(self, camera: str, alone: list[int] | None = None) -> np.ndarray:
+        from roboview.libero.factors import VISUAL_GROUP
         from roboview.tasks.libero import CAMERAS
 
         model, data = self.env.model, self.env.data
@@ -275,12 +274,11 @@ class LiberoFairnessProbe:
 
 
 def _ring(mask: np.ndarray, width: int = 4) -> np.ndarray:
-    """The pixels within `width` of `mask` but outside it: what the object is seen against."""
-    grown = mask.copy()
-    for axis in (0, 1):
-        for shift in range(1, width + 1):
-            grown |= np.roll(mask, shift, axis) | np.roll(mask, -shift, axis)
-    return grown & ~mask
+    """The pixels within `width` of `mask` (along a row or a column) but outside it: what the object is seen
+    against."""
+    cross = np.zeros((2 * width + 1, 2 * width + 1), bool)
+    cross[width, :] = cross[:, width] = True
+    return ndimage.binary_dilation(mask, structure=cross) & ~mask
 
 
 # The gate of each world: its probe class and the cameras it renders.

@@ -11,24 +11,26 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 
-VERBS = (
-    "audit",
-    "build_benchmark",
-    "collect",
-    "coverage",
-    "evaluate",
-    "export_dataset",
-    "leaderboard",
-    "merge",
-    "plan",
-    "probe_grounding",
-    "publish",
-    "report",
-    "serve_policy",
-    "serve_vlm",
-    "train",
-    "verify",
+# The verb modules, one per console script (their names as strings: the import graph sees them).
+MODULES = (
+    "roboview.pipelines.audit",
+    "roboview.pipelines.build_benchmark",
+    "roboview.pipelines.collect",
+    "roboview.pipelines.coverage",
+    "roboview.pipelines.evaluate",
+    "roboview.pipelines.export_dataset",
+    "roboview.pipelines.leaderboard",
+    "roboview.pipelines.merge",
+    "roboview.pipelines.plan",
+    "roboview.pipelines.probe_grounding",
+    "roboview.pipelines.publish",
+    "roboview.pipelines.report",
+    "roboview.pipelines.serve_policy",
+    "roboview.pipelines.serve_vlm",
+    "roboview.pipelines.train",
+    "roboview.pipelines.verify",
 )
+VERBS = tuple(module.rpartition(".")[2] for module in MODULES)
 
 
 def script_name(verb: str) -> str:
@@ -47,19 +49,8 @@ def _script(module: str) -> Callable[[], None]:
     return run
 
 
-audit = _script("roboview.pipelines.audit")
-build_benchmark = _script("roboview.pipelines.build_benchmark")
-collect = _script("roboview.pipelines.collect")
-coverage = _script("roboview.pipelines.coverage")
-evaluate = _script("roboview.pipelines.evaluate")
-export_dataset = _script("roboview.pipelines.export_dataset")
-leaderboard = _script("roboview.pipelines.leaderboard")
-merge = _script("roboview.pipelines.merge")
-plan = _script("roboview.pipelines.plan")
-probe_grounding = _script("roboview.pipelines.probe_grounding")
-publish = _script("roboview.pipelines.publish")
-report = _script("roboview.pipelines.report")
-serve_policy = _script("roboview.pipelines.serve_policy")
-serve_vlm = _script("roboview.pipelines.serve_vlm")
-train = _script("roboview.pipelines.train")
-verify = _script("roboview.pipelines.verify")
+def __getattr__(name: str) -> Callable[[], None]:
+    """`roboview.pipelines._console:<verb>`, the entry point of `roboview-<verb>` (PEP 562)."""
+    if name in VERBS:
+        return _script(MODULES[VERBS.index(name)])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -35,12 +35,13 @@ quaternion, the two gripper joint positions (LeRobot's LIBERO state, bit for bit
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from roboview.libero.suites import SUITES, max_steps, tasks
+from roboview.libero.suites import SUITES, max_steps
 from roboview.sim.cameras import CameraPose, mat_to_quat
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
@@ -261,13 +262,12 @@ class _LiberoScene:
     @property
     def spec(self):
         xml = self.env.libero_world.inner.model.get_xml()
-        return type("Spec", (), {"to_xml": staticmethod(lambda: xml)})()
+        return SimpleNamespace(to_xml=lambda: xml)
 
     @property
     def ids(self):
         model = self.env.model
-        cameras = {name: model.camera(CAMERAS[name]).id for name in OBSERVED_CAMERAS}
-        return type("Ids", (), {"cameras": cameras})()
+        return SimpleNamespace(cameras={name: model.camera(CAMERAS[name]).id for name in OBSERVED_CAMERAS})
 
     def camera_pose(self, name: str) -> CameraPose:
         import mujoco
@@ -351,11 +351,6 @@ class LiberoTaskExpert:
 
     def select_action(self, observation=None) -> np.ndarray:
         return np.asarray(self._expert.select_action(observation), dtype=np.float32)
-
-
-def libero_task_values(suite: str) -> tuple[str, ...]:
-    """The `libero_task` values of one suite."""
-    return tuple(f"{suite}/{t.task_id}" for t in tasks(suite))
 
 
 register_task(
