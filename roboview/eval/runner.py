@@ -383,13 +383,7 @@ def run_rounds(
     records: dict[str, dict] = {}
     for r in range(design.max_repeats + 1):
         for split in sorted(active):
-            # Rows infrastructure ended (still so after their re-runs) enter no decision.
-            rows = [
-                row
-                for item in chosen[split]
-                for rep in range(r)
-                if (row := store.rows.get((item.record["instance_id"], rep))) is not None and is_counted(row)
-            ]
+            rows = _counted_rows(chosen[split], r, store)
             decision = decide_split(rows, r, design)
             if decision.stopped:
                 records[split] = decision.record(len(rows))
@@ -425,6 +419,17 @@ def run_rounds(
             if not store.done((item.record["instance_id"], rep))
         ]
     )
+
+
+def _counted_rows(items: list, rounds: int, store: EpisodeStore) -> list[dict]:
+    """The rows of `items`' first `rounds` repeats that count: rows infrastructure ended (still so after their
+    re-runs) enter no decision."""
+    return [
+        row
+        for item in items
+        for rep in range(rounds)
+        if (row := store.rows.get((item.record["instance_id"], rep))) is not None and is_counted(row)
+    ]
 
 
 def _merge_cluster(per_task: dict[str, dict]) -> dict:

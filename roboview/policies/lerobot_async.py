@@ -94,8 +94,6 @@ log = logging.getLogger(__name__)
 SERVED_TYPES = tuple(t for t in CHUNKED_TYPES if t in ("act", "smolvla", "pi0", "pi05"))
 SERVER_DEVICE = re.compile(r"^(cpu|mps|cuda(:\d+)?)$")
 ADDRESS = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
-# Seconds for `Ready` (the reachability check, and each reconnect attempt's first call).
-CONNECT_TIMEOUT_S = 10.0
 START_SERVER = (
     "python -m lerobot.async_inference.policy_server --host={host} --port={port} --fps=10 "
     "--inference_latency=0"
@@ -143,7 +141,7 @@ def _down(address: str) -> str:
     )
 
 
-def check_reachable(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+def check_reachable(address: str, timeout_s: float) -> None:
     """`Ready` on the server at `address`; a ValueError naming it if it does not answer."""
     import grpc
     from lerobot.transport import services_pb2
@@ -181,6 +179,20 @@ class _Spec:
     def state(self) -> tuple[str, tuple[str, ...]]:
         """The observation key the state is read from and its entries' names (joint, or the EE state)."""
         return (STATE_KEY, STATE_NAMES) if self.control == "joint" else (EE_STATE_KEY, EE_STATE_NAMES)
+
+
+def _chunk_error(exc, s: _Spec) -> Exception:
+    """A failed chunk request as a lost connection, a timeout (the evaluator retries) or the server's failure."""
+    import grpc
+
+    if exc.code() in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED):
+        return _ConnectionLost(_rpc_reason(exc))
+    if exc.code() == grpc.StatusCode.DEADLINE_EXCEEDED:
+        return TimeoutError(
+            f"no action chunk from the LeRobot policy server at {s.address} within "
+            f"--policy.timeout_s={s.timeout_s:g} s"
+        )
+    return RuntimeError(f"the LeRobot policy server at {s.address} failed: {_rpc_reason(exc)}")
 
 
 class _ConnectionLost(Exception):
@@ -344,16 +356,8 @@ class LeRobotAsyncPolicy:
                     services_pb2.Empty(), timeout=max(0.1, deadline - time.monotonic())
                 )
             except grpc.RpcError as exc:
-                if exc.code() in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED):
-                    raise _ConnectionLost(_rpc_reason(exc)) from exc
-                if exc.code() == grpc.StatusCode.DEADLINE_EXCEEDED:
-                    raise TimeoutError(
-                        f"no action chunk from the LeRobot policy server at {s.address} within "
-                        f"--policy.timeout_s={s.timeout_s:g} s"
-                    ) from None
-                raise RuntimeError(
-                    f"the LeRobot policy server at {s.address} failed: {_rpc_reason(exc)}"
-                ) from None
+                error = _chunk_error(exc, s)
+                raise error from (exc if isinstance(error, _ConnectionLost) else None)
             if reply.data:
                 break
             if attempt == 0:  # a restarted server has no policy; an inference error also answers empty

@@ -52,66 +52,65 @@ def read_rows(results: Path) -> tuple[list[dict], dict]:
 
 def check_rows(rows: list[dict], bench) -> list[Check]:
     """Instances, seeds and duplicates of the rows against the benchmark's records."""
-    from roboview.variation.instances import episode_seed
-
     records = {i.record["instance_id"]: i.record for items in bench.splits.values() for i in items}
+    return [check_instances(rows, records), check_seeds(rows, records), check_duplicates(rows)]
+
+
+def check_instances(rows: list[dict], records: dict[str, dict]) -> Check:
+    """Every row an instance of the benchmark, its instance columns as the benchmark records them."""
     unknown = [r["instance_id"] for r in rows if r["instance_id"] not in records]
     edited = []
     for row in rows:
         record = records.get(row["instance_id"])
-        if record is not None:
-            cols = [c for c, v in record.items() if row.get(c) != v]
-            if cols:
-                edited.append(f"{row['instance_id']} repeat {row['repeat']} ({', '.join(cols)})")
-    checks = [
-        Check(
-            "instances",
-            not unknown and not edited,
-            f"{len(rows)} rows, each an instance of the benchmark with identical content"
-            if not unknown and not edited
-            else "; ".join(
-                filter(
-                    None,
-                    [
-                        f"{len(unknown)} rows name instances the benchmark does not hold: {listed(sorted(set(unknown)))}"
-                        if unknown
-                        else "",
-                        f"{len(edited)} rows differ from their instance's record: {listed(edited)}"
-                        if edited
-                        else "",
-                    ],
-                )
-            ),
-        )
+        cols = [c for c, v in record.items() if row.get(c) != v] if record is not None else []
+        if cols:
+            edited.append(f"{row['instance_id']} repeat {row['repeat']} ({', '.join(cols)})")
+    problems = [
+        f"{len(unknown)} rows name instances the benchmark does not hold: {listed(sorted(set(unknown)))}"
+        if unknown
+        else "",
+        f"{len(edited)} rows differ from their instance's record: {listed(edited)}" if edited else "",
     ]
-    bad_seeds = [
-        f"{r['instance_id']} repeat {r['repeat']} (seed {r.get('episode_seed')}, expected "
-        f"{episode_seed(records[r['instance_id']]['context_id'], r['repeat'])})"
-        for r in rows
-        if r["instance_id"] in records
-        and r.get("episode_seed") != episode_seed(records[r["instance_id"]]["context_id"], r["repeat"])
-    ]
-    checks.append(
-        Check(
-            "seeds",
-            not bad_seeds,
-            "every episode seed is its (context, repeat)'s common-random-number seed"
-            if not bad_seeds
-            else f"{len(bad_seeds)} rows with another seed: {listed(bad_seeds)}",
-        )
+    return Check(
+        "instances",
+        not unknown and not edited,
+        "; ".join(filter(None, problems))
+        or f"{len(rows)} rows, each an instance of the benchmark with identical content",
     )
+
+
+def check_seeds(rows: list[dict], records: dict[str, dict]) -> Check:
+    """Every episode seed the common-random-number seed of its (context, repeat)."""
+    from roboview.variation.instances import episode_seed
+
+    bad = []
+    for r in rows:
+        if r["instance_id"] in records:
+            expected = episode_seed(records[r["instance_id"]]["context_id"], r["repeat"])
+            if r.get("episode_seed") != expected:
+                bad.append(
+                    f"{r['instance_id']} repeat {r['repeat']} (seed {r.get('episode_seed')}, expected {expected})"
+                )
+    return Check(
+        "seeds",
+        not bad,
+        f"{len(bad)} rows with another seed: {listed(bad)}"
+        if bad
+        else "every episode seed is its (context, repeat)'s common-random-number seed",
+    )
+
+
+def check_duplicates(rows: list[dict]) -> Check:
+    """No (instance, repeat) twice."""
     counts = Counter((r["instance_id"], r["repeat"]) for r in rows)
     twice = [f"{i} repeat {r} ×{n}" for (i, r), n in counts.items() if n > 1]
-    checks.append(
-        Check(
-            "duplicates",
-            not twice,
-            "no (instance, repeat) twice"
-            if not twice
-            else f"{len(twice)} (instance, repeat) pairs appear more than once: {listed(twice)}",
-        )
+    return Check(
+        "duplicates",
+        not twice,
+        f"{len(twice)} (instance, repeat) pairs appear more than once: {listed(twice)}"
+        if twice
+        else "no (instance, repeat) twice",
     )
-    return checks
 
 
 def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
