@@ -58,6 +58,21 @@ def check_source(root: Path) -> tuple[Source, str | None]:
     collection was made with (None for a dataset not written by roboview.pipelines.collect)."""
     import pyarrow.parquet as pq
 
+    info = _read_info(root)
+    video_keys = [key for key, ft in info["features"].items() if ft["dtype"] == "video"]
+    for key, template in (("data_path", V30_DATA_PATH), ("video_path", V30_VIDEO_PATH)):
+        if info.get(key) != template and (key == "data_path" or video_keys):
+            raise ExportError(f"{root}: meta/info.json has {key}={info.get(key)!r}; allowed: {template!r}")
+    repo_id = _collected_repo_id(root, info)
+    episodes = _read_episodes(root, info)
+    _check_files(root, episodes, video_keys)
+    tasks = pq.read_table(root / "meta/tasks.parquet").to_pandas()
+    task_list = sorted((int(index), str(task)) for task, index in zip(tasks.index, tasks["task_index"]))
+    return Source(root, info, episodes, task_list, video_keys), repo_id
+
+
+def _read_info(root: Path) -> dict:
+    """meta/info.json of a LeRobot v3.0 dataset folder."""
     what = "give a LeRobot v3.0 dataset folder written by roboview.pipelines.collect"
     if not root.exists():
         raise ExportError(f"{root} does not exist; {what}")
@@ -73,23 +88,27 @@ def check_source(root: Path) -> tuple[Source, str | None]:
             f"{root} is a LeRobot {version} dataset; allowed: {SOURCE_VERSION} "
             f"(this command exports {SOURCE_VERSION} to {', '.join(FORMATS)})"
         )
-    video_keys = [key for key, ft in info["features"].items() if ft["dtype"] == "video"]
-    for key, template in (("data_path", V30_DATA_PATH), ("video_path", V30_VIDEO_PATH)):
-        if info.get(key) != template and (key == "data_path" or video_keys):
-            raise ExportError(f"{root}: meta/info.json has {key}={info.get(key)!r}; allowed: {template!r}")
+    return info
 
-    repo_id = None
-    if (
-        root / PROGRESS
-    ).is_file():  # written by roboview.pipelines.collect: its checkpoint must match the metadata
-        progress = json.loads((root / PROGRESS).read_text())
-        repo_id = progress.get("signature", {}).get("repo_id")
-        if progress.get("episodes_saved") != info["total_episodes"]:
-            raise ExportError(
-                f"{root} holds an interrupted collection ({progress.get('episodes_saved')} episodes checkpointed, "
-                f"meta/info.json lists {info['total_episodes']}); rerun roboview.pipelines.collect with the same "
-                "settings to finish it, then export"
-            )
+
+def _collected_repo_id(root: Path, info: dict) -> str | None:
+    """The repo id roboview.pipelines.collect recorded (None for another writer's dataset); its checkpoint must
+    match the metadata (an interrupted collection is refused)."""
+    if not (root / PROGRESS).is_file():
+        return None
+    progress = json.loads((root / PROGRESS).read_text())
+    if progress.get("episodes_saved") != info["total_episodes"]:
+        raise ExportError(
+            f"{root} holds an interrupted collection ({progress.get('episodes_saved')} episodes checkpointed, "
+            f"meta/info.json lists {info['total_episodes']}); rerun roboview.pipelines.collect with the same "
+            "settings to finish it, then export"
+        )
+    return progress.get("signature", {}).get("repo_id")
+
+
+def _read_episodes(root: Path, info: dict) -> list[dict]:
+    """meta/episodes' rows in episode order, checked against meta/info.json's counts."""
+    import pyarrow.parquet as pq
 
     files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
     episodes = sorted(
@@ -108,7 +127,11 @@ def check_source(root: Path) -> tuple[Source, str | None]:
         )
     if not episodes:
         raise ExportError(f"{root} holds no episodes; nothing to export")
+    return episodes
 
+
+def _check_files(root: Path, episodes: list[dict], video_keys: list[str]) -> None:
+    """Every data and video file the episodes' metadata lists exists."""
     needed = {
         V30_DATA_PATH.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"])
         for row in episodes
@@ -127,10 +150,6 @@ def check_source(root: Path) -> tuple[Source, str | None]:
         raise ExportError(
             f"{root} is incomplete: {len(missing)} file(s) its metadata lists are missing, e.g. {missing[0]}"
         )
-
-    tasks = pq.read_table(root / "meta/tasks.parquet").to_pandas()
-    task_list = sorted((int(index), str(task)) for task, index in zip(tasks.index, tasks["task_index"]))
-    return Source(root, info, episodes, task_list, video_keys), repo_id
 
 
 def check_output(out: Path, root: Path) -> None:

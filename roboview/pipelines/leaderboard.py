@@ -127,15 +127,10 @@ def _board_benchmark(cfg: LeaderboardConfig, local: dict[str, Path]) -> Path:
     )
 
 
-def run(cfg: LeaderboardConfig) -> Board:
-    import pandas as pd
-    import pyarrow.parquet as pq
-
+def sort_bundles(cfg: LeaderboardConfig) -> tuple[str, dict[str, Path], list[Rejected]]:
+    """(benchmark version, the bundles that verify by source, those listed apart with the reason): every source
+    fetched and checked against the board's benchmark."""
     from roboview.benchmark.format import load_benchmark
-    from roboview.eval.reporting.leaderboard import rank_metrics, single_policy_rows
-    from roboview.eval.reporting.report import HTML_FILE, load_results, write_report
-    from roboview.eval.running.results import PARQUET, RUN_FILE, STATUS, counted, is_privileged_run
-    from roboview.eval.statistics.metrics import compute_all_metrics
 
     rejected: list[Rejected] = []
     local: dict[str, Path] = {}
@@ -153,6 +148,30 @@ def run(cfg: LeaderboardConfig) -> Board:
             rejected.append(Rejected(source, reason))
         else:
             accepted[source] = path
+    return version, accepted, rejected
+
+
+def bundle_policy(path: Path) -> str:
+    """The one policy a bundle's counted episodes name; EpisodesError for a bundle of several."""
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from roboview.eval.running.results import PARQUET, STATUS, counted
+
+    columns = [c for c in ("policy", STATUS) if c in pq.read_schema(path / PARQUET).names]
+    names = sorted(map(str, counted(pd.read_parquet(path / PARQUET, columns=columns))["policy"].unique()))
+    if len(names) != 1:
+        raise EpisodesError(f"{path} holds several policies ({', '.join(names)}); give one per bundle")
+    return names[0]
+
+
+def run(cfg: LeaderboardConfig) -> Board:
+    from roboview.eval.reporting.leaderboard import rank_metrics, single_policy_rows
+    from roboview.eval.reporting.report import HTML_FILE, load_results, write_report
+    from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
+    from roboview.eval.statistics.metrics import compute_all_metrics
+
+    version, accepted, rejected = sort_bundles(cfg)
     out = Path(cfg.output_dir)
     entries: list[Entry] = []
     board = Board(
@@ -162,16 +181,8 @@ def run(cfg: LeaderboardConfig) -> Board:
         generated=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     )
     if accepted:
-        policies = []
-        for path in accepted.values():  # each bundle's policy, read first: the labels rename them when loaded
-            columns = [c for c in ("policy", STATUS) if c in pq.read_schema(path / PARQUET).names]
-            rows = counted(pd.read_parquet(path / PARQUET, columns=columns))
-            names = sorted(map(str, rows["policy"].unique()))
-            if len(names) != 1:
-                raise EpisodesError(
-                    f"{path} holds several policies ({', '.join(names)}); give one per bundle"
-                )
-            policies.append(names[0])
+        # Each bundle's policy, read first: the labels rename them when loaded.
+        policies = [bundle_policy(path) for path in accepted.values()]
         labels = labels_for(policies, list(accepted))
         episodes, sources = load_results([p / PARQUET for p in accepted.values()], labels)
         metrics = compute_all_metrics(episodes, cfg.metrics)
