@@ -21,12 +21,12 @@ import pandas as pd
 
 from roboview.core.folders import folder_problem
 from roboview.demos.recorder import DemoEpisode
+from roboview.tasks import load_task
 from roboview.tasks.env import EE_STATE_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES, action_names
 from roboview.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
 
-ROBOT_TYPE = "franka_panda_robotiq_2f85"
 PROGRESS_DIR = Path("meta/roboview")
 PROGRESS_FILE = PROGRESS_DIR / "progress.json"
 PROVENANCE_FILE = PROGRESS_DIR / "episodes.parquet"
@@ -56,6 +56,7 @@ class CollectionSignature:
     randomize: tuple[str, ...] = ()  # collections made before randomization existed had none
     task: str = DEFAULT_TASK  # collections made before the task axis were pick_place
     control: str = "joint"  # collections made before end-effector control were joint
+    contexts: tuple[tuple[str, tuple[str, ...]], ...] = ()  # the context values drawn from (empty: all)
 
 
 def state_names(control: str) -> tuple[str, ...]:
@@ -63,9 +64,12 @@ def state_names(control: str) -> tuple[str, ...]:
     return STATE_NAMES if control == "joint" else EE_STATE_NAMES
 
 
-def demo_features(cameras: tuple[str, ...], image_size: int, control: str = "joint") -> dict[str, dict]:
-    """LeRobot features: one video per camera, 8-d state and the control's action, named (docs/benchmark.md, "The
-    task and its interfaces"; docs/control.md)."""
+def demo_features(
+    cameras: tuple[str, ...], image_size: int, control: str = "joint", task: str = DEFAULT_TASK
+) -> dict[str, dict]:
+    """LeRobot features: one video per camera, 8-d state and the control's action, named as the task's env names
+    them (RoboView's scene: docs/benchmark.md, "The task and its interfaces", docs/control.md; LIBERO's: the
+    `{"motors": [...]}` names of LeRobot-format LIBERO datasets, docs/libero.md)."""
     features = {
         IMAGE_KEY.format(cam): {
             "dtype": "video",
@@ -74,9 +78,12 @@ def demo_features(cameras: tuple[str, ...], image_size: int, control: str = "joi
         }
         for cam in cameras
     }
-    states, actions = state_names(control), action_names(control)
-    features[STATE_KEY] = {"dtype": "float32", "shape": (len(states),), "names": list(states)}
-    features["action"] = {"dtype": "float32", "shape": (len(actions),), "names": list(actions)}
+    names = load_task(task).env_class().feature_names(control)
+    if names is None:
+        names = (list(state_names(control)), list(action_names(control)))
+    for key, value in zip((STATE_KEY, "action"), names):
+        listed = next(iter(value.values())) if isinstance(value, dict) else value
+        features[key] = {"dtype": "float32", "shape": (len(listed),), "names": value}
     return features
 
 
@@ -101,6 +108,7 @@ class Progress:
         sig = raw.pop("signature")
         sig["cameras"] = tuple(sig["cameras"])
         sig["randomize"] = tuple(sig.get("randomize", ()))
+        sig["contexts"] = tuple((name, tuple(values)) for name, values in sig.get("contexts", ()))
         return cls(signature=CollectionSignature(**sig), **raw)
 
     def save(self, root: Path) -> None:
@@ -254,9 +262,7 @@ def roll_back(root: Path, progress: Progress) -> int:
 
 def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRobotDataset
     """Append one successful expert episode through lerobot's add_frame / save_episode."""
-    values = episode.instance.factor_values
-    # instruction / push_instruction
-    task = next(values[name] for name in values if name.endswith("instruction"))
+    task = episode.instruction
     for t in range(episode.steps):
         frame = {IMAGE_KEY.format(cam): frames[t] for cam, frames in episode.images.items()}
         frame[STATE_KEY] = episode.states[t]

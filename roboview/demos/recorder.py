@@ -25,9 +25,12 @@ def attempt_seed(seed: int, attempt: int) -> int:
     return seed_from_text(f"collect:{seed}:{attempt}")
 
 
-def training_instance(rng: np.random.Generator, task: str = DEFAULT_TASK) -> TaskInstance:
-    """Context-only randomization: the task's context factors drawn at random, visual factors at baseline."""
-    values = ContextSampler(task=task).sample_context(rng)
+def training_instance(
+    rng: np.random.Generator, task: str = DEFAULT_TASK, contexts: dict[str, tuple[str, ...]] | None = None
+) -> TaskInstance:
+    """Context-only randomization: the task's context factors drawn at random (among `contexts`' values for the
+    factors it names), visual factors at baseline."""
+    values = ContextSampler(contexts, task=task).sample_context(rng)
     return TaskInstance(
         split="train", varied=context_factors(task), factors=values, context_subspace="cartesian", task=task
     )
@@ -48,6 +51,7 @@ class DemoEpisode:
     actions: np.ndarray | None = None  # (T, 8) float32 joint actions, or (T, 7) EE actions
     visuals: Randomization | None = None  # the object color and camera poses the frames show
     randomized: tuple[str, ...] = ()
+    instruction: str = ""  # the episode's instruction (the dataset's `task`)
 
     def provenance(self) -> dict:
         row = {
@@ -74,10 +78,12 @@ class DemoCollector:
         randomize: tuple[str, ...] = (),
         task: str = DEFAULT_TASK,
         control: str = "joint",
+        contexts: tuple[tuple[str, tuple[str, ...]], ...] = (),
     ) -> None:
         self.seed = seed
         self.randomize = randomize
         self.task = task
+        self.contexts = dict(contexts)
         self.env = make_env(
             task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps, control=control
         )
@@ -88,8 +94,9 @@ class DemoCollector:
     def run(self, attempt: int) -> DemoEpisode:
         start = time.perf_counter()
         ep_seed = attempt_seed(self.seed, attempt)
-        instance = training_instance(np.random.default_rng(ep_seed), self.task)
-        visuals = sample_randomization(ep_seed, self.randomize)
+        instance = training_instance(np.random.default_rng(ep_seed), self.task, self.contexts)
+        # RoboView's scene records the colors and camera poses its frames show; another world's are its own.
+        visuals = sample_randomization(ep_seed, self.randomize) if self.env.world == "roboview" else None
         options = {"instance": instance}
         if self.randomize:  # context-only collections reset exactly as before
             options |= {"object_rgb": visuals.object_rgb, "cameras": visuals.cameras}
@@ -116,6 +123,7 @@ class DemoCollector:
             time.perf_counter() - start,
             visuals=visuals,
             randomized=self.randomize,
+            instruction=self.env.instruction,
         )
         if success:  # failures are only counted, so their frames never cross the process boundary
             episode.images = {c: np.stack(v) for c, v in frames.items()}

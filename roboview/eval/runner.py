@@ -21,6 +21,7 @@ from roboview.eval.running.backends import run_local, run_ray
 from roboview.eval.running.results import EpisodeStore, is_counted, shard_of
 from roboview.eval.running.rollout import WorkerSpec, WorkItem
 from roboview.policies.base import PolicyConfig
+from roboview.policies.fit import fit_policy
 from roboview.tasks import DEFAULT_TASK, load_task
 
 log = logging.getLogger(__name__)
@@ -118,6 +119,8 @@ def plan(cfg: EvaluateConfig) -> Plan:
             split: [x for x in items if shard_of(x.record["instance_id"], n) == i]
             for split, items in chosen.items()
         }
+    tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
+    fit_policy(policy, tasks)
     return Plan(
         version=bench.version,
         chosen=chosen,
@@ -126,7 +129,7 @@ def plan(cfg: EvaluateConfig) -> Plan:
             split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
             for split in bench.splits
         },
-        tasks=list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items)),
+        tasks=tasks,
         image_size=resolve_image_size(policy, cfg.eval.image_size),
     )
 

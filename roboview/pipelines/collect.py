@@ -26,7 +26,6 @@ from tqdm import tqdm
 from roboview.core.cli_errors import flag_errors
 from roboview.core.workers import WorkerPool
 from roboview.demos.dataset import (
-    ROBOT_TYPE,
     CollectionSignature,
     DatasetRootError,
     Progress,
@@ -41,8 +40,8 @@ from roboview.demos.dataset import (
 from roboview.demos.recorder import DemoCollector, DemoEpisode
 from roboview.pipelines._cli import cli_main, interrupted
 from roboview.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
-from roboview.sim.control import CONTROLS
 from roboview.tasks import DEFAULT_TASK, load_task
+from roboview.variation.factors import FACTORS, context_factors
 from roboview.variation.randomization import validate_randomize
 
 log = logging.getLogger(__name__)
@@ -52,6 +51,24 @@ VCODECS = ("libsvtav1", "h264", "hevc")
 # a collected image is at least one backbone stride wide.
 ACT_BACKBONE_STRIDE = 32
 TRAIN_IMAGE_MIN = max(IMAGE_SIZE_MIN, ACT_BACKBONE_STRIDE)
+
+
+def parse_contexts(text: str, task: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """`FACTOR=V1|V2,FACTOR=V` → ((factor, values), …), each a context factor of `task` and each value one of
+    its values; a one-line error naming the bad entry otherwise."""
+    out = []
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        name, sep, values = item.partition("=")
+        if not sep or name not in context_factors(task):
+            raise ValueError(
+                f"{item!r}: expected FACTOR=V1|V2 with FACTOR one of {task}'s context factors "
+                f"({', '.join(context_factors(task))})"
+            )
+        chosen = tuple(v.strip() for v in values.split("|"))
+        for value in chosen:
+            FACTORS[name].validate(value)
+        out.append((name, chosen))
+    return tuple(out)
 
 
 @dataclass
@@ -67,7 +84,8 @@ class DatasetConfig:
     fps: int = 10
     # Side of the square camera images (pixels).
     image_size: int = 224
-    # Cameras recorded as videos (any of front, left_top, right_top, wrist).
+    # Cameras recorded as videos (any of front, left_top, right_top, wrist; LIBERO's scenes: image, image2 — LeRobot's
+    # names of agentview and the wrist camera, the layout of LeRobot-format LIBERO datasets).
     cameras: list[str] = field(default_factory=lambda: list(ALL_CAMERAS))
     # Video codec for lerobot's encoder: libsvtav1 (LeRobot's default), h264 or hevc.
     vcodec: str = "libsvtav1"
@@ -76,8 +94,11 @@ class DatasetConfig:
     # left_top on the continuous orbital surface). What was drawn is recorded per episode in
     # meta/roboview/episodes.parquet. Empty: context-only randomization, as in the paper.
     randomize: list[str] = field(default_factory=list)
-    # Task the expert demonstrates: pick_place (the paper's) or push (roboview.tasks).
+    # Task the expert demonstrates: pick_place (the paper's), push or libero (roboview.tasks).
     task: str = DEFAULT_TASK
+    # Draw these context factors among the values named only: FACTOR=V1|V2,FACTOR=V (e.g.
+    # libero_task=libero_object/0|libero_object/1); empty: every value of every context factor.
+    contexts: str = ""
     # Control the demos are recorded in: joint (observation.state = joints, action = 7 joint targets + gripper),
     # ee_delta or ee_abs (observation.state = the EE state, action = the 7-d EE action; docs/control.md).
     control: str = "joint"
@@ -98,20 +119,30 @@ class DatasetConfig:
             f"training reads the images at this size, and ACT's ResNet backbone downsamples "
             f"them by {ACT_BACKBONE_STRIDE}",
         )
-        unknown = [c for c in self.cameras if c not in ALL_CAMERAS]
+        with flag_errors("--dataset.task"):
+            env_class = load_task(self.task).env_class()
+        unknown = [c for c in self.cameras if c not in env_class.camera_names]
         if unknown or not self.cameras or len(set(self.cameras)) != len(self.cameras):
             raise ValueError(
                 f"--dataset.cameras={self.cameras}: unknown or repeated camera(s) {unknown}; "
-                f"allowed: {', '.join(ALL_CAMERAS)}"
+                f"allowed for --dataset.task={self.task}: {', '.join(env_class.camera_names)}"
             )
         if self.vcodec not in VCODECS:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
         with flag_errors("--dataset.randomize"):
             self.randomize = list(validate_randomize(self.randomize))
-        with flag_errors("--dataset.task"):
-            load_task(self.task)
-        if self.control not in CONTROLS:
-            raise ValueError(f"unknown --dataset.control={self.control!r}; allowed: {', '.join(CONTROLS)}")
+        if self.randomize and env_class.world != "roboview":
+            raise ValueError(
+                f"--dataset.randomize={','.join(self.randomize)}: domain randomization draws RoboView's scene's "
+                f"colors and camera poses; --dataset.task={self.task} runs in the {env_class.world} world"
+            )
+        if self.control not in env_class.controls:
+            raise ValueError(
+                f"--dataset.control={self.control!r} is not a control of --dataset.task={self.task}; allowed: "
+                f"{', '.join(env_class.controls)}"
+            )
+        with flag_errors("--dataset.contexts"):
+            self.context_values = parse_contexts(self.contexts, self.task)
 
 
 @dataclass
@@ -148,6 +179,7 @@ class CollectConfig:
             tuple(d.randomize),
             d.task,
             d.control,
+            d.context_values,
         )
 
 
@@ -181,6 +213,7 @@ def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
         tuple(d.randomize),
         d.task,
         d.control,
+        d.context_values,
     )
     attempt = first_attempt
     if cfg.num_workers == 1:
@@ -214,9 +247,9 @@ def _open_dataset(cfg: CollectConfig, create: bool):
         return LeRobotDataset.create(
             d.repo_id,
             d.fps,
-            demo_features(tuple(d.cameras), d.image_size, d.control),
+            demo_features(tuple(d.cameras), d.image_size, d.control, d.task),
             root=d.root,
-            robot_type=ROBOT_TYPE,
+            robot_type=load_task(d.task).env_class().robot_type,
             use_videos=True,
             **kwargs,
         )

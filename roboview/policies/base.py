@@ -223,6 +223,10 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """Image side the policy was trained on (the env renders exactly that); None: any size works."""
         return None
 
+    def settle_control(self, controls: tuple[str, ...]) -> None:
+        """Called before any episode with the controls every env of the run takes: a type whose control can be
+        left open (a checkpoint that does not say) takes it from them here; others need not override it."""
+
     def options(self) -> dict[str, Any]:
         """The type's own settings, recorded in run.json (a resume must match them); the control is recorded
         on its own (run.json's `control`)."""

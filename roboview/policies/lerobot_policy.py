@@ -28,9 +28,10 @@ from roboview.core.cli_errors import flag_errors
 from roboview.policies.base import AgentView, Episode, PolicyConfig, control_field
 from roboview.policies.checkpoints import CheckpointError, checkpoint_dir
 from roboview.policies.devices import resolve_device
-from roboview.sim.cameras import ALL_CAMERAS
 from roboview.sim.control import CONTROLS, EE_ACTION_NAMES, EE_CONTROLS
+from roboview.tasks import camera_names
 from roboview.tasks.env import ACTION_NAMES, EE_STATE_KEY, STATE_KEY, STATE_NAMES
+from roboview.tasks.libero import ACTION_NAMES as LIBERO_ACTION_NAMES
 
 log = logging.getLogger(__name__)
 
@@ -57,11 +58,12 @@ def load_config(path: str | None):
 def check_features(config) -> None:
     """Every input the checkpoint wants must be one we render; its action must be our action."""
     problems = []
+    cameras = camera_names()
     for key, feature in config.input_features.items():
         if key.startswith("observation.images."):
             cam = key.removeprefix("observation.images.")
-            if cam not in ALL_CAMERAS:
-                problems.append(f"camera {cam!r} (env cameras: {', '.join(ALL_CAMERAS)})")
+            if cam not in cameras:
+                problems.append(f"camera {cam!r} (the envs' cameras: {', '.join(cameras)})")
         elif key == STATE_KEY:
             if tuple(feature.shape) != (len(STATE_NAMES),):
                 problems.append(f"{key} shape {tuple(feature.shape)} (env gives ({len(STATE_NAMES)},))")
@@ -75,7 +77,7 @@ def check_features(config) -> None:
             f"({EE_ACTION_DIMS},): end-effector pose + gripper)"
         )
     if problems:
-        raise CheckpointError("checkpoint does not match the RoboView env: " + "; ".join(problems))
+        raise CheckpointError("checkpoint does not match RoboView's envs: " + "; ".join(problems))
 
 
 EE_ACTION_DIMS = len(EE_ACTION_NAMES[EE_CONTROLS[0]])  # every EE control: 3 + 3 + gripper
@@ -99,6 +101,10 @@ def dataset_action_names(root: Path) -> list[str] | None:
         info = candidate / "meta" / "info.json"
         if info.is_file():
             names = json.loads(info.read_text()).get("features", {}).get("action", {}).get("names")
+            if (
+                isinstance(names, dict) and len(names) == 1
+            ):  # {"motors": [...]}, as LIBERO's datasets write it
+                names = next(iter(names.values()))
             return list(names) if isinstance(names, list) else None
     return None
 
@@ -110,6 +116,8 @@ def checkpoint_control(path: str | None) -> str | None:
     if tuple(config.output_features["action"].shape) == (len(ACTION_NAMES),):
         return "joint"
     names = dataset_action_names(root)
+    if names == list(LIBERO_ACTION_NAMES):  # LeRobot-format LIBERO datasets: OSC_POSE deltas
+        return "ee_delta"
     return next((c for c in EE_CONTROLS if names == list(EE_ACTION_NAMES[c])), None)
 
 
@@ -264,7 +272,8 @@ class LeRobotConfig(PolicyConfig):
     # Device: auto (CUDA when present), cpu or cuda.
     device: str = "auto"
     # Control mode: empty to read it from the checkpoint (8-d action: joint; 7-d: ee_delta or ee_abs, from its
-    # training dataset's action names); name it (ee_delta / ee_abs) for a 7-d checkpoint whose dataset is not here.
+    # training dataset's action names, else the one EE control the benchmark's envs take — LIBERO's: ee_delta);
+    # name it (ee_delta / ee_abs) for a 7-d checkpoint on RoboView's scene whose dataset is not here.
     control: str = ""
 
     doc = "any LeRobot checkpoint (--policy.path=DIR)"
@@ -287,24 +296,30 @@ class LeRobotConfig(PolicyConfig):
                 f"--policy.control={given!r} but the checkpoint {self.path} acts in {found!r} (its action "
                 "shape and its dataset's action names); drop the flag"
             )
-        if not given and found is None:
-            raise ValueError(
-                f"the checkpoint {self.path} acts in end-effector space (7-d action) but its training dataset "
-                f"(named in train_config.json) is not here to say which: pass --policy.control="
-                f"{' or --policy.control='.join(EE_CONTROLS)}"
-            )
         if given == "joint" and found is None:
             raise ValueError(
                 f"--policy.control='joint' but the checkpoint {self.path} has a 7-d (end-effector) action"
             )
-        self.control = given or found
-        control_field(self)
+        self.control = given or found or ""  # "": open until the run's envs settle it (settle_control)
+        if self.control:
+            control_field(self)
+
+    def settle_control(self, controls: tuple[str, ...]) -> None:
+        ee = [c for c in controls if c in EE_CONTROLS]
+        if not self.control and len(ee) == 1:
+            self.control = ee[0]
 
     @property
     def checkpoint(self) -> str | None:
         return self.path
 
     def env_control(self) -> str:
+        if not self.control:
+            raise ValueError(
+                f"the checkpoint {self.path} acts in end-effector space (7-d action) but its training dataset "
+                f"(named in train_config.json) is not here to say which control: pass --policy.control="
+                f"{' or --policy.control='.join(EE_CONTROLS)}"
+            )
         return self.control
 
     def observed_cameras(self) -> tuple[str, ...]:

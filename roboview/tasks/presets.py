@@ -115,6 +115,27 @@ register_preset(
         ),
     )
 )
+# `libero_small`: one task (libero_object/0) from 10 init states × one or two values of each of the six factors:
+# 80 instances, a first bias profile of a learned policy that a CPU evaluates in well under an hour (docs/libero.md).
+register_preset(
+    SuiteConfig(
+        preset="libero_small",
+        tasks=("libero",),
+        union_mode="dedupe",
+        splits=LIBERO_SPLITS,
+        factorial_colors=(),
+        value_subsets=(
+            ("color", ("red", "blue", "green")),
+            ("camera_pose", ("orbit_r1_3",)),
+            ("camera_euler", ("6,0",)),
+            ("dist_scale", ("4",)),
+            ("lighting", ("dim_left",)),
+            ("table_texture", ("checker_dark",)),
+            ("libero_task", ("libero_object/0",)),
+            ("init_state", tuple(str(i) for i in range(10))),
+        ),
+    )
+)
 register_preset(
     SuiteConfig(
         preset="libero",

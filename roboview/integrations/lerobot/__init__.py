@@ -55,7 +55,7 @@ class RoboViewEnv(EnvConfig):
     fps: int = 10
     # Benchmark folder (roboview.pipelines.build_benchmark).
     benchmark_path: str = "outputs/benchmark"
-    # The checkpoint's cameras (comma-separated): what it was trained on.
+    # The checkpoint's cameras (comma-separated): what it was trained on (LIBERO's scenes: image,image2).
     cameras: str = "left_top,wrist"
     # The checkpoint's square image side (pixels): what it was trained on.
     image_size: int = 96
@@ -80,14 +80,15 @@ class RoboViewEnv(EnvConfig):
     features_map: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        from roboview.sim.cameras import ALL_CAMERAS, check_image_size
+        from roboview.sim.cameras import check_image_size
+        from roboview.tasks import camera_names
 
         cams = self.camera_list
-        unknown = [c for c in cams if c not in ALL_CAMERAS]
+        unknown = [c for c in cams if c not in camera_names()]
         if unknown or not cams:
             raise ValueError(
                 f"--env.cameras={self.cameras!r}: unknown camera(s) {unknown or cams}; "
-                f"allowed: {', '.join(ALL_CAMERAS)}"
+                f"allowed: {', '.join(camera_names())}"
             )
         for name in ("n_repeats", "max_steps", "fps"):
             if getattr(self, name) <= 0:

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from roboview.policies.base import Episode
-from roboview.sim.cameras import ALL_CAMERAS
 from roboview.sim.control import EE_ACTION_NAMES
+from roboview.tasks import camera_names
 from roboview.tasks.env import ACTION_NAMES, DEPTH_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
@@ -28,6 +28,8 @@ ROBOVIEW_KEY = "roboview"
 EPISODE_KEY = "roboview/episode"
 WIRE_DIMS = len(ACTION_NAMES)  # 7 joints + gripper
 EE_WIRE_DIMS = len(EE_ACTION_NAMES["ee_delta"])  # end-effector pose (6) + gripper
+# The wrist cameras by name: RoboView's and LIBERO's `wrist`, and `image2`, LeRobot's name of LIBERO's wrist camera.
+WRIST_CAMERAS = ("wrist", "image2")
 _SLICE = re.compile(r"^state\[(\d*):(\d*)\]$")
 
 
@@ -144,10 +146,10 @@ def parse_key_map(text: str) -> tuple[tuple[tuple[str, ...], str], ...]:
             raise ValueError(f"--policy.key_map entry {item!r} must be wire_key=SOURCE")
         if src.startswith(("camera:", "camera_chw:", "depth:")):
             cam = src.split(":", 1)[1]
-            if cam not in ALL_CAMERAS:
+            if cam not in camera_names():
                 raise ValueError(
                     f"--policy.key_map entry {item!r}: unknown camera {cam!r}; "
-                    f"allowed: {', '.join(ALL_CAMERAS)}"
+                    f"allowed: {', '.join(camera_names())}"
                 )
         elif src.startswith("state"):
             match = _SLICE.match(src)
@@ -180,12 +182,13 @@ def wire_format(
         raise ValueError(f"unknown --policy.obs_format={obs_format!r}; allowed: {', '.join(OBS_FORMATS)}")
     if obs_format == "custom":
         return WireFormat("custom", parse_key_map(key_map))
-    scene = [c for c in cameras if c != "wrist"]
-    wrist = "wrist" in cameras
+    scene = [c for c in cameras if c not in WRIST_CAMERAS]
+    wrist = next((c for c in cameras if c in WRIST_CAMERAS), None)
     if not scene:
         raise ValueError(
             f"--policy.obs_format={obs_format} needs a scene camera among --policy.cameras "
-            f"(got {','.join(cameras)}; scene cameras: {', '.join(c for c in ALL_CAMERAS if c != 'wrist')})"
+            f"(got {','.join(cameras)}; scene cameras: "
+            f"{', '.join(c for c in camera_names() if c not in WRIST_CAMERAS)})"
         )
     limit = {"droid": 2, "libero": 1, "aloha": 2}[obs_format]
     if len(scene) > limit:
@@ -198,7 +201,7 @@ def wire_format(
         if len(scene) > 1:
             entries += [(("observation/exterior_image_2_left",), f"camera:{scene[1]}")]
         if wrist:
-            entries += [(("observation/wrist_image_left",), "camera:wrist")]
+            entries += [(("observation/wrist_image_left",), f"camera:{wrist}")]
         entries += [
             (("observation/joint_position",), "state[0:7]"),
             (("observation/gripper_position",), "state[7:8]"),
@@ -206,14 +209,14 @@ def wire_format(
     elif obs_format == "libero":
         entries += [(("observation/image",), f"camera:{scene[0]}")]
         if wrist:
-            entries += [(("observation/wrist_image",), "camera:wrist")]
+            entries += [(("observation/wrist_image",), f"camera:{wrist}")]
         entries += [(("observation/state",), "state")]
     else:
         entries += [
             (("images", name), f"camera_chw:{cam}") for name, cam in zip(("cam_high", "cam_low"), scene)
         ]
         if wrist:
-            entries += [(("images", "cam_left_wrist"), "camera_chw:wrist")]
+            entries += [(("images", "cam_left_wrist"), f"camera_chw:{wrist}")]
         entries += [(("state",), "state")]
     entries += [(("prompt",), "instruction")]
     if depth:

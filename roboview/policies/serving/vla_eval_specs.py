@@ -37,7 +37,7 @@ from vla_eval.specs import (
     DimSpec,
 )
 
-from roboview.sim.cameras import ALL_CAMERAS
+from roboview.tasks import camera_names
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
 
 JOINT_TARGETS = DimSpec(
@@ -220,11 +220,11 @@ def _observation(
             sent += [(cam, cam) for cam in cameras]
         elif s.format == IMAGE_FORMAT:
             cam = camera_map.get(name, name)
-            if cam not in ALL_CAMERAS:
+            if cam not in camera_names():
                 raise _mismatch(
                     f"observation_spec[{name!r}]",
                     f"a camera named {name!r}",
-                    f"the cameras {', '.join(ALL_CAMERAS)}",
+                    f"the cameras {', '.join(camera_names())}",
                     f"map it with --policy.camera_map={name}=CAMERA",
                 )
             sent.append((name, cam))

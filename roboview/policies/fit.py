@@ -1,0 +1,42 @@
+"""Whether a policy fits the envs of the tasks it is about to run on, checked once before any episode: the control
+it acts in must be one every env takes and the cameras it observes ones every env renders. A policy whose control
+is still open (a 7-d LeRobot checkpoint whose training dataset is not here to name it) takes the one end-effector
+control every env shares — LIBERO's scenes take only `ee_delta`, so a LIBERO checkpoint needs no flag."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from roboview.policies.base import PolicyConfig
+from roboview.tasks import load_task
+
+
+def fit_policy(policy: PolicyConfig, tasks: Sequence[str]) -> None:
+    """Settle the policy's open control against `tasks`' envs, then check its control and cameras against each
+    env; a one-line ValueError naming the task, the policy's value and what the env allows."""
+    envs = {task: load_task(task).env_class() for task in tasks}
+    if not envs:
+        return
+    shared = [c for c in next(iter(envs.values())).controls if all(c in e.controls for e in envs.values())]
+    policy.settle_control(tuple(shared))
+    control = policy.env_control()
+    for task, env in envs.items():
+        if control not in env.controls:
+            raise ValueError(
+                f"the {task!r} task's env takes control {', '.join(env.controls)}; {describe(policy)} acts in "
+                f"{control!r}"
+            )
+        if policy.privileged and env.observed_cameras:
+            continue  # a privileged policy is given the world's own cameras
+        missing = [c for c in policy.observed_cameras() if c not in env.camera_names]
+        if missing:
+            raise ValueError(
+                f"{describe(policy)} observes camera(s) {', '.join(missing)}, which the {task!r} task's env does "
+                f"not render; its cameras: {', '.join(env.camera_names)}"
+            )
+
+
+def describe(policy: PolicyConfig) -> str:
+    """`--policy.type=lerobot (DIR)`: the policy as the command line named it."""
+    where = f" ({policy.checkpoint})" if policy.checkpoint else ""
+    return f"--policy.type={policy.type}{where}"
