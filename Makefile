@@ -33,6 +33,7 @@ install-libero: install $(LIBERO_STAMP)
 
 $(LIBERO_STAMP): $(STAMP) roboview/libero/bootstrap.py
 	$(PY) -m $$($(PY) -c 'from roboview.libero.bootstrap import PIP_INSTALL; print(PIP_INSTALL)') -q
+	$(PY) -m roboview.libero >/dev/null
 	@touch $(LIBERO_STAMP)
 
 # System packages: ffmpeg (LeRobot's video decoding needs it), Mesa EGL for off-screen rendering and

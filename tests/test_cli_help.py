@@ -33,6 +33,7 @@ HARNESSES = (
     "gpu",
     "libero_expert",
     "libero_render",
+    "libero_vs_lerobot_eval",
     "render_rate",
     "serving",
     "stats_calibration",

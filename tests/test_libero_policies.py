@@ -152,7 +152,13 @@ def _episode(policy, steps: int = 6):
     return result.row, result.ee_path
 
 
-def test_the_checkpoint_served_over_openpi_gives_the_in_process_episode(libero_checkpoint):
+@pytest.fixture(scope="module")
+def in_process(libero_checkpoint):
+    """The checkpoint's episode run in-process: the row and path every served path must give."""
+    return _episode(policy_config("lerobot", path=str(libero_checkpoint), device="cpu"))
+
+
+def test_the_checkpoint_served_over_openpi_gives_the_in_process_episode(libero_checkpoint, in_process):
     from tests.test_openpi import free_port, start_server, stop
 
     port = free_port()
@@ -170,7 +176,7 @@ def test_the_checkpoint_served_over_openpi_gives_the_in_process_episode(libero_c
         served_row, served_path = _episode(client)
     finally:
         stop(server)
-    local_row, local_path = _episode(policy_config("lerobot", path=str(libero_checkpoint), device="cpu"))
+    local_row, local_path = in_process
     assert served_row["status"] == local_row["status"] == "ok"
     for key in ("instance_id", "episode_seed", "success", "steps"):
         assert served_row[key] == local_row[key], key
@@ -234,7 +240,9 @@ def test_the_openpi_client_sends_what_openpis_libero_example_sends():
     assert json.dumps(client.served_by()["metadata"])  # recorded as provenance
 
 
-def test_the_checkpoint_behind_vla_evals_lerobot_server_gives_the_in_process_episode(libero_checkpoint):
+def test_the_checkpoint_behind_vla_evals_lerobot_server_gives_the_in_process_episode(
+    libero_checkpoint, in_process
+):
     """vla-eval's own LeRobotModelServer holding the checkpoint, LIBERO's cameras mapped onto its features."""
     from vla_eval.model_servers.lerobot import LeRobotModelServer
 
@@ -250,7 +258,7 @@ def test_the_checkpoint_behind_vla_evals_lerobot_server_gives_the_in_process_epi
         assert client.env_control() == "ee_delta" and client.observed_cameras() == ("agentview", "wrist")
         fit_policy(client, ["libero"])
         served_row, served_path = _episode(client)
-    local_row, local_path = _episode(policy_config("lerobot", path=str(libero_checkpoint), device="cpu"))
+    local_row, local_path = in_process
     assert served_row["status"] == local_row["status"] == "ok"
     for key in ("instance_id", "episode_seed", "success", "steps"):
         assert served_row[key] == local_row[key], key

