@@ -107,6 +107,24 @@ def test_what_libero_cannot_take_is_refused_in_one_line(env):
         make_env("libero", control="joint")
 
 
+def test_a_policy_that_does_not_fit_libero_is_refused_before_any_episode():
+    from roboview.policies.fit import fit_policy
+    from roboview.policies.types import policy_config
+
+    with pytest.raises(
+        ValueError,
+        match=r"the 'libero' task's env takes control ee_delta; --policy.type=vision acts in 'joint' "
+        r"\(pass --policy.control=ee_delta\)",
+    ):
+        fit_policy(policy_config("vision"), ["libero"])
+    with pytest.raises(ValueError, match="observes camera.s. front, which the 'libero' task's env does not render"):
+        fit_policy(policy_config("vision", control="ee_delta"), ["libero"])
+    with pytest.raises(ValueError, match="takes control ee_delta"):  # a run over both worlds: the control they share
+        fit_policy(policy_config("expert"), ["pick_place", "libero"])
+    expert = policy_config("expert", control="ee_delta")
+    fit_policy(expert, ["pick_place", "libero"])  # privileged: given each world's own cameras
+
+
 def test_the_libero_presets():
     tiny = generate_suite(load_preset("libero_tiny"))
     assert len(tiny) == 4 and {i.get("libero_task") for i in tiny} == {CONTEXT}

@@ -22,9 +22,10 @@ def fit_policy(policy: PolicyConfig, tasks: Sequence[str]) -> None:
     control = policy.env_control()
     for task, env in envs.items():
         if control not in env.controls:
+            hint = f" (pass --policy.control={env.controls[0]})" if hasattr(policy, "control") else ""
             raise ValueError(
                 f"the {task!r} task's env takes control {', '.join(env.controls)}; {describe(policy)} acts in "
-                f"{control!r}"
+                f"{control!r}{hint}"
             )
         if policy.privileged and env.observed_cameras:
             continue  # a privileged policy is given the world's own cameras
