@@ -132,7 +132,7 @@ def serve_policy(
 
 
 def lerobot_server(port: int, cwd: Path) -> subprocess.Popen:
-    from roboview.policies.lerobot_async import check_reachable
+    from roboview.policies.lerobot_async_connection import check_reachable
 
     proc = subprocess.Popen(
         [

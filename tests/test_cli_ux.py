@@ -238,7 +238,7 @@ def test_every_image_size_flag_checks_the_one_bound():
 
 
 def test_vlm_endpoint_flags_nest_and_the_flat_spelling_still_works_with_a_warning(capsys):
-    from roboview.core.cli import flag_aliases, renamed_flags
+    from roboview.core.cli_flags import flag_aliases, renamed_flags
     from roboview.pipelines._cli import parse
     from roboview.pipelines.build_benchmark import BuildConfig
     from roboview.pipelines.evaluate import EvaluateConfig

@@ -489,7 +489,7 @@ class _LeRobotServer:
     """`python -m lerobot.async_inference.policy_server` on 127.0.0.1:`port` (its logs/ folder goes to `cwd`)."""
 
     def __init__(self, cwd: Path, port: int, timeout_s: float = 120) -> None:
-        from roboview.policies.lerobot_async import check_reachable
+        from roboview.policies.lerobot_async_connection import check_reachable
 
         self.address = f"127.0.0.1:{port}"
         with (cwd / "server.log").open("a") as log:

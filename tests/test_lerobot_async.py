@@ -34,7 +34,7 @@ class Server:
     """`python -m lerobot.async_inference.policy_server` on 127.0.0.1 (its logs/ folder goes to `cwd`)."""
 
     def __init__(self, cwd: Path, timeout_s: float = 90) -> None:
-        from roboview.policies.lerobot_async import check_reachable
+        from roboview.policies.lerobot_async_connection import check_reachable
 
         self.address = f"127.0.0.1:{free_port()}"
         self.log = cwd / "server.log"

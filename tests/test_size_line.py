@@ -20,20 +20,13 @@ OVERSIZE_FUNCTIONS = {
     "roboview.eval.running.results:merge_folders": 76,
     "roboview.eval.statistics.metrics:split_metrics": 73,
     "roboview.eval.statistics.metrics:interaction_metrics": 65,
-    "roboview.integrations.vla_eval.benchmark:__init__": 64,
-    "roboview.integrations.vla_eval.convert:convert": 66,
     "roboview.pipelines.build_benchmark:run": 99,
     "roboview.pipelines.collect:run": 94,
     "roboview.pipelines.probe_grounding:run": 80,
     "roboview.pipelines.publish:stage_results": 92,
-    "roboview.policies.lerobot_async:_resolve": 79,
-    "roboview.sim.scene:build_spec": 66,
-    "roboview.tasks.env:__init__": 77,
 }
 OVERSIZE_MODULES = {
-    "roboview.core.cli": 550,
     "roboview.eval.reporting.report": 820,
-    "roboview.policies.lerobot_async": 591,
 }
 
 

@@ -7,11 +7,11 @@ from dataclasses import dataclass
 
 from roboview.core.cli import (  # noqa: F401  (the pipelines import the command-line helpers from here)
     cli_main,
-    format_help,
     interrupted,
     parse,
     setup_environment,
 )
+from roboview.core.cli_help import format_help  # noqa: F401
 
 
 @dataclass

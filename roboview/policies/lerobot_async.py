@@ -83,78 +83,21 @@ from roboview.policies.base import (
     control_field,
 )
 from roboview.policies.errors import InfraError, PolicyUnavailable, open_with_retries
-from roboview.policies.lerobot_policy import CHUNKED_TYPES, checkpoint_image_size, is_chunked, load_config
-from roboview.sim.cameras import ALL_CAMERAS
+from roboview.policies.lerobot_async_checkpoint import ServedCheckpoint, resolve_checkpoint
+from roboview.policies.lerobot_async_connection import (
+    ConnectionLost,
+    check_reachable,
+    chunk_error,
+    open_channel,
+    parse_servers,
+    rpc_reason,
+    start_server_hint,
+)
 from roboview.tasks.env import EE_STATE_KEY, EE_STATE_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES
 
 log = logging.getLogger(__name__)
 
-# Policy types served here: chunked in-process (CHUNKED_TYPES) and known to lerobot's server
-# (lerobot.async_inference.constants.SUPPORTED_POLICIES: act, smolvla, diffusion, tdmpc, vqbet, pi0, pi05, groot).
-SERVED_TYPES = tuple(t for t in CHUNKED_TYPES if t in ("act", "smolvla", "pi0", "pi05"))
 SERVER_DEVICE = re.compile(r"^(cpu|mps|cuda(:\d+)?)$")
-ADDRESS = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})$")
-START_SERVER = (
-    "python -m lerobot.async_inference.policy_server --host={host} --port={port} --fps=10 "
-    "--inference_latency=0"
-)
-
-
-def parse_servers(value: str) -> tuple[str, ...]:
-    """`HOST:PORT` or a comma-separated list of them (worker i uses entry i mod n)."""
-    servers = tuple(s.strip() for s in value.split(",") if s.strip())
-    if not servers:
-        raise ValueError(
-            "give the LeRobot policy server as HOST:PORT (or a comma-separated list, one per worker)"
-        )
-    for server in servers:
-        match = ADDRESS.match(server)
-        if match is None or not 1 <= int(match.group(2)) <= 65535:
-            raise ValueError(
-                f"{server!r} is not HOST:PORT (e.g. 127.0.0.1:8080; a list: HOST:PORT,HOST:PORT)"
-            )
-    return servers
-
-
-def _channel(address: str):
-    import grpc
-    from lerobot.transport import services_pb2_grpc
-    from lerobot.transport.utils import grpc_channel_options
-
-    # lerobot's client options (4 MB, retries)
-    channel = grpc.insecure_channel(address, grpc_channel_options())
-    return channel, services_pb2_grpc.AsyncInferenceStub(channel)
-
-
-def _rpc_reason(exc: Exception) -> str:
-    code, details = getattr(exc, "code", None), getattr(exc, "details", None)
-    if callable(code) and callable(details):
-        return f"{code().name}: {details()}"
-    return f"{type(exc).__name__}: {exc}"
-
-
-def _down(address: str) -> str:
-    host, _, port = address.rpartition(":")
-    return (
-        f"is the LeRobot policy server running there? Start it with `{START_SERVER.format(host=host, port=port)}` "
-        "and check the address"
-    )
-
-
-def check_reachable(address: str, timeout_s: float) -> None:
-    """`Ready` on the server at `address`; a ValueError naming it if it does not answer."""
-    import grpc
-    from lerobot.transport import services_pb2
-
-    channel, stub = _channel(address)
-    try:
-        stub.Ready(services_pb2.Empty(), timeout=timeout_s)
-    except grpc.RpcError as exc:
-        raise ValueError(
-            f"the LeRobot policy server at {address} does not answer ({_rpc_reason(exc)}); {_down(address)}"
-        ) from None
-    finally:
-        channel.close()
 
 
 @dataclass(frozen=True)
@@ -179,24 +122,6 @@ class _Spec:
     def state(self) -> tuple[str, tuple[str, ...]]:
         """The observation key the state is read from and its entries' names (joint, or the EE state)."""
         return (STATE_KEY, STATE_NAMES) if self.control == "joint" else (EE_STATE_KEY, EE_STATE_NAMES)
-
-
-def _chunk_error(exc, s: _Spec) -> Exception:
-    """A failed chunk request as a lost connection, a timeout (the evaluator retries) or the server's failure."""
-    import grpc
-
-    if exc.code() in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED):
-        return _ConnectionLost(_rpc_reason(exc))
-    if exc.code() == grpc.StatusCode.DEADLINE_EXCEEDED:
-        return TimeoutError(
-            f"no action chunk from the LeRobot policy server at {s.address} within "
-            f"--policy.timeout_s={s.timeout_s:g} s"
-        )
-    return RuntimeError(f"the LeRobot policy server at {s.address} failed: {_rpc_reason(exc)}")
-
-
-class _ConnectionLost(Exception):
-    """A call found the server unreachable (gRPC UNAVAILABLE) or cut off (CANCELLED)."""
 
 
 class LeRobotAsyncPolicy:
@@ -233,7 +158,7 @@ class LeRobotAsyncPolicy:
 
     # -- connection ---------------------------------------------------------------------------------
     def _load(self) -> None:
-        """Ready + SendPolicyInstructions; _ConnectionLost if unreachable, PolicyUnavailable if the server
+        """Ready + SendPolicyInstructions; ConnectionLost if unreachable, PolicyUnavailable if the server
         cannot load the policy."""
         import grpc
         from lerobot.async_inference.helpers import RemotePolicyConfig
@@ -241,7 +166,7 @@ class LeRobotAsyncPolicy:
 
         s = self.spec
         if self._channel is None:
-            self._channel, self._stub = _channel(s.address)
+            self._channel, self._stub = open_channel(s.address)
         instructions = RemotePolicyConfig(
             policy_type=s.policy_type,
             pretrained_name_or_path=s.path,
@@ -261,10 +186,10 @@ class LeRobotAsyncPolicy:
                 grpc.StatusCode.CANCELLED,
                 grpc.StatusCode.DEADLINE_EXCEEDED,
             ):
-                raise _ConnectionLost(_rpc_reason(exc)) from exc
+                raise ConnectionLost(rpc_reason(exc)) from exc
             raise PolicyUnavailable(
                 f"the LeRobot policy server at {s.address} could not load {s.policy_type} checkpoint {s.path!r} on "
-                f"{s.device} ({_rpc_reason(exc)}; its log has the traceback); fix that and rerun the same command "
+                f"{s.device} ({rpc_reason(exc)}; its log has the traceback); fix that and rerun the same command "
                 "to resume (finished episodes are kept)"
             ) from None
         log.info("policy server %s loaded %s in %.2f s", s.address, s.path, time.perf_counter() - start)
@@ -288,12 +213,12 @@ class LeRobotAsyncPolicy:
                 self.spec.reconnects,
                 self.spec.reconnect_backoff_s,
                 lost,
-                retry_on=(_ConnectionLost,),
+                retry_on=(ConnectionLost,),
                 flag="--policy.server",
             )
         except PolicyUnavailable as exc:
             self.connected = False
-            raise PolicyUnavailable(f"{exc}; {_down(self.spec.address)}") from None
+            raise PolicyUnavailable(f"{exc}; {start_server_hint(self.spec.address)}") from None
 
     # -- the policy protocol ------------------------------------------------------------------------
     def reset(self, episode: Episode, slot: int = 0) -> None:
@@ -313,7 +238,7 @@ class LeRobotAsyncPolicy:
             if not self.queues[slot]:
                 try:
                     self.queues[slot].extend(self._chunk(observation, self.tasks[slot]))
-                except _ConnectionLost as exc:
+                except ConnectionLost as exc:
                     self.connected = False
                     self._drop_channel()
                     self._connect(str(exc))  # PolicyUnavailable (the run stops) if the server stays away
@@ -356,8 +281,8 @@ class LeRobotAsyncPolicy:
                     services_pb2.Empty(), timeout=max(0.1, deadline - time.monotonic())
                 )
             except grpc.RpcError as exc:
-                error = _chunk_error(exc, s)
-                raise error from (exc if isinstance(error, _ConnectionLost) else None)
+                error = chunk_error(exc, s.address, s.timeout_s)
+                raise error from (exc if isinstance(error, ConnectionLost) else None)
             if reply.data:
                 break
             if attempt == 0:  # a restarted server has no policy; an inference error also answers empty
@@ -450,101 +375,24 @@ class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
     def local(self) -> bool:
         return bool(self.path) and Path(self.path).exists()
 
-    def _flag_cameras(self) -> tuple[str, ...]:
-        return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
-
-    def _resolve(self) -> tuple[str, str, int, tuple[str, ...], int]:
-        """(policy type, path sent, actions per chunk, cameras, image side); ValueError naming the flag."""
-        if not self.path:
-            raise ValueError(
-                "--policy.path: give the checkpoint as the server loads it (a pretrained_model folder "
-                "or a hub id ORG/NAME)"
-            )
-        flag_cams = self._flag_cameras()
-        unknown = [c for c in flag_cams if c not in ALL_CAMERAS]
-        if unknown:
-            raise ValueError(
-                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: "
-                f"{', '.join(ALL_CAMERAS)}"
-            )
-        if self.local:
-            with flag_errors("--policy.path"):
-                root, config = load_config(self.path)
-                side = checkpoint_image_size(self.path)
-            # The cameras the checkpoint reads (none for a state-only one; the env still renders `front`).
-            cameras = tuple(
-                k.removeprefix("observation.images.")
-                for k in config.input_features
-                if k.startswith("observation.images.")
-            )
-            kind, sent = config.type, str(root.absolute())
-            per_chunk = self.actions_per_chunk or int(
-                getattr(config, "n_action_steps", None) or config.chunk_size
-            )
-            if not is_chunked(config) or kind not in SERVED_TYPES:
-                what = (
-                    "an ACT checkpoint with temporal ensembling"
-                    if kind == "act"
-                    else f"a {kind!r} checkpoint"
-                )
-                raise ValueError(
-                    f"--policy.path: {what} is not served as it runs in-process (LeRobot's server only "
-                    "calls predict_action_chunk: per-step state is lost); served: chunked "
-                    f"{', '.join(SERVED_TYPES)} checkpoints. Use --policy.type=lerobot"
-                )
-            chunk_size = getattr(config, "chunk_size", None)
-            if chunk_size and per_chunk > chunk_size:
-                raise ValueError(
-                    f"--policy.actions_per_chunk={per_chunk} exceeds the checkpoint's chunk_size {chunk_size}"
-                )
-            clashes = [
-                f"--policy.{flag}={given!r} but the checkpoint says {own!r}"
-                for flag, given, own in (
-                    ("policy_type", self.policy_type, kind),
-                    ("cameras", ",".join(flag_cams), ",".join(cameras)),
-                    ("image_size", self.image_size, side),
-                )
-                if given and given != own
-            ]
-            if clashes:
-                raise ValueError(f"{'; '.join(clashes)} (drop the flag: a checkpoint folder here is read)")
-            return kind, sent, per_chunk, cameras, int(side or 0)
-        missing = [
-            flag
-            for flag, given in (
-                ("policy_type", self.policy_type),
-                ("cameras", flag_cams),
-                ("image_size", self.image_size),
-                ("actions_per_chunk", self.actions_per_chunk),
-            )
-            if not given
-        ]
-        if missing:
-            raise ValueError(
-                f"--policy.path={self.path!r} is not a folder on this machine (the server loads it on its "
-                "side), so its cameras, image size, type and chunk length cannot be read here: pass "
-                + " ".join(f"--policy.{flag}=…" for flag in missing)
-                + " (e.g. --policy.cameras=left_top,wrist --policy.image_size=224 "
-                "--policy.policy_type=act --policy.actions_per_chunk=50)"
-            )
-        if self.policy_type not in SERVED_TYPES:
-            raise ValueError(
-                f"--policy.policy_type={self.policy_type!r}: served types are {', '.join(SERVED_TYPES)}"
-            )
-        return self.policy_type, self.path, self.actions_per_chunk, flag_cams, self.image_size
+    def _resolve(self) -> ServedCheckpoint:
+        """The checkpoint the server loads and what the client needs of it; ValueError naming the flag."""
+        return resolve_checkpoint(
+            self.path, self.policy_type, self.cameras, self.image_size, self.actions_per_chunk
+        )
 
     def spec(self, rank: int | None = None) -> _Spec:
         servers = parse_servers(self.server)
-        kind, sent, per_chunk, cameras, side = self._resolve()
+        checkpoint = self._resolve()
         address = servers[(worker_rank() if rank is None else rank) % len(servers)]
         return _Spec(
             address,
-            kind,
-            sent,
+            checkpoint.policy_type,
+            checkpoint.path,
             self.device,
-            per_chunk,
-            cameras,
-            side,
+            checkpoint.actions_per_chunk,
+            checkpoint.cameras,
+            checkpoint.image_size,
             self.open_timeout_s,
             self.timeout_s,
             self.load_timeout_s,
@@ -559,20 +407,20 @@ class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
         return self.path if self.local else None
 
     def observed_cameras(self) -> tuple[str, ...]:
-        return self._resolve()[3] or DEFAULT_CAMERAS
+        return self._resolve().cameras or DEFAULT_CAMERAS
 
     def input_image_size(self) -> int | None:
-        return self._resolve()[4] or None
+        return self._resolve().image_size or None
 
     def served_by(self) -> dict:
-        kind, sent, per_chunk, cameras, side = self._resolve()
+        checkpoint = self._resolve()
         return {
             "protocol": "lerobot_async",
             "servers": list(parse_servers(self.server)),
-            "policy_type": kind,
-            "pretrained_name_or_path": sent,
+            "policy_type": checkpoint.policy_type,
+            "pretrained_name_or_path": checkpoint.path,
             "device": self.device,
-            "actions_per_chunk": per_chunk,
+            "actions_per_chunk": checkpoint.actions_per_chunk,
         }
 
     def options(self) -> dict[str, Any]:

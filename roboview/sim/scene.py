@@ -119,6 +119,22 @@ def build_spec(
     """
     spec = mujoco.MjSpec()
     spec.modelname = "roboview_pick_place"
+    _set_options(spec, quality)
+    world = spec.worldbody
+    _add_room(world, quality)
+    if target is not None:
+        target(spec)
+    _add_shapes(spec, world)
+    for extra in extras:
+        extra(spec)
+    for name, pose in BASE_CAMERAS.items():
+        world.add_camera(name=name, pos=list(pose.pos), quat=list(pose.quat), fovy=pose.fovy)
+    _attach_panda(spec, world)
+    return spec
+
+
+def _set_options(spec: mujoco.MjSpec, quality: RenderQuality) -> None:
+    """Physics (2 ms step, implicit damping) and rendering settings (offscreen size, headlight, quality)."""
     spec.option.timestep = 0.002
     spec.option.noslip_iterations = 3
     # Actuator damping is integrated implicitly: stiff servos stay stable at a 2 ms step.
@@ -130,7 +146,9 @@ def build_spec(
     spec.visual.quality.offsamples = 0 if quality == "fast" else 4
     spec.visual.quality.shadowsize = 0 if quality == "fast" else 2048
 
-    world = spec.worldbody
+
+def _add_room(world: mujoco.MjsBody, quality: RenderQuality) -> None:
+    """The top light, the floor, the table and the parking slab where unused shapes wait."""
     world.add_light(
         name="top",
         pos=[0.4, 0.0, 2.0],
@@ -157,15 +175,9 @@ def build_spec(
         rgba=FLOOR_RGBA,
     )
 
-    if target is not None:
-        target(spec)
-    _add_shapes(spec, world)
-    for extra in extras:
-        extra(spec)
 
-    for name, pose in BASE_CAMERAS.items():
-        world.add_camera(name=name, pos=list(pose.pos), quat=list(pose.quat), fovy=pose.fovy)
-
+def _attach_panda(spec: mujoco.MjSpec, world: mujoco.MjsBody) -> None:
+    """gym-hil's Panda + 2F-85 at the origin: gravity-compensated, position servos, the wrist camera on its hand."""
     panda = mujoco.MjSpec.from_file(_panda_xml())
     for body in panda.bodies:
         body.gravcomp = 1.0
@@ -174,7 +186,6 @@ def build_spec(
     _position_servos(panda)
     frame = world.add_frame(pos=[0, 0, 0])
     spec.attach(panda, prefix=PANDA_PREFIX, frame=frame)
-    return spec
 
 
 def _add_shapes(spec: mujoco.MjSpec, world: mujoco.MjsBody) -> None:

@@ -82,6 +82,29 @@ def action_names(control: str) -> tuple[str, ...]:
     return ACTION_NAMES if check_control(control) == "joint" else EE_ACTION_NAMES[control]
 
 
+def _joint_action_space(arm_range: np.ndarray) -> gym.spaces.Box:
+    """The joint-target action's space: each arm joint within its limits (`arm_range`, (7, 2) rad), the gripper
+    command in [0, 1]."""
+    low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
+    high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
+    return gym.spaces.Box(low, high, dtype=np.float32)
+
+
+def _observation_space(cameras: Sequence[str], image_size: int, depth: bool) -> gym.spaces.Dict:
+    """The observations' spaces: each camera's image (and depth map), the joint state and the EE state."""
+    spaces = {
+        IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8) for c in cameras
+    }
+    if depth:
+        spaces |= {
+            DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
+            for c in cameras
+        }
+    spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
+    spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(EE_STATE_NAMES),), np.float32)
+    return gym.spaces.Dict(spaces)
+
+
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
     """Every factor at its baseline: the scene the expert demos are rendered in."""
     return TaskInstance(
@@ -199,22 +222,8 @@ class TaskEnv(gym.Env):
         control: str = "joint",
     ) -> None:
         check_control(control)
-        if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(
-                f"render_mode={render_mode!r} unsupported; allowed: None, "
-                f"{', '.join(map(repr, self.metadata['render_modes']))}"
-            )
+        self._check_settings(render_mode, cameras, image_size, fps, max_steps)
         self.render_mode = render_mode
-        unknown = [c for c in cameras if c not in ALL_CAMERAS]
-        if unknown or not cameras:
-            raise ValueError(
-                f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}"
-            )
-        check_image_size(image_size)
-        if fps <= 0 or 500 % fps:
-            raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
-        if max_steps <= 0:
-            raise ValueError(f"max_steps={max_steps} must be positive")
         self.cameras = tuple(cameras)
         self.image_size = image_size
         self.fps = fps
@@ -242,27 +251,34 @@ class TaskEnv(gym.Env):
         self.instruction = self.instance.get(self.instruction_factor)
         self.steps = 0
 
-        arm_range = self.scene.ids.arm_range
-        low = np.append(arm_range[:, 0], 0.0).astype(np.float32)
-        high = np.append(arm_range[:, 1], 1.0).astype(np.float32)
         # The joint-target action (what the scripted planners plan in, whatever the control).
-        self.joint_action_space = gym.spaces.Box(low, high, dtype=np.float32)
+        self.joint_action_space = _joint_action_space(self.scene.ids.arm_range)
         if control == "joint":
             self.action_space = self.joint_action_space
         else:
             self.action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
-        spaces = {
-            IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
-            for c in self.cameras
-        }
-        if depth:
-            spaces |= {
-                DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
-                for c in self.cameras
-            }
-        spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
-        spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(EE_STATE_NAMES),), np.float32)
-        self.observation_space = gym.spaces.Dict(spaces)
+        self.observation_space = _observation_space(self.cameras, image_size, depth)
+
+    @classmethod
+    def _check_settings(
+        cls, render_mode: str | None, cameras: Sequence[str], image_size: int, fps: int, max_steps: int
+    ) -> None:
+        """ValueError for a render mode, camera, image size, control rate or step budget the env cannot take."""
+        if render_mode not in (None, *cls.metadata["render_modes"]):
+            raise ValueError(
+                f"render_mode={render_mode!r} unsupported; allowed: None, "
+                f"{', '.join(map(repr, cls.metadata['render_modes']))}"
+            )
+        unknown = [c for c in cameras if c not in ALL_CAMERAS]
+        if unknown or not cameras:
+            raise ValueError(
+                f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}"
+            )
+        check_image_size(image_size)
+        if fps <= 0 or 500 % fps:
+            raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")
+        if max_steps <= 0:
+            raise ValueError(f"max_steps={max_steps} must be positive")
 
     # -- rendering ---------------------------------------------------------------------------
     def new_renderer(self) -> mujoco.Renderer:

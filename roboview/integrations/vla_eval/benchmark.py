@@ -43,6 +43,55 @@ def _names(value: str | list[str] | tuple[str, ...]) -> list[str]:
     return [str(x).strip() for x in items if str(x).strip()]
 
 
+def _cameras(cameras: str | list[str]) -> tuple[str, ...]:
+    """params.cameras as camera names; ValueError for an unknown one or none."""
+    from roboview.sim.cameras import ALL_CAMERAS
+
+    names = tuple(_names(cameras))
+    unknown = [c for c in names if c not in ALL_CAMERAS]
+    if unknown or not names:
+        raise ValueError(
+            f"params.cameras={cameras!r}: unknown camera(s) {unknown or list(names)}; "
+            f"allowed: {', '.join(ALL_CAMERAS)}"
+        )
+    return names
+
+
+def _check_sizes(image_size: int, n_repeats: int, max_steps: int, contexts: int, limit: int) -> None:
+    """params.image_size a side the env renders, the counts positive, the selections ≥ 0."""
+    from roboview.sim.cameras import check_image_size
+
+    check_image_size(image_size, "params.image_size")
+    for name, value in (("n_repeats", n_repeats), ("max_steps", max_steps)):
+        if value <= 0:
+            raise ValueError(f"params.{name}={value} must be a positive count")
+    for name, value in (("contexts", contexts), ("limit", limit)):
+        if value < 0:
+            raise ValueError(f"params.{name}={value} must be ≥ 0 (0 = all)")
+
+
+def _chosen_splits(benchmark_path: str, splits: str | list[str]) -> list[str]:
+    """The splits params.splits names in the benchmark folder (`all`: every split of it); ValueError for a missing
+    folder or an unknown split."""
+    from roboview.benchmark.format import available_splits
+
+    if not benchmark_path or not Path(benchmark_path).is_dir():
+        raise ValueError(
+            f"params.benchmark_path={benchmark_path!r}: no such folder (a benchmark folder written by "
+            "roboview-build-benchmark)"
+        )
+    names = _names(splits)
+    available = available_splits(benchmark_path)
+    chosen = available if names == ["all"] else names
+    unknown = [s for s in chosen if s not in available]
+    if unknown or not chosen:
+        raise ValueError(
+            f"params.splits={splits!r}: unknown split(s) {unknown or chosen}; the benchmark at "
+            f"{benchmark_path} has: {', '.join(available)} (or `all`)"
+        )
+    return chosen
+
+
 class RoboViewBenchmark(StepBenchmark):
     """The (instance, repeat) episodes of a RoboView benchmark folder's splits.
 
@@ -91,39 +140,13 @@ class RoboViewBenchmark(StepBenchmark):
         allow_drift: bool = False,
     ) -> None:
         super().__init__()
-        from roboview.benchmark.format import available_splits, load_benchmark, select_items
-        from roboview.sim.cameras import ALL_CAMERAS, check_image_size
+        from roboview.benchmark.format import load_benchmark, select_items
 
         if control not in ACTION_SPECS:
             raise ValueError(f"params.control={control!r} unknown; allowed: {', '.join(ACTION_SPECS)}")
-        self.cameras = tuple(_names(cameras))
-        unknown = [c for c in self.cameras if c not in ALL_CAMERAS]
-        if unknown or not self.cameras:
-            raise ValueError(
-                f"params.cameras={cameras!r}: unknown camera(s) {unknown or list(self.cameras)}; "
-                f"allowed: {', '.join(ALL_CAMERAS)}"
-            )
-        check_image_size(image_size, "params.image_size")
-        for name, value in (("n_repeats", n_repeats), ("max_steps", max_steps)):
-            if value <= 0:
-                raise ValueError(f"params.{name}={value} must be a positive count")
-        for name, value in (("contexts", contexts), ("limit", limit)):
-            if value < 0:
-                raise ValueError(f"params.{name}={value} must be ≥ 0 (0 = all)")
-        if not benchmark_path or not Path(benchmark_path).is_dir():
-            raise ValueError(
-                f"params.benchmark_path={benchmark_path!r}: no such folder (a benchmark folder written by "
-                "roboview-build-benchmark)"
-            )
-        names = _names(splits)
-        available = available_splits(benchmark_path)
-        chosen = available if names == ["all"] else names
-        unknown = [s for s in chosen if s not in available]
-        if unknown or not chosen:
-            raise ValueError(
-                f"params.splits={splits!r}: unknown split(s) {unknown or chosen}; the benchmark at "
-                f"{benchmark_path} has: {', '.join(available)} (or `all`)"
-            )
+        self.cameras = _cameras(cameras)
+        _check_sizes(image_size, n_repeats, max_steps, contexts, limit)
+        chosen = _chosen_splits(benchmark_path, splits)
         bench = load_benchmark(benchmark_path, chosen)
         self.benchmark_path = str(Path(benchmark_path).resolve())
         self.version = bench.version

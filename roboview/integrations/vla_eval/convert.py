@@ -88,22 +88,50 @@ def episode_row(episode: dict, record: dict, policy: str, verdict: str) -> dict:
 
 
 def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: str = "") -> Path:
+    """Write the RoboView results folder `output_dir` from vla-eval's `results` of the benchmark at
+    `benchmark_path` (empty: the folder its config names); the path of the episodes file written."""
     entries = roboview_entries(read_aggregates(Path(results)))
     params = [PARAM_DEFAULTS | (a["config"].get("params") or {}) for a in entries]
+    root = _benchmark_root(benchmark_path, params)
+    bench = load_benchmark(root)
+    records = {i.record["instance_id"]: i.record for items in bench.splits.values() for i in items}
+    episodes = [(a, e) for a in entries for t in a["tasks"] for e in t["episodes"]]
+    _check_episodes(episodes, records, bench.version, root)
+    _check_same_params(params)
+    policy = policy_name or entries[0].get("server_info", {}).get("model_server") or "vla-eval"
+    splits = list(dict.fromkeys(e["split"] for _, e in episodes))
+    store = EpisodeStore(
+        Path(output_dir), _run_info(entries, params[0], results, bench.version, policy, splits)
+    )
+    verdicts = {
+        e.get("sid"): e["metrics"]["conformance"] for _, e in episodes if "conformance" in e["metrics"]
+    }
+    for _, episode in episodes:
+        verdict = verdicts.get(episode.get("sid"), "")
+        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict))
+    store.close()
+    provenance.write(Path(output_dir), provenance_entries(entries, episodes, bench.version, root))
+    return Path(output_dir) / "episodes.parquet"
+
+
+def _benchmark_root(benchmark_path: str, params: list[dict]) -> str:
+    """The benchmark folder to read: `--benchmark.path`, else the first entry's params.benchmark_path."""
     root = benchmark_path or params[0].get("benchmark_path", "")
     if not root or not Path(root).is_dir():
         raise ValueError(
             f"--benchmark.path={root!r}: no such folder; pass the benchmark folder vla-eval ran "
             "(params.benchmark_path)"
         )
-    bench = load_benchmark(root)
-    records = {i.record["instance_id"]: i.record for items in bench.splits.values() for i in items}
-    episodes = [(a, e) for a in entries for t in a["tasks"] for e in t["episodes"]]
-    versions = sorted({str(e.get("benchmark_version")) for _, e in episodes} - {bench.version})
+    return root
+
+
+def _check_episodes(episodes: list, records: dict[str, dict], version: str, root: str) -> None:
+    """Every episode ran this benchmark version, an instance of it, and its (instance, repeat) once."""
+    versions = sorted({str(e.get("benchmark_version")) for _, e in episodes} - {version})
     if versions:
         raise ValueError(
             f"the vla-eval episodes ran benchmark version(s) {', '.join(versions)}; {root} is version "
-            f"{bench.version}: pass the benchmark folder they ran"
+            f"{version}: pass the benchmark folder they ran"
         )
     unknown = sorted({e["instance_id"] for _, e in episodes if e["instance_id"] not in records})
     if unknown:
@@ -117,42 +145,37 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
             f"(instance, repeat) {twice[0]} ran {counts[twice[0]]} times: run the benchmark with "
             "episodes_per_task: 1 (repeats come from params.n_repeats)"
         )
-    first = params[0]
+
+
+def _check_same_params(params: list[dict]) -> None:
+    """The entries share the params a results folder holds once."""
     for name in ("n_repeats", "max_steps", "image_size", "control"):
         if len({p[name] for p in params}) > 1:
             raise ValueError(
                 f"the RoboView entries were run with different params.{name}: convert them apart"
             )
-    policy = policy_name or entries[0].get("server_info", {}).get("model_server") or "vla-eval"
-    splits = list(dict.fromkeys(e["split"] for _, e in episodes))
-    store = EpisodeStore(
-        Path(output_dir),
-        {
-            "benchmark_version": bench.version,
-            "values": None,
-            "policy": policy,
-            "policy_path": None,
-            "policy_options": {
-                "source": "vla-eval",
-                "results": str(Path(results).resolve()),
-                "server_url": (entries[0]["config"].get("server") or {}).get("url"),
-                "control": first["control"],
-                "cameras": first["cameras"],
-            },
-            "n_repeats": {split: first["n_repeats"] for split in splits},
-            "max_steps": first["max_steps"],
-            "image_size": first["image_size"],
+
+
+def _run_info(
+    entries: list[dict], first: dict, results: Path, version: str, policy: str, splits: list[str]
+) -> dict:
+    """The results folder's run description, as `roboview.pipelines.evaluate` writes it."""
+    return {
+        "benchmark_version": version,
+        "values": None,
+        "policy": policy,
+        "policy_path": None,
+        "policy_options": {
+            "source": "vla-eval",
+            "results": str(Path(results).resolve()),
+            "server_url": (entries[0]["config"].get("server") or {}).get("url"),
+            "control": first["control"],
+            "cameras": first["cameras"],
         },
-    )
-    verdicts = {
-        e.get("sid"): e["metrics"]["conformance"] for _, e in episodes if "conformance" in e["metrics"]
+        "n_repeats": {split: first["n_repeats"] for split in splits},
+        "max_steps": first["max_steps"],
+        "image_size": first["image_size"],
     }
-    for _, episode in episodes:
-        verdict = verdicts.get(episode.get("sid"), "")
-        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict))
-    store.close()
-    provenance.write(Path(output_dir), provenance_entries(entries, episodes, bench.version, root))
-    return Path(output_dir) / "episodes.parquet"
 
 
 def provenance_entries(entries: list[dict], episodes: list, version: str, root: str) -> list[dict]:
