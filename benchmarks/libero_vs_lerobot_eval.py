@@ -50,7 +50,9 @@ class LiberoVsLeRobotConfig:
 
     def __post_init__(self) -> None:
         if not self.checkpoint or not (Path(self.checkpoint) / "config.json").is_file():
-            raise ValueError(f"--checkpoint={self.checkpoint!r} must be a folder holding a LeRobot config.json")
+            raise ValueError(
+                f"--checkpoint={self.checkpoint!r} must be a folder holding a LeRobot config.json"
+            )
         if min(self.episodes, self.num_workers, self.batch_size) < 1:
             raise ValueError("--episodes, --num_workers and --batch_size must be ≥ 1")
 

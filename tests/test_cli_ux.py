@@ -81,13 +81,14 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
 
 
 def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monkeypatch, capsys):
+    import roboview.demos.collection
     import roboview.pipelines.collect as collect
     from roboview.demos.dataset import Progress
 
-    real = collect._episodes
+    real = roboview.demos.collection.attempts
 
-    def three_then_ctrl_c(cfg, first_attempt):
-        episodes = real(cfg, first_attempt)
+    def three_then_ctrl_c(job, first_attempt):
+        episodes = real(job, first_attempt)
         try:
             for _ in range(3):
                 yield next(episodes)
@@ -95,7 +96,7 @@ def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monke
         finally:
             episodes.close()
 
-    monkeypatch.setattr(collect, "_episodes", three_then_ctrl_c)
+    monkeypatch.setattr(roboview.demos.collection, "attempts", three_then_ctrl_c)
     root = tmp_path / "demos"
     with pytest.raises(SystemExit) as exit_:
         collect.main(
@@ -118,12 +119,13 @@ def test_ctrl_c_during_collect_says_how_many_demos_a_rerun_keeps(tmp_path, monke
 
 
 def test_ctrl_c_during_build_says_nothing_was_written(tmp_path, monkeypatch, capsys):
+    import roboview.benchmark.build
     import roboview.pipelines.build_benchmark as build
 
-    def ctrl_c(cfg, instances):
+    def ctrl_c(spec, instances):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(build, "_render_all", ctrl_c)
+    monkeypatch.setattr(roboview.benchmark.build, "render_all", ctrl_c)
     out = tmp_path / "bench"
     with pytest.raises(SystemExit) as exit_:
         build.main([f"--output_dir={out}", "--preset=tiny"])

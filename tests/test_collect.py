@@ -168,7 +168,10 @@ def _main(capsys, *args: str) -> subprocess.CompletedProcess:
     [
         (["--dataset.num_episodes=0"], "--dataset.num_episodes=0 must be a positive count"),
         (["--num_workers=-1"], "--num_workers=-1 must be a positive count"),
-        (["--dataset.cameras=[front,top_down]"], "['top_down']; allowed for --dataset.task=pick_place: front, left_top, right_top, wrist"),
+        (
+            ["--dataset.cameras=[front,top_down]"],
+            "['top_down']; allowed for --dataset.task=pick_place: front, left_top, right_top, wrist",
+        ),
         (["--dataset.fps=7"], "--dataset.fps=7 must be a positive divisor of 500"),
         (["--dataset.vcodec=mjpeg"], "'mjpeg' unknown; allowed: libsvtav1, h264, hevc"),
         (["--dataset.repo_id=noslash"], "'noslash' must look like ORG/NAME"),

@@ -85,7 +85,7 @@ def test_publish_dry_run_lists_the_envhub_repo(tiny_benchmark):
     assert proc.returncode == 0, proc.stderr
     assert f"{len(ENV_PY.read_text().encode()):,}  org/roboview-env/env.py" in proc.stdout
     assert "org/roboview-env/README.md" in proc.stdout
-    from roboview.pipelines.publish import env_hub_files
+    from roboview.integrations.publishing.benchmark import env_hub_files
 
     readme = env_hub_files("org/roboview-env", "org/roboview-bias", "v1")["README.md"]
     assert 'ROBOVIEW_BENCHMARK"] = "org/roboview-bias"' in readme and 'make_env("org/roboview-env"' in readme

@@ -179,7 +179,8 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
     from huggingface_hub import EvalResultEntry, parse_eval_result_entries
 
     from roboview.eval.reporting.bundle import BUNDLE_FILE, sha256_file
-    from roboview.pipelines.publish import PublishConfig, PublishError
+    from roboview.integrations.publishing.hub import PublishError
+    from roboview.pipelines.publish import PublishConfig
     from roboview.pipelines.publish import run as publish
 
     staging = tmp_path / "bundle"
@@ -251,7 +252,8 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
 
 
 def test_publish_refuses_results_that_do_not_verify(bundles, tmp_path):
-    from roboview.pipelines.publish import PublishConfig, PublishError
+    from roboview.integrations.publishing.hub import PublishError
+    from roboview.pipelines.publish import PublishConfig
     from roboview.pipelines.publish import run as publish
 
     partial = tmp_path / "partial"

@@ -117,9 +117,13 @@ def test_a_policy_that_does_not_fit_libero_is_refused_before_any_episode():
         r"\(pass --policy.control=ee_delta\)",
     ):
         fit_policy(policy_config("vision"), ["libero"])
-    with pytest.raises(ValueError, match="observes camera.s. front, which the 'libero' task's env does not render"):
+    with pytest.raises(
+        ValueError, match="observes camera.s. front, which the 'libero' task's env does not render"
+    ):
         fit_policy(policy_config("vision", control="ee_delta"), ["libero"])
-    with pytest.raises(ValueError, match="takes control ee_delta"):  # a run over both worlds: the control they share
+    with pytest.raises(
+        ValueError, match="takes control ee_delta"
+    ):  # a run over both worlds: the control they share
         fit_policy(policy_config("expert"), ["pick_place", "libero"])
     expert = policy_config("expert", control="ee_delta")
     fit_policy(expert, ["pick_place", "libero"])  # privileged: given each world's own cameras

@@ -47,7 +47,7 @@ def test_absent_color_categories_are_left_out_not_drawn_as_zero():
 def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
     from pathlib import Path
 
-    from roboview.pipelines.collect import CollectResult
+    from roboview.demos.collection import CollectResult
     from roboview.pipelines.collect import summary as collect_summary
     from roboview.pipelines.evaluate import EvaluateResult, rate_text
 

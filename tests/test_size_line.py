@@ -20,10 +20,6 @@ OVERSIZE_FUNCTIONS = {
     "roboview.eval.running.results:merge_folders": 76,
     "roboview.eval.statistics.metrics:split_metrics": 73,
     "roboview.eval.statistics.metrics:interaction_metrics": 65,
-    "roboview.pipelines.build_benchmark:run": 99,
-    "roboview.pipelines.collect:run": 94,
-    "roboview.pipelines.probe_grounding:run": 80,
-    "roboview.pipelines.publish:stage_results": 92,
 }
 OVERSIZE_MODULES = {
     "roboview.eval.reporting.report": 820,

@@ -340,7 +340,24 @@ def _write_jsonl(path: Path, rows: Iterator[dict]) -> None:
 
 
 def export(source: Source, out: Path) -> int:
-    """Write the v2.1 dataset into `out` (existing and empty); returns how many videos were written."""
+    """Write the v2.1 dataset into `out` (new or empty; check_output's), made if missing; returns how many videos
+    were written. A failed or interrupted export leaves no half-written dataset: what it wrote is removed, and
+    `out` itself if it made it."""
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _write(source, out)
+    except BaseException:
+        if created:
+            shutil.rmtree(out, ignore_errors=True)
+        else:
+            for child in out.iterdir():
+                shutil.rmtree(child) if child.is_dir() else child.unlink()
+        raise
+
+
+def _write(source: Source, out: Path) -> int:
+    """Write the v2.1 dataset into the existing, empty `out`; the videos written."""
     import pyarrow.parquet as pq
 
     info = source.info

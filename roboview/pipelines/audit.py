@@ -34,40 +34,21 @@ The mapping:
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
-
-from roboview.eval.reporting.report import REPORT_FILE, write_report
+from roboview.eval.audit import AuditSource, audit
+from roboview.eval.reporting.report import METRICS_FILE, REPORT_FILE
 from roboview.eval.running.harnesses import harness_names, load
-from roboview.eval.running.harnesses.base import MAP_FIELDS, REQUIRED, HarnessTable
+from roboview.eval.running.harnesses.mapping import (
+    MapConfig,
+    harness_map,
+    input_problem,
+    read_table,
+    to_episodes,
+)
 from roboview.eval.statistics.metrics import MetricsConfig, policy_layouts
-from roboview.eval.statistics.significance import lrt_power
 from roboview.pipelines._cli import cli_main
-
-METRICS_FILE = "metrics.json"
-TRUE = {"1", "true", "yes", "success", "succeeded", "t", "y"}
-FALSE = {"0", "false", "no", "failure", "fail", "failed", "f", "n"}
-
-
-@dataclass
-class MapConfig:
-    # Column naming the perturbed factor (one split per distinct name); or pass --factor_name.
-    factor: str = ""
-    # Column holding the factor's level.
-    value: str = ""
-    # Column the comparison is stratified by (base task, scene).
-    context: str = ""
-    # Column holding the episode's outcome (1/0, true/false, yes/no, success/failure).
-    success: str = ""
-    # Column numbering trials; empty: episodes of one (policy, factor, value, context) in file order.
-    repeat: str = ""
-    # Column naming the policy (several policies: paired comparisons); empty: --policy_name.
-    policy: str = ""
 
 
 @dataclass
@@ -115,203 +96,17 @@ class AuditConfig:
             )
 
 
-FORMATS = {".csv": "CSV", ".parquet": "parquet", ".jsonl": "JSON lines", ".json": "JSON lines"}
-EXPECTED = "expected one row per episode in a .csv, .parquet or .jsonl file"
-
-
-def input_problem(path: Path) -> str | None:
-    """Why `path` is not a per-episode file audit reads, in one line naming it and what was expected; None if it
-    may be one (its contents are checked when read)."""
-    from roboview.eval.running.inputs import benchmark_root, is_parquet, is_results_folder
-
-    if not path.exists():
-        return f"--results={path}: no such file; {EXPECTED}"
-    if path.is_dir():
-        if benchmark_root(path) == path:
-            return (
-                f"--results={path} is a benchmark folder (its instances), not per-episode results; {EXPECTED}"
-            )
-        if is_results_folder(path):
-            return (
-                f"--results={path} is a RoboView results folder: report it with roboview-report "
-                f"--results={path / 'episodes.parquet'} (audit reads other benchmarks' per-episode files)"
-            )
-        return f"--results={path} is a folder; {EXPECTED}"
-    if path.suffix.lower() not in FORMATS:
-        return f"--results={path}: unknown format {path.suffix!r}; {EXPECTED}"
-    if path.suffix.lower() == ".parquet" and not is_parquet(path):
-        return f"--results={path} is named .parquet but its bytes are not parquet; {EXPECTED}"
-    return None
-
-
-def read_table(path: str) -> pd.DataFrame:
-    file = Path(path)
-    problem = input_problem(file)
-    if problem:
-        raise FileNotFoundError(problem) if not file.exists() else ValueError(problem)
-    kind = FORMATS[file.suffix.lower()]
-    try:
-        if kind == "CSV":
-            table = pd.read_csv(file)
-        elif kind == "parquet":
-            table = pd.read_parquet(file)
-        else:
-            table = pd.read_json(file, lines=True)
-    except Exception as exc:  # pandas' and pyarrow's parse errors, undecodable bytes, an empty file
-        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise ValueError(
-            f"--results={path} could not be read as {kind} ({type(exc).__name__}: {reason}); {EXPECTED}"
-        ) from None
-    if table.empty:
-        raise ValueError(f"--results={path} holds no rows; {EXPECTED}")
-    return table
-
-
-def _success(column: pd.Series, name: str) -> np.ndarray:
-    if column.dtype == bool:
-        return column.to_numpy()
-    text = column.astype(str).str.strip().str.lower().str.removesuffix(".0")
-    bad = sorted(set(text) - TRUE - FALSE)
-    if bad:
-        raise ValueError(
-            f"--map.success={name}: values {bad[:5]} are not outcomes; allowed: 1/0, true/false, "
-            "yes/no, success/failure"
-        )
-    return text.isin(TRUE).to_numpy()
-
-
-def to_episodes(table: pd.DataFrame, cfg: AuditConfig) -> pd.DataFrame:
-    """RoboView episode records (policy, split, factor, value, context_id, instance_id, repeat, success)."""
-    m = cfg.map
-    columns = [c for c in (m.factor, m.value, m.context, m.success, m.repeat, m.policy) if c]
-    missing = [c for c in columns if c not in table]
-    if missing:
-        raise ValueError(
-            f"{cfg.results} has no column(s) {missing}; its columns: {', '.join(map(str, table.columns))}"
-        )
-    factor = table[m.factor].astype(str) if m.factor else pd.Series(cfg.factor_name, index=table.index)
-    out = pd.DataFrame(
-        {
-            "policy": table[m.policy].astype(str) if m.policy else cfg.policy_name,
-            "factor": factor.str.replace("|", "/", regex=False),
-            "value": table[m.value].astype(str).str.replace("|", "/", regex=False),
-            "context_id": table[m.context].astype(str),
-            "success": _success(table[m.success], m.success),
-        }
-    )
-    out["split"] = out["factor"]
-    out["instance_id"] = [
-        hashlib.sha256(f"{f}\0{v}\0{c}".encode()).hexdigest()[:16]
-        for f, v, c in zip(out["factor"], out["value"], out["context_id"])
-    ]
-    if m.repeat:
-        out["repeat"] = pd.factorize(table[m.repeat].astype(str), sort=True)[0]
-        dup = out.duplicated(["policy", "instance_id", "repeat"])
-        if dup.any():
-            row = out[dup].iloc[0]
-            raise ValueError(
-                f"--map.repeat={m.repeat}: {int(dup.sum())} episodes repeat a (policy, factor, value, "
-                f"context, repeat), e.g. {row['factor']}={row['value']} in {row['context_id']}"
-            )
-    else:
-        out["repeat"] = out.groupby(["policy", "instance_id"]).cumcount()
-    return out
-
-
-def harness_map(cfg: AuditConfig, harness: HarnessTable) -> MapConfig:
-    """The --map.* flags given, each empty one filled with the harness's default column; a field left without a
-    column, or a column with episodes that lack a value, raises ValueError saying why and which flag names it."""
-    given = {name: getattr(cfg.map, name) for name in MAP_FIELDS}
-    columns = {name: given[name] or harness.mapping.get(name, "") for name in MAP_FIELDS}
-    if cfg.factor_name and not given["factor"]:
-        columns["factor"] = ""
-    unmapped = [n for n in REQUIRED if not columns[n] and not (n == "factor" and cfg.factor_name)]
-    table = harness.table
-    if unmapped:
-        by_reason: dict[str, list[str]] = {}
-        for n in unmapped:
-            by_reason.setdefault(harness.missing.get(n, "no default column"), []).append(n)
-        reasons = "; ".join(f"{', '.join(names)}: {reason}" for reason, names in by_reason.items())
-        flags = " ".join(f"--map.{n}=COLUMN" for n in unmapped)
-        columns_read = list(map(str, table.columns))
-        raise ValueError(
-            f"--format={cfg.format} --results={cfg.results}: {reasons}. Name them with {flags}"
-            + (" (or --factor_name=NAME)" if "factor" in unmapped else "")
-            + f"; its columns: {', '.join(columns_read[:40])}{' …' if len(columns_read) > 40 else ''}"
-        )
-    for name in REQUIRED:
-        column = columns[name]
-        if column in table and table[column].isna().any():
-            raise ValueError(
-                f"--map.{name}={column}: {int(table[column].isna().sum())} of {len(table)} episodes of "
-                f"{cfg.results} have no {column}; name another column with --map.{name}=COLUMN"
-            )
-    return MapConfig(**columns)
-
-
-def power_lines(episodes: pd.DataFrame, tau: float) -> dict[str, dict[str, dict]]:
-    """policy → split → the design's power against a logit-SD `tau` bias (asymptotic LRT, as roboview.pipelines.plan)."""
-    out: dict[str, dict[str, dict]] = {}
-    for (policy, split), rows in episodes.groupby(["policy", "split"], sort=False):
-        n_values, n_contexts = rows["value"].nunique(), rows["context_id"].nunique()
-        repeats = int(round(len(rows) / max(1, n_values * n_contexts)))
-        sr = float(np.clip(rows["success"].mean(), 0.02, 0.98))
-        power = lrt_power(n_values, n_contexts, max(1, repeats), tau, sr) if n_values > 1 else None
-        out.setdefault(str(policy), {})[str(split)] = {
-            "tau": tau,
-            "n_values": int(n_values),
-            "n_contexts": int(n_contexts),
-            "repeats": repeats,
-            "power": power,
-        }
-    return out
-
-
 def run(cfg: AuditConfig):
     origin = f"`{cfg.results}`"
     if cfg.format:
         harness = load(cfg.format)(Path(cfg.results))
-        cfg = replace(cfg, map=harness_map(cfg, harness))
+        cfg = replace(cfg, map=harness_map(cfg.map, harness, cfg.format, cfg.results, cfg.factor_name))
         table, origin = harness.table, f"{origin} ({harness.source})"
     else:
         table = read_table(cfg.results)
-    episodes = to_episodes(table, cfg)
-    metrics_cfg = cfg.metrics
-    source = {
-        "path": str(cfg.results),
-        "roboview_benchmark_version": None,
-        "provenance": [],
-        "mapping": {k: v for k, v in vars(cfg.map).items() if v},
-    }
-    if cfg.format:
-        source["format"] = cfg.format
-    result = write_report(episodes, cfg.output_dir, metrics_cfg, sources=[source], plots=False)
-    power = power_lines(episodes, cfg.tau)
-    for name, layout in policy_layouts(result.metrics).items():
-        for split, m in layout["splits"].items():
-            m["power"] = power.get(name, {}).get(split)
-    out = Path(cfg.output_dir)
-    (out / METRICS_FILE).write_text(json.dumps(result.metrics, indent=2, allow_nan=False) + "\n")
-    lines = [
-        "## Audit: mapping and power",
-        "",
-        f"Source {origin}: {len(episodes)} episodes; factor ← {cfg.map.factor or repr(cfg.factor_name)}, "
-        f"value ← {cfg.map.value}, context ← {cfg.map.context}, success ← {cfg.map.success}, repeat ← "
-        f"{cfg.map.repeat or 'file order'}, policy ← {cfg.map.policy or repr(cfg.policy_name)}.",
-        "",
-        "| policy | split | values | contexts | repeats | power at τ = " + f"{cfg.tau:g} |",
-        "| --- | --- | --- | --- | --- | --- |",
-    ]
-    for name, splits in power.items():
-        for split, p in splits.items():
-            lines.append(
-                f"| {name} | {split} | {p['n_values']} | {p['n_contexts']} | {p['repeats']} | "
-                + ("N/A" if p["power"] is None else f"{100 * p['power']:.2f}")
-                + " |"
-            )
-    with (out / REPORT_FILE).open("a") as fh:
-        fh.write("\n" + "\n".join(lines) + "\n")
-    return result
+    episodes = to_episodes(table, cfg.map, cfg.results, cfg.factor_name, cfg.policy_name)
+    source = AuditSource(cfg.results, origin, cfg.map, cfg.format, cfg.factor_name, cfg.policy_name)
+    return audit(episodes, source, cfg.output_dir, cfg.metrics, cfg.tau)
 
 
 def _summary(cfg: AuditConfig, result) -> None:

@@ -11,33 +11,16 @@ The build fails, after writing the contact sheet and `fairness_report.csv`, when
 
 from __future__ import annotations
 
-import csv
-import logging
-import shutil
-import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from tqdm import tqdm
-
-from roboview.benchmark import conformance
-from roboview.benchmark import format as bio
-from roboview.benchmark.card import fairness_stats, write_card
-from roboview.benchmark.contact_sheet import context_text, write_contact_sheet
+from roboview.benchmark.build import BuildResult, BuildSpec, GateFailure, build
 from roboview.benchmark.fairness import FairnessThresholds
-from roboview.benchmark.render import InstanceRenderer
-from roboview.benchmark.review import adjudicate, read_decisions
-from roboview.benchmark.screen import agreement
-from roboview.benchmark.screen import write_decisions as write_screen_decisions
-from roboview.core.folders import folder_problem
-from roboview.core.workers import WorkerPool
 from roboview.pipelines._cli import cli_main
 from roboview.policies.vlm.client import Endpoint, VLMClient
 from roboview.sim.cameras import IMAGE_SIZE_MIN, check_image_size
-from roboview.tasks import DEFAULT_TASK, PRESETS, load_preset
+from roboview.tasks import PRESETS, load_preset
 from roboview.variation.instances import SuiteConfig, generate_suite
-
-log = logging.getLogger(__name__)
 
 # The perceptual-fairness gate judges visibility from object pixel counts: at 64² the smallest tiny-preset
 # object still covers 6 px of the front camera, at 48² 2 px, at 32² one.
@@ -114,180 +97,22 @@ class BuildConfig:
         return suite
 
 
-@dataclass(frozen=True)
-class BuildResult:
-    output_dir: Path
-    candidates: int
-    accepted: int
-    gate_pass_rate: float
-    suite_hash: str
-    elapsed_s: float
-    contact_sheet: Path
-
-
-def _check_output_dir(out: Path) -> None:
-    problem = folder_problem(
-        out,
-        "benchmark",
-        bio.MANIFEST,
-        "choose a new folder or delete this one",
-        label=f"--output_dir={out}",
-        writing=True,
-    )
-    if problem:
-        raise ValueError(problem)
-
-
-def _render_all(cfg: BuildConfig, instances: list) -> list[dict]:
-    screen = (VLMClient, cfg.vlm_screen) if cfg.screen_enabled else None
-    args = (cfg.image_size, cfg.fairness, DEFAULT_TASK, screen)
-    bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
-    records, passed = [], 0
-    try:
-        with WorkerPool(cfg.num_workers, InstanceRenderer, args, method="record") as pool:
-            for record in pool.imap(instances, lookahead=8 * cfg.num_workers):
-                records.append(record)
-                passed += record["fairness"]["passed"]
-                bar.update(1)
-                bar.set_postfix(passed=f"{passed / len(records):.1%}")
-    finally:  # also on Ctrl-C: the bar ends its line before the closing message
-        bar.close()
-    return records
-
-
 def run(cfg: BuildConfig) -> BuildResult:
-    out = Path(cfg.output_dir)
-    _check_output_dir(out)
-    suite = cfg.suite
-    instances = generate_suite(suite)
-    decisions = (
-        read_decisions(Path(cfg.decisions), {i.instance_id for i in instances}) if cfg.decisions else {}
+    screen = (VLMClient, cfg.vlm_screen) if cfg.screen_enabled else None
+    spec = BuildSpec(
+        cfg.suite,
+        cfg.image_size,
+        cfg.fairness,
+        cfg.min_pass_rate,
+        cfg.num_workers,
+        Path(cfg.decisions) if cfg.decisions else None,
+        screen,
     )
-    t0 = time.perf_counter()
-    records = _render_all(cfg, instances)
-    verdicts = [adjudicate(r, decisions.get(r["instance_id"])) for r in records]
-    accepted = [ok for ok, _ in verdicts]
-    rejected_by = [who for _, who in verdicts]
-    gate_rate = sum(r["fairness"]["passed"] for r in records) / len(records)
-
-    # Write into a sibling temp folder and swap it in: never a half-written benchmark.
-    tmp = out.with_name(out.name + ".building")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    sheet = write_contact_sheet(tmp, records, accepted, rejected_by)
-    screen = agreement(records) if cfg.screen_enabled else None
-    if screen is not None:
-        screen |= {"model": cfg.vlm_screen.model, "base_url": cfg.vlm_screen.base_url}
-        write_screen_decisions(tmp / "vlm_screen.csv", records, f"vlm:{cfg.vlm_screen.model}")
-    by_split: dict[str, list[dict]] = {}
-    rejected_rows = []
-    for r, ok, who in zip(records, accepted, rejected_by):
-        if ok:
-            by_split.setdefault(r["split"], []).append(r)
-        else:
-            rejected_rows.append({**r, "rejected_by": who})
-    if gate_rate < cfg.min_pass_rate:
-        _write_offenders(tmp, records)
-    else:
-        for split, rows in by_split.items():
-            bio.write_split(rows, tmp / "data" / f"{split}.parquet")
-        for task, rows in _by_task(rejected_rows).items():  # one table per task: their columns differ
-            bio.write_split(rows, tmp / "rejected" / f"{_rejected_table(task)}.parquet", rejected=True)
-    digest = bio.suite_hash(by_split)
-    content, reference, stack = {}, None, None
-    if gate_rate >= cfg.min_pass_rate:
-        # What was written, as it reads back: the conformance sample, then every cell's checksum.
-        written = {split: bio.read_rows(tmp / "data" / f"{split}.parquet") for split in by_split}
-        stack = conformance.write_reference(tmp, written, cfg.image_size)
-        content = bio.write_checksums(tmp)
-        reference = bio.reference_hash(tmp)
-    manifest = {
-        "status": "ok" if gate_rate >= cfg.min_pass_rate else "failed_gate",
-        "suite": {
-            "preset": suite.preset,
-            "union_mode": suite.union_mode,
-            "splits": list(suite.splits),
-            "factorial_colors": list(suite.factorial_colors),
-            "cartesian": [list(c) for c in suite.cartesian],
-            "value_subsets": {k: list(v) for k, v in suite.value_subsets},
-        },
-        "image_size": cfg.image_size,
-        "thresholds": asdict(cfg.fairness),
-        "candidates": len(records),
-        "gate_pass_rate": gate_rate,
-        "min_pass_rate": cfg.min_pass_rate,
-        "splits": bio.split_counts(records, accepted, rejected_by),
-        "rejected": len(rejected_rows),
-        **(
-            {"rejected_tables": sorted(map(_rejected_table, _by_task(rejected_rows)))}
-            if rejected_rows
-            else {}
-        ),
-        "decisions": len(decisions),
-        "reviewers": sorted({d.reviewer for d in decisions.values()}),
-        "suite_hash": digest,
-        "content": content,
-        "stack": stack,
-        "benchmark_version": bio.benchmark_version(suite.preset, content, reference),
-        "fairness_stats": fairness_stats(records),
-        **({"vlm_screen": screen} if screen is not None else {}),
-    }
-    bio.write_manifest(tmp, manifest)
-    if manifest["status"] == "ok":
-        write_card(tmp, manifest)
-    shutil.rmtree(out, ignore_errors=True)
-    tmp.rename(out)
-    sheet = out / sheet.relative_to(tmp)
-    if manifest["status"] != "ok":
-        raise GateFailure(
-            f"only {gate_rate:.1%} of {len(records)} candidates pass the fairness gate "
-            f"(need {cfg.min_pass_rate:.0%}); offenders in {out / 'fairness_report.csv'}, "
-            f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold."
-        )
-    _print_summary(manifest)
-    if screen is not None:
-        kappa = "undefined" if screen["cohens_kappa"] is None else f"{screen['cohens_kappa']:.3f}"
-        print(
-            f"VLM screen ({screen['model']}): {screen['pass_rate']:.1%} yes over {screen['screened']} "
-            f"(paper target ≥ 95 %: {'met' if screen['meets_paper_target'] else 'NOT met'}), agreement with the "
-            f"gate {screen['observed_agreement']:.1%}, Cohen's κ {kappa}, {len(screen['disagreements'])} "
-            f"disagreements (contact sheet; answers in vlm_screen.csv)"
-        )
-    return BuildResult(out, len(records), sum(accepted), gate_rate, digest, time.perf_counter() - t0, sheet)
-
-
-def _rejected_table(task: str) -> str:
-    """The rejected table's name (and card config) of a task: `rejected` for pick_place, `<task>_rejected`."""
-    return "rejected" if task == DEFAULT_TASK else f"{task}_rejected"
-
-
-def _by_task(rows: list[dict]) -> dict[str, list[dict]]:
-    out: dict[str, list[dict]] = {}
-    for row in rows:
-        out.setdefault(row.get("task", DEFAULT_TASK), []).append(row)
-    return out
-
-
-class GateFailure(RuntimeError):
-    """Fewer candidates than required pass the perceptual-fairness gate."""
-
-
-def _write_offenders(out: Path, records: list[dict]) -> None:
-    with (out / "fairness_report.csv").open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["instance_id", "task", "split", "value", "context", "reject_reason"])
-        for r in records:
-            if not r["fairness"]["passed"]:
-                writer.writerow(
-                    [
-                        r["instance_id"],
-                        r.get("task", DEFAULT_TASK),
-                        r["split"],
-                        r["value"],
-                        context_text(r),
-                        r["fairness"]["reject_reason"],
-                    ]
-                )
+    result = build(spec, Path(cfg.output_dir))
+    _print_summary(result.manifest)
+    if "vlm_screen" in result.manifest:
+        _print_screen(result.manifest["vlm_screen"])
+    return result
 
 
 def _print_summary(manifest: dict) -> None:
@@ -298,6 +123,16 @@ def _print_summary(manifest: dict) -> None:
             f"{split:<22}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{c['accepted'] / c['candidates']:>8.1%}"
         )
     print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
+
+
+def _print_screen(screen: dict) -> None:
+    kappa = "undefined" if screen["cohens_kappa"] is None else f"{screen['cohens_kappa']:.3f}"
+    print(
+        f"VLM screen ({screen['model']}): {screen['pass_rate']:.1%} yes over {screen['screened']} "
+        f"(paper target ≥ 95 %: {'met' if screen['meets_paper_target'] else 'NOT met'}), agreement with the "
+        f"gate {screen['observed_agreement']:.1%}, Cohen's κ {kappa}, {len(screen['disagreements'])} "
+        f"disagreements (contact sheet; answers in vlm_screen.csv)"
+    )
 
 
 def _summary(cfg: BuildConfig, result: BuildResult) -> None:

@@ -13,38 +13,17 @@ run stopped. Load the result with `LeRobotDataset(repo_id, root=root)`.
 
 from __future__ import annotations
 
-import itertools
-import logging
-import shutil
-import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from tqdm import tqdm
-
 from roboview.core.cli_errors import flag_errors
-from roboview.core.workers import WorkerPool
-from roboview.demos.dataset import (
-    CollectionSignature,
-    DatasetRootError,
-    Progress,
-    add_episode,
-    check_root,
-    demo_features,
-    load_provenance,
-    roll_back,
-    write_card,
-    write_checkpoint,
-)
-from roboview.demos.recorder import DemoCollector, DemoEpisode
-from roboview.pipelines._cli import cli_main, interrupted
+from roboview.demos.collection import CollectionJob, CollectResult, collect
+from roboview.demos.dataset import CollectionSignature, DatasetRootError, check_root
+from roboview.pipelines._cli import cli_main
 from roboview.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
 from roboview.tasks import DEFAULT_TASK, load_task
 from roboview.variation.factors import FACTORS, context_factors
 from roboview.variation.randomization import validate_randomize
-
-log = logging.getLogger(__name__)
 
 VCODECS = ("libsvtav1", "h264", "hevc")
 # roboview.pipelines.train's ACT reads the images at their collected size through a ResNet that downsamples by 32:
@@ -183,173 +162,20 @@ class CollectConfig:
         )
 
 
-@dataclass(frozen=True)
-class CollectResult:
-    root: Path
-    episodes: int
-    new_episodes: int
-    attempts: int
-    failures: int
-    elapsed_s: float
-
-    @property
-    def success_rate(self) -> float:
-        return (self.attempts - self.failures) / self.attempts if self.attempts else float("nan")
-
-    @property
-    def demos_per_hour(self) -> float:
-        return 3600 * self.new_episodes / self.elapsed_s if self.elapsed_s else float("nan")
-
-
-def _episodes(cfg: CollectConfig, first_attempt: int) -> Iterator[DemoEpisode]:
-    """Attempts first_attempt, first_attempt+1, … in order, computed by the worker pool."""
-    d = cfg.dataset
-    args = (
-        cfg.seed,
-        tuple(d.cameras),
-        d.image_size,
-        d.fps,
-        cfg.max_steps,
-        tuple(d.randomize),
-        d.task,
-        d.control,
-        d.context_values,
-    )
-    attempt = first_attempt
-    if cfg.num_workers == 1:
-        collector = DemoCollector(*args)
-        try:
-            while True:
-                yield collector.run(attempt)
-                attempt += 1
-        finally:
-            collector.env.close()
-    with WorkerPool(cfg.num_workers, DemoCollector, args) as pool:
-        yield from pool.imap(itertools.count(attempt))
-
-
-def _open_dataset(cfg: CollectConfig, create: bool):
-    from lerobot.configs.video import RGBEncoderConfig
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    d = cfg.dataset
-    # lerobot's streaming encoder silently *drops* a frame when its queue stays full for 0.1 s (it
-    # was made for live capture); we feed frames faster than real time, so under CPU load frames went
-    # missing (1 of ~13,000 per camera in a 250-demo run: an episode's video one frame short of its
-    # parquet rows). A queue that holds a whole episode can never fill: no frame can be dropped.
-    kwargs = dict(
-        rgb_encoder=RGBEncoderConfig(vcodec=d.vcodec),
-        streaming_encoding=True,
-        encoder_threads=1,
-        encoder_queue_maxsize=cfg.max_steps + 1,
-    )
-    if create:
-        return LeRobotDataset.create(
-            d.repo_id,
-            d.fps,
-            demo_features(tuple(d.cameras), d.image_size, d.control, d.task),
-            root=d.root,
-            robot_type=load_task(d.task).env_class().robot_type,
-            use_videos=True,
-            **kwargs,
-        )
-    return LeRobotDataset.resume(d.repo_id, root=d.root, **kwargs)  # reopened for writing: new files
-
-
 def run(cfg: CollectConfig) -> CollectResult:
-    root = Path(cfg.dataset.root)
+    d = cfg.dataset
+    job = CollectionJob(
+        cfg.signature,
+        Path(d.root),
+        d.num_episodes,
+        d.vcodec,
+        cfg.num_workers,
+        cfg.checkpoint_every,
+        cfg.max_failures,
+    )
     with flag_errors("--dataset.root"):
-        progress = check_root(root, cfg.signature)  # every input error surfaces here, before work
-    if progress is not None:
-        roll_back(root, progress)
-        if progress.episodes_saved == 0:  # nothing complete yet: start over cleanly
-            shutil.rmtree(root)
-            progress = None
-    if progress is not None and progress.episodes_saved >= cfg.dataset.num_episodes:
-        log.info(
-            "%s already holds %d episodes (asked for %d); nothing to do",
-            root,
-            progress.episodes_saved,
-            cfg.dataset.num_episodes,
-        )
-        return CollectResult(root, progress.episodes_saved, 0, 0, 0, 0.0)
-    if progress is None:
-        if root.exists():
-            root.rmdir()  # empty (check_root verified); lerobot creates the folder itself
-        dataset = _open_dataset(cfg, create=True)
-        progress = Progress(cfg.signature)
-        write_checkpoint(root, progress, [])
-    else:
-        dataset = _open_dataset(cfg, create=False)
-    provenance = load_provenance(root)
-    start_saved, start_attempt, start_failures = (
-        progress.episodes_saved,
-        progress.next_attempt,
-        progress.failures,
-    )
-    target = cfg.dataset.num_episodes
-    t0 = time.perf_counter()
-
-    bar = tqdm(total=target, initial=start_saved, desc="collect", unit="demo", dynamic_ncols=True)
-    episodes = _episodes(cfg, progress.next_attempt)
-    checkpointed = progress.episodes_saved  # what a rerun resumes from
-    try:
-        for ep in episodes:
-            progress.next_attempt = ep.attempt + 1
-            if ep.success:
-                add_episode(dataset, ep)
-                provenance.append({"episode_index": progress.episodes_saved, **ep.provenance()})
-                progress.episodes_saved += 1
-                bar.update(1)
-            else:
-                progress.failures += 1
-                log.info(
-                    "attempt %d failed after %d steps (context %s)", ep.attempt, ep.steps, ep.instance.context
-                )
-            tried = progress.next_attempt - start_attempt
-            bar.set_postfix(
-                success=f"{(tried - progress.failures + start_failures) / tried:.1%}",
-                failed=progress.failures,
-            )
-            done = progress.episodes_saved >= target
-            if ep.success and (done or progress.episodes_saved % cfg.checkpoint_every == 0):
-                dataset.finalize()
-                write_checkpoint(root, progress, provenance)
-                checkpointed = progress.episodes_saved
-                write_card(root, cfg.dataset.repo_id, cfg.dataset.task, len(provenance), cfg.dataset.control)
-                if done:
-                    break
-                dataset = _open_dataset(cfg, create=False)
-            if progress.failures >= cfg.max_failures:
-                raise RuntimeError(
-                    f"{progress.failures} attempts failed (limit --max_failures={cfg.max_failures}); "
-                    f"the {progress.episodes_saved} episodes checkpointed so far are kept. "
-                    "Check the scene or raise --max_steps / --max_failures."
-                )
-    except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
-        since = progress.episodes_saved - checkpointed
-        lost = (
-            f" (the {since} collected since its last checkpoint are collected again; "
-            f"--checkpoint_every={cfg.checkpoint_every})"
-            if since
-            else ""
-        )
-        raise interrupted(
-            exc,
-            f"{checkpointed} demo{'s' * (checkpointed != 1)} saved in {root}{lost}; "
-            "rerun the same command to resume",
-        ) from exc
-    finally:
-        episodes.close()
-        bar.close()
-    return CollectResult(
-        root,
-        progress.episodes_saved,
-        progress.episodes_saved - start_saved,
-        progress.next_attempt - start_attempt,
-        progress.failures - start_failures,
-        time.perf_counter() - t0,
-    )
+        progress = check_root(job.root, job.signature)  # every input error surfaces here, before work
+    return collect(job, progress)
 
 
 def summary(cfg: CollectConfig, result: CollectResult) -> None:

@@ -26,7 +26,6 @@ output folder must be new or empty; a failed export removes what it wrote. See d
 
 from __future__ import annotations
 
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -90,17 +89,7 @@ def run(cfg: ExportConfig) -> ExportResult:
         check_output(out, root)
 
     t0 = time.perf_counter()
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    try:
-        videos = export(source, out)
-    except BaseException:  # failed or interrupted: leave no half-written dataset behind
-        if created:
-            shutil.rmtree(out, ignore_errors=True)
-        else:
-            for child in out.iterdir():
-                shutil.rmtree(child) if child.is_dir() else child.unlink()
-        raise
+    videos = export(source, out)
     return ExportResult(
         out,
         repo_id or "",

@@ -14,10 +14,9 @@ with `--eval.split_repeats=split=N,...`.
 
 from __future__ import annotations
 
-from collections import defaultdict
 from dataclasses import dataclass, field
 
-from roboview.eval.statistics.significance import lrt_power, repeats_needed
+from roboview.eval.planning import SplitPlan, plan_splits, split_layouts
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 
@@ -44,53 +43,9 @@ class PlanConfig:
                 raise ValueError(f"--{name}={getattr(self, name)} must lie strictly between 0 and 1")
 
 
-@dataclass(frozen=True)
-class SplitPlan:
-    split: str
-    factor: str
-    n_values: int
-    n_strata: int
-    repeats: int | None  # None: more than 1,000 would be needed
-    power_at_5: float  # power with the paper's 5 repeats, for comparison
-
-
-def _layouts(cfg: PlanConfig) -> list[tuple[str, str, int, int]]:
-    """(split, factor, |V|, strata) for every tested factor of every split."""
-    if cfg.benchmark.path:
-        from roboview.benchmark.format import load_benchmark
-
-        items = {s: [i.instance for i in v] for s, v in load_benchmark(cfg.benchmark.path).splits.items()}
-    else:
-        from roboview.tasks import load_preset
-        from roboview.variation.instances import generate_suite
-
-        items = defaultdict(list)
-        for instance in generate_suite(load_preset(cfg.preset)):
-            items[instance.split].append(instance)
-    out = []
-    for split, instances in items.items():
-        varied = instances[0].varied
-        for factor in varied:
-            others = [f for f in varied if f != factor]
-            values = {i.get(factor) for i in instances}
-            strata = {(tuple(i.get(f) for f in others), i.context_id) for i in instances}
-            out.append((split, factor, len(values), len(strata)))
-    return out
-
-
 def run(cfg: PlanConfig) -> list[SplitPlan]:
-    return [
-        SplitPlan(
-            split,
-            factor,
-            n_values,
-            n_strata,
-            repeats_needed(n_values, n_strata, cfg.tau, cfg.sr, cfg.power, cfg.alpha),
-            lrt_power(n_values, n_strata, 5, cfg.tau, cfg.sr, cfg.alpha),
-        )
-        for split, factor, n_values, n_strata in _layouts(cfg)
-        if n_values >= 2
-    ]
+    layouts = split_layouts(cfg.benchmark.path, cfg.preset)
+    return plan_splits(layouts, cfg.tau, cfg.sr, cfg.power, cfg.alpha)
 
 
 def _summary(cfg: PlanConfig, plans: list[SplitPlan]) -> None:

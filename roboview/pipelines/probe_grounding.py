@@ -14,23 +14,14 @@ probe.json and probe.md.
 
 from __future__ import annotations
 
-import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-from tqdm import tqdm
-
 from roboview.benchmark.format import load_benchmark
 from roboview.core.cli_errors import flag_errors
-from roboview.eval.running.agents import color_words
+from roboview.eval.grounding_probe import ProbeSettings, colour_rows, probe, write_probe
 from roboview.eval.running.results import read_episodes
 from roboview.pipelines._cli import BenchmarkPath, cli_main
-from roboview.tasks import make_env
-from roboview.tasks.env import IMAGE_KEY
-from roboview.variation.colors import COLORS, delta_e_2000
-from roboview.variation.instances import episode_seed
 
 
 @dataclass
@@ -62,97 +53,21 @@ class ProbeConfig:
             raise ValueError(f"--neighbours={self.neighbours} must be at least 1")
 
 
-def neighbours(name: str, k: int) -> list[str]:
-    """The k named colours nearest `name` in CIELAB (ΔE2000), nearest first."""
-    lab = np.asarray(COLORS[name].lab)
-    others = [n for n in COLORS if n != name]
-    return sorted(others, key=lambda n: float(delta_e_2000(lab, np.asarray(COLORS[n].lab))))[:k]
-
-
-def _best(grounder, rgb, description: str) -> float:
-    found = grounder.detect(rgb, description)
-    return found[0].score if found else 0.0
-
-
 def run(cfg: ProbeConfig) -> dict:
     from roboview.policies.vlm.client import Endpoint
     from roboview.policies.vlm.moka import MokaConfig
 
     with flag_errors("--results"):
         episodes = read_episodes(cfg.results)
-    if "moka_object_description" not in episodes:
-        raise ValueError(
-            f"{cfg.results} holds no MOKA descriptions (moka_object_description): run vlm_moka first"
-        )
+    rows = colour_rows(episodes, cfg.results, cfg.limit)
     with flag_errors("--benchmark.path"):
         bench = load_benchmark(cfg.benchmark.path)
-    instances = {item.instance.instance_id: item for items in bench.splits.values() for item in items}
-    rows = episodes[episodes["moka_object_description"].notna() & episodes["repeat"].notna()]
-    rows = rows[rows["moka_object_description"].map(lambda d: any(c in COLORS for c in color_words(str(d))))]
-    if cfg.limit:
-        rows = rows.head(cfg.limit)
     grounder = MokaConfig(
         grounding=cfg.grounding, detector_model=cfg.detector_model, endpoint=Endpoint(model="probe")
     ).grounder()
-    env = make_env(cameras=(cfg.camera,), image_size=cfg.image_size)
-    cases, per_color = [], {}
-    try:
-        for _, row in tqdm(rows.iterrows(), total=len(rows), desc="probe", unit="ep"):
-            item = instances.get(row["instance_id"])
-            if item is None:
-                continue
-            seed = episode_seed(row["context_id"], int(row["repeat"]))
-            obs, _ = env.reset(seed=seed, options={"instance": item.instance})
-            rgb = obs[IMAGE_KEY.format(cfg.camera)]
-            text = str(row["moka_object_description"])
-            word = next(c for c in color_words(text) if c in COLORS)
-            base = _best(grounder, rgb, text)
-            for other in neighbours(word, cfg.neighbours):
-                swapped = re.sub(rf"\b{word}\b", other, text)
-                rise = _best(grounder, rgb, swapped) - base
-                cases.append(
-                    {
-                        "instance_id": row["instance_id"],
-                        "repeat": int(row["repeat"]),
-                        "description": text,
-                        "neighbour": other,
-                        "base": round(base, 4),
-                        "rise": round(rise, 4),
-                    }
-                )
-                stats = per_color.setdefault(word, [0, 0])
-                stats[0] += rise > cfg.margin
-                stats[1] += 1
-    finally:
-        env.close()
-    n = len(cases)
-    result = {
-        "episodes": int(len({(c["instance_id"], c["repeat"]) for c in cases})),
-        "cases": n,
-        "margin": cfg.margin,
-        "neighbours": cfg.neighbours,
-        "grounding": cfg.grounding,
-        "rises": int(sum(c["rise"] > cfg.margin for c in cases)),
-        "share": round(sum(c["rise"] > cfg.margin for c in cases) / n, 4) if n else None,
-        "per_color": {w: {"rises": a, "cases": b} for w, (a, b) in sorted(per_color.items())},
-        "detail": cases,
-    }
-    out = Path(cfg.output_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "probe.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = [
-        "# Grounding-deviation probe",
-        "",
-        f"{result['episodes']} MOKA episodes whose description names a colour, {n} substitutions of that "
-        f"colour by one of its {cfg.neighbours} nearest named colours (CIELAB ΔE2000); grounding backend "
-        f"`{cfg.grounding}`. The neighbour grounds with more than {cfg.margin} higher confidence in "
-        f"**{result['rises']} of {n} cases ({(result['share'] or 0):.2%})** (the paper: 17.78 %).",
-        "",
-        "| colour word | rises | cases |",
-        "|---|---|---|",
-    ]
-    lines += [f"| {w} | {v['rises']} | {v['cases']} |" for w, v in result["per_color"].items()]
-    (out / "probe.md").write_text("\n".join(lines) + "\n")
+    settings = ProbeSettings(cfg.camera, cfg.image_size, cfg.neighbours, cfg.margin, cfg.grounding)
+    result = probe(rows, bench, grounder, settings)
+    write_probe(result, Path(cfg.output_dir))
     return result
 
 

@@ -21,23 +21,14 @@ nothing. Without a token, in offline mode or without network it fails before cha
 from __future__ import annotations
 
 import json
-import logging
 from dataclasses import dataclass, field
-from fnmatch import fnmatch
 from pathlib import Path
-from typing import Any
 
 from roboview.benchmark.format import MANIFEST, load_benchmark
 from roboview.core.cli_errors import flag_errors
+from roboview.integrations.publishing.benchmark import Release, release_plan, upload_release
+from roboview.integrations.publishing.hub import Plan, PublishError, folder_files
 from roboview.pipelines._cli import BenchmarkPath, cli_main
-
-log = logging.getLogger(__name__)
-
-CONTACT_SHEET = "contact_sheet/*"
-
-
-class PublishError(RuntimeError):
-    """The hub cannot be reached or refuses; nothing was changed."""
 
 
 @dataclass
@@ -111,113 +102,23 @@ class PublishConfig:
                 f"--lerobot_root={self.lerobot_root} is not a LeRobot dataset (meta/info.json missing)"
             )
 
-
-@dataclass(frozen=True)
-class Plan:
-    repo_id: str
-    version: str
-    files: list[tuple[str, int]]  # (path in repo, bytes)
-    lerobot_files: list[tuple[str, int]]
-    env_files: dict[str, str]  # EnvHub repo: path in repo -> text
-
     @property
-    def total_bytes(self) -> int:
-        env = sum(len(text.encode()) for text in self.env_files.values())
-        return sum(size for _, size in self.files + self.lerobot_files) + env
-
-
-def _files(root: Path, ignore: list[str]) -> list[tuple[str, int]]:
-    out = []
-    for p in sorted(root.rglob("*")):
-        rel = p.relative_to(root).as_posix()
-        if p.is_file() and not any(fnmatch(rel, pattern) for pattern in ignore):
-            out.append((rel, p.stat().st_size))
-    return out
+    def release(self) -> Release:
+        """The benchmark release these flags describe."""
+        return Release(
+            Path(self.path),
+            self.repo_id,
+            self.private,
+            self.include_contact_sheet,
+            self.lerobot_root,
+            self.lerobot_repo_id,
+            self.env_repo_id,
+        )
 
 
 def plan(cfg: PublishConfig) -> Plan:
-    root = Path(cfg.path)
-    version = json.loads((root / MANIFEST).read_text())["benchmark_version"]
-    ignore = [] if cfg.include_contact_sheet else [CONTACT_SHEET]
-    lerobot = _files(Path(cfg.lerobot_root), ["images/*"]) if cfg.lerobot_root else []
-    env = env_hub_files(cfg.env_repo_id, cfg.repo_id, version) if cfg.env_repo_id else {}
-    return Plan(cfg.repo_id, version, _files(root, ignore), lerobot, env)
-
-
-def env_hub_files(env_repo_id: str, benchmark_repo_id: str, version: str) -> dict[str, str]:
-    """The EnvHub repo: RoboView's env.py (make_env) and a README that points it at the benchmark repo."""
-    import roboview.integrations.lerobot
-
-    env_py = (Path(roboview.integrations.lerobot.__file__).parent / "hub" / "env.py").read_text()
-    readme = (
-        f"---\ntags: [lerobot, envhub, roboview, robot-learning, visual-bias]\n---\n"
-        f"# RoboView-Bias ({version}) as a LeRobot EnvHub environment\n\n"
-        f"Frozen, factor-isolated splits of the RoboView-Bias benchmark (`{benchmark_repo_id}`).\n"
-        "Needs the `roboview` package installed beside lerobot.\n\n"
-        "```python\nimport os\nfrom lerobot.envs.factory import make_env\n\n"
-        f'os.environ["ROBOVIEW_BENCHMARK"] = "{benchmark_repo_id}"\n'
-        'os.environ["ROBOVIEW_TASK"] = "color,camera_pose"\n'
-        f'envs = make_env("{env_repo_id}", n_envs=4, trust_remote_code=True)\n```\n\n'
-        "Settings: see the docstring of `env.py`.\n"
-    )
-    return {"env.py": env_py, "README.md": readme}
-
-
-def _hub_api():
-    """An authenticated HfApi, or PublishError saying what is missing (checked before any change)."""
-    from huggingface_hub import HfApi, constants, get_token
-
-    if constants.HF_HUB_OFFLINE:
-        raise PublishError(
-            "offline mode is on (HF_HUB_OFFLINE=1); unset it to publish, "
-            "or use --dry_run=true to see what would be uploaded"
-        )
-    token = get_token()
-    if not token:
-        raise PublishError(
-            "no Hugging Face token: run `huggingface-cli login` or set HF_TOKEN "
-            "(use --dry_run=true to see what would be uploaded)"
-        )
-    api = HfApi(token=token)
-    try:
-        user = api.whoami()
-    except Exception as exc:  # network down, endpoint unreachable, token refused
-        raise PublishError(
-            f"cannot reach the hub at {constants.ENDPOINT} or the token was refused: "
-            f"{type(exc).__name__}: {exc}"
-        ) from exc
-    log.info("publishing as %s", user.get("name"))
-    return api
-
-
-def publish(cfg: PublishConfig, the_plan: Plan) -> str:
-    api = _hub_api()
-    api.create_repo(cfg.repo_id, repo_type="dataset", private=cfg.private, exist_ok=True)
-    ignore = None if cfg.include_contact_sheet else [CONTACT_SHEET]
-    commit = api.upload_folder(
-        folder_path=cfg.path,
-        repo_id=cfg.repo_id,
-        repo_type="dataset",
-        ignore_patterns=ignore,
-        commit_message=f"RoboView benchmark {the_plan.version}",
-    )
-    api.create_tag(cfg.repo_id, tag=the_plan.version, repo_type="dataset", exist_ok=True)
-    if cfg.env_repo_id:
-        from huggingface_hub import CommitOperationAdd
-
-        api.create_repo(cfg.env_repo_id, private=cfg.private, exist_ok=True)
-        api.create_commit(
-            cfg.env_repo_id,
-            [CommitOperationAdd(path, text.encode()) for path, text in the_plan.env_files.items()],
-            commit_message=f"RoboView EnvHub env for {cfg.repo_id} {the_plan.version}",
-        )
-    if cfg.lerobot_root:
-        from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-        LeRobotDataset(cfg.lerobot_repo_id, root=cfg.lerobot_root).push_to_hub(
-            tags=["roboview", "franka-panda", "mujoco"], private=cfg.private
-        )
-    return str(commit)
+    """Every file the benchmark's release uploads, with its size, and its version tag."""
+    return release_plan(cfg.release)
 
 
 def run(cfg: PublishConfig) -> Plan:
@@ -239,143 +140,34 @@ def run(cfg: PublishConfig) -> Plan:
             f"{the_plan.total_bytes:,} bytes; tag {the_plan.version}; nothing uploaded"
         )
         return the_plan
-    publish(cfg, the_plan)
+    upload_release(cfg.release, the_plan)
     print(f"[publish] {cfg.repo_id} tagged {the_plan.version}")
     return the_plan
 
 
-# --- a result bundle ----------------------------------------------------------------------------------
-
-
-def stage_results(cfg: PublishConfig) -> tuple[Path, dict[str, Any], str | None]:
-    """Verify the results, write the bundle folder; (folder, manifest, .eval_results text or None).
-    PublishError, with every failed check, for results that do not verify."""
-    import datetime
-    import shutil
-
-    import pandas as pd
-
-    from roboview.eval.reporting import bundle
-    from roboview.eval.reporting.report import HTML_FILE, REPORT_FILE, load_results, write_report
-    from roboview.eval.running import provenance
-    from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
-    from roboview.eval.verification import benchmark_path, verify_results
-
-    results = Path(cfg.results)
-    verified = verify_results(results, cfg.benchmark.path or None)
-    failed = [c for c in verified.checks if not c.passed]
-    if failed:
-        raise PublishError(
-            f"{results} does not verify, so it is not published: "
-            + "; ".join(f"{c.name}: {c.detail}" for c in failed)
-            + " (roboview-verify --results=... prints every check)"
-        )
-    episodes, sources = load_results([results / PARQUET])
-    policies = sorted(map(str, counted(episodes)["policy"].unique()))
-    if len(policies) != 1:
-        raise PublishError(
-            f"{results} holds several policies ({', '.join(policies)}); publish one per bundle"
-        )
-    policy = policies[0]
-    staging = Path(cfg.staging_dir) if cfg.staging_dir else results.with_name(results.name + "_bundle")
-    if staging.resolve() == results.resolve() or results.resolve() in staging.resolve().parents:
-        raise PublishError(f"--staging_dir={staging} must lie outside the results folder {results}")
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
-    bundle.copy_results(results, staging)
-    report = write_report(episodes, staging / bundle.REPORT_DIR, sources=sources)
-    entries = provenance.read(results)
-    bench_root = benchmark_path(results, cfg.benchmark.path or None)
-    manifest = json.loads((bench_root / MANIFEST).read_text())
-    checks = [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in verified.checks]
-    identity = {
-        "policy": policy,
-        "benchmark_repo_id": cfg.benchmark_repo_id,
-        "benchmark_version": manifest["benchmark_version"],
-        "benchmark_content_hash": bundle.content_hash(manifest),
-        "episodes": int(counted(episodes).shape[0]),
-        "conformance": sorted(set(pd.Series(episodes.get("conformance", [])).dropna().astype(str))),
-    }
-    (staging / bundle.VERIFY_FILE).write_text(
-        json.dumps(
-            {
-                "checks": checks,
-                "passed": True,
-                "stacks": [e["conformance"] for e in entries if e.get("conformance")],
-            }
-            | identity,
-            indent=2,
-            default=str,
-        )
-        + "\n"
-    )
-    (staging / bundle.CARD_FILE).write_text(
-        bundle.card(
-            policy=policy,
-            repo_id=cfg.repo_id,
-            identity=identity,
-            checks=checks,
-            report_md=(report.output_dir / REPORT_FILE).read_text(),
-            privileged=is_privileged_run(json.loads((results / RUN_FILE).read_text())),
-        )
-    )
-    assert (report.output_dir / HTML_FILE).is_file()
-    written = bundle.write_manifest(staging, identity)
-    eval_results = None
-    if cfg.model_repo_id:
-        date = max((e.get("ended") or "" for e in entries), default="") or datetime.datetime.now(
-            datetime.UTC
-        ).isoformat(timespec="seconds")
-        eval_results = bundle.eval_results_yaml(
-            bundle.eval_result_entries(
-                report.metrics,
-                benchmark_repo_id=cfg.benchmark_repo_id,
-                results_repo_id=cfg.repo_id,
-                date=date,
-            )
-        )
-        target = staging.with_name(staging.name + "_eval_results") / ".eval_results"
-        target.mkdir(parents=True, exist_ok=True)
-        (target / bundle.eval_results_name(cfg.benchmark_repo_id)).write_text(eval_results)
-    return staging, written, eval_results
-
-
 def publish_results(cfg: PublishConfig) -> Plan:
-    from roboview.eval.reporting import bundle
+    """Stage the verified bundle of --results, then list it (--dry_run) or upload it."""
+    from roboview.integrations.publishing.results import BundleRepos, stage_bundle, upload_bundle
 
-    staging, manifest, eval_results = stage_results(cfg)
-    files = _files(staging, [])
-    the_plan = Plan(cfg.repo_id, manifest["benchmark_version"], files, [], {})
-    eval_path = f".eval_results/{bundle.eval_results_name(cfg.benchmark_repo_id or 'x/roboview')}"
+    repos = BundleRepos(cfg.repo_id, cfg.benchmark_repo_id, cfg.model_repo_id)
+    staging = Path(cfg.staging_dir) if cfg.staging_dir else None
+    staged = stage_bundle(Path(cfg.results), repos, cfg.benchmark.path or None, staging)
+    files = folder_files(staged.folder, [])
+    the_plan = Plan(cfg.repo_id, staged.manifest["benchmark_version"], files, [], {})
+    policy = staged.manifest["policy"]
     if cfg.dry_run:
         for rel, size in files:
             print(f"{size:>12,}  {cfg.repo_id}/{rel}")
-        if eval_results is not None:
-            print(f"{len(eval_results.encode()):>12,}  {cfg.model_repo_id}/{eval_path} (pull request)")
+        if staged.eval_results is not None:
+            size = len(staged.eval_results.encode())
+            print(f"{size:>12,}  {cfg.model_repo_id}/{repos.eval_results_path} (pull request)")
         print(
-            f"[dry run] result bundle of {manifest['policy']} in {staging}: {len(files)} files, "
+            f"[dry run] result bundle of {policy} in {staged.folder}: {len(files)} files, "
             f"{the_plan.total_bytes:,} bytes; verified; nothing uploaded"
         )
         return the_plan
-    api = _hub_api()
-    api.create_repo(cfg.repo_id, repo_type="dataset", private=cfg.private, exist_ok=True)
-    api.upload_folder(
-        folder_path=str(staging),
-        repo_id=cfg.repo_id,
-        repo_type="dataset",
-        commit_message=f"RoboView-Bias results of {manifest['policy']} on {manifest['benchmark_version']}",
-    )
-    if eval_results is not None:
-        from huggingface_hub import CommitOperationAdd
-
-        api.create_commit(
-            cfg.model_repo_id,
-            [CommitOperationAdd(eval_path, eval_results.encode())],
-            commit_message=f"RoboView-Bias eval results ({manifest['benchmark_version']})",
-            create_pr=True,
-        )
-    print(f"[publish] {cfg.repo_id}: result bundle of {manifest['policy']} ({len(files)} files)")
+    upload_bundle(staged, repos, cfg.private)
+    print(f"[publish] {cfg.repo_id}: result bundle of {policy} ({len(files)} files)")
     return the_plan
 
 

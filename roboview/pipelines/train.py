@@ -19,12 +19,20 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from roboview.core.cli_errors import flag_errors
+from roboview.integrations.lerobot_train import (
+    ActRecipe,
+    PeriodicEval,
+    check_new_run,
+    fresh_command,
+    last_checkpoint,
+    resume_command,
+    run_trainer,
+    thread_env,
+)
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 from roboview.policies.devices import DEVICES, resolve_device
 
@@ -121,28 +129,12 @@ class TrainConfig:
             with flag_errors("--benchmark.path"):
                 load_benchmark(self.benchmark.path, None if splits == ["all"] else splits)  # checksums
 
-    def eval_flags(self) -> list[str]:
-        """lerobot-train's flags for periodic evals on the RoboView split (the dataset's cameras and size)."""
+    @property
+    def periodic_eval(self) -> PeriodicEval | None:
+        """The evaluations while training on the RoboView splits; None without --benchmark.path."""
         if not self.benchmark.path:
-            return []
-        features = json.loads((Path(self.dataset.root) / "meta" / "info.json").read_text())["features"]
-        images = {
-            k.removeprefix("observation.images."): v["shape"]
-            for k, v in features.items()
-            if k.startswith("observation.images.")
-        }
-        side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
-        return [
-            "--env.type=roboview",
-            f"--env.benchmark_path={self.benchmark.path}",
-            f"--env.task={self.eval_splits.replace(' ', '')}",
-            f"--env.limit={self.eval_episodes}",
-            f"--env.cameras={','.join(images)}",
-            f"--env.image_size={side}",
-            f"--env_eval_freq={self.eval_freq}",
-            f"--eval.n_episodes={self.eval_episodes}",
-            f"--eval.batch_size={min(self.eval_episodes, 8)}",
-        ]
+            return None
+        return PeriodicEval(self.benchmark.path, self.eval_splits, self.eval_episodes, self.eval_freq)
 
     @property
     def threads(self) -> int:
@@ -150,73 +142,29 @@ class TrainConfig:
         return self.num_threads or max(1, (os.cpu_count() or 1) - 1)
 
 
-def last_checkpoint(output_dir: Path) -> Path | None:
-    config = output_dir / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
-    return config if config.is_file() else None
-
-
-def _device(device: str) -> str:
-    with flag_errors("--device"):
-        return resolve_device(device)
-
-
 def command(cfg: TrainConfig) -> list[str]:
     """lerobot-train's argument list: a fresh run, or a resume from the run folder's last checkpoint."""
     out = Path(cfg.output_dir)
-    trainer = [sys.executable, "-m", "lerobot.scripts.lerobot_train"]
     resume = last_checkpoint(out)
     if resume is not None:
-        return [*trainer, f"--config_path={resume}", "--resume=true", f"--steps={cfg.steps}"]
-    if out.exists() and any(out.iterdir()):
-        raise ValueError(
-            f"--output_dir={out} is not empty and holds no checkpoint to resume; choose a new folder"
-        )
-    return [
-        *trainer,
-        f"--dataset.repo_id={cfg.dataset.repo_id}",
-        f"--dataset.root={cfg.dataset.root}",
-        "--policy.type=act",
-        "--policy.pretrained_backbone_weights=null",
-        "--policy.push_to_hub=false",
-        f"--policy.device={_device(cfg.device)}",
-        "--policy.dim_model=256",
-        "--policy.dim_feedforward=1024",
-        "--policy.n_encoder_layers=2",
-        "--policy.n_vae_encoder_layers=2",
-        f"--policy.chunk_size={cfg.chunk_size}",
-        f"--policy.n_action_steps={cfg.n_action_steps}",
-        f"--policy.optimizer_lr={cfg.lr}",
-        f"--policy.optimizer_lr_backbone={cfg.lr}",
-        f"--batch_size={cfg.batch_size}",
-        f"--steps={cfg.steps}",
-        f"--save_freq={cfg.save_freq}",
-        f"--log_freq={min(100, cfg.save_freq)}",
-        "--num_workers=0",
-        "--wandb.enable=false",
-        f"--output_dir={out}",
-        f"--job_name={out.name}",
-        *cfg.eval_flags(),
-    ]
+        return resume_command(resume, cfg.steps)
+    check_new_run(out)
+    with flag_errors("--device"):
+        device = resolve_device(cfg.device)
+    recipe = ActRecipe(
+        cfg.steps, cfg.save_freq, cfg.batch_size, cfg.lr, cfg.chunk_size, cfg.n_action_steps, device
+    )
+    return fresh_command(cfg.dataset.repo_id, cfg.dataset.root, out, recipe, cfg.periodic_eval)
 
 
 def run(cfg: TrainConfig) -> Path:
     """Train (or resume); returns the last checkpoint's pretrained_model folder."""
     cmd = command(cfg)
-    threads = {"OMP_NUM_THREADS": str(cfg.threads), "MKL_NUM_THREADS": str(cfg.threads)}
     if cfg.dry_run:
-        print(" ".join([*(f"{k}={v}" for k, v in threads.items()), *cmd]))
-        return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
-    # lerobot imports roboview.integrations.lerobot by name (its lerobot_env_roboview plugin): this checkout's, first.
-    root = str(Path(__file__).resolve().parents[2])
-    env = (
-        os.environ
-        | threads
-        | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
-    )
-    print(f"[train] lerobot-train with {cfg.threads} CPU thread(s) (--num_threads)", flush=True)
-    proc = subprocess.run(cmd, env=env)
-    if proc.returncode != 0:
-        raise RuntimeError(f"lerobot-train exited with {proc.returncode}; its log is above")
+        print(" ".join([*(f"{k}={v}" for k, v in thread_env(cfg.threads).items()), *cmd]))
+    else:
+        print(f"[train] lerobot-train with {cfg.threads} CPU thread(s) (--num_threads)", flush=True)
+        run_trainer(cmd, cfg.threads)
     return Path(cfg.output_dir) / "checkpoints" / "last" / "pretrained_model"
 
 

@@ -1,0 +1,269 @@
+"""Build the frozen benchmark folder: a suite's instances rendered, judged by the fairness gate and the stage-2
+decisions, and written (splits, rejected tables, contact sheet, conformance sample, checksums, manifest, card).
+
+The folder is written into a sibling `<name>.building` folder and swapped in at the end: a build leaves either
+the whole benchmark or nothing. A build whose gate pass rate is under the floor still writes its contact sheet
+and `fairness_report.csv` (the offenders), then raises `GateFailure`.
+"""
+
+from __future__ import annotations
+
+import csv
+import shutil
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from roboview.benchmark import conformance
+from roboview.benchmark import format as bio
+from roboview.benchmark.card import fairness_stats, write_card
+from roboview.benchmark.contact_sheet import context_text, write_contact_sheet
+from roboview.benchmark.fairness import FairnessThresholds
+from roboview.benchmark.render import InstanceRenderer
+from roboview.benchmark.review import Decision, adjudicate, read_decisions
+from roboview.benchmark.screen import agreement
+from roboview.benchmark.screen import write_decisions as write_screen_decisions
+from roboview.core.folders import folder_problem
+from roboview.core.workers import WorkerPool
+from roboview.tasks import DEFAULT_TASK
+from roboview.variation.instances import SuiteConfig, generate_suite
+
+OFFENDERS_FILE = "fairness_report.csv"
+SCREEN_FILE = "vlm_screen.csv"
+
+
+class GateFailure(RuntimeError):
+    """Fewer candidates than required pass the perceptual-fairness gate."""
+
+
+@dataclass(frozen=True)
+class BuildSpec:
+    """What a build renders and how it judges: the suite, the image size the gate measures, the thresholds and
+    the pass-rate floor, the worker processes, the stage-2 decisions file and the optional VLM screen."""
+
+    suite: SuiteConfig
+    image_size: int
+    fairness: FairnessThresholds = field(default_factory=FairnessThresholds)
+    min_pass_rate: float = 0.95
+    num_workers: int = 2
+    decisions: Path | None = None
+    # (client class, endpoint) of the stage-1b VLM screen, built in each worker; None: no screen. The endpoint's
+    # `model` and `base_url` are recorded in the manifest.
+    screen: tuple[Any, Any] | None = None
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    """What a build wrote: the folder, the candidates and those accepted, the gate's pass rate, the suite hash,
+    the time it took, the contact sheet and the manifest."""
+
+    output_dir: Path
+    candidates: int
+    accepted: int
+    gate_pass_rate: float
+    suite_hash: str
+    elapsed_s: float
+    contact_sheet: Path
+    manifest: dict = field(default_factory=dict)  # what benchmark.json records
+
+
+@dataclass(frozen=True)
+class Judged:
+    """The rendered candidates with their verdicts: accepted or not, and by whom rejected (gate, a reviewer)."""
+
+    records: list[dict]
+    accepted: list[bool]
+    rejected_by: list[str]
+    decisions: dict[str, Decision]
+
+    @property
+    def gate_pass_rate(self) -> float:
+        """The share of candidates the stage-1 gate passed."""
+        return sum(r["fairness"]["passed"] for r in self.records) / len(self.records)
+
+    def by_split(self) -> dict[str, list[dict]]:
+        """The accepted records of every split, in suite order."""
+        out: dict[str, list[dict]] = {}
+        for r, ok in zip(self.records, self.accepted):
+            if ok:
+                out.setdefault(r["split"], []).append(r)
+        return out
+
+    def rejected_rows(self) -> list[dict]:
+        """The rejected records, each with who rejected it."""
+        return [
+            {**r, "rejected_by": who}
+            for r, ok, who in zip(self.records, self.accepted, self.rejected_by)
+            if not ok
+        ]
+
+
+def check_output_dir(out: Path) -> None:
+    """ValueError unless `out` is new, empty or an earlier build's folder (a build replaces it)."""
+    problem = folder_problem(
+        out,
+        "benchmark",
+        bio.MANIFEST,
+        "choose a new folder or delete this one",
+        label=f"--output_dir={out}",
+        writing=True,
+    )
+    if problem:
+        raise ValueError(problem)
+
+
+def render_all(spec: BuildSpec, instances: list) -> list[dict]:
+    """Every instance's record (cameras, fairness, preview), rendered by the worker pool in suite order."""
+    args = (spec.image_size, spec.fairness, DEFAULT_TASK, spec.screen)
+    bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
+    records, passed = [], 0
+    try:
+        with WorkerPool(spec.num_workers, InstanceRenderer, args, method="record") as pool:
+            for record in pool.imap(instances, lookahead=8 * spec.num_workers):
+                records.append(record)
+                passed += record["fairness"]["passed"]
+                bar.update(1)
+                bar.set_postfix(passed=f"{passed / len(records):.1%}")
+    finally:  # also on Ctrl-C: the bar ends its line before the closing message
+        bar.close()
+    return records
+
+
+def build(spec: BuildSpec, output_dir: Path) -> BuildResult:
+    """Render, judge and write the benchmark to `output_dir`; GateFailure (after writing the offenders) when too
+    few candidates pass the gate. Input errors (the folder, the decisions file) raise ValueError before work."""
+    check_output_dir(output_dir)
+    instances = generate_suite(spec.suite)
+    decisions = read_decisions(spec.decisions, {i.instance_id for i in instances}) if spec.decisions else {}
+    t0 = time.perf_counter()
+    records = render_all(spec, instances)
+    verdicts = [adjudicate(r, decisions.get(r["instance_id"])) for r in records]
+    judged = Judged(records, [ok for ok, _ in verdicts], [who for _, who in verdicts], decisions)
+    # Write into a sibling temp folder and swap it in: never a half-written benchmark.
+    tmp = output_dir.with_name(output_dir.name + ".building")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    sheet = write_contact_sheet(tmp, records, judged.accepted, judged.rejected_by)
+    manifest = _write_folder(spec, judged, tmp)
+    shutil.rmtree(output_dir, ignore_errors=True)
+    tmp.rename(output_dir)
+    sheet = output_dir / sheet.relative_to(tmp)
+    if manifest["status"] != "ok":
+        raise GateFailure(
+            f"only {judged.gate_pass_rate:.1%} of {len(records)} candidates pass the fairness gate "
+            f"(need {spec.min_pass_rate:.0%}); offenders in {output_dir / OFFENDERS_FILE}, "
+            f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold."
+        )
+    return BuildResult(
+        output_dir,
+        len(records),
+        sum(judged.accepted),
+        judged.gate_pass_rate,
+        manifest["suite_hash"],
+        time.perf_counter() - t0,
+        sheet,
+        manifest,
+    )
+
+
+def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
+    """Write the screen's answers, the tables (or the offenders of a failed gate), the integrity files, the
+    manifest and the card into `tmp`; the manifest."""
+    screen = _screen(spec, judged.records, tmp)
+    by_split, rejected = judged.by_split(), judged.rejected_rows()
+    passed = judged.gate_pass_rate >= spec.min_pass_rate
+    content, reference, stack = {}, None, None
+    if passed:
+        _write_tables(tmp, by_split, rejected)
+        # What was written, as it reads back: the conformance sample, then every cell's checksum.
+        written = {split: bio.read_rows(tmp / "data" / f"{split}.parquet") for split in by_split}
+        stack = conformance.write_reference(tmp, written, spec.image_size)
+        content = bio.write_checksums(tmp)
+        reference = bio.reference_hash(tmp)
+    else:
+        _write_offenders(tmp, judged.records)
+    manifest = {
+        "status": "ok" if passed else "failed_gate",
+        "suite": suite_record(spec.suite),
+        "image_size": spec.image_size,
+        "thresholds": asdict(spec.fairness),
+        "candidates": len(judged.records),
+        "gate_pass_rate": judged.gate_pass_rate,
+        "min_pass_rate": spec.min_pass_rate,
+        "splits": bio.split_counts(judged.records, judged.accepted, judged.rejected_by),
+        "rejected": len(rejected),
+        **({"rejected_tables": sorted(map(rejected_table, _by_task(rejected)))} if rejected else {}),
+        "decisions": len(judged.decisions),
+        "reviewers": sorted({d.reviewer for d in judged.decisions.values()}),
+        "suite_hash": bio.suite_hash(by_split),
+        "content": content,
+        "stack": stack,
+        "benchmark_version": bio.benchmark_version(spec.suite.preset, content, reference),
+        "fairness_stats": fairness_stats(judged.records),
+        **({"vlm_screen": screen} if screen is not None else {}),
+    }
+    bio.write_manifest(tmp, manifest)
+    if passed:
+        write_card(tmp, manifest)
+    return manifest
+
+
+def suite_record(suite: SuiteConfig) -> dict:
+    """The suite as the manifest records it."""
+    return {
+        "preset": suite.preset,
+        "union_mode": suite.union_mode,
+        "splits": list(suite.splits),
+        "factorial_colors": list(suite.factorial_colors),
+        "cartesian": [list(c) for c in suite.cartesian],
+        "value_subsets": {k: list(v) for k, v in suite.value_subsets},
+    }
+
+
+def _screen(spec: BuildSpec, records: list[dict], out: Path) -> dict | None:
+    """The VLM screen's agreement with the gate (its answers written to vlm_screen.csv); None without a screen."""
+    if spec.screen is None:
+        return None
+    endpoint = spec.screen[1]
+    write_screen_decisions(out / SCREEN_FILE, records, f"vlm:{endpoint.model}")
+    return agreement(records) | {"model": endpoint.model, "base_url": endpoint.base_url}
+
+
+def _write_tables(out: Path, by_split: dict[str, list[dict]], rejected: list[dict]) -> None:
+    for split, rows in by_split.items():
+        bio.write_split(rows, out / "data" / f"{split}.parquet")
+    for task, rows in _by_task(rejected).items():  # one table per task: their columns differ
+        bio.write_split(rows, out / "rejected" / f"{rejected_table(task)}.parquet", rejected=True)
+
+
+def rejected_table(task: str) -> str:
+    """The rejected table's name (and card config) of a task: `rejected` for pick_place, `<task>_rejected`."""
+    return "rejected" if task == DEFAULT_TASK else f"{task}_rejected"
+
+
+def _by_task(rows: list[dict]) -> dict[str, list[dict]]:
+    out: dict[str, list[dict]] = {}
+    for row in rows:
+        out.setdefault(row.get("task", DEFAULT_TASK), []).append(row)
+    return out
+
+
+def _write_offenders(out: Path, records: list[dict]) -> None:
+    with (out / OFFENDERS_FILE).open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["instance_id", "task", "split", "value", "context", "reject_reason"])
+        for r in records:
+            if not r["fairness"]["passed"]:
+                writer.writerow(
+                    [
+                        r["instance_id"],
+                        r.get("task", DEFAULT_TASK),
+                        r["split"],
+                        r["value"],
+                        context_text(r),
+                        r["fairness"]["reject_reason"],
+                    ]
+                )

@@ -1,0 +1,140 @@
+"""lerobot-train's command line for RoboView's reference policy: ACT-small (dim_model 256, feed-forward 1024, 2
+encoder layers, the backbone's learning rate that of the transformer) with no pretrained backbone (the default
+downloads ImageNet weights, which fails offline), a resume from a run folder's last checkpoint, and lerobot-train's
+periodic evaluation on frozen RoboView splits (the `roboview` env of the lerobot_env_roboview plugin).
+
+Kept apart from the `roboview.integrations.lerobot` package, which imports lerobot: this module only writes the
+command line, and lerobot runs in the process it starts.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+TRAINER = (sys.executable, "-m", "lerobot.scripts.lerobot_train")
+IMAGE_PREFIX = "observation.images."
+
+
+@dataclass(frozen=True)
+class ActRecipe:
+    """The reference recipe's settings: optimizer steps, checkpoint interval, batch size, learning rate, action
+    chunk and the actions of each chunk run, and the torch device."""
+
+    steps: int = 6000
+    save_freq: int = 1000
+    batch_size: int = 16
+    lr: float = 1e-4
+    chunk_size: int = 20
+    n_action_steps: int = 10
+    device: str = "cpu"
+
+
+@dataclass(frozen=True)
+class PeriodicEval:
+    """lerobot-train's evaluation while training: the benchmark folder, its splits (comma-separated, or `all`),
+    the episodes per split and the steps between evaluations."""
+
+    benchmark_path: str
+    splits: str
+    episodes: int
+    freq: int
+
+
+def last_checkpoint(output_dir: Path) -> Path | None:
+    """The train_config.json of a run folder's last checkpoint; None when it holds none."""
+    config = output_dir / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    return config if config.is_file() else None
+
+
+def dataset_cameras(root: str | Path) -> dict[str, list[int]]:
+    """camera → (H, W, 3) of every image feature of the LeRobot dataset at `root`."""
+    features = json.loads((Path(root) / "meta" / "info.json").read_text())["features"]
+    return {
+        k.removeprefix(IMAGE_PREFIX): v["shape"] for k, v in features.items() if k.startswith(IMAGE_PREFIX)
+    }
+
+
+def eval_flags(dataset_root: str, periodic: PeriodicEval) -> list[str]:
+    """lerobot-train's flags for periodic evals on the RoboView splits (the dataset's cameras and image size)."""
+    images = dataset_cameras(dataset_root)
+    side = next(iter(images.values()))[0]  # (H, W, 3): square, one size for every camera
+    return [
+        "--env.type=roboview",
+        f"--env.benchmark_path={periodic.benchmark_path}",
+        f"--env.task={periodic.splits.replace(' ', '')}",
+        f"--env.limit={periodic.episodes}",
+        f"--env.cameras={','.join(images)}",
+        f"--env.image_size={side}",
+        f"--env_eval_freq={periodic.freq}",
+        f"--eval.n_episodes={periodic.episodes}",
+        f"--eval.batch_size={min(periodic.episodes, 8)}",
+    ]
+
+
+def check_new_run(output_dir: Path) -> None:
+    """ValueError unless `output_dir`, holding no checkpoint, is new or empty: a fresh run writes there."""
+    if output_dir.exists() and any(output_dir.iterdir()):
+        raise ValueError(
+            f"--output_dir={output_dir} is not empty and holds no checkpoint to resume; choose a new folder"
+        )
+
+
+def resume_command(checkpoint: Path, steps: int) -> list[str]:
+    """lerobot-train resuming from `checkpoint` (last_checkpoint's) towards `steps` in total."""
+    return [*TRAINER, f"--config_path={checkpoint}", "--resume=true", f"--steps={steps}"]
+
+
+def fresh_command(
+    repo_id: str, root: str, output_dir: Path, recipe: ActRecipe, periodic: PeriodicEval | None = None
+) -> list[str]:
+    """lerobot-train on the dataset (`repo_id` at `root`) with the recipe, into `output_dir` (check_new_run's)."""
+    return [
+        *TRAINER,
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={root}",
+        "--policy.type=act",
+        "--policy.pretrained_backbone_weights=null",
+        "--policy.push_to_hub=false",
+        f"--policy.device={recipe.device}",
+        "--policy.dim_model=256",
+        "--policy.dim_feedforward=1024",
+        "--policy.n_encoder_layers=2",
+        "--policy.n_vae_encoder_layers=2",
+        f"--policy.chunk_size={recipe.chunk_size}",
+        f"--policy.n_action_steps={recipe.n_action_steps}",
+        f"--policy.optimizer_lr={recipe.lr}",
+        f"--policy.optimizer_lr_backbone={recipe.lr}",
+        f"--batch_size={recipe.batch_size}",
+        f"--steps={recipe.steps}",
+        f"--save_freq={recipe.save_freq}",
+        f"--log_freq={min(100, recipe.save_freq)}",
+        "--num_workers=0",
+        "--wandb.enable=false",
+        f"--output_dir={output_dir}",
+        f"--job_name={output_dir.name}",
+        *(eval_flags(root, periodic) if periodic is not None else []),
+    ]
+
+
+def thread_env(threads: int) -> dict[str, str]:
+    """The trainer's torch threads, as environment variables."""
+    return {"OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads)}
+
+
+def run_trainer(cmd: list[str], threads: int) -> None:
+    """Run lerobot-train with `threads` CPU threads, this checkout first on its path (lerobot imports
+    roboview.integrations.lerobot by name: its lerobot_env_roboview plugin); RuntimeError when it fails."""
+    root = str(Path(__file__).resolve().parents[2])
+    env = (
+        os.environ
+        | thread_env(threads)
+        | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
+    )
+    proc = subprocess.run(cmd, env=env)
+    if proc.returncode != 0:
+        raise RuntimeError(f"lerobot-train exited with {proc.returncode}; its log is above")
