@@ -13,13 +13,6 @@ EXCUSE = "Long because"
 
 # Over the line today, with their current size (a ceiling).
 OVERSIZE_FUNCTIONS = {
-    "roboview.benchmark.card:write_card": 95,
-    "roboview.eval.reporting.html:render_html": 74,
-    "roboview.eval.reporting.report:load_results": 76,
-    "roboview.eval.running.backends:run_ray": 121,
-    "roboview.eval.running.results:merge_folders": 76,
-    "roboview.eval.statistics.metrics:split_metrics": 73,
-    "roboview.eval.statistics.metrics:interaction_metrics": 65,
     "roboview.integrations.vla_eval.benchmark:__init__": 64,
     "roboview.integrations.vla_eval.convert:convert": 66,
     "roboview.pipelines.build_benchmark:run": 99,
@@ -32,7 +25,6 @@ OVERSIZE_FUNCTIONS = {
 }
 OVERSIZE_MODULES = {
     "roboview.core.cli": 550,
-    "roboview.eval.reporting.report": 820,
     "roboview.policies.lerobot_async": 591,
 }
 
