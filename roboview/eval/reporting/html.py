@@ -172,6 +172,7 @@ def render_html(
 
 
 def _summary_section(layouts: dict[str, dict]) -> tuple[str, str, str]:
+    """Is each policy biased: report.md's summary table, with its legend."""
     summary = tables.summary_table(layouts)
     return "summary", "Summary", tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>"
 
@@ -215,6 +216,7 @@ def _markdown_sections(
 
 
 def _skipped_section(plots: dict[str, str | None]) -> list[tuple[str, str, str]]:
+    """The figures not drawn, each with why (none: no section)."""
     skipped = [f"{name}: {reason}" for name, reason in plots.items() if reason is not None]
     if not skipped:
         return []

@@ -117,6 +117,7 @@ def _source(path: Path) -> dict[str, Any]:
 
 
 def _read(path: Path) -> pd.DataFrame:
+    """The episode rows of one results file (another results format: EpisodesError)."""
     try:
         return read_episodes(path)
     except ResultsError as exc:

@@ -14,6 +14,8 @@ from roboview.eval.reporting.tables import markdown_table
 
 
 def diagnostics_section(layouts: dict[str, dict]) -> list[str]:
+    """Per split: instances, episodes, contexts, how its p-values were calibrated; then the control arm's
+    test-retest agreement."""
     rows = []
     for name, layout in layouts.items():
         for split, m in layout["splits"].items():

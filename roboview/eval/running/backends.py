@@ -288,6 +288,7 @@ class _RayWorkers:
         self.in_flight: dict = {}
 
     def _start(self, rank: int) -> tuple:
+        """A new actor for slot `rank`, and the reference to the node id it reports once a node runs it."""
         import ray
 
         actor = self.actor_cls.remote(self.spec, rank)
@@ -349,6 +350,7 @@ class _RayWorkers:
             return "unknown"
 
     def kill(self) -> None:
+        """End every actor of the run."""
         import ray
 
         for actor, _ in self.actors.values():
