@@ -91,7 +91,7 @@ def test_an_instruction_that_depends_on_the_value_is_flagged_and_left_out(tiny_b
     color = metrics["splits"]["color"]
     assert color["isolation"]["verified"] == 4 and len(color["isolation"]["violations"]) == 4
     assert color["n_episodes"] == len(clean[clean["split"] == "color"])  # only the clean blocks were tested
-    from roboview.eval.reporting.report import render_markdown
+    from roboview.eval.reporting.markdown import render_markdown
 
     text = render_markdown(metrics, {})
     assert "## Isolation certificate" in text and "instruction differ across" in text and "4 / 8" in text

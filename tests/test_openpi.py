@@ -136,7 +136,7 @@ def test_openpi_server_rows_equal_in_process_and_metadata_is_recorded(
     )
     assert "url" not in json.loads((tmp_path / "served" / "run.json").read_text())["policy_options"]
     # The report says where the policy was served and what the server said.
-    from roboview.eval.reporting.report import provenance_section
+    from roboview.eval.reporting.run_sections import provenance_section
 
     lines = provenance_section([{"path": "served", "provenance": [entry]}])
     line = next(x for x in lines if "served elsewhere" in x)

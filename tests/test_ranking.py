@@ -100,7 +100,7 @@ def test_two_policies_get_no_ranking():
 
 
 def test_the_report_prints_the_rankings():
-    from roboview.eval.reporting.report import render_markdown
+    from roboview.eval.reporting.markdown import render_markdown
 
     metrics = compute_all_metrics(policies({"p1": 0.95, "p2": 0.93, "p3": 0.55, "p4": 0.1}, repeats=8), FAST)
     text = render_markdown(metrics, {})

@@ -13,16 +13,8 @@ EXCUSE = "Long because"
 
 # Over the line today, with their current size (a ceiling).
 OVERSIZE_FUNCTIONS = {
-    "roboview.benchmark.card:write_card": 95,
-    "roboview.eval.reporting.html:render_html": 74,
-    "roboview.eval.reporting.report:load_results": 76,
-    "roboview.eval.running.backends:run_ray": 121,
-    "roboview.eval.running.results:merge_folders": 76,
-    "roboview.eval.statistics.metrics:split_metrics": 73,
-    "roboview.eval.statistics.metrics:interaction_metrics": 65,
 }
 OVERSIZE_MODULES = {
-    "roboview.eval.reporting.report": 820,
 }
 
 

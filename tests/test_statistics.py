@@ -193,7 +193,7 @@ def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
 
 
 def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_binds():
-    from roboview.eval.reporting.report import p_fmt
+    from roboview.eval.reporting.format import p_fmt
 
     frame, _ = simulate_split(np.random.default_rng(3), 9, 4, 5, 2.0, 0.7)
     m = split_metrics(frame)  # default: up to 20,000 permutations

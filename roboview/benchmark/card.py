@@ -32,11 +32,46 @@ def fairness_stats(records: list[dict]) -> dict[str, dict[str, float]]:
 
 
 def write_card(out: Path, manifest: dict) -> None:
-    splits = manifest["splits"]
-    total = sum(s["accepted"] for s in splits.values())
-    # One config per task (their context columns differ): `default` holds pick_place, the paper's task.
+    """The dataset card `out/README.md` for a built benchmark's manifest: the YAML front matter (one config per
+    task, the rejected tables), the counts, how the instances were built and the perceptual fairness gate."""
+    total = sum(s["accepted"] for s in manifest["splits"].values())
+    text = "\n".join(
+        [
+            _front_matter(manifest, total),
+            _counts_section(manifest, total),
+            _build_section(manifest["suite"]),
+            _fairness_section(manifest),
+        ]
+    )
+    (out / "README.md").write_text(text)
+
+
+def _front_matter(manifest: dict, total: int) -> str:
+    """The Hub's YAML header: license, tags, size and the configs."""
+    return f"""---
+license: apache-2.0
+task_categories:
+- robotics
+tags:
+- roboview
+- visual-bias
+- benchmark
+- mujoco
+- lerobot
+size_categories:
+- {_size_category(total)}
+pretty_name: RoboView-Bias benchmark instances ({manifest["suite"]["preset"]})
+configs:
+{chr(10).join(_configs(manifest))}
+---
+"""
+
+
+def _configs(manifest: dict) -> list[str]:
+    """One config per task (their context columns differ; `default` holds pick_place, the paper's task), then
+    one per rejected table."""
     by_task: dict[str, list[str]] = {}
-    for split in splits:
+    for split in manifest["splits"]:
         by_task.setdefault(split_task(split)[0], []).append(split)
     configs = []
     for task, names in sorted(by_task.items(), key=lambda kv: kv[0] != DEFAULT_TASK):
@@ -50,38 +85,21 @@ def write_card(out: Path, manifest: dict) -> None:
             f"  - split: {name}",
             f"    path: rejected/{name}.parquet",
         ]
+    return configs
+
+
+def _counts_section(manifest: dict, total: int) -> str:
+    """What the dataset is and how to load it, its hashes, and the counts per split."""
     table = [
         "| split | candidates | accepted | rejected (gate) | rejected (review) | accepted over gate |",
         "|---|---|---|---|---|---|",
     ]
-    for name, s in splits.items():
+    for name, s in manifest["splits"].items():
         table.append(
             f"| {name} | {s['candidates']} | {s['accepted']} | {s['rejected_gate']} | "
             f"{s['rejected_review']} | {s['accepted_over_gate']} |"
         )
-    stats = ["| camera | measure | p5 | median | p95 |", "|---|---|---|---|---|"]
-    for cam, measures in manifest["fairness_stats"].items():
-        for key, (p5, p50, p95) in measures.items():
-            stats.append(f"| {cam} | {key} | {p5} | {p50} | {p95} |")
-    suite = manifest["suite"]
-    text = f"""---
-license: apache-2.0
-task_categories:
-- robotics
-tags:
-- roboview
-- visual-bias
-- benchmark
-- mujoco
-- lerobot
-size_categories:
-- {_size_category(total)}
-pretty_name: RoboView-Bias benchmark instances ({suite["preset"]})
-configs:
-{chr(10).join(configs)}
----
-
-# RoboView-Bias benchmark instances — preset `{suite["preset"]}`
+    return f"""# RoboView-Bias benchmark instances — preset `{manifest["suite"]["preset"]}`
 
 Frozen task instances of the RoboView-Bias benchmark: a simulated Franka Panda (MuJoCo) puts one
 small object into a yellow box while exactly one visual factor varies per split. Every row is one
@@ -97,8 +115,12 @@ config: `datasets.load_dataset(PATH, "push", split="push_color")`.
 {chr(10).join(table)}
 
 Total accepted: {total}.
+"""
 
-## How the instances were built
+
+def _build_section(suite: dict) -> str:
+    """How the instances were built: the SVGF preset, its union mode and splits, the ids and seeds."""
+    return f"""## How the instances were built
 
 Structured Variant-Generation Framework with the `{suite["preset"]}` preset: union mode
 `{suite["union_mode"]}` for the generalization context space C_Gen (Structured Union over initial
@@ -108,8 +130,16 @@ color × camera_pose over colors {", ".join(suite["factorial_colors"])} in the b
 Extra Cartesian splits: {suite["cartesian"] or "none"}. Value subsets: {suite["value_subsets"] or "none (full factor sets)"}.
 `instance_id` is the first 16 hex digits of SHA-256 over the canonical JSON of the instance's
 parameters; `seed` (used by env reset) is the repeat-0 seed of the instance's context (common random numbers).
+"""
 
-## Perceptual fairness
+
+def _fairness_section(manifest: dict) -> str:
+    """The perceptual fairness gate: stage 1's measures and pass rate, the review, the VLM screen, the quantiles."""
+    stats = ["| camera | measure | p5 | median | p95 |", "|---|---|---|---|---|"]
+    for cam, measures in manifest["fairness_stats"].items():
+        for key, (p5, p50, p95) in measures.items():
+            stats.append(f"| {cam} | {key} | {p5} | {p50} | {p95} |")
+    return f"""## Perceptual fairness
 
 Stage 1 (programmatic, at t = 0, from every observed camera): segmentation renders give the
 object's and box's visible fraction (visible pixels / pixels covered when rendered unoccluded),
@@ -125,7 +155,6 @@ Measured over all candidates (p5 / median / p95):
 
 {chr(10).join(stats)}
 """
-    (out / "README.md").write_text(text)
 
 
 def _screen_section(manifest: dict) -> str:

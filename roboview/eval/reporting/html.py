@@ -136,41 +136,71 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> li
     return ["<details><summary>Episode videos (✗ failed)</summary>", tables.to_html(table), "</details>"]
 
 
+# report.md's sections the page renders as they are, in this order, with their titles in the page's index.
+_MARKDOWN_TITLES = {
+    "infra": "Episodes ended by infrastructure",
+    "interactions": "Interactions",
+    "rankings": "Rankings",
+    "comparisons": "Policy comparisons",
+    "context": "Success by task context",
+    "adaptive": "Adaptive sampling",
+    "isolation": "Isolation certificate",
+    "diagnostics": "Sample sizes and calibration",
+    "agents": "VLM agents",
+    "stack": "Simulation stack and conformance",
+    "provenance": "Provenance",
+}
+# Sections whose heading the page writes itself (report.md's sections carry their own).
+_OWN_HEADINGS = ("summary", "splits", "skipped")
+
+
 def render_html(
     metrics: dict[str, Any], plots: dict[str, str | None], out: Path, sections_md: dict[str, list[str]]
 ) -> str:
     """The page for a metrics dict (every number is read from it) and report.md's sections (`sections_md`,
-    roboview.eval.reporting.report.markdown_sections); figures are read from `out` and inlined."""
+    roboview.eval.reporting.markdown.markdown_sections); figures are read from `out` and inlined."""
     layouts = policy_layouts(metrics)
-    settings = metrics["resampling"]
     figures = _figure_splits(plots)
-    md_render = MarkdownIt("commonmark", {"html": False}).enable("table")
     splits = fmt.task_order(fmt.split_order(layouts, "splits"))
-    sections: list[tuple[str, str, str]] = []  # (anchor, title, HTML)
+    sections = [  # (anchor, title, HTML)
+        _summary_section(layouts),
+        _splits_section(splits, layouts, metrics, figures, out),
+        *_markdown_sections(sections_md, figures, splits, out),
+        *_skipped_section(plots),
+    ]
+    return _page(metrics, layouts, sections)
+
+
+def _summary_section(layouts: dict[str, dict]) -> tuple[str, str, str]:
+    """Is each policy biased: report.md's summary table, with its legend."""
     summary = tables.summary_table(layouts)
-    sections.append(
-        ("summary", "Summary", tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>")
-    )
+    return "summary", "Summary", tables.to_html(summary) + f"<p class=note>{_e(summary.legend())}</p>"
+
+
+def _splits_section(
+    splits: list[str],
+    layouts: dict[str, dict],
+    metrics: dict[str, Any],
+    figures: dict[str, list[str]],
+    out: Path,
+) -> tuple[str, str, str]:
+    """Table 1 as one block per split, under the legend of its columns."""
     legend = (
         f"<p class=note>{_e(tables.Table(tables.SPLIT_COLUMNS).legend())} The CV permutation p is in "
         "metrics.json and the calibration section.</p>"
     )
     blocks = [_split_block(s, layouts, metrics, figures.get(s, []), out) for s in splits]
-    sections.append(("splits", "Splits", legend + "\n".join(blocks)))
-    titles = {
-        "infra": "Episodes ended by infrastructure",
-        "interactions": "Interactions",
-        "rankings": "Rankings",
-        "comparisons": "Policy comparisons",
-        "context": "Success by task context",
-        "adaptive": "Adaptive sampling",
-        "isolation": "Isolation certificate",
-        "diagnostics": "Sample sizes and calibration",
-        "agents": "VLM agents",
-        "stack": "Simulation stack and conformance",
-        "provenance": "Provenance",
-    }
-    for anchor, title in titles.items():
+    return "splits", "Splits", legend + "\n".join(blocks)
+
+
+def _markdown_sections(
+    sections_md: dict[str, list[str]], figures: dict[str, list[str]], splits: list[str], out: Path
+) -> list[tuple[str, str, str]]:
+    """report.md's own sections rendered by markdown-it; the interactions carry the figures of the splits
+    that have no block of their own (the factorial splits)."""
+    md_render = MarkdownIt("commonmark", {"html": False}).enable("table")
+    sections = []
+    for anchor, title in _MARKDOWN_TITLES.items():
         lines = sections_md.get(anchor)
         if not lines:
             continue
@@ -182,11 +212,21 @@ def render_html(
                 if split not in splits
             )
         sections.append((anchor, title, body))
+    return sections
+
+
+def _skipped_section(plots: dict[str, str | None]) -> list[tuple[str, str, str]]:
+    """The figures not drawn, each with why (none: no section)."""
     skipped = [f"{name}: {reason}" for name, reason in plots.items() if reason is not None]
-    if skipped:
-        sections.append(
-            ("skipped", "Figures not drawn", "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in skipped) + "</ul>")
-        )
+    if not skipped:
+        return []
+    return [
+        ("skipped", "Figures not drawn", "<ul>" + "".join(f"<li>{_e(s)}</li>" for s in skipped) + "</ul>")
+    ]
+
+
+def _page(metrics: dict[str, Any], layouts: dict[str, dict], sections: list[tuple[str, str, str]]) -> str:
+    """The whole document: the heading with the sources, an index of the sections, then the sections."""
     nav = "".join(f'<a href="#{a}">{_e(t)}</a>' for a, t, _ in sections)
     sources = "".join(
         f"<li><code>{_e(s['path'])}</code> (benchmark version {_e(s.get(VERSION_KEY) or 'not recorded')})</li>"
@@ -194,15 +234,12 @@ def render_html(
     )
     head = (
         f"<h1>RoboView-Bias report</h1><p>Policies: {_e(', '.join(layouts))}. ε = {metrics['epsilon']:g}; "
-        f"{_e(fmt.resampling_line(settings))}.</p>"
+        f"{_e(fmt.resampling_line(metrics['resampling']))}.</p>"
         + (f"<ul>{sources}</ul>" if sources else "")
         + f"<nav>{nav}</nav>"
     )
     body = "".join(
-        f'<section id="{a}">'
-        + (f"<h2>{_e(t)}</h2>" if a in ("summary", "splits", "skipped") else "")
-        + html_
-        + "</section>"
+        f'<section id="{a}">' + (f"<h2>{_e(t)}</h2>" if a in _OWN_HEADINGS else "") + html_ + "</section>"
         for a, t, html_ in sections
     )
     return (

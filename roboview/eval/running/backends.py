@@ -58,6 +58,13 @@ class _HeadWatch(threading.Thread):
                     self.lost = True
                     return
 
+    def lost_error(self) -> ClusterLost:
+        """What ends the run once the head is lost."""
+        return ClusterLost(
+            f"the Ray head at {self.target[0]}:{self.target[1]} stopped answering; the episodes already written "
+            "are kept: start a cluster and rerun the same command (with its --eval.ray_address) to resume"
+        )
+
 
 def _retry(work: WorkItem, tries: dict, max_retries: int, why: str) -> bool:
     """Count one more death of the worker running `work`: True to run it again, False once it has died more than
@@ -84,6 +91,17 @@ def _lost(
     reason = f"infrastructure error: the worker died {tries[chunk[0].key]} times running this episode ({why})"
     for work in chunk:
         yield work, EpisodeResult(lost_row(work, reason, spec.policy.name or None))
+
+
+def _after_death(
+    spec: WorkerSpec, work: tuple[WorkItem, ...], queue: list, tries: dict, max_retries: int, why: str
+) -> Iterator[tuple[WorkItem, EpisodeResult]]:
+    """A chunk whose worker died: back on the queue, or, once it has died more than `max_retries` times, its
+    infra_error rows."""
+    if _retry(work[0], tries, max_retries, why):
+        queue.append(work)
+    else:
+        yield from _lost(spec, work, tries, why)
 
 
 def chunks(spec: WorkerSpec, items: Iterable[WorkItem]) -> list[tuple[WorkItem, ...]]:
@@ -127,10 +145,7 @@ def run_local(
                         # A worker died: the pool is gone, so every episode in flight is requeued.
                         broken = True
                         why = str(exc) or "worker process died"
-                        if _retry(work[0], tries, max_retries, why):
-                            queue.append(work)
-                        else:
-                            yield from _lost(spec, work, tries, why)
+                        yield from _after_death(spec, work, queue, tries, max_retries, why)
                         continue
                     yield from zip(work, results)
             for work in in_flight.values():
@@ -165,111 +180,178 @@ def run_ray(
     receives the cluster address, episodes per node id and the actors lost. A replacement actor that no node
     takes within `place_timeout_s` (the cluster lost the CPU it ran on) is dropped: the run goes on with fewer."""
     import ray
-    from ray.exceptions import GetTimeoutError, RayActorError
+    from ray.exceptions import RayActorError
 
     if spec.policy_server:
         raise ValueError("a policy server runs with the local backend only (backend=local)")
-
-    env = {"env_vars": {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}}
-    if not ray.is_initialized():
-        if address:
-            # Without its head the driver exits after this long (Ray's default, 60 s, only delays the exit: the
-            # head watch below has already stopped the run).
-            os.environ.setdefault("RAY_gcs_rpc_server_reconnect_timeout_s", "15")
-            try:
-                ray.init(address=address, log_to_driver=False, runtime_env=env)
-            except ConnectionError as exc:
-                raise ClusterLost(
-                    f"no Ray cluster answers at --eval.ray_address={address} ({exc}); start one "
-                    "(ray start --head) or drop the flag to run a local Ray instance"
-                ) from None
-        else:
-            # "local": a new instance of our own, never a cluster `ray start` left on this machine.
-            ray.init(
-                address="local",
-                num_cpus=num_workers,
-                include_dashboard=False,
-                log_to_driver=False,
-                runtime_env=env,
-            )
-    watch = None
-    if address and (gcs := _gcs_address(address)):
-        watch = _HeadWatch(gcs)
-        watch.start()
-    stats = stats if stats is not None else {}
-    # accumulated over the calls of one run (adaptive rounds call once per round)
-    stats.setdefault("nodes", {})
-    stats.setdefault("lost_actors", 0)
-    stats["address"] = address or "local"
-    actor_cls = ray.remote(num_cpus=1)(EvalWorker).options(scheduling_strategy="SPREAD")
-
-    def start(rank: int):
-        actor = actor_cls.remote(spec, rank)
-        return actor, actor.__ray_call__.remote(lambda self: ray.get_runtime_context().get_node_id())
-
-    actors = {rank: start(rank) for rank in range(num_workers)}
+    _connect(address, num_workers)
+    watch = _watch_head(address)
+    stats = _cluster_stats(stats, address)
+    workers = _RayWorkers(spec, num_workers)
     queue = chunks(spec, items)[::-1]
     tries: dict = {}
-    in_flight: dict = {}
-    idle = list(range(num_workers))
-    starting: dict[int, float] = {}  # replacement actors not yet placed on a node → since when
     lost = False
     try:
-        while queue or in_flight:
-            for slot, since in list(starting.items()):  # a replacement works once a node has taken it
-                if ray.wait([actors[slot][1]], timeout=0)[0]:
-                    del starting[slot]
-                    idle.append(slot)
-                elif time.monotonic() - since > place_timeout_s:
-                    log.warning(
-                        "no Ray node took a replacement worker in %.0f s: continuing with fewer workers",
-                        place_timeout_s,
-                    )
-                    ray.kill(actors.pop(slot)[0])
-                    del starting[slot]
-            while queue and idle:
-                slot = idle.pop()
-                work = queue.pop()
-                in_flight[actors[slot][0].run_batch.remote(list(work))] = (slot, work)
-            if not in_flight and not starting:
-                raise ClusterLost(
-                    f"every Ray worker was lost and no node took a new one; {sum(map(len, queue))} "
-                    "episode(s) left: rerun the same command on a cluster to finish them"
-                )
-            ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0) if in_flight else ([], [])
+        while queue or workers.in_flight:
+            workers.place(place_timeout_s)
+            workers.submit(queue)
+            workers.check_any_left(queue)
+            ready = workers.wait_one(timeout_s=1.0)
             if watch is not None and watch.lost:
                 lost = True
-                raise ClusterLost(
-                    f"the Ray head at {watch.target[0]}:{watch.target[1]} stopped answering; the "
-                    "episodes already written are kept: start a cluster and rerun the same command "
-                    "(with its --eval.ray_address) to resume"
-                )
-            if not ready:
-                if not in_flight:
+                raise watch.lost_error()
+            if ready is None:
+                if not workers.in_flight:
                     time.sleep(0.5)
                 continue
-            slot, work = in_flight.pop(ready[0])
+            slot, work = workers.in_flight.pop(ready)
             try:
-                results = ray.get(ready[0])
+                results = ray.get(ready)
             except RayActorError as exc:
                 stats["lost_actors"] += 1
-                if _retry(work[0], tries, max_retries, type(exc).__name__):
-                    queue.append(work)
-                else:
-                    yield from _lost(spec, work, tries, type(exc).__name__)
-                actors[slot] = start(slot)
-                starting[slot] = time.monotonic()
+                yield from _after_death(spec, work, queue, tries, max_retries, type(exc).__name__)
+                workers.restart(slot)
                 continue
-            try:
-                node = ray.get(actors[slot][1], timeout=10)
-            except (GetTimeoutError, RayActorError):
-                node = "unknown"
+            node = workers.node_of(slot)
             stats["nodes"][node] = stats["nodes"].get(node, 0) + len(work)
             yield from zip(work, results)
-            idle.append(slot)
+            workers.idle.append(slot)
     finally:
         if watch is not None:
             watch.stop.set()
         if not lost:
-            for actor, _ in actors.values():
-                ray.kill(actor)
+            workers.kill()
+
+
+def _watch_head(address: str | None) -> _HeadWatch | None:
+    """A started watch on the cluster head's GCS port (a cluster given by address whose head is known), else None."""
+    if address and (gcs := _gcs_address(address)):
+        watch = _HeadWatch(gcs)
+        watch.start()
+        return watch
+    return None
+
+
+def _cluster_stats(stats: dict | None, address: str | None) -> dict:
+    """The stats dict `run_ray` fills: episodes per node and actors lost, accumulated over the calls of one run
+    (adaptive rounds call once per round), and the cluster's address."""
+    stats = stats if stats is not None else {}
+    stats.setdefault("nodes", {})
+    stats.setdefault("lost_actors", 0)
+    stats["address"] = address or "local"
+    return stats
+
+
+def _connect(address: str | None, num_workers: int) -> None:
+    """Join the Ray cluster at `address`, or start a local Ray instance of `num_workers` CPUs; nothing when this
+    process is connected already. ClusterLost when no cluster answers at `address`."""
+    import ray
+
+    if ray.is_initialized():
+        return
+    env = {"env_vars": {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}}
+    if address:
+        # Without its head the driver exits after this long (Ray's default, 60 s, only delays the exit: the
+        # head watch has already stopped the run).
+        os.environ.setdefault("RAY_gcs_rpc_server_reconnect_timeout_s", "15")
+        try:
+            ray.init(address=address, log_to_driver=False, runtime_env=env)
+        except ConnectionError as exc:
+            raise ClusterLost(
+                f"no Ray cluster answers at --eval.ray_address={address} ({exc}); start one "
+                "(ray start --head) or drop the flag to run a local Ray instance"
+            ) from None
+    else:
+        # "local": a new instance of our own, never a cluster `ray start` left on this machine.
+        ray.init(
+            address="local",
+            num_cpus=num_workers,
+            include_dashboard=False,
+            log_to_driver=False,
+            runtime_env=env,
+        )
+
+
+class _RayWorkers:
+    """The actors of one `run_ray` call by slot: each slot's actor with the reference to the node id it reports
+    once placed, the idle slots, the replacements still waiting for a node (since when) and the batches in
+    flight (reference → (slot, chunk))."""
+
+    def __init__(self, spec: WorkerSpec, num_workers: int) -> None:
+        import ray
+
+        self.spec = spec
+        self.actor_cls = ray.remote(num_cpus=1)(EvalWorker).options(scheduling_strategy="SPREAD")
+        self.actors = {rank: self._start(rank) for rank in range(num_workers)}
+        self.idle = list(range(num_workers))
+        self.starting: dict[int, float] = {}
+        self.in_flight: dict = {}
+
+    def _start(self, rank: int) -> tuple:
+        """A new actor for slot `rank`, and the reference to the node id it reports once a node runs it."""
+        import ray
+
+        actor = self.actor_cls.remote(self.spec, rank)
+        return actor, actor.__ray_call__.remote(lambda worker: ray.get_runtime_context().get_node_id())
+
+    def place(self, timeout_s: float) -> None:
+        """A replacement works once a node has taken it; one no node took within `timeout_s` is dropped."""
+        import ray
+
+        for slot, since in list(self.starting.items()):
+            if ray.wait([self.actors[slot][1]], timeout=0)[0]:
+                del self.starting[slot]
+                self.idle.append(slot)
+            elif time.monotonic() - since > timeout_s:
+                log.warning(
+                    "no Ray node took a replacement worker in %.0f s: continuing with fewer workers",
+                    timeout_s,
+                )
+                ray.kill(self.actors.pop(slot)[0])
+                del self.starting[slot]
+
+    def submit(self, queue: list[tuple[WorkItem, ...]]) -> None:
+        """Give each idle actor the next chunk of the queue (taken from its end)."""
+        while queue and self.idle:
+            slot = self.idle.pop()
+            work = queue.pop()
+            self.in_flight[self.actors[slot][0].run_batch.remote(list(work))] = (slot, work)
+
+    def check_any_left(self, queue: list[tuple[WorkItem, ...]]) -> None:
+        """ClusterLost when no actor is working or waiting for a node: every one was lost and none replaced."""
+        if not self.in_flight and not self.starting:
+            raise ClusterLost(
+                f"every Ray worker was lost and no node took a new one; {sum(map(len, queue))} "
+                "episode(s) left: rerun the same command on a cluster to finish them"
+            )
+
+    def wait_one(self, timeout_s: float):
+        """The reference of a finished batch, waiting at most `timeout_s`; None when none finished."""
+        import ray
+
+        if not self.in_flight:
+            return None
+        ready, _ = ray.wait(list(self.in_flight), num_returns=1, timeout=timeout_s)
+        return ready[0] if ready else None
+
+    def restart(self, slot: int) -> None:
+        """A new actor in a slot whose actor died; it works once a node takes it (`place`)."""
+        self.actors[slot] = self._start(slot)
+        self.starting[slot] = time.monotonic()
+
+    def node_of(self, slot: int) -> str:
+        """The id of the node a slot's actor runs on ("unknown" when it does not say in time)."""
+        import ray
+        from ray.exceptions import GetTimeoutError, RayActorError
+
+        try:
+            return ray.get(self.actors[slot][1], timeout=10)
+        except (GetTimeoutError, RayActorError):
+            return "unknown"
+
+    def kill(self) -> None:
+        """End every actor of the run."""
+        import ray
+
+        for actor, _ in self.actors.values():
+            ray.kill(actor)

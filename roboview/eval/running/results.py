@@ -235,12 +235,34 @@ def merge_folders(
     """
     if len(folders) < 2:
         raise ResultsError(f"merging needs two results folders or more, got {len(folders)}")
-    infos = []
-    for folder in folders:
-        run_file = Path(folder) / RUN_FILE
-        if not run_file.is_file():
-            raise ResultsError(f"{folder} holds no RoboView evaluation ({RUN_FILE} missing)")
-        infos.append(json.loads(run_file.read_text()))
+    infos = [_run_info(folder) for folder in folders]
+    base = _common_run(folders, infos)
+    shards = [info.get("shard") for info in infos]
+    n = _shard_count(folders, shards, partial)
+    per_folder = _disjoint_rows(folders)
+    if any(Path(out).resolve() == Path(f).resolve() for f in folders):
+        raise ResultsError(f"--output_dir={out} is one of the folders being merged; choose a new folder")
+    store = EpisodeStore(Path(out), {**base, "merged_shards": f"{len(shards)}/{n}"})
+    entries = []
+    for folder, shard in zip(folders, shards):
+        _copy_videos(per_folder[str(folder)], Path(folder), Path(out))
+        store.add_many(per_folder[str(folder)])
+        entries += [{**entry, "shard": shard} for entry in provenance.read(Path(folder))]
+    provenance.write(Path(out), entries)
+    store.close()
+    return store, {k: len(v) for k, v in per_folder.items()}
+
+
+def _run_info(folder: Path) -> dict:
+    """A results folder's run.json; ResultsError when it holds none."""
+    run_file = Path(folder) / RUN_FILE
+    if not run_file.is_file():
+        raise ResultsError(f"{folder} holds no RoboView evaluation ({RUN_FILE} missing)")
+    return json.loads(run_file.read_text())
+
+
+def _common_run(folders: list[Path], infos: list[dict]) -> dict:
+    """The run.json the shards share, less its `shard`; ResultsError naming what differs when they do not."""
     base = {k: v for k, v in infos[0].items() if k != "shard"}
     for folder, info in zip(folders[1:], infos[1:]):
         diffs = [
@@ -250,7 +272,12 @@ def merge_folders(
         ]
         if diffs:
             raise ResultsError(f"{folder} is not a shard of the same run as {folders[0]}: {'; '.join(diffs)}")
-    shards = [info.get("shard") for info in infos]
+    return base
+
+
+def _shard_count(folders: list[Path], shards: list[str | None], partial: bool) -> int:
+    """N of the shards "i/N" given; ResultsError for an unsharded folder, shards of different N, a shard given
+    twice, or (unless `partial`) a shard missing."""
     if any(s is None for s in shards):
         raise ResultsError(
             "only shards of one run merge (folders written with --eval.shard=i/N); "
@@ -271,6 +298,11 @@ def merge_folders(
             f"shard(s) {', '.join(missing)} missing: give every shard of the run, or pass "
             "--partial=true to merge what there is"
         )
+    return n
+
+
+def _disjoint_rows(folders: list[Path]) -> dict[str, list[dict]]:
+    """folder → its journal's rows; ResultsError when an episode (instance, repeat) is in two folders."""
     owner: dict[tuple[str, int], Path] = {}
     per_folder: dict[str, list[dict]] = {}
     for folder in folders:
@@ -284,21 +316,16 @@ def merge_folders(
                 )
             owner[key] = folder
         per_folder[str(folder)] = rows
-    if any(Path(out).resolve() == Path(f).resolve() for f in folders):
-        raise ResultsError(f"--output_dir={out} is one of the folders being merged; choose a new folder")
-    store = EpisodeStore(Path(out), {**base, "merged_shards": f"{len(seen)}/{n}"})
-    entries = []
-    for folder, shard in zip(folders, shards):
-        for row in per_folder[str(folder)]:
-            for rel in (row.get("video") or "").split(","):
-                if rel and (Path(folder) / rel).is_file() and not (Path(out) / rel).is_file():
-                    (Path(out) / rel).parent.mkdir(parents=True, exist_ok=True)
-                    shutil.copy2(Path(folder) / rel, Path(out) / rel)
-        store.add_many(per_folder[str(folder)])
-        entries += [{**entry, "shard": shard} for entry in provenance.read(Path(folder))]
-    provenance.write(Path(out), entries)
-    store.close()
-    return store, {k: len(v) for k, v in per_folder.items()}
+    return per_folder
+
+
+def _copy_videos(rows: list[dict], folder: Path, out: Path) -> None:
+    """Copy the videos the rows name (relative paths) from their results folder into `out`, once each."""
+    for row in rows:
+        for rel in (row.get("video") or "").split(","):
+            if rel and (folder / rel).is_file() and not (out / rel).is_file():
+                (out / rel).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(folder / rel, out / rel)
 
 
 def is_privileged_run(run: dict) -> bool:

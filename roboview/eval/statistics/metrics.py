@@ -83,25 +83,7 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     table = _table(episodes, (factor,))
     n, k = len(episodes), int(episodes["success"].sum())
     ctx = table.codes(["context_id"])
-    sr_cell = table.sr
     ctx_k = np.bincount(ctx, weights=table.k)
-    dev = sr_cell - (group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
-    tests = _per_value_tests(table, factor) if k else {}
-    grouped = table.cells.assign(dev=dev).groupby(factor)
-    per_value: dict[str, dict[str, Any]] = {}
-    for value in value_order(factor, list(grouped.groups)):
-        rows = grouped.get_group(value)
-        test = tests.get(value, stats.ValueTest(None, None, None))
-        per_value[value] = {
-            "sr": float(rows["k"].sum() / rows["n"].sum()),
-            "n_episodes": int(rows["n"].sum()),
-            "signed_dev": float(rows["dev"].mean()),
-            "odds_ratio": test.odds_ratio,
-            "odds_ratio_ci95": test.odds_ratio_ci95,
-            "p_value": test.p_value,
-        }
-    for value, q in zip(per_value, stats.benjamini_hochberg([m["p_value"] for m in per_value.values()])):
-        per_value[value]["q_value"] = q
     out: dict[str, Any] = {
         "factor": factor,
         "n_instances": int(episodes["instance_id"].nunique()),
@@ -118,31 +100,68 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
         "p_value_cv": None,
         "p_value_cv_draws": None,
         "p_value_cv_at_floor": None,
-        "per_value": per_value,
+        "per_value": _split_per_value(table, factor, ctx, tested=k > 0),
     }
-    if k == 0:
-        return out
+    if k:
+        out |= _cv_tests(table, factor, ctx, cfg.rng(split, "perm"), cfg)
+    return out
+
+
+def _split_per_value(
+    table: CellTable, factor: str, ctx: np.ndarray, tested: bool
+) -> dict[str, dict[str, Any]]:
+    """value → SR, episodes, signed deviation from its contexts' mean, and (`tested`) the CMH test against the
+    rest with its Benjamini-Hochberg q over the values."""
+    sr_cell = table.sr
+    dev = sr_cell - (group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
+    tests = _per_value_tests(table, factor) if tested else {}
+    grouped = table.cells.assign(dev=dev).groupby(factor)
+    per_value: dict[str, dict[str, Any]] = {}
+    for value in value_order(factor, list(grouped.groups)):
+        rows = grouped.get_group(value)
+        test = tests.get(value, stats.ValueTest(None, None, None))
+        per_value[value] = {
+            "sr": float(rows["k"].sum() / rows["n"].sum()),
+            "n_episodes": int(rows["n"].sum()),
+            "signed_dev": float(rows["dev"].mean()),
+            "odds_ratio": test.odds_ratio,
+            "odds_ratio_ci95": test.odds_ratio_ci95,
+            "p_value": test.p_value,
+        }
+    for value, q in zip(per_value, stats.benjamini_hochberg([m["p_value"] for m in per_value.values()])):
+        per_value[value]["q_value"] = q
+    return per_value
+
+
+def _cv_tests(
+    table: CellTable, factor: str, ctx: np.ndarray, rng: np.random.Generator, cfg: MetricsConfig
+) -> dict[str, Any]:
+    """CV against its permutation null (values shuffled within context): cv, cv_null, cv_excess, the sequential
+    Monte Carlo p, then the GLM likelihood-ratio test of the factor on the first `n_glm` permutations."""
 
     def statistic(sr: np.ndarray) -> np.ndarray:
         return conditional_cv(sr, ctx, cfg.epsilon).mean(axis=-1)
 
-    rng = cfg.rng(split, "perm")
     permuted = table.permuted_k(["context_id"], cfg.n_perm, rng)
     null = statistic(permuted / table.n)
-    out["cv"] = float(statistic(sr_cell))
-    out["cv_null"] = float(null.mean())
-    out["cv_excess"] = excess(out["cv"], out["cv_null"])
+    cv, cv_null = float(statistic(table.sr)), float(null.mean())
     mc = stats.sequential_p(
-        out["cv"],
+        cv,
         null,
         lambda b: statistic(table.permuted_k(["context_id"], b, rng) / table.n),
         SEQUENTIAL_H,
         cfg.max_perm,
     )
-    out |= {"p_value_cv": mc.p_value, "p_value_cv_draws": mc.draws, "p_value_cv_at_floor": mc.at_floor}
-    value_codes = table.codes([factor])
-    out |= stats.lrt_fields(stats.factor_lrt(table.k, table.n, value_codes, ctx, permuted[: cfg.n_glm]))
-    return out
+    lrt = stats.factor_lrt(table.k, table.n, table.codes([factor]), ctx, permuted[: cfg.n_glm])
+    return {
+        "cv": cv,
+        "cv_null": cv_null,
+        "cv_excess": excess(cv, cv_null),
+        "p_value_cv": mc.p_value,
+        "p_value_cv_draws": mc.draws,
+        "p_value_cv_at_floor": mc.at_floor,
+        **stats.lrt_fields(lrt),
+    }
 
 
 def _factorial_statistics(table: CellTable, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
@@ -169,16 +188,6 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     a, b = str(episodes["factor"].iloc[0]).split("|")
     table = _table(episodes, (a, b))
     n, k = len(episodes), int(episodes["success"].sum())
-    pooled = table.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
-    order = {f: {v: i for i, v in enumerate(value_order(f, table.cells[f].unique()))} for f in (a, b)}
-    keys = sorted(pooled.index, key=lambda ab: (order[a][ab[0]], order[b][ab[1]]))
-    per_value = {
-        f"{va}|{vb}": {
-            "sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
-            "n_episodes": int(pooled.loc[(va, vb), "n"]),
-        }
-        for va, vb in keys
-    }
     iec_names = (f"{a}|{b}", f"{b}|{a}")
     out: dict[str, Any] = {
         "factors": [a, b],
@@ -193,22 +202,68 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
         **{key: dict.fromkeys(iec_names) for key in ("iec", "iec_null", "iec_excess", "p_iec")},
         "p_interaction": None,
         "p_interaction_method": None,
-        "per_value": per_value,
+        "per_value": _pair_per_value(table),
     }
     if k == 0:
         return out
     statistics, by = _factorial_statistics(table, cfg.epsilon)
     point = statistics(table.sr)
     for f, other in ((a, b), (b, a)):
-        permuted = table.permuted_k([other, "context_id"], cfg.n_perm, cfg.rng(split, f"perm:{f}"))
-        null = statistics(permuted / table.n)[f]
-        out["cv"][f] = float(point[f])
-        out["cv_null"][f] = float(null.mean())
-        out["cv_excess"][f] = excess(out["cv"][f], out["cv_null"][f])
-        out["p_value_cv"][f] = stats.permutation_p(out["cv"][f], null)
-        test = stats.factor_lrt(table.k, table.n, table.codes([f]), by[f], permuted[: cfg.n_glm])
-        out["p_value"][f] = None if test is None else test.p_value
-        out["p_value_method"][f] = None if test is None else test.method
+        _factor_tests(out, table, f, other, statistics, point, by[f], split, cfg)
+    _interaction_tests(out, table, statistics, point, split, cfg)
+    return out
+
+
+def _pair_per_value(table: CellTable) -> dict[str, dict[str, Any]]:
+    """ "a|b" → SR and episodes of the value pair pooled over contexts, in both factors' value order."""
+    a, b = table.factors
+    pooled = table.cells.groupby([a, b], sort=False)[["n", "k"]].sum()
+    order = {f: {v: i for i, v in enumerate(value_order(f, table.cells[f].unique()))} for f in (a, b)}
+    keys = sorted(pooled.index, key=lambda ab: (order[a][ab[0]], order[b][ab[1]]))
+    return {
+        f"{va}|{vb}": {
+            "sr": float(pooled.loc[(va, vb), "k"] / pooled.loc[(va, vb), "n"]),
+            "n_episodes": int(pooled.loc[(va, vb), "n"]),
+        }
+        for va, vb in keys
+    }
+
+
+def _factor_tests(
+    out: dict[str, Any],
+    table: CellTable,
+    f: str,
+    other: str,
+    statistics: Callable,
+    point: dict[str, np.ndarray],
+    groups: np.ndarray,
+    split: str,
+    cfg: MetricsConfig,
+) -> None:
+    """Factor `f`'s CV against its permutation null (values of f shuffled within (other, context)) and its GLM
+    likelihood-ratio test, into `out`'s per-factor entries."""
+    permuted = table.permuted_k([other, "context_id"], cfg.n_perm, cfg.rng(split, f"perm:{f}"))
+    null = statistics(permuted / table.n)[f]
+    out["cv"][f] = float(point[f])
+    out["cv_null"][f] = float(null.mean())
+    out["cv_excess"][f] = excess(out["cv"][f], out["cv_null"][f])
+    out["p_value_cv"][f] = stats.permutation_p(out["cv"][f], null)
+    test = stats.factor_lrt(table.k, table.n, table.codes([f]), groups, permuted[: cfg.n_glm])
+    out["p_value"][f] = None if test is None else test.p_value
+    out["p_value_method"][f] = None if test is None else test.method
+
+
+def _interaction_tests(
+    out: dict[str, Any],
+    table: CellTable,
+    statistics: Callable,
+    point: dict[str, np.ndarray],
+    split: str,
+    cfg: MetricsConfig,
+) -> None:
+    """The likelihood-ratio test of A×B against A + B, and both IECs against their null (tables drawn from the
+    fitted additive model), into `out`."""
+    a, b = table.factors
     test, draws = stats.interaction_lrt(
         table.k,
         table.n,
@@ -221,13 +276,12 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     if test is not None:
         out["p_interaction"], out["p_interaction_method"] = test.p_value, test.method
     null_iec = statistics(draws / table.n) if draws is not None else None
-    for name in iec_names:
+    for name in (f"{a}|{b}", f"{b}|{a}"):
         out["iec"][name] = float(point[name])
         if null_iec is not None:
             out["iec_null"][name] = float(null_iec[name].mean())
             out["iec_excess"][name] = excess(out["iec"][name], out["iec_null"][name])
             out["p_iec"][name] = stats.permutation_p(out["iec"][name], null_iec[name])
-    return out
 
 
 class EpisodesError(ValueError):
