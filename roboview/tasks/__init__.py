@@ -30,7 +30,8 @@ from roboview.tasks.base import (
     register_task,
     resolve,
 )
-from roboview.tasks.env import ScriptedExpert, TaskEnv
+from roboview.tasks.env import TaskEnv
+from roboview.tasks.expert import ScriptedExpert
 from roboview.variation.factors import DEFAULT_TASK
 
 # Registry lines: imported in this order, the order of the tasks in a suite that names several.

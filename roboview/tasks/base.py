@@ -43,7 +43,7 @@ class Task:
     timeout_reason: str
     # "module:Class" of the privileged scripted expert: `Expert(env)`, `.reset()`, `.select_action(obs)`.
     # The default plans the env's own `plan` from the object's true pose.
-    expert: str = "roboview.tasks.env:ScriptedExpert"
+    expert: str = "roboview.tasks.expert:ScriptedExpert"
     # Context values of the small presets (`tiny`, `tiny_extended`), as (factor, values) pairs.
     small_contexts: tuple[tuple[str, tuple[str, ...]], ...] = ()
     max_episode_steps: int = DEFAULT_MAX_STEPS
