@@ -28,11 +28,13 @@ LIBERO_CAMERAS = ("agentview", "wrist")
 
 @dataclass(frozen=True)
 class FairnessThresholds:
-    """Pass criteria. The wrist view is local by design, so the box is not required in it."""
+    """Pass criteria. "Box" is the task's target, whatever it is (pick_place's box, push's zone): the `box_*` names are
+    those of the stored records and flags, kept so every benchmark already built still reads. The wrist view is local
+    by design, so the target is not required in it."""
 
     # Minimum share of the object's unoccluded pixels that must be visible, per observed camera.
     min_object_visible: float = 0.6
-    # Minimum share of the box's unoccluded pixels visible in the scene cameras (front, left_top).
+    # Minimum share of the target's (box's, zone's) unoccluded pixels visible in the scene cameras (front, left_top).
     min_box_visible: float = 0.5
     # Minimum object area in pixels of a 224² frame (scaled by area for other image sizes).
     min_object_pixels: int = 25
@@ -53,6 +55,8 @@ class FairnessThresholds:
 
 @dataclass(frozen=True)
 class CameraFairness:
+    """One camera's measures of an instance; `box_*` measure the task's target (the box, or push's zone)."""
+
     camera: str
     object_visible: float
     object_pixels: int
