@@ -321,16 +321,25 @@ def test_unmappable_specs_stop_before_any_episode_naming_the_field(tiny_benchmar
         pytest.raises(SpecMismatch, match=r"observation_spec\['state'\].*eef_pos3_quat4_gripper1"),
     ):
         policy_config("vla_eval", url=url)
-    libero_cams = FixedServer(POSE, JOINTS, {"agentview": IMAGE_RGB, "state": STATE_JOINT})
-    with serving(libero_cams) as url:
+    other_cams = FixedServer(POSE, JOINTS, {"exterior": IMAGE_RGB, "state": STATE_JOINT})
+    with serving(other_cams) as url:
         with pytest.raises(
             SpecMismatch,
-            match=r"'agentview'.*front, left_top, right_top, wrist.*--policy.camera_map=agentview",
+            match=r"'exterior'.*front, left_top, right_top, wrist, agentview.*--policy.camera_map=exterior",
         ):
             policy_config("vla_eval", url=url)
-        assert policy_config("vla_eval", url=url, camera_map="agentview=right_top").negotiated.cameras == (
-            ("agentview", "right_top"),
+        assert policy_config("vla_eval", url=url, camera_map="exterior=right_top").negotiated.cameras == (
+            ("exterior", "right_top"),
         )
+    # LIBERO's camera names negotiate (LIBERO's envs render them); RoboView's scene refuses them before any episode.
+    libero_cams = FixedServer(POSE, JOINTS, {"agentview": IMAGE_RGB, "state": STATE_JOINT})
+    with serving(libero_cams) as url:
+        from roboview.policies.fit import fit_policy
+
+        with pytest.raises(
+            ValueError, match="observes camera.s. agentview, which the 'pick_place' task's env"
+        ):
+            fit_policy(policy_config("vla_eval", url=url), ["pick_place"])
     wrist = FixedServer(
         POSE, {"actions": RAW}, {"image": IMAGE_RGB, "state": RAW}, {"send_wrist_image": True}
     )
