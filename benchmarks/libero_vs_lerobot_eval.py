@@ -120,7 +120,7 @@ def run(cfg: LiberoVsLeRobotConfig) -> dict:
         out / "roboview.log",
     )
     info = json.loads((lerobot_dir / "eval_info.json").read_text())
-    lerobot_success = [bool(e["success"]) for e in info["per_episode"]]
+    lerobot_success = [bool(x) for task in info["per_task"] for x in task["metrics"]["successes"]]
     rows = pd.read_parquet(roboview_dir / "episodes.parquet")
     rows["init"] = rows["init_state"].astype(int)
     roboview_success = [bool(s) for s in rows.sort_values("init")["success"]]
