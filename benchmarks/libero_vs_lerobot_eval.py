@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -82,8 +83,6 @@ def run(cfg: LiberoVsLeRobotConfig) -> dict:
     lerobot_dir, roboview_dir = out / "lerobot_eval", out / "roboview"
     for folder in (lerobot_dir, roboview_dir):
         if folder.exists():
-            import shutil
-
             shutil.rmtree(folder)
     lerobot_s = _timed(
         [

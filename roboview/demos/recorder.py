@@ -14,7 +14,7 @@ import numpy as np
 
 from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
-from roboview.variation.factors import context_factors
+from roboview.variation.factors import FACTORS, context_factors
 from roboview.variation.instances import TaskInstance, seed_from_text
 from roboview.variation.randomization import Randomization, sample_randomization
 from roboview.variation.svgf import ContextSampler
@@ -34,6 +34,24 @@ def training_instance(
     return TaskInstance(
         split="train", varied=context_factors(task), factors=values, context_subspace="cartesian", task=task
     )
+
+
+def parse_contexts(text: str, task: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """`FACTOR=V1|V2,FACTOR=V` → ((factor, values), …), each a context factor of `task` and each value one of
+    its values; a one-line error naming the bad entry otherwise."""
+    out = []
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        name, sep, values = item.partition("=")
+        if not sep or name not in context_factors(task):
+            raise ValueError(
+                f"{item!r}: expected FACTOR=V1|V2 with FACTOR one of {task}'s context factors "
+                f"({', '.join(context_factors(task))})"
+            )
+        chosen = tuple(v.strip() for v in values.split("|"))
+        for value in chosen:
+            FACTORS[name].validate(value)
+        out.append((name, chosen))
+    return tuple(out)
 
 
 @dataclass

@@ -19,10 +19,10 @@ from pathlib import Path
 from roboview.core.cli_errors import flag_errors
 from roboview.demos.collection import CollectionJob, CollectResult, collect
 from roboview.demos.dataset import CollectionSignature, DatasetRootError, check_root
+from roboview.demos.recorder import parse_contexts
 from roboview.pipelines._cli import cli_main
 from roboview.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
 from roboview.tasks import DEFAULT_TASK, load_task
-from roboview.variation.factors import FACTORS, context_factors
 from roboview.variation.randomization import validate_randomize
 
 VCODECS = ("libsvtav1", "h264", "hevc")
@@ -30,24 +30,6 @@ VCODECS = ("libsvtav1", "h264", "hevc")
 # a collected image is at least one backbone stride wide.
 ACT_BACKBONE_STRIDE = 32
 TRAIN_IMAGE_MIN = max(IMAGE_SIZE_MIN, ACT_BACKBONE_STRIDE)
-
-
-def parse_contexts(text: str, task: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
-    """`FACTOR=V1|V2,FACTOR=V` → ((factor, values), …), each a context factor of `task` and each value one of
-    its values; a one-line error naming the bad entry otherwise."""
-    out = []
-    for item in filter(None, (x.strip() for x in text.split(","))):
-        name, sep, values = item.partition("=")
-        if not sep or name not in context_factors(task):
-            raise ValueError(
-                f"{item!r}: expected FACTOR=V1|V2 with FACTOR one of {task}'s context factors "
-                f"({', '.join(context_factors(task))})"
-            )
-        chosen = tuple(v.strip() for v in values.split("|"))
-        for value in chosen:
-            FACTORS[name].validate(value)
-        out.append((name, chosen))
-    return tuple(out)
 
 
 @dataclass

@@ -41,6 +41,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from roboview.libero.env import IMAGE_SIZE
 from roboview.libero.suites import SUITES, max_steps
 from roboview.sim.cameras import CameraPose, mat_to_quat
 from roboview.sim.observation import LazyObservation
@@ -58,10 +59,11 @@ CAMERAS = {
     "image2": "robot0_eye_in_hand",
 }
 OBSERVED_CAMERAS = ("agentview", "wrist")
-# The scene camera under both its names, and the side every LIBERO harness renders at (LeRobot's LiberoEnv class,
-# openpi's and vla-eval's LIBERO clients).
-LIBERO_SCENE_CAMERAS = ("agentview", "image")
-LIBERO_RENDER_SIZE = 256
+# The scene camera and the wrist camera under all their names, and the side every LIBERO harness renders at
+# (LeRobot's LiberoEnv class, openpi's and vla-eval's LIBERO clients).
+LIBERO_SCENE_CAMERAS = tuple(name for name, camera in CAMERAS.items() if camera == "agentview")
+LIBERO_WRIST_CAMERAS = tuple(name for name, camera in CAMERAS.items() if camera == "robot0_eye_in_hand")
+LIBERO_RENDER_SIZE = IMAGE_SIZE
 IMAGE_KEY = "observation.images.{}"
 STATE_KEY = "observation.state"
 EE_STATE_KEY = "observation.ee_state"
@@ -130,7 +132,7 @@ class LiberoTaskEnv(gym.Env):
     def __init__(
         self,
         cameras=OBSERVED_CAMERAS,
-        image_size: int = 256,
+        image_size: int = LIBERO_RENDER_SIZE,
         fps: int = 20,
         max_steps: int | None = None,
         depth: bool = False,
