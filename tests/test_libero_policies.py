@@ -8,6 +8,7 @@ what the openpi client hands a server on LIBERO's scenes is what openpi's LIBERO
 brought to 224² by openpi-client's resize_with_pad, LIBERO's 8-d state).
 """
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -263,3 +264,105 @@ def test_the_checkpoint_behind_vla_evals_lerobot_server_gives_the_in_process_epi
     for key in ("instance_id", "episode_seed", "success", "steps"):
         assert served_row[key] == local_row[key], key
     np.testing.assert_allclose(served_path, local_path, rtol=0, atol=1e-6)
+
+
+def test_the_vla_eval_client_sends_what_vla_evals_libero_benchmark_sends():
+    """A server declaring what vla-eval's LIBERO benchmark declares is sent, step for step, what that benchmark's
+    own `make_obs` builds from its own env (same init state, seed and actions: images, state, instruction), and
+    its actions reach the env as that benchmark steps them (gripper discretized by its sign)."""
+    from vla_eval.benchmarks.libero.benchmark import LIBEROBenchmark
+
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from tests.test_vla_eval_client import FixedServer, serving
+
+    # Continuous gripper values: vla-eval's LIBERO benchmark sends their sign to the env.
+    actions = [
+        np.array([0.4, -0.2, 0.1, 0.0, 0.1, 0.0, -0.3], np.float32),
+        np.array([0.0, 0.5, -0.3, 0.2, 0.0, 0.0, 0.6], np.float32),
+        np.array([-0.3, 0.1, 0.2, 0.0, -0.1, 0.1, 0.2], np.float32),
+    ]
+
+    class Replaying(FixedServer):
+        def predict_batch(self, obs_batch, ctx_batch):
+            self.seen.extend(obs_batch)
+            return [{"actions": actions[min(ctx.step, len(actions) - 1)].copy()} for ctx in ctx_batch]
+
+    spec = LIBEROBenchmark("libero_object", send_wrist_image=True, send_state=True)
+    server = Replaying(
+        actions[0],
+        spec.get_action_spec(),
+        spec.get_observation_spec(),
+        {"send_state": True, "send_wrist_image": True},
+    )
+    instance = baseline_libero_instance("libero_object/0", "1")
+    with serving(server) as url:
+        client = policy_config("vla_eval", url=url)
+        assert client.env_control() == "ee_delta" and client.observed_cameras() == ("agentview", "wrist")
+        assert client.input_image_size() == 256  # vla-eval's LIBERO side, by default
+        worker = EvalWorker(WorkerSpec(client, image_size=256, max_steps=len(actions), task="libero"))
+        try:
+            row = worker.run(WorkItem(BenchmarkItem(instance, instance.to_record()), 0)).row
+        finally:
+            worker.close()
+    assert row["status"] == "ok" and row["steps"] == len(actions)
+
+    seed = int(row["episode_seed"])
+    reference = LIBEROBenchmark("libero_object", seed=seed, send_wrist_image=True, send_state=True)
+    task = {**reference.get_tasks()[0], "episode_idx": 1}
+
+    async def benchmark_episode() -> list[dict]:
+        """vla-eval's own episode loop of the benchmark: start, then observation / action per step."""
+        sent = []
+        await reference.start_episode(task)
+        for action in actions:
+            sent.append(await reference.get_observation())
+            await reference.apply_action({"actions": action})
+        return sent
+
+    try:
+        expected_steps = asyncio.run(benchmark_episode())
+    finally:
+        reference.cleanup()
+    for step, (expected, got) in enumerate(zip(expected_steps, server.seen, strict=True)):
+        assert got["task_description"] == expected["task_description"] == task["name"], step
+        for camera in ("agentview", "wrist"):
+            np.testing.assert_array_equal(
+                got["images"][camera], expected["images"][camera], err_msg=f"{step}"
+            )
+        assert got["states"].dtype == expected["states"].dtype == np.float64
+        np.testing.assert_array_equal(got["states"], expected["states"], err_msg=f"{step}")
+    assert expected_steps[0]["images"]["agentview"].shape == (256, 256, 3)
+
+
+def test_libero_states_follow_vla_evals_quaternion_conventions():
+    """Both axis-angle conventions of vla-eval's LIBERO benchmark (antipodal-normalized by default, robosuite's under
+    `quat_no_antipodal`), on quaternions with w < 0 where they differ; the reference runs in its own process (importing
+    vla-eval's LIBERO benchmark switches rendering to EGL)."""
+    from roboview.policies.serving.vla_eval_specs import libero_state
+
+    rng = np.random.default_rng(0)
+    quats = rng.normal(size=(6, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    quats[:, 3] = -np.abs(quats[:, 3])
+    proprios = [np.concatenate([rng.normal(size=3), q, rng.normal(size=2)]) for q in quats]
+    code = (
+        "import json, sys, numpy as np\n"
+        "from vla_eval.benchmarks.libero.benchmark import LIBEROBenchmark\n"
+        "out = []\n"
+        "for p in json.load(sys.stdin):\n"
+        "    obs = dict(robot0_eef_pos=np.array(p[:3]), robot0_eef_quat=np.array(p[3:7]),"
+        " robot0_gripper_qpos=np.array(p[7:]))\n"
+        "    out.append([LIBEROBenchmark(quat_no_antipodal=f)._proprio_state(obs).tolist() for f in (False, True)])\n"
+        "print(json.dumps(out))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        input=json.dumps([p.tolist() for p in proprios]),
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    for proprio, (default, robosuite) in zip(proprios, json.loads(proc.stdout), strict=True):
+        np.testing.assert_array_equal(libero_state(proprio, no_antipodal=False), default)
+        np.testing.assert_array_equal(libero_state(proprio, no_antipodal=True), robosuite)
+        assert not np.allclose(default[3:6], robosuite[3:6])  # w < 0: the conventions differ

@@ -46,10 +46,12 @@ from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
 from roboview.sim.control import CONTROLS
 from roboview.tasks import camera_names
 from roboview.tasks.env import IMAGE_KEY
+from roboview.tasks.libero import LIBERO_RENDER_SIZE, LIBERO_SCENE_CAMERAS
 
 log = logging.getLogger(__name__)
 
 IMAGE_FORMATS = ("raw", "png", "jpeg")
+DEFAULT_IMAGE_SIZE = 224
 
 
 class ServerError(RuntimeError):
@@ -239,8 +241,7 @@ class VlaEvalPolicy:
                 wire: observation[IMAGE_KEY.format(cam)] for wire, cam in self.agreed.cameras
             }
         if self.agreed.state_key is not None:
-            state = np.asarray(observation[self.agreed.state_key], np.float32)
-            payload["states"] = payload["state"] = state
+            payload["states"] = payload["state"] = self.agreed.state(observation)
         return payload
 
     def episode_record(self) -> dict:
@@ -299,8 +300,9 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
     # The server's camera names mapped onto RoboView's, e.g. agentview=left_top,wrist=wrist (for servers that
     # declare named cameras RoboView does not have).
     camera_map: str = ""
-    # Side of the square images sent (rendered at that size, not resized here; the server may resize).
-    image_size: int = 224
+    # Side of the square images sent (rendered at that size, not resized here; the server may resize). 0: 256 when a
+    # LIBERO scene camera is sent (vla-eval's LIBERO benchmark renders 256²), else 224.
+    image_size: int = 0
     # The env control for a server whose action spec is `raw` (LeRobot's server: the checkpoint decides): joint,
     # ee_delta or ee_abs; empty: joint. For other servers it must agree with their spec (empty: follow it).
     control: str = ""
@@ -337,8 +339,10 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
         if self.images_every < 1:
             raise ValueError(f"--policy.images_every={self.images_every} must be 1 or more (1: every step)")
         self.check_connection()
-        if self.image_size <= 0:
-            raise ValueError(f"--policy.image_size={self.image_size} must be positive")
+        if self.image_size < 0:
+            raise ValueError(
+                f"--policy.image_size={self.image_size} must be 0 (the world's own side: 256 for LIBERO, else 224) or positive"
+            )
         # Every server is reached and negotiated here, before any rollout; all must agree.
         self._hello: dict[str, dict] = {}
         agreed = None
@@ -394,7 +398,10 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
         return self._agreed.observed_cameras
 
     def input_image_size(self) -> int | None:
-        return self.image_size
+        if self.image_size:
+            return self.image_size
+        libero = any(cam in LIBERO_SCENE_CAMERAS for cam in self.observed_cameras())
+        return LIBERO_RENDER_SIZE if libero else DEFAULT_IMAGE_SIZE
 
     def options(self) -> dict[str, Any]:
         # The URL is where the policy lives, not what it is: a resume may point at a restarted server.

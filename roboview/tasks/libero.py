@@ -30,7 +30,9 @@ unchanged:
 **Observations** (what every policy path receives; the keys are RoboView's): `observation.images.agentview` and
 `observation.images.wrist`, uint8 H×W×3, flipped 180° as LeRobot's, openpi's and vla-eval's LIBERO clients flip
 them (upright); `observation.state` and `observation.ee_state`, float32 (8,): eef position, axis-angle of the eef
-quaternion, the two gripper joint positions (LeRobot's LIBERO state, bit for bit). Images render when read.
+quaternion, the two gripper joint positions (LeRobot's LIBERO state, bit for bit); `libero.proprio`, float64 (9,):
+the raw eef position, eef quaternion (xyzw) and gripper joint positions, from which a client that follows another
+harness's state convention builds its state (vla-eval's LIBERO benchmark). Images render when read.
 """
 
 from __future__ import annotations
@@ -67,6 +69,7 @@ LIBERO_RENDER_SIZE = IMAGE_SIZE
 IMAGE_KEY = "observation.images.{}"
 STATE_KEY = "observation.state"
 EE_STATE_KEY = "observation.ee_state"
+PROPRIO_KEY = "libero.proprio"
 CONTROL = "ee_delta"
 N_INIT_STATES = 50
 # The factors LIBERO's scenes cannot take (an instance setting one away from its baseline is refused).
@@ -208,7 +211,8 @@ class LiberoTaskEnv(gym.Env):
         from roboview.libero.env import image_key, lerobot_state
 
         state = lerobot_state(raw)
-        eager = {STATE_KEY: state, EE_STATE_KEY: state.copy()}
+        proprio = np.concatenate([raw["robot0_eef_pos"], raw["robot0_eef_quat"], raw["robot0_gripper_qpos"]])
+        eager = {STATE_KEY: state, EE_STATE_KEY: state.copy(), PROPRIO_KEY: proprio.astype(np.float64)}
 
         def flipped(camera: str):
             return lambda: np.ascontiguousarray(raw[image_key(CAMERAS[camera])][::-1, ::-1])

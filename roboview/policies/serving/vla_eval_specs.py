@@ -19,10 +19,15 @@ declared and what RoboView provides: before any episode runs.
 | observation `image` (rgb_hwc_uint8)                          | every camera of `--policy.cameras`, by name |
 | observation `<camera>` (rgb_hwc_uint8)                       | that camera (or `--policy.camera_map`)   |
 | observation `language`                                       | the instruction (`task_description`)     |
+
+On LIBERO's scenes the `eef_pos3_axisangle3_gripper2` state is built as vla-eval's LIBERO benchmark builds it (float64;
+the quaternion's axis-angle by `vla_eval.rotation.quat_to_axisangle`, or robosuite's formula where the server's
+`observation_params` ask for `quat_no_antipodal`, as OpenVLA-OFT's does), so such a server reads what it reads there.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +44,7 @@ from vla_eval.specs import (
 
 from roboview.tasks import camera_names
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
+from roboview.tasks.libero import PROPRIO_KEY
 
 JOINT_TARGETS = DimSpec(
     "joints", 7, "joint_positions", description="absolute Panda joint position targets (rad)"
@@ -91,6 +97,8 @@ class Negotiated:
     # The server's action components in wire order: (name, dims, format).
     action: tuple[tuple[str, int, str], ...]
     gripper: str
+    # LIBERO's state axis-angle without vla-eval's antipodal normalization (observation_params quat_no_antipodal).
+    quat_no_antipodal: bool = False
 
     @property
     def observed_cameras(self) -> tuple[str, ...]:
@@ -99,6 +107,14 @@ class Negotiated:
     @property
     def action_dims(self) -> int:
         return ACTION_DIMS[self.control]
+
+    def state(self, observation) -> np.ndarray:
+        """The state sent: on LIBERO's scenes an EE state as vla-eval's LIBERO benchmark builds it, else the
+        env's, float32."""
+        proprio = observation.get(PROPRIO_KEY) if self.state_key == EE_STATE_KEY else None
+        if proprio is None:
+            return np.asarray(observation[self.state_key], np.float32)
+        return libero_state(np.asarray(proprio, np.float64), self.quat_no_antipodal)
 
     def env_action(self, action: np.ndarray) -> np.ndarray:
         """The env action for one answered action; ValueError (the episode's failure) for a wrong width."""
@@ -114,6 +130,27 @@ class Negotiated:
         closure = gripper_closure(float(a[-1]), self.gripper)
         a[-1] = closure if self.control == "joint" else 2.0 * closure - 1.0
         return a
+
+
+def libero_state(proprio: np.ndarray, no_antipodal: bool) -> np.ndarray:
+    """vla-eval's LIBERO benchmark's `_proprio_state` from (eef pos, eef quat xyzw, gripper qpos): float64 (8,)."""
+    from vla_eval.rotation import quat_to_axisangle
+
+    pos, quat, grip = proprio[:3], proprio[3:7], proprio[7:]
+    return np.concatenate(
+        [pos, _axisangle_robosuite(quat) if no_antipodal else quat_to_axisangle(quat), grip]
+    )
+
+
+def _axisangle_robosuite(quat: np.ndarray) -> np.ndarray:
+    """robosuite's quat2axisangle (no antipodal normalization), float32: what vla-eval's LIBERO benchmark uses under
+    `quat_no_antipodal` (`vla_eval.benchmarks.libero.benchmark`, whose import sets EGL rendering)."""
+    q = quat.copy()
+    q[3] = min(max(q[3], -1.0), 1.0)
+    den = np.sqrt(1.0 - q[3] * q[3])
+    if math.isclose(den, 0.0):
+        return np.zeros(3, dtype=np.float32)
+    return (q[:3] * 2.0 * math.acos(q[3]) / den).astype(np.float32)
 
 
 def gripper_closure(value: float, fmt: str) -> float:
@@ -139,14 +176,11 @@ def negotiate(
     """The agreement for a server's HELLO answer; `cameras` serve a generic `image` spec, `camera_map`
     renames the server's camera keys, `control` ("" = from the spec) decides a `raw` action spec."""
     chosen, action, gripper = _action(parse_specs(hello, "action_spec"), control)
+    params = hello.get("observation_params") or {}
     sent, state_key = _observation(
-        parse_specs(hello, "observation_spec"),
-        hello.get("observation_params") or {},
-        cameras,
-        camera_map,
-        chosen,
+        parse_specs(hello, "observation_spec"), params, cameras, camera_map, chosen
     )
-    return Negotiated(chosen, sent, state_key, action, gripper)
+    return Negotiated(chosen, sent, state_key, action, gripper, bool(params.get("quat_no_antipodal")))
 
 
 def _action(spec: dict[str, DimSpec], control: str) -> tuple[str, tuple, str]:
