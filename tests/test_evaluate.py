@@ -349,17 +349,30 @@ def test_bad_input_fails_before_any_rollout(bench, tiny_checkpoint, tmp_path, ca
     assert proc.returncode == 2 and "['chartreuse']" in proc.stderr and "red" in proc.stderr
 
 
-def test_repeats_per_split_and_the_paper_protocol():
+def test_repeats_per_split_and_the_benchmarks_protocols():
+    from roboview.benchmark.protocols import choose, default_protocols
+
+    protocols = default_protocols(["color", "camera_pose", "color_x_camera_pose"], "tiny")
+    assert list(protocols) == ["paper", "adaptive", "quick"]
     paper = EvalConfig(protocol="paper")
+    paper.follow(protocols["paper"])
     assert (paper.repeats_for("color"), paper.repeats_for("color_x_camera_pose")) == (5, 10)
+    quick = EvalConfig(protocol="quick")
+    quick.follow(protocols["quick"])
+    assert [quick.repeats_for(s) for s in ("color", "color_x_camera_pose")] == [2, 2]
+    adaptive = EvalConfig(protocol="adaptive")
+    adaptive.follow(protocols["adaptive"])
+    assert (
+        adaptive.adaptive and adaptive.max_repeats == 10 and adaptive.repeats_for("color_x_camera_pose") == 10
+    )
     mixed = EvalConfig(n_repeats=3, split_repeats="color=2, camera_pose=6")
     assert [mixed.repeats_for(s) for s in ("color", "camera_pose", "dist_scale")] == [2, 6, 3]
-    assert (
-        EvalConfig(protocol="paper", split_repeats="color_x_camera_pose=4").repeats_for("color_x_camera_pose")
-        == 4
-    )
-    with pytest.raises(ValueError, match="unknown --eval.protocol='pi0'"):
-        EvalConfig(protocol="pi0")
+    with pytest.raises(ValueError, match="drop --eval.n_repeats=3, --eval.limit=4"):
+        EvalConfig(protocol="paper", n_repeats=3, limit=4).follow(protocols["paper"])
+    with pytest.raises(
+        ValueError, match="'pi0' is not a protocol of this benchmark; it declares: paper: 3 splits"
+    ):
+        choose(protocols, "pi0")
 
 
 def test_values_filter_keeps_that_value_in_every_context(bench, tmp_path):

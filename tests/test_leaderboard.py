@@ -70,7 +70,8 @@ def test_letters_of_a_known_order():
 
 @pytest.fixture(scope="module")
 def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
-    """expert, random and vision evaluated on one split of the tiny benchmark, each a complete results folder."""
+    """expert, random and vision evaluated on one split of the tiny benchmark under its `quick` protocol (2
+    repeats): each a partial results folder, that split whole."""
     from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run as evaluate
     from roboview.policies.types import policy_config
@@ -82,7 +83,7 @@ def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
             EvaluateConfig(
                 BenchmarkConfig(str(tiny_benchmark), SPLIT),
                 policy_config(name),
-                EvalConfig(n_repeats=2, num_workers=1, image_size=64),
+                EvalConfig(protocol="quick", num_workers=1, image_size=64),
                 str(root / name),
             )
         )
@@ -99,19 +100,28 @@ def _board(bundles, tmp_path, *extra, **kw):
 
 def test_board_ranks_verified_bundles_with_groups_and_links(bundles, tmp_path):
     board = _board(bundles, tmp_path)
-    sr = {r["policy"]: r for r in board.overall["sr"]}
-    assert set(sr) == {"expert", "random", "vision"} and not board.rejected
-    # The expert and vision solve every episode here, random none: two groups, random alone and last.
+    assert board.protocol == "quick" and not board.rejected
+    assert board.overall == {}  # partial bundles: ranked on the split they cover, never overall
+    sr = {r["policy"]: r for r in board.splits[SPLIT]["sr"]}
+    assert set(sr) == {"expert", "random", "vision"}
+    # The expert (privileged) is a reference line, not rank 1; vision solves every episode here, random none.
     assert sr["expert"]["value"] == sr["vision"]["value"] == 1.0 and sr["random"]["value"] == 0.0
-    assert sr["expert"]["group"] == sr["vision"]["group"] == "a" and sr["random"]["group"] == "b"
-    assert sr["expert"]["rank"] == sr["vision"]["rank"] == 1 and sr["random"]["rank"] == 3
-    assert sr["random"]["rank_range"] == [3, 3] and sr["vision"]["rank_range"] == [1, 2]
+    assert sr["expert"]["rank"] is None and sr["expert"]["group"] == "ref" and sr["expert"]["reference"]
+    assert (sr["vision"]["rank"], sr["vision"]["group"]) == (1, "a") and (
+        sr["random"]["rank"],
+        sr["random"]["group"],
+    ) == (2, "b")
+    assert sr["random"]["rank_range"] == [2, 2] and sr["vision"]["rank_range"] == [1, 1]
     assert sr["random"]["episodes"] == 18 and sr["random"]["ci95"][1] == pytest.approx(0.1759, abs=1e-3)
+    assert all(r["protocol"] == "quick" and r["partial"] and not r["replayed"] for r in sr.values())
     assert list(board.splits) == [SPLIT]
     entries = {e.label: e for e in board.entries}
     assert entries["expert"].privileged and not entries["vision"].privileged
     saved = json.loads((tmp_path / "board" / "leaderboard.json").read_text())
     assert saved["benchmark_version"] == board.benchmark_version and saved["adjustment"] == "holm"
+    assert saved["protocol"] == "quick" and saved["splits"][SPLIT]["sr"][0]["replay_note"]
+    page = (tmp_path / "board" / "leaderboard.html").read_text()
+    assert "(privileged: reference, not ranked)" in page and "cv_excess ×100 (no interval)" in page
     for e in board.entries:  # each row links to a report of that bundle's episodes
         report = tmp_path / "board" / e.report
         metrics = json.loads((report.parent / "metrics.json").read_text())
@@ -218,7 +228,11 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
     assert "## Table 1" in card and plan.version in card and manifest["benchmark_content_hash"] in card
     assert "(privileged)" in card and "| conformance | pass |" in card
     verify = json.loads((staging / "verify.json").read_text())
-    assert verify["passed"] and all(c["passed"] for c in verify["checks"])
+    checks = {c["name"]: c for c in verify["checks"]}
+    assert verify["passed"] and all(c["passed"] for name, c in checks.items() if name != "replay")
+    # Staging re-ran no episode, and says so: never labelled replayed.
+    assert checks["replay"]["passed"] is None and verify["replay"] is None and "| replay | not run |" in card
+    assert verify["protocol"] == "quick" and verify["partial"] and verify["covered_splits"] == [SPLIT]
 
     # The model repo's .eval_results file: the documented schema, one entry per split, read back by the Hub's
     # own parser.
@@ -228,7 +242,8 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
     assert isinstance(data, list) and len(data) == 1
     entry = data[0]
     assert set(entry) <= {"dataset", "value", "verifyToken", "date", "source", "notes"}
-    assert entry["dataset"] == {"id": "lab/roboview-bias", "task_id": SPLIT}
+    # The benchmark version is the dataset revision (the tag its release carries): a republished benchmark differs.
+    assert entry["dataset"] == {"id": "lab/roboview-bias", "task_id": SPLIT, "revision": plan.version}
     assert isinstance(entry["value"], float) and entry["value"] == 100.0
     datetime.datetime.fromisoformat(entry["date"])
     assert entry["source"]["url"] == "https://huggingface.co/datasets/lab/expert-results"
@@ -238,6 +253,7 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
             dataset_id="lab/roboview-bias",
             task_id=SPLIT,
             value=100.0,
+            dataset_revision=plan.version,
             date=entry["date"],
             source_url=entry["source"]["url"],
             source_name=entry["source"]["name"],
@@ -261,7 +277,7 @@ def test_publish_refuses_results_that_do_not_verify(bundles, tmp_path):
     table = pq.read_table(partial / "episodes.parquet")
     pq.write_table(table.slice(0, 10), partial / "episodes.parquet")
     with pytest.raises(
-        PublishError, match=r"does not verify.*complete: camera_pose: 8 of 18 episodes missing"
+        PublishError, match=r"does not verify.*complete: protocol quick: camera_pose: 8 of 18 episodes missing"
     ):
         publish(PublishConfig(results=str(partial), repo_id="lab/x", dry_run=True))
     assert not (tmp_path / "partial_bundle").exists()
@@ -278,8 +294,9 @@ def test_board_page_in_chromium(bundles, tmp_path):
     page = load_page(tmp_path / "board" / "leaderboard.html", scripts=(order, sort_by_sr, sort_by_sr))
     assert page.errors == []
     before, ascending, descending = page.evaluated
-    assert before == "expert (privileged),vision,random"
-    assert ascending.split(",")[0] == "random" and descending.split(",")[-1] == "random"
+    # Ranked first, the privileged expert after them as a reference line; every bundle partial (one split).
+    assert before == "vision (partial),random (partial),expert (privileged: reference, not ranked) (partial)"
+    assert ascending.split(",")[0] == "random (partial)" and descending.split(",")[-1] == "random (partial)"
     # The screenshot shows the ranked table: dark text rows on white, the header band grey.
     shot = page.screenshot
     assert shot.shape[0] > 600

@@ -22,6 +22,7 @@ from roboview.benchmark import format as bio
 from roboview.benchmark.card import fairness_stats, write_card
 from roboview.benchmark.contact_sheet import context_text, write_contact_sheet
 from roboview.benchmark.fairness import FairnessThresholds
+from roboview.benchmark.protocols import protocols_json
 from roboview.benchmark.render import InstanceRenderer
 from roboview.benchmark.review import Decision, adjudicate, read_decisions
 from roboview.benchmark.screen import agreement
@@ -175,8 +176,9 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
     screen = _screen(spec, judged.records, tmp)
     by_split, rejected = judged.by_split(), judged.rejected_rows()
     passed = judged.gate_pass_rate >= spec.min_pass_rate
-    content, reference, stack = {}, None, None
+    content, reference, stack, protocols = {}, None, None, None
     if passed:
+        protocols = protocols_json([s for s, rows in by_split.items() if rows], spec.suite.preset)
         _write_tables(tmp, by_split, rejected)
         # What was written, as it reads back: the conformance sample, then every cell's checksum.
         written = {split: bio.read_rows(tmp / "data" / f"{split}.parquet") for split in by_split}
@@ -201,7 +203,8 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
         "suite_hash": bio.suite_hash(by_split),
         "content": content,
         "stack": stack,
-        "benchmark_version": bio.benchmark_version(spec.suite.preset, content, reference),
+        **({"protocols": protocols} if protocols else {}),
+        "benchmark_version": bio.benchmark_version(spec.suite.preset, content, reference, protocols),
         "fairness_stats": fairness_stats(judged.records),
         **({"vlm_screen": screen} if screen is not None else {}),
     }

@@ -24,13 +24,14 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import datasets
 import pyarrow.parquet as pq
 
+from roboview.benchmark.protocols import Protocol, declared
 from roboview.core.files import files_sha256
 from roboview.core.folders import folder_problem
 from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
@@ -205,11 +206,15 @@ def reference_hash(root: Path) -> str | None:
     return files_sha256(folder, sorted(folder.iterdir()))
 
 
-def benchmark_version(preset: str, content: dict[str, str], conformance: str | None) -> str:
-    """`<preset>-<12 hex>`: SHA-256 over every table's content hash and the conformance reference's."""
-    digest = hashlib.sha256(
-        canonical_json({"content": content, "conformance": conformance}).encode()
-    ).hexdigest()
+def benchmark_version(
+    preset: str, content: dict[str, str], conformance: str | None, protocols: dict | None = None
+) -> str:
+    """`<preset>-<12 hex>`: SHA-256 over every table's content hash, the conformance reference's and the declared
+    protocols (a manifest written before protocols were declared hashes without them: its version stands)."""
+    hashed: dict[str, Any] = {"content": content, "conformance": conformance}
+    if protocols:
+        hashed["protocols"] = protocols
+    digest = hashlib.sha256(canonical_json(hashed).encode()).hexdigest()
     return f"{preset}-{digest[:12]}"
 
 
@@ -282,6 +287,8 @@ class Benchmark:
     path: Path
     version: str
     splits: dict[str, list[BenchmarkItem]]
+    # The protocols it can be evaluated under (roboview.benchmark.protocols), over all its splits.
+    protocols: dict[str, Protocol] = field(default_factory=dict)
 
 
 def read_manifest(root: Path) -> dict:
@@ -300,12 +307,15 @@ def read_manifest(root: Path) -> dict:
     if manifest.get("status") != "ok":
         raise BenchmarkError(f"{root} is a failed build; rebuild it")
     expected = benchmark_version(
-        manifest["suite"]["preset"], manifest.get("content", {}), reference_hash(root)
+        manifest["suite"]["preset"],
+        manifest.get("content", {}),
+        reference_hash(root),
+        manifest.get("protocols"),
     )
     if manifest.get("benchmark_version") != expected:
         raise BenchmarkError(
             f"{root}/{MANIFEST} names version {manifest.get('benchmark_version')!r} but its content "
-            f"hashes and conformance reference give {expected!r}: the manifest or the conformance "
+            f"hashes, conformance reference and protocols give {expected!r}: the manifest or the conformance "
             "folder was edited after the build; rebuild it or download it again"
         )
     return manifest
@@ -373,7 +383,7 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
             )
             for row in rows
         ]
-    return Benchmark(root, manifest["benchmark_version"], out)
+    return Benchmark(root, manifest["benchmark_version"], out, declared(manifest, available))
 
 
 def select_items(items: list[BenchmarkItem], contexts: int = 0, limit: int = 0) -> list[BenchmarkItem]:

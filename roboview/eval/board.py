@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import datetime
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 from roboview.eval.reporting.leaderboard import Board, Entry, Rejected, labels_for, write_board
@@ -38,20 +39,57 @@ def fetch(source: str, cache_dir: str | None = None) -> Path:
         raise RuntimeError(f"cannot download Hub dataset {repo_id}: {type(exc).__name__}: {exc}") from exc
 
 
-def check_bundle(path: Path, benchmark: Path, version: str) -> str | None:
-    """Why the bundle at `path` cannot be ranked on the board of `benchmark` (version `version`); None: it can."""
+@dataclass
+class Checked:
+    """A bundle that verified: its folder, the protocol it claims, its coverage and its replay."""
+
+    path: Path
+    policy: str
+    protocol: str
+    partial: bool
+    covered: list[str]
+    replayed: bool
+    replay_note: str
+
+
+def check_bundle(path: Path, benchmark: Path, version: str, replay: int = 0) -> Checked | str:
+    """The bundle at `path` verified against the board's `benchmark` (version `version`), `replay` episodes drawn
+    at random and re-run where its policy is reachable here; or why it cannot be ranked (one line: any file that
+    cannot be read, any failed check)."""
     from roboview.eval.running.inputs import results_folder_problem
     from roboview.eval.running.results import PARQUET, read_version
     from roboview.eval.verification import verify_results
 
     if problem := results_folder_problem(path):
         return problem
-    recorded = read_version(path / PARQUET)
-    if recorded != version:
-        return f"results of benchmark {recorded}; this board ranks {version}"
-    result = verify_results(path, benchmark)
-    failed = [f"{c.name}: {c.detail}" for c in result.checks if not c.passed]
-    return "verification failed — " + "; ".join(failed) if failed else None
+    try:
+        recorded = read_version(path / PARQUET)
+        if recorded != version:
+            return f"results of benchmark {recorded}; this board ranks {version}"
+        result = verify_results(path, benchmark, replay)
+        policy = bundle_policy(path)
+    except Exception as exc:  # an unreadable or malformed bundle is listed apart, the board goes on
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    unreachable = [c for c in result.checks if c.name == "replay" and "cannot rebuild policy" in c.detail]
+    failed = [f"{c.name}: {c.detail}" for c in result.checks if not c.passed and c not in unreachable]
+    if failed:
+        return "verification failed — " + "; ".join(failed)
+    if not result.coverage.get("protocol"):
+        return "claims no protocol of the benchmark (evaluate with --eval.protocol=NAME to be ranked)"
+    replay_note = (
+        f"not replayed: {unreachable[0].detail}"
+        if unreachable
+        else next((c.detail for c in result.checks if c.name == "replay"), "not replayed (--replay.n=0)")
+    )
+    return Checked(
+        path,
+        policy,
+        result.coverage["protocol"],
+        bool(result.coverage["partial"]),
+        list(result.coverage["covered"]),
+        result.replay is not None and not unreachable,
+        replay_note,
+    )
 
 
 def board_benchmark(benchmark: str, local: dict[str, Path]) -> Path:
@@ -71,10 +109,11 @@ def board_benchmark(benchmark: str, local: dict[str, Path]) -> Path:
 
 
 def sort_bundles(
-    sources: list[str], benchmark: str = "", cache_dir: str | None = None
-) -> tuple[str, dict[str, Path], list[Rejected]]:
-    """(benchmark version, the bundles that verify by source, those listed apart with the reason): every source
-    fetched and checked against the board's benchmark (`benchmark`, else the one the bundles name)."""
+    sources: list[str], benchmark: str = "", cache_dir: str | None = None, protocol: str = "", replay: int = 0
+) -> tuple[str, str, dict[str, Checked], list[Rejected]]:
+    """(benchmark version, the protocol ranked, the bundles that verify under it by source, those listed apart with
+    the reason): every source fetched and checked against the board's benchmark (`benchmark`, else the one the
+    bundles name). The board ranks one protocol: `protocol`, else the one most verified bundles claim."""
     from roboview.benchmark.format import load_benchmark
 
     rejected: list[Rejected] = []
@@ -86,14 +125,22 @@ def sort_bundles(
             rejected.append(Rejected(source, str(exc)))
     root = board_benchmark(benchmark, local)
     version = load_benchmark(root).version
-    accepted: dict[str, Path] = {}
+    verified: dict[str, Checked] = {}
     for source, path in local.items():
-        reason = check_bundle(path, root, version)
-        if reason:
-            rejected.append(Rejected(source, reason))
+        checked = check_bundle(path, root, version, replay)
+        if isinstance(checked, str):
+            rejected.append(Rejected(source, checked))
         else:
-            accepted[source] = path
-    return version, accepted, rejected
+            verified[source] = checked
+    claims = [c.protocol for c in verified.values()]
+    ranked = protocol or (max(dict.fromkeys(claims), key=claims.count) if claims else "")
+    accepted = {s: c for s, c in verified.items() if c.protocol == ranked}
+    rejected += [
+        Rejected(s, f"claims protocol {c.protocol}; this board ranks protocol {ranked}")
+        for s, c in verified.items()
+        if c.protocol != ranked
+    ]
+    return version, ranked, accepted, rejected
 
 
 def bundle_policy(path: Path) -> str:
@@ -117,13 +164,19 @@ def build_board(
     benchmark: str = "",
     cache_dir: str | None = None,
     plots: bool = True,
+    protocol: str = "",
+    replay: int = 0,
 ) -> Board:
-    """Rank the bundles that verify (the others listed apart) and write leaderboard.html, leaderboard.json and a
-    report.html per ranked bundle under `output_dir`/reports/."""
-    version, accepted, rejected = sort_bundles(sources, benchmark, cache_dir)
+    """Rank the bundles that verify under the board's protocol (the others listed apart) and write leaderboard.html,
+    leaderboard.json and a report.html per ranked bundle under `output_dir`/reports/."""
+    version, ranked, accepted, rejected = sort_bundles(sources, benchmark, cache_dir, protocol, replay)
     out = Path(output_dir)
     board = Board(
-        version, [], rejected, generated=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+        version,
+        [],
+        rejected,
+        generated=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        protocol=ranked,
     )
     if accepted:
         _rank(board, accepted, out, metrics, plots)
@@ -132,21 +185,20 @@ def build_board(
 
 
 def _rank(
-    board: Board, accepted: dict[str, Path], out: Path, metrics_cfg: MetricsConfig, plots: bool
+    board: Board, accepted: dict[str, Checked], out: Path, metrics_cfg: MetricsConfig, plots: bool
 ) -> None:
-    """Measure the accepted bundles together: the board's entries (a report each) and its ranked rows."""
-    from roboview.eval.reporting.leaderboard import rank_metrics, single_policy_rows
+    """Measure the accepted bundles together: the board's entries (a report each) and its ranked rows (partial
+    bundles per split only; the privileged ones as a reference line)."""
+    from roboview.eval.reporting.leaderboard import rank_metrics
     from roboview.eval.reporting.report import HTML_FILE, load_results, write_report
     from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
     from roboview.eval.statistics.metrics import compute_all_metrics
 
-    # Each bundle's policy, read first: the labels rename them when loaded.
-    policies = [bundle_policy(path) for path in accepted.values()]
-    labels = labels_for(policies, list(accepted))
-    episodes, sources = load_results([p / PARQUET for p in accepted.values()], labels)
+    labels = labels_for([c.policy for c in accepted.values()], list(accepted))
+    episodes, sources = load_results([c.path / PARQUET for c in accepted.values()], labels)
     metrics = compute_all_metrics(episodes, metrics_cfg)
     several = "policies" in metrics
-    for label, policy, (source, path), src in zip(labels, policies, accepted.items(), sources):
+    for label, (source, checked), src in zip(labels, accepted.items(), sources):
         own = episodes[episodes["policy"] == label]
         report_dir = out / "reports" / label.replace("/", "_")
         # The bundle's own metrics are those just computed for it among the others: not computed again.
@@ -156,14 +208,22 @@ def _rank(
             Entry(
                 label,
                 source,
-                policy,
+                checked.policy,
                 str((report_dir / HTML_FILE).relative_to(out)),
                 int((counted(own)).shape[0]),
-                is_privileged_run(json.loads((path / RUN_FILE).read_text())),
+                is_privileged_run(json.loads((checked.path / RUN_FILE).read_text())),
+                checked.protocol,
+                checked.partial,
+                checked.replayed,
+                checked.replay_note,
             )
         )
-    if several:
-        board.overall, board.splits = rank_metrics(metrics, episodes)
-    else:
-        board.overall, board.splits = single_policy_rows(metrics)
+    layouts = metrics["policies"] if several else {labels[0]: metrics}
+    board.overall, board.splits = rank_metrics(
+        layouts,
+        metrics.get("comparisons", []),
+        episodes,
+        partial={e.label for e in board.entries if e.partial},
+        reference={e.label for e in board.entries if e.privileged},
+    )
     board.resampling = metrics["resampling"]

@@ -41,8 +41,6 @@ class BenchmarkConfig:
 
 DEFAULT_IMAGE_SIZE = 224
 VIDEO_FPS = 10  # the env's control rate: videos play in real time
-# protocol → (repeats for splits not listed (0: n_repeats), per-split repeats)
-PROTOCOLS: dict[str, tuple[int, dict[str, int]]] = {"": (0, {}), "paper": (5, {"color_x_camera_pose": 10})}
 
 
 @dataclass
@@ -52,8 +50,10 @@ class EvalConfig:
     # Per-split repeats overriding n_repeats, comma-separated split=N (e.g. color_x_camera_pose=10).
     # `roboview-plan` says how many a split needs to detect a given bias.
     split_repeats: str = ""
-    # paper: the paper's protocol, 5 repeats per single-factor instance and 10 per factorial
-    # instance (sets n_repeats and split_repeats; explicit split_repeats entries still win).
+    # A protocol the benchmark declares (its benchmark.json `protocols`; every benchmark has `paper`: 5 repeats per
+    # single-factor instance, 10 per factorial one; and `adaptive`): it sets the repeats, or the adaptive design, of
+    # every split, and run.json claims it, so the results can be ranked on a board. Empty: the repeats of the flags
+    # (a run no board ranks). Not combined with --eval.n_repeats, split_repeats, adaptive, limit or contexts.
     protocol: str = ""
     # Evaluate only the first N instances of each chosen split (fixed order); 0 = all.
     limit: int = 0
@@ -150,10 +150,6 @@ class EvalConfig:
             raise ValueError(f"unknown --eval.backend={self.backend!r}; allowed: {', '.join(BACKENDS)}")
         if self.rerun and not self.rerun.endswith(".rrd"):
             raise ValueError(f"--eval.rerun={self.rerun!r} must name a .rrd file")
-        if self.protocol not in PROTOCOLS:
-            raise ValueError(
-                f"unknown --eval.protocol={self.protocol!r}; allowed: {', '.join(map(repr, PROTOCOLS))}"
-            )
         self.split_repeat_table  # noqa: B018  (parses split_repeats now, so a typo fails before any work)
         self.shard_index  # noqa: B018  (parses shard now)
         if self.shard and self.adaptive:
@@ -200,9 +196,33 @@ class EvalConfig:
         return table
 
     def repeats_for(self, split: str) -> int:
-        """Repeats for `split`: split_repeats entry, else the protocol's, else n_repeats."""
-        default, table = PROTOCOLS[self.protocol]
-        return {**table, **self.split_repeat_table}.get(split, default or self.n_repeats)
+        """Repeats for `split` without a protocol: its split_repeats entry, else n_repeats."""
+        return self.split_repeat_table.get(split, self.n_repeats)
+
+    def follow(self, protocol) -> None:
+        """Take a declared protocol's repeats or adaptive design (roboview.benchmark.protocols.Protocol); ValueError
+        for a flag that would run something else."""
+        flag = f"--eval.protocol={protocol.name}"
+        clashes = [
+            f"--eval.{name}={getattr(self, name)}"
+            for name, default in (("n_repeats", 5), ("split_repeats", ""), ("limit", 0), ("contexts", 0))
+            if getattr(self, name) != default
+        ]
+        if self.adaptive and protocol.adaptive is None:
+            clashes.append("--eval.adaptive=true")
+        if clashes:
+            raise ValueError(
+                f"{flag} sets every split's repeats and covers each split whole; drop {', '.join(clashes)} "
+                "(or drop the protocol: such a run is not ranked on a board)"
+            )
+        if protocol.adaptive is not None:
+            if self.shard:
+                raise ValueError(f"{flag} is adaptive: it cannot be sharded (--eval.shard={self.shard})")
+            self.adaptive = True
+            self.max_repeats = int(protocol.adaptive["max_repeats"])
+            self.alpha, self.tau = float(protocol.adaptive["alpha"]), float(protocol.adaptive["tau"])
+            self.power = float(protocol.adaptive["power"])
+        self.split_repeats = ",".join(f"{s}={n}" for s, n in protocol.n_repeats.items())
 
 
 @dataclass

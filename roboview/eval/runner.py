@@ -75,12 +75,33 @@ class Plan:
         ]
 
 
+def follow_protocol(cfg: EvaluateConfig, bench) -> None:
+    """--eval.protocol: a protocol the benchmark declares, covering every chosen split, sets the run's repeats."""
+    from roboview.benchmark.protocols import choose
+
+    protocol = choose(bench.protocols, cfg.eval.protocol)
+    outside = [s for s in bench.splits if s not in protocol.splits]
+    if outside:
+        raise ValueError(
+            f"--eval.protocol={protocol.name} does not cover split(s) {', '.join(outside)}; it covers "
+            f"{', '.join(protocol.splits)}"
+        )
+    if cfg.benchmark.value_list:
+        raise ValueError(
+            f"--eval.protocol={protocol.name} covers every value of a split; drop --benchmark.values "
+            "(or the protocol: such a run is not ranked on a board)"
+        )
+    cfg.eval.follow(protocol)
+
+
 def plan(cfg: EvaluateConfig) -> Plan:
     """Load the benchmark and check every flag against it: anything wrong fails here, before any rollout."""
     with flag_errors("--benchmark.path"):
         bench = load_benchmark(cfg.benchmark.path, cfg.benchmark.split_list)
     policy = cfg.policy
-    unknown = [s for s in cfg.eval.split_repeat_table if s not in bench.splits]
+    if cfg.eval.protocol:
+        follow_protocol(cfg, bench)
+    unknown = [s for s in cfg.eval.split_repeat_table if s not in bench.splits and not cfg.eval.protocol]
     if unknown:
         raise ValueError(
             f"--eval.split_repeats names split(s) {unknown} not being evaluated; "
@@ -148,6 +169,8 @@ def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
     policy = cfg.policy
     return {
         "benchmark_version": p.version,
+        # The benchmark's protocol the run claims (--eval.protocol); "": none, the flags' repeats.
+        "protocol": cfg.eval.protocol,
         "values": cfg.benchmark.value_list,
         "policy": policy.type,
         # Whether the policy type reads the simulator state (PolicyConfig.privileged): boards rank it apart.

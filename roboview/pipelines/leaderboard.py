@@ -42,12 +42,20 @@ class LeaderboardConfig:
     cache_dir: str | None = None
     # Draw the plots of each bundle's report (false: the reports hold tables only, faster).
     plots: bool = True
+    # The benchmark protocol the board ranks (every ranked bundle claims it; the others are listed apart). Empty:
+    # the one most verified bundles claim.
+    protocol: str = ""
+    # Episodes of each bundle re-run here, drawn at random (0: none; a bundle whose policy cannot be rebuilt here is
+    # marked "not replayed" with the reason, one whose replay disagrees is listed apart).
+    replay: int = 0
 
     def __post_init__(self) -> None:
         if not self.sources:
             raise ValueError(
                 "--results is required: result bundles (folders or Hub dataset ids), comma-separated"
             )
+        if self.replay < 0:
+            raise ValueError(f"--replay={self.replay} must be 0 or more")
         if len(set(self.sources)) != len(self.sources):
             raise ValueError(f"--results names a bundle twice: {self.results}")
         if self.benchmark.path:
@@ -62,17 +70,27 @@ class LeaderboardConfig:
 
 
 def run(cfg: LeaderboardConfig) -> Board:
-    return build_board(cfg.sources, cfg.output_dir, cfg.metrics, cfg.benchmark.path, cfg.cache_dir, cfg.plots)
+    return build_board(
+        cfg.sources,
+        cfg.output_dir,
+        cfg.metrics,
+        cfg.benchmark.path,
+        cfg.cache_dir,
+        cfg.plots,
+        cfg.protocol,
+        cfg.replay,
+    )
 
 
 def _summary(cfg: LeaderboardConfig, board: Board) -> None:
     for row in board.overall.get("sr", []):
-        print(f"  {row['rank']:>2}. {row['policy']:<30} SR {100 * row['value']:6.2f}  group {row['group']}")
+        rank = "ref" if row["rank"] is None else f"{row['rank']:>2}."
+        print(f"  {rank:>3} {row['policy']:<30} SR {100 * row['value']:6.2f}  group {row['group']}")
     for r in board.rejected:
         print(f"  listed apart: {r.source}: {r.reason}")
     print(
         f"[leaderboard] {Path(cfg.output_dir) / BOARD_HTML}: {len(board.entries)} ranked, "
-        f"{len(board.rejected)} listed apart (benchmark {board.benchmark_version})"
+        f"{len(board.rejected)} listed apart (benchmark {board.benchmark_version}, protocol {board.protocol or 'none'})"
     )
 
 

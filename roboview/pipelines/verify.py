@@ -15,6 +15,17 @@ appear twice; the isolation certificate must hold; each split must be complete f
 split: its stopping record must follow from its rows); no episode may be an uncounted infrastructure error;
 every row must record its conformance verdict, none `different`. Prints a pass/fail table with reasons.
 
+Every split must be complete for the benchmark's protocol the results claim (run.json's `protocol`, from
+`roboview-evaluate --eval.protocol`): judged against the benchmark's declaration, so a split left out, a value
+filtered away or repeats padded all show. Results that cover only some of the protocol's splits are `partial`.
+
+    roboview-verify --results=outputs/eval/vision --replay.detect=0.05 --replay.confidence=0.95
+
+re-runs episodes drawn at random here (nothing in the folder predicts which), as many as the guarantee needs: any
+forgery of ≥ 5 % of the rows is caught with probability ≥ 95 % (59 episodes). `--replay=N` (or `--replay.n=N`)
+fixes the number instead; the line printed states the guarantee N gives, and that a smaller forgery can pass.
+verify.json in the results folder records the checks, the coverage and the replay.
+
 Exit status: 0 when everything checked holds, 1 otherwise (2 for unusable input).
 """
 
@@ -28,23 +39,44 @@ from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 
 @dataclass
+class ReplayConfig:
+    # Episodes to re-run, drawn at random here; 0 with detect = 0: no replay. Set: overrides detect / confidence.
+    n: int = 0
+    # Size the sample to catch any forgery of at least this share of the rows (e.g. 0.05) ...
+    detect: float = 0.0
+    # ... with at least this probability.
+    confidence: float = 0.95
+
+    def size(self) -> int:
+        """Episodes to re-run (0: none)."""
+        from roboview.eval.verification.replay import replay_size
+
+        if self.n < 0:
+            raise ValueError(f"--replay.n={self.n} must be 0 or more")
+        if self.n:
+            return self.n
+        return replay_size(self.detect, self.confidence) if self.detect else 0
+
+
+@dataclass
 class VerifyConfig:
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # A results folder (roboview.pipelines.evaluate --output_dir) to verify against its benchmark; empty: verify the
     # benchmark (--benchmark.path) on this machine.
     results: str = ""
-    # With --results: re-run this many of its episodes (a fixed sample; all when larger) with the policy run.json
-    # records, here, and require each to end as recorded (success, steps, failure reason). Catches an edited row;
-    # needs the policy to be deterministic and reachable (a checkpoint on disk, a server that answers).
-    replay: int = 0
+    # With --results: re-run episodes drawn at random here with the policy run.json records, and require each to end
+    # as recorded (success, steps, failure reason): --replay.detect=F --replay.confidence=C sizes the sample to
+    # catch any forgery of ≥ F of the rows with probability ≥ C; --replay=N fixes N. Needs the policy deterministic
+    # and reachable (a checkpoint on disk, a scripted agent, a server that answers).
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
     # With --benchmark.path alone: re-render and re-simulate only the first N instances of the reference sample
     # (a quick look; the verdict then speaks for those only). 0: all of them.
     sample: int = 0
 
     def __post_init__(self) -> None:
-        for flag in ("replay", "sample"):
-            if getattr(self, flag) < 0:
-                raise ValueError(f"--{flag}={getattr(self, flag)} must be 0 or more")
+        if self.sample < 0:
+            raise ValueError(f"--sample={self.sample} must be 0 or more")
+        self.replay.size()  # a bad detect / confidence fails here
         if not self.results and not self.benchmark.path:
             raise ValueError(
                 "give --benchmark.path=DIR (verify a benchmark on this machine) or --results=DIR "
@@ -64,8 +96,32 @@ class VerifyConfig:
 
 def run(cfg: VerifyConfig) -> Report:
     if cfg.results:
-        return verify_results(cfg.results, cfg.benchmark.path or None, cfg.replay)
+        detect = cfg.replay.detect or 0.05
+        report = verify_results(cfg.results, cfg.benchmark.path or None, cfg.replay.size(), detect)
+        write_verify_json(Path(cfg.results), report)
+        return report
     return verify_benchmark(cfg.benchmark.path, cfg.sample)
+
+
+def write_verify_json(results: Path, report: Report) -> None:
+    """verify.json beside the results: every check, the coverage and the replay (a published bundle keeps the
+    verify.json its staging wrote; a read-only folder: skipped)."""
+    import json
+
+    from roboview.eval.reporting.bundle import BUNDLE_FILE
+
+    if (results / BUNDLE_FILE).is_file():
+        return
+    record = {
+        "passed": report.passed,
+        "checks": [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in report.checks],
+        **report.coverage,
+        "replay": report.replay,
+    }
+    try:
+        (results / "verify.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
+    except OSError:
+        pass
 
 
 def _summary(cfg: VerifyConfig, result: Report) -> None:
@@ -83,9 +139,16 @@ def _summary(cfg: VerifyConfig, result: Report) -> None:
 
 
 def main(args: list[str] | None = None) -> Report:
+    import sys
+
     from roboview.eval.running.results import ResultsError
 
-    return cli_main(VerifyConfig, run, _summary, (ValueError, ResultsError), args)
+    # `--replay=N` is the short form of `--replay.n=N`.
+    argv = [
+        a.replace("--replay=", "--replay.n=", 1) if a.startswith("--replay=") else a
+        for a in (args if args is not None else sys.argv[1:])
+    ]
+    return cli_main(VerifyConfig, run, _summary, (ValueError, ResultsError), argv)
 
 
 if __name__ == "__main__":

@@ -68,7 +68,13 @@ def manifest_problems(root: Path) -> list[str] | None:
     path = root / BUNDLE_FILE
     if not path.is_file():
         return None
-    recorded = json.loads(path.read_text()).get("files", {})
+    try:
+        manifest = json.loads(path.read_text())
+    except ValueError as exc:
+        return [f"{BUNDLE_FILE}: not readable JSON ({exc})"]
+    recorded = manifest.get("files") if isinstance(manifest, dict) else None
+    if not isinstance(recorded, dict):
+        return [f"{BUNDLE_FILE}: holds no `files` object (it is a JSON {type(manifest).__name__})"]
     present = {str(p) for p in bundle_files(root)}
     problems = [f"{rel}: missing" for rel in sorted(set(recorded) - present)]
     problems += [f"{rel}: not in {BUNDLE_FILE}" for rel in sorted(present - set(recorded))]
@@ -144,7 +150,10 @@ def card(
         "",
         "| Check | Result | Detail |",
         "|---|---|---|",
-        *(f"| {c['name']} | {'pass' if c['passed'] else 'FAIL'} | {c['detail']} |" for c in checks),
+        *(
+            f"| {c['name']} | {'not run' if c['passed'] is None else 'pass' if c['passed'] else 'FAIL'} | {c['detail']} |"
+            for c in checks
+        ),
         "",
         table1(report_md),
         "",

@@ -43,6 +43,12 @@ class Entry:
     report: str  # report.html, relative to the board's folder
     episodes: int = 0
     privileged: bool = False
+    # The benchmark protocol the bundle claims; partial: it covers only some of its splits (ranked per split only).
+    protocol: str = ""
+    partial: bool = False
+    # Whether the board re-ran a random sample of its episodes here, and the guarantee or why not.
+    replayed: bool = False
+    replay_note: str = ""
 
 
 @dataclass
@@ -63,6 +69,8 @@ class Board:
     alpha: float = ALPHA
     resampling: dict[str, Any] = field(default_factory=dict)
     generated: str = ""
+    # The protocol every ranked bundle claims: overall figures are computed on it alone.
+    protocol: str = ""
 
     def to_json(self) -> dict[str, Any]:
         return {"format": BOARD_FORMAT, "adjustment": "holm"} | asdict(self)
@@ -75,105 +83,108 @@ def _rows(
     ci: dict[str, Any],
     episodes: dict[str, int],
     alpha: float,
+    reference: set[str] | frozenset[str] = frozenset(),
 ) -> list[dict[str, Any]]:
-    ranked = rank_table(values, pvalues, higher_better, alpha)
+    """The ranked rows, then the reference rows (privileged policies: shown, never ranked)."""
+    ranked_values = {n: v for n, v in values.items() if n not in reference}
+    ranked = rank_table(ranked_values, pvalues, higher_better, alpha)
     # Tied values share a rank (1, 1, 3): the order among them is alphabetical, not a claim.
-    return [
+    rows = [
         r
         | {
             "ci95": ci.get(r["policy"]),
             "episodes": episodes[r["policy"]],
-            "rank": 1 + sum((v > r["value"]) if higher_better else (v < r["value"]) for v in values.values()),
+            "rank": 1
+            + sum((v > r["value"]) if higher_better else (v < r["value"]) for v in ranked_values.values()),
         }
         for r in ranked
     ]
+    for name in sorted(set(values) & set(reference)):
+        rows.append(
+            {
+                "policy": name,
+                "value": values[name],
+                "group": "ref",
+                "rank_range": None,
+                "rank": None,
+                "reference": True,
+                "ci95": ci.get(name),
+                "episodes": episodes[name],
+            }
+        )
+    return rows
 
 
 def rank_metrics(
-    metrics: dict[str, Any], episodes: pd.DataFrame, alpha: float = ALPHA
+    layouts: dict[str, Any],
+    comparisons: list[dict],
+    episodes: pd.DataFrame,
+    partial: set[str] | frozenset[str] = frozenset(),
+    reference: set[str] | frozenset[str] = frozenset(),
+    alpha: float = ALPHA,
 ) -> tuple[dict[str, list], dict[str, dict[str, list]]]:
-    """Per split and overall, the board's rows for SR and cv_excess from `compute_all_metrics` of two or more
-    policies (`policies`, `comparisons`) and the episodes they came from (infrastructure errors left out)."""
-    layouts = metrics["policies"]
+    """Per split and overall, the board's rows for SR and cv_excess: `layouts` are each policy's metrics
+    (`compute_all_metrics`), `comparisons` the paired tests between them, `episodes` what they came from
+    (infrastructure errors left out). Partial bundles are ranked per split only; `reference` policies are shown
+    beside each ranking, never in it. Overall SR pools every counted episode of each complete bundle, one way for
+    one policy or many."""
     counted = episodes[episodes.get("status", pd.Series("ok", index=episodes.index)) != "infra_error"]
     splits: dict[str, dict[str, list]] = {}
     for split in sorted({s for layout in layouts.values() for s in layout["splits"]}):
-        comps = {frozenset(c["policies"]): c for c in metrics["comparisons"] if c["split"] == split}
+        comps = {frozenset(c["policies"]): c for c in comparisons if c["split"] == split}
         have = {n: layout["splits"][split] for n, layout in layouts.items() if split in layout["splits"]}
         n_eps = {n: int(m["n_episodes"]) for n, m in have.items()}
         entry: dict[str, list] = {}
         for metric, p_key, higher in (("sr", "p_sr", True), ("cv_excess", "p_cv_excess", False)):
             values = {n: m[metric] for n, m in have.items() if m[metric] is not None}
             if values:
-                entry[metric] = _rows(
-                    values,
-                    {pair: c[p_key] for pair, c in comps.items()},
-                    higher,
-                    {n: have[n][f"{metric}_ci95"] for n in values},
-                    n_eps,
-                    alpha,
-                )
+                pvalues = {pair: c[p_key] for pair, c in comps.items()}
+                ci = {n: have[n][f"{metric}_ci95"] for n in values}
+                entry[metric] = _rows(values, pvalues, higher, ci, n_eps, alpha, reference)
         splits[split] = entry
-    names = sorted(layouts)
+    return _overall(
+        layouts, counted, sorted(n for n in layouts if n not in partial), reference, alpha
+    ), splits
+
+
+def _overall(layouts, counted: pd.DataFrame, names: list[str], reference, alpha: float) -> dict[str, list]:
+    """Overall SR (every counted episode pooled, paired tests on the shared ones) and mean cv_excess."""
+    if not names:
+        return {}
     k = {n: int(counted.loc[counted["policy"] == n, "success"].sum()) for n in names}
     n = {n: int((counted["policy"] == n).sum()) for n in names}
     pooled = {
         frozenset((a, b)): pooled_p_sr(counted, a, b) for i, a in enumerate(names) for b in names[i + 1 :]
     }
-    overall = {
-        "sr": _rows(
-            {x: k[x] / n[x] for x in names if n[x]},
-            pooled,
-            True,
-            {x: list(wilson_ci95(k[x], n[x])) for x in names if n[x]},
-            n,
-            alpha,
-        )
-    }
+    sr = {x: k[x] / n[x] for x in names if n[x]}
+    wilson = {x: list(wilson_ci95(k[x], n[x])) for x in names if n[x]}
+    overall = {"sr": _rows(sr, pooled, True, wilson, n, alpha, reference)}
     mean_cv = {
         x: float(np.mean(v))
         for x in names
         if (v := [m["cv_excess"] for m in layouts[x]["splits"].values() if m["cv_excess"] is not None])
     }
     if mean_cv:  # no overall test of cv_excess: one group, every rank possible
-        overall["cv_excess"] = _rows(mean_cv, {}, False, {}, n, alpha)
-    return overall, splits
+        overall["cv_excess"] = _rows(mean_cv, {}, False, {}, n, alpha, reference)
+    return overall
 
 
-def single_policy_rows(metrics: dict[str, Any]) -> tuple[dict[str, list], dict[str, dict[str, list]]]:
-    """The board of one policy: its numbers, rank 1, group a."""
-    name = metrics["policy"]
-
-    def row(value: float, ci: Any, episodes: int) -> list[dict[str, Any]]:
-        return [
-            {
-                "policy": name,
-                "value": value,
-                "group": "a",
-                "rank_range": [1, 1],
-                "ci95": ci,
-                "episodes": episodes,
-                "rank": 1,
-            }
-        ]
-
-    splits = {
-        s: {
-            metric: row(m[metric], m[f"{metric}_ci95"], m["n_episodes"])
-            for metric in ("sr", "cv_excess")
-            if m[metric] is not None
-        }
-        for s, m in metrics["splits"].items()
-    }
-    n = sum(m["n_episodes"] for m in metrics["splits"].values())
-    k = sum(round(m["sr"] * m["n_episodes"]) for m in metrics["splits"].values())
-    overall = {"sr": row(k / n, list(wilson_ci95(k, n)), n)} if n else {}
-    if metrics["average"]["cv_excess"] is not None:
-        overall["cv_excess"] = row(metrics["average"]["cv_excess"], None, n)
-    return overall, splits
+def annotate(board: Board) -> None:
+    """Every table row carries its bundle's protocol, partial, replayed and replay_note."""
+    entries = {e.label: e for e in board.entries}
+    tables = [board.overall, *board.splits.values()]
+    for table in tables:
+        for rows in table.values():
+            for row in rows:
+                e = entries.get(row["policy"])
+                if e is not None:
+                    row.update(
+                        protocol=e.protocol, partial=e.partial, replayed=e.replayed, replay_note=e.replay_note
+                    )
 
 
 def write_board(board: Board, output_dir: Path) -> tuple[Path, Path]:
+    annotate(board)
     output_dir.mkdir(parents=True, exist_ok=True)
     json_path, html_path = output_dir / BOARD_JSON, output_dir / BOARD_HTML
     json_path.write_text(json.dumps(board.to_json(), indent=2, default=float) + "\n")
@@ -226,25 +237,34 @@ _METRIC_TITLES = {
 
 def _table(rows: list[dict[str, Any]], metric: str, entries: dict[str, Entry]) -> str:
     _, column, _ = _METRIC_TITLES[metric]
+    if not any(r.get("ci95") for r in rows):  # the header claims no interval the statistics do not give
+        column = column.replace(" [95 % CI]", " (no interval)")
     head = (
         '<tr><th data-key="rank">Rank</th><th class="name" data-key="policy">Policy</th>'
         f'<th data-key="value">{column}</th><th data-key="group">Group</th>'
-        '<th data-key="range">Possible ranks</th><th data-key="episodes">Episodes</th></tr>'
+        '<th data-key="range">Possible ranks</th><th data-key="episodes">Episodes</th>'
+        '<th data-key="replay">Replayed</th></tr>'
     )
     body = []
     for r in rows:
         e = entries.get(r["policy"])
-        label = html.escape(r["policy"]) + (" (privileged)" if e and e.privileged else "")
+        label = html.escape(r["policy"]) + (
+            " (privileged: reference, not ranked)" if e and e.privileged else ""
+        )
+        label += " (partial)" if e and e.partial else ""
         name = f'<a href="{html.escape(e.report)}">{label}</a>' if e and e.report else label
-        lo, hi = r["rank_range"]
+        lo, hi = r["rank_range"] or ("—", "—")
+        rank = "ref" if r["rank"] is None else r["rank"]
+        replay = ("yes" if e.replayed else "no") if e else ""
         body.append(
             f'<tr class="{"privileged" if e and e.privileged else ""}">'
-            f'<td data-sort="{r["rank"]}">{r["rank"]}</td>'
+            f'<td data-sort="{r["rank"] if r["rank"] is not None else 0}">{rank}</td>'
             f'<td class="name" data-sort="{html.escape(r["policy"])}">{name}</td>'
             f'<td data-sort="{r["value"]:.10g}">{pct(r["value"])}{html.escape(pct_ci(r["ci95"]))}</td>'
             f'<td class="group" data-sort="{html.escape(r["group"])}">{html.escape(r["group"])}</td>'
             f'<td data-sort="{lo}">{lo}–{hi}</td>'
-            f'<td data-sort="{r["episodes"]}">{r["episodes"]}</td></tr>'
+            f'<td data-sort="{r["episodes"]}">{r["episodes"]}</td>'
+            f'<td data-sort="{replay}" title="{html.escape(e.replay_note if e else "")}">{replay}</td></tr>'
         )
     return f'<table class="ranked" data-metric="{metric}"><thead>{head}</thead><tbody>{"".join(body)}</tbody></table>'
 
@@ -266,7 +286,8 @@ def render_board(board: Board) -> str:
         f"<title>RoboView-Bias leaderboard — {html.escape(board.benchmark_version)}</title>",
         f"<style>{_CSS}</style></head><body>",
         "<h1>RoboView-Bias leaderboard</h1>",
-        f"<p class=note>Benchmark <code>{html.escape(board.benchmark_version)}</code>; "
+        f"<p class=note>Benchmark <code>{html.escape(board.benchmark_version)}</code>, protocol "
+        f"<code>{html.escape(board.protocol or 'none')}</code>; "
         f"{len(board.entries)} verified bundle(s), {len(board.rejected)} listed apart; generated "
         f"{html.escape(board.generated)}.</p>",
         "<p class=note>Ranked by success rate (higher first) and by <code>cv_excess</code>, the spread of "
@@ -275,7 +296,10 @@ def render_board(board: Board) -> str:
         f"(paired tests on the same instances and seeds, Holm-adjusted, α = {board.alpha}); "
         "<b>possible ranks</b>: the ranks those tests leave open. Overall cv_excess is the mean over splits "
         "and has no overall test: its differences are tested per split. Click a column to sort. Each name "
-        "links to the bundle's report.</p>",
+        "links to the bundle's report. A privileged policy (it reads the simulator's state) is a reference line, "
+        "not ranked; a partial bundle (some of the protocol's splits) is ranked on those splits only, never "
+        "overall. <b>Replayed</b>: whether the board re-ran a random sample of the bundle's episodes here "
+        "(hover for the guarantee, or why not).</p>",
     ]
     parts += _section("Overall", board.overall, entries, "h2")
     if board.splits:

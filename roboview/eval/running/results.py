@@ -41,7 +41,7 @@ JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
 RUN_FILE = "run.json"
 # run.json keys added later, with the value every run written before them had (a resume of such a run matches).
-RUN_DEFAULTS = {"control": "joint"}
+RUN_DEFAULTS = {"control": "joint", "protocol": ""}
 # run.json keys added later that follow from the others (`privileged` from the policy type): a run.json without
 # them matches whatever this run records.
 RUN_DERIVED = ("privileged",)

@@ -61,3 +61,23 @@ class EpisodeRow:
         if self.conformance is not None:
             row["conformance"] = self.conformance
         return row | {k: v for k, v in self.extra.items() if k not in row}
+
+
+# The columns every episode row carries in episodes.parquet, their kind and whether they may be null: what a
+# verifier checks before anything else (the instance's record columns are checked against the benchmark).
+SCHEMA: dict[str, tuple[str, bool]] = {
+    "instance_id": ("string", False),
+    "split": ("string", False),
+    "value": ("string", False),
+    "context_id": ("string", False),
+    "repeat": ("integer", False),
+    "episode_seed": ("integer", False),
+    "success": ("bool", False),
+    "steps": ("integer", True),
+    "duration_s": ("float", True),
+    "policy": ("string", True),
+    "failure_reason": ("string", True),
+    STATUS: ("string", False),
+}
+# Columns whose values are drawn from a fixed set (`conformance` where a row records it).
+ALLOWED = {STATUS: STATUSES, "conformance": ("identical", "equivalent", "different")}

@@ -1,38 +1,96 @@
-"""Replay: re-run a sample of a results folder's episodes here with the policy its run.json records, and
-require each to end as its row says."""
+"""Replay: re-run a sample of a results folder's episodes here with the policy its run.json records, and require
+each to end as its row says.
+
+The sample is drawn at verification time from the verifier's own randomness (`secrets.SystemRandom`), so nothing in
+the folder predicts it. Its size follows from the guarantee asked for: to catch, with probability at least
+`confidence`, any forgery that changed at least a share `detect` of the rows, n is the smallest with
+1 − (1 − detect)^n ≥ confidence (≈ 59 episodes for 5 % at 95 %); drawing without replacement only does better. A
+forgery of fewer rows can pass: one changed row of N is caught with probability n / N. Every verification says so.
+"""
 
 from __future__ import annotations
+
+import datetime
+import math
+import secrets
 
 from roboview.eval.verification.report import Check, listed
 
 REPLAYED = ("success", "steps", "failure_reason")  # what a replayed episode must reproduce
 
 
-def replay_sample(rows: list[dict], n: int) -> list[dict]:
-    """`n` rows in a fixed order (by a hash of instance and repeat): the same sample on every machine."""
-    import hashlib
+def replay_size(detect: float, confidence: float) -> int:
+    """The smallest n with 1 − (1 − detect)^n ≥ confidence."""
+    if not 0 < detect < 1 or not 0 < confidence < 1:
+        raise ValueError(
+            f"--replay.detect={detect} and --replay.confidence={confidence} must each lie strictly between 0 and 1"
+        )
+    return math.ceil(math.log(1 - confidence) / math.log(1 - detect))
 
-    def key(row: dict) -> str:
-        return hashlib.sha256(f"{row['instance_id']}:{row['repeat']}".encode()).hexdigest()
 
-    return sorted((r for r in rows if r.get("status") != "infra_error"), key=key)[:n]
+def guarantee(n: int, total: int, detect: float) -> str:
+    """The replay's guarantee in words, for n episodes drawn of `total`."""
+    if n >= total:
+        return f"all {total} episodes re-run: any changed outcome is caught"
+    caught = 1 - (1 - detect) ** n
+    return (
+        f"{n} of {total} episodes drawn at random here: a forgery of ≥ {detect:.0%} of the rows is caught with "
+        f"probability ≥ {caught:.1%}; a smaller one can pass (one changed row: {n / total:.1%})"
+    )
 
 
-def check_replay(rows: list[dict], bench, run: dict, n: int) -> Check:
-    """Re-run a sample of the episodes with the recorded policy; every one must end as its row says."""
-    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+def draw_sample(rows: list[dict], n: int, rng=None) -> list[dict]:
+    """`n` of the counted rows (infrastructure errors are no results) drawn with `rng` (default: the system's
+    randomness, which nothing in the folder predicts)."""
+    counted = [r for r in rows if r.get("status") != "infra_error"]
+    rng = rng or secrets.SystemRandom()
+    return counted if n >= len(counted) else rng.sample(counted, n)
+
+
+def check_replay(rows: list[dict], bench, run: dict, n: int, detect: float) -> tuple[Check, dict]:
+    """Re-run a random sample of the episodes with the recorded policy; every one must end as its row says.
+    Returns the check and what verify.json records."""
+    sample = draw_sample(rows, n)
+    total = sum(r.get("status") != "infra_error" for r in rows)
+    record = {
+        "n": len(sample),
+        "detect": detect,
+        "confidence": 1 - (1 - detect) ** len(sample) if len(sample) < total else 1.0,
+        "drawn_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "passed": False,
+        "disagreements": [],
+    }
+    try:
+        policy = _recorded_policy(run)
+    except Exception as exc:  # any failure to rebuild the policy is the check's answer
+        detail = f"cannot rebuild policy {run.get('policy')!r} from run.json: {type(exc).__name__}: {exc}"
+        return Check("replay", False, detail), record | {"error": detail}
+    differ = _rerun(sample, bench, run, policy)
+    record |= {"passed": not differ, "disagreements": differ}
+    words = guarantee(len(sample), total, detect)
+    detail = (
+        f"{len(sample)} episodes re-run with {run['policy']}, each ended as recorded ({words})"
+        if not differ
+        else f"{len(differ)} of {len(sample)} re-run episodes end differently from their rows: {listed(differ)}"
+    )
+    return Check("replay", not differ, detail), record
+
+
+def _recorded_policy(run: dict):
     from roboview.policies.types import policy_config
 
-    sample = replay_sample(rows, n)
-    try:
-        settings = dict(run.get("policy_options") or {})
-        if run.get("policy_path"):
-            settings["path"] = run["policy_path"]
-        if run.get("policy_name"):
-            settings["name"] = run["policy_name"]
-        policy = policy_config(run["policy"], **settings)
-    except Exception as exc:  # any failure to rebuild the policy is the check's answer
-        return Check("replay", False, f"cannot rebuild policy {run.get('policy')!r} from run.json: {exc}")
+    settings = dict(run.get("policy_options") or {})
+    if run.get("policy_path"):
+        settings["path"] = run["policy_path"]
+    if run.get("policy_name"):
+        settings["name"] = run["policy_name"]
+    return policy_config(run["policy"], **settings)
+
+
+def _rerun(sample: list[dict], bench, run: dict, policy) -> list[str]:
+    """Each sampled row's episode again; the rows whose outcome differs, described."""
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+
     items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
     workers: dict[str, EvalWorker] = {}
     differ = []
@@ -55,10 +113,4 @@ def check_replay(rows: list[dict], bench, run: dict, n: int) -> Check:
     finally:
         for worker in workers.values():
             worker.close()
-    return Check(
-        "replay",
-        not differ,
-        f"{len(sample)} episodes re-run with {run['policy']}, each ended as recorded"
-        if not differ
-        else f"{len(differ)} of {len(sample)} re-run episodes end differently from their rows: {listed(differ)}",
-    )
+    return differ

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass
@@ -17,6 +17,10 @@ class Report:
     checks: list[Check]
     seconds: float
     verdict: str | None = None  # the conformance verdict (a benchmark's verification)
+    # A results folder's coverage of the protocol it claims: protocol, covered splits, partial.
+    coverage: dict = field(default_factory=dict)
+    # The replay: n, detect, confidence, drawn_at, passed, disagreements (None: not replayed).
+    replay: dict | None = None
 
     @property
     def passed(self) -> bool:

@@ -13,9 +13,12 @@ from pathlib import Path
 import pandas as pd
 import pyarrow.parquet as pq
 
+from roboview.benchmark.format import read_manifest
 from roboview.core.folders import folder_problem
 from roboview.eval.reporting.bundle import BUNDLE_FILE, manifest_problems
 from roboview.eval.running.row import INFRA_ERROR, STATUS
+from roboview.eval.statistics.adaptive import read_record
+from roboview.eval.verification.integrity import check_conformance, check_plausible, check_schema
 from roboview.eval.verification.report import Check, Report, listed
 
 
@@ -38,6 +41,13 @@ def benchmark_path(results: str | Path, benchmark: str | Path | None = None) -> 
 
 def read_rows(results: Path) -> tuple[list[dict], dict]:
     """The results' rows (as stored) and run.json; ResultsError for a folder that holds none."""
+    table, run = read_table(results)
+    return table.to_pylist(), run
+
+
+def read_table(results: Path):
+    """The results' episode table and run.json; ResultsError, one line naming the file and the problem, for a
+    folder that holds none or a file that cannot be read."""
     from roboview.eval.running.results import PARQUET, RUN_FILE, ResultsError, check_format
 
     advice = "give the folder roboview-evaluate wrote (--output_dir)"
@@ -46,8 +56,24 @@ def read_rows(results: Path) -> tuple[list[dict], dict]:
     )
     if problem:
         raise ResultsError(problem)
-    check_format(results / PARQUET)  # refuses other results formats with its own message
-    return pq.read_table(results / PARQUET).to_pylist(), json.loads((results / RUN_FILE).read_text())
+    try:
+        check_format(results / PARQUET)  # refuses other results formats with its own message
+        table = pq.read_table(results / PARQUET)
+    except ResultsError:
+        raise
+    except Exception as exc:  # a torn, zeroed or foreign file: named, never a traceback
+        raise ResultsError(
+            f"{results / PARQUET} cannot be read as a parquet table ({type(exc).__name__}: {exc})"
+        ) from None
+    try:
+        run = json.loads((results / RUN_FILE).read_text())
+    except (OSError, ValueError) as exc:
+        raise ResultsError(
+            f"{results / RUN_FILE} is not readable JSON ({type(exc).__name__}: {exc})"
+        ) from None
+    if not isinstance(run, dict):
+        raise ResultsError(f"{results / RUN_FILE} holds a JSON {type(run).__name__}, not an object")
+    return table, run
 
 
 def check_rows(rows: list[dict], bench) -> list[Check]:
@@ -113,11 +139,94 @@ def check_duplicates(rows: list[dict]) -> Check:
     )
 
 
-def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
-    """Every split the run chose: all its instances (after the run's value filter and shard) × its repeats, or,
-    for an adaptive split, the rounds its stopping record says, with the decision its rows give."""
+def check_complete(rows: list[dict], bench, run: dict, results: Path) -> tuple[Check, dict]:
+    """Coverage against the benchmark's protocol the run claims (never the run's own run.json): every covered
+    split whole (all its instances × the protocol's repeats, or for an adaptive split the rounds its stopping record
+    says, with the decision its rows give) and no row beyond the protocol. Returns the check and the coverage
+    (`protocol`, `covered` splits, `partial`). A run that claims no protocol is checked against its own run.json
+    and ranked nowhere."""
+    claimed = run.get("protocol") or ""
+    if not claimed:
+        check = check_own_run(rows, bench, run, results)
+        detail = (
+            f"claims no protocol of the benchmark (it declares {', '.join(bench.protocols)}): {check.detail}"
+        )
+        return Check("complete", check.passed, detail), {"protocol": "", "covered": [], "partial": True}
+    if claimed not in bench.protocols:
+        detail = f"claims protocol {claimed!r}; the benchmark declares {', '.join(bench.protocols)}"
+        return Check("complete", False, detail), {"protocol": claimed, "covered": [], "partial": True}
+    protocol = bench.protocols[claimed]
+    by_split: dict[str, list[dict]] = {}
+    for row in rows:
+        by_split.setdefault(row["split"], []).append(row)
+    problems = [
+        f"{len(extra)} rows of split {split}, which protocol {claimed} does not cover"
+        for split, extra in by_split.items()
+        if split not in protocol.splits
+    ]
+    record = (read_record(results) or {}) if protocol.adaptive is not None else {}
+    covered = [s for s in protocol.splits if by_split.get(s)]
+    for split in covered:
+        problem = _split_problem(split, by_split[split], bench, protocol, record)
+        if problem:
+            problems.append(f"{split}: {problem}")
+    partial = len(covered) < len(protocol.splits)
+    if problems:
+        detail = f"protocol {claimed}: " + "; ".join(problems)
+    elif not covered:
+        detail = f"protocol {claimed}: no split covered"
+    else:
+        detail = f"protocol {claimed}: {len(covered)} of {len(protocol.splits)} splits whole" + (
+            f" (partial: {', '.join(s for s in protocol.splits if s not in covered)} not run; ranked per split only)"
+            if partial
+            else ""
+        )
+    coverage = {"protocol": claimed, "covered": covered, "partial": partial}
+    return Check("complete", not problems and bool(covered), detail), coverage
+
+
+def _split_problem(split: str, rows: list[dict], bench, protocol, record: dict) -> str:
+    """What keeps a covered split from being whole under `protocol`: missing rows, rows beyond it, a stopping
+    record its rows do not give; "" when it is whole."""
+    from roboview.eval.statistics.adaptive import Design, decide_split
+
+    ids = {i.record["instance_id"] for i in bench.splits.get(split, [])}
+    if protocol.adaptive_split(split):
+        stopped = record.get("splits", {}).get(split)
+        design = Design(**protocol.adaptive)
+        if stopped is None:
+            return "adaptive under the protocol but no stopping record (unfinished: rerun the same command)"
+        if record.get("design") and Design(**record["design"]) != design:
+            return f"stopping record's design {record['design']} is not the protocol's {protocol.adaptive}"
+        rounds = int(stopped["rounds"])
+        if rounds > design.max_repeats:
+            return f"{rounds} rounds, beyond the protocol's {design.max_repeats}"
+    else:
+        rounds, stopped = protocol.n_repeats[split], None
+    have = {(r["instance_id"], int(r["repeat"])) for r in rows}
+    want = {(i, r) for i in ids for r in range(rounds)}
+    missing, beyond = sorted(want - have), sorted(have - want)
+    if missing:
+        return (
+            f"{len(missing)} of {len(want)} episodes missing (e.g. {missing[0][0]} repeat {missing[0][1]}; a "
+            "sample, a filter, a shard or an unfinished run)"
+        )
+    if beyond:
+        return f"{len(beyond)} rows beyond the protocol (e.g. {beyond[0][0]} repeat {beyond[0][1]})"
+    if stopped is not None:
+        decision = decide_split(
+            [r for r in rows if int(r["repeat"]) < rounds], rounds, Design(**protocol.adaptive)
+        )
+        if decision.stopped != stopped["stopped"]:
+            return f"its rows give {decision.stopped!r} after {rounds} rounds, its record says {stopped['stopped']!r}"
+    return ""
+
+
+def check_own_run(rows: list[dict], bench, run: dict, results: Path) -> Check:
+    """A run that claims no protocol: every split it chose whole for its own repeats, value filter and shard, or
+    for an adaptive split the rounds its stopping record says, with the decision its rows give; no row beyond."""
     from roboview.eval.running.results import shard_of
-    from roboview.eval.statistics.adaptive import Design, decide_split, read_record
+    from roboview.eval.statistics.adaptive import Design, decide_split
 
     values = set(run.get("values") or [])
     shard = run.get("shard")
@@ -125,8 +234,11 @@ def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
     index = int(shard.split("/")[0]) if shard else 0
     have = {(r["instance_id"], r["repeat"]) for r in rows}
     adaptive = (read_record(results) or {}) if run.get("adaptive") else {}
-    problems, summary = [], []
-    for split, repeats in run.get("n_repeats", {}).items():
+    repeats_of = run.get("n_repeats", {})
+    beyond = [r for r in rows if r["split"] not in repeats_of]
+    problems = [f"{len(beyond)} rows of splits the run did not choose"] if beyond else []
+    summary = []
+    for split, repeats in repeats_of.items():
         items = [i for i in bench.splits.get(split, []) if not values or i.record["value"] in values]
         items = [i for i in items if not n_shards or shard_of(i.record["instance_id"], n_shards) == index]
         if split not in bench.splits:
@@ -145,6 +257,7 @@ def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
             for r in range(rounds)
             if (i.record["instance_id"], r) not in have
         ]
+        over = [r for r in rows if r["split"] == split and int(r["repeat"]) >= rounds]
         if not any((i.record["instance_id"], 0) in have for i in items) and items:
             problems.append(f"{split}: missing (no episode of its {len(items)} instances)")
         elif missing:
@@ -152,6 +265,8 @@ def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
                 f"{split}: {len(missing)} of {len(items) * rounds} episodes missing "
                 f"(e.g. {missing[0][0]} repeat {missing[0][1]}; a sample or an unfinished run)"
             )
+        elif over:
+            problems.append(f"{split}: {len(over)} rows beyond its {rounds} repeats")
         elif stopped:
             design = Design(**adaptive["design"])
             split_rows = [r for r in rows if r["split"] == split and r["repeat"] < rounds]
@@ -169,24 +284,49 @@ def check_complete(rows: list[dict], bench, run: dict, results: Path) -> Check:
     )
 
 
-def verify_results(results: str | Path, benchmark: str | Path | None = None, replay: int = 0) -> Report:
-    """A results folder against its benchmark (`benchmark`, else the one its provenance names): files, identity,
-    instances, seeds, duplicates, isolation, completeness, infrastructure errors, conformance, and with `replay`
-    > 0 that many episodes re-run here. ResultsError for a folder that holds no results; ValueError when no
-    benchmark can be found."""
+def verify_results(
+    results: str | Path, benchmark: str | Path | None = None, replay: int = 0, detect: float = 0.05
+) -> Report:
+    """A results folder against its benchmark (`benchmark`, else the one its provenance names): the table's schema
+    first, then files, identity, instances, seeds, duplicates, isolation, completeness for the protocol it claims,
+    infrastructure errors, plausibility, conformance re-derived, and with `replay` > 0 that many episodes drawn at
+    random and re-run here (`detect`: the forged share the stated guarantee speaks of). ResultsError for a folder
+    that holds no readable results; ValueError when no benchmark can be found."""
     from roboview.benchmark.format import BenchmarkError, load_benchmark
-    from roboview.eval.running.results import read_version
     from roboview.eval.verification.replay import check_replay
 
     start = time.perf_counter()
     results = Path(results)
-    rows, run = read_rows(results)
+    table, run = read_table(results)
+    schema = check_schema(table)
+    if not schema.passed:  # nothing else can be read from rows that are not episode rows
+        return Report([schema], time.perf_counter() - start)
+    rows = table.to_pylist()
     root = benchmark_path(results, benchmark)
     try:
         bench = load_benchmark(root)
     except BenchmarkError as exc:
-        return Report([Check("benchmark", False, str(exc))], time.perf_counter() - start)
-    checks = [Check("benchmark", True, f"{root}: version {bench.version}, every cell as built")]
+        return Report([schema, Check("benchmark", False, str(exc))], time.perf_counter() - start)
+    checks = [schema, Check("benchmark", True, f"{root}: version {bench.version}, every cell as built")]
+    checks += _file_checks(results, run, bench)
+    checks += check_rows(rows, bench)
+    checks.append(check_isolation(rows))
+    complete, coverage = check_complete(rows, bench, run, results)
+    checks += [complete, check_infrastructure(rows), check_plausible(rows, run.get("max_steps"))]
+    checks.append(check_conformance(rows, results, read_manifest(root).get("stack")))
+    replayed = None
+    if replay > 0:
+        check, replayed = check_replay(rows, bench, run, replay, detect)
+        checks.append(check)
+    return Report(checks, time.perf_counter() - start, coverage=coverage, replay=replayed)
+
+
+def _file_checks(results: Path, run: dict, bench) -> list[Check]:
+    """A published bundle's files against bundle.json; the benchmark version the table, run.json and the
+    benchmark agree on."""
+    from roboview.eval.running.results import read_version
+
+    checks = []
     problems = manifest_problems(results)
     if problems is not None:  # a published bundle: every file as bundle.json records it
         checks.append(
@@ -208,14 +348,7 @@ def verify_results(results: str | Path, benchmark: str | Path | None = None, rep
             + ("" if same else f", not of {bench.version} (another benchmark or version)"),
         )
     )
-    checks += check_rows(rows, bench)
-    checks.append(check_isolation(rows))
-    checks.append(check_complete(rows, bench, run, results))
-    checks.append(check_infrastructure(rows))
-    checks.append(check_conformance(rows, results))
-    if replay > 0:
-        checks.append(check_replay(rows, bench, run, replay))
-    return Report(checks, time.perf_counter() - start)
+    return checks
 
 
 def check_isolation(rows: list[dict]) -> Check:
@@ -248,28 +381,4 @@ def check_infrastructure(rows: list[dict]) -> Check:
         else f"{sum(infra.values())} episodes ended by infrastructure, not results ("
         + ", ".join(f"{s}: {n}" for s, n in infra.items())
         + "); rerun the same command to re-run them",
-    )
-
-
-def check_conformance(rows: list[dict], results: Path) -> Check:
-    """Every row from a stack whose conformance was identical or equivalent, as provenance.json records it."""
-    from roboview.eval.running import provenance
-
-    verdicts = Counter(r.get("conformance") or "not recorded" for r in rows)
-    entries = [e for e in provenance.read(results) if e.get("conformance")]
-    ok = bool(rows) and set(verdicts) <= {"identical", "equivalent"} and bool(entries)
-    stacks = sorted(
-        {json.dumps(e["conformance"].get("stack", {}).get("renderer", {}), sort_keys=True) for e in entries}
-    )
-    return Check(
-        "conformance",
-        ok,
-        ", ".join(f"{n} rows {v}" for v, n in sorted(verdicts.items()))
-        + f"; {len(entries)} run(s) recorded their stack ({len(stacks)} renderer(s))"
-        + (
-            ""
-            if ok
-            else " — every row must come from a stack whose conformance is identical or "
-            "equivalent, recorded in provenance.json"
-        ),
     )

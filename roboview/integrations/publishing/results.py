@@ -82,7 +82,9 @@ def stage_bundle(
     )
     written = bundle.write_manifest(staging, identity)
     eval_results = (
-        _write_eval_results(staging, repos, report.metrics, entries) if repos.model_repo_id else None
+        _write_eval_results(staging, repos, report.metrics, entries, identity["benchmark_version"])
+        if repos.model_repo_id
+        else None
     )
     return StagedBundle(staging, written, eval_results)
 
@@ -122,23 +124,36 @@ def _identity(policy: str, episodes: pd.DataFrame, repos: BundleRepos, bench_roo
 def _write_verify(staging: Path, verified: Report, entries: list[dict], identity: dict) -> list[dict]:
     """verify.json: every check (all passed), the runs' simulation stacks and the identity; the checks."""
     checks = [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in verified.checks]
+    if verified.replay is None:  # said, never implied: staging re-runs no episode
+        checks.append({"name": "replay", "passed": None, "detail": "not replayed when the bundle was staged"})
     record = {
         "checks": checks,
         "passed": True,
+        "protocol": verified.coverage.get("protocol", ""),
+        "partial": verified.coverage.get("partial", True),
+        "covered_splits": verified.coverage.get("covered", []),
+        "replay": verified.replay,
         "stacks": [e["conformance"] for e in entries if e.get("conformance")],
     }
     (staging / bundle.VERIFY_FILE).write_text(json.dumps(record | identity, indent=2, default=str) + "\n")
     return checks
 
 
-def _write_eval_results(staging: Path, repos: BundleRepos, metrics: dict, entries: list[dict]) -> str:
-    """The model repo's `.eval_results` file (one entry per split), written beside the bundle; its text."""
+def _write_eval_results(
+    staging: Path, repos: BundleRepos, metrics: dict, entries: list[dict], version: str
+) -> str:
+    """The model repo's `.eval_results` file (one entry per split, each at the benchmark's version: the tag its
+    release carries), written beside the bundle; its text."""
     date = max((e.get("ended") or "" for e in entries), default="") or datetime.datetime.now(
         datetime.UTC
     ).isoformat(timespec="seconds")
     text = bundle.eval_results_yaml(
         bundle.eval_result_entries(
-            metrics, benchmark_repo_id=repos.benchmark_repo_id, results_repo_id=repos.repo_id, date=date
+            metrics,
+            benchmark_repo_id=repos.benchmark_repo_id,
+            results_repo_id=repos.repo_id,
+            date=date,
+            revision=version,
         )
     )
     target = staging.with_name(staging.name + "_eval_results") / ".eval_results"
