@@ -277,7 +277,8 @@ def test_publish_refuses_results_that_do_not_verify(bundles, tmp_path):
     table = pq.read_table(partial / "episodes.parquet")
     pq.write_table(table.slice(0, 10), partial / "episodes.parquet")
     with pytest.raises(
-        PublishError, match=r"does not verify.*complete: protocol quick: camera_pose: 8 of 18 episodes missing"
+        PublishError,
+        match=r"does not verify.*complete: protocol quick: camera_pose: 8 of 18 episodes missing",
     ):
         publish(PublishConfig(results=str(partial), repo_id="lab/x", dry_run=True))
     assert not (tmp_path / "partial_bundle").exists()
@@ -302,3 +303,163 @@ def test_board_page_in_chromium(bundles, tmp_path):
     assert shot.shape[0] > 600
     dark_rows = np.flatnonzero((shot.min(axis=2) < 90).sum(axis=1) > 20)
     assert len(dark_rows) > 100
+
+
+# --- a board no one can game ------------------------------------------------------------------------------
+
+
+def _copy_with(bundle: Path, to: Path, edit_rows=None, edit_run=None) -> Path:
+    """A copy of a results folder with its rows and/or run.json edited (the parquet's metadata kept)."""
+    shutil.copytree(bundle, to)
+    if edit_rows is not None:
+        table = pq.read_table(to / "episodes.parquet")
+        rows = edit_rows(table.to_pylist())
+        pq.write_table(pa.Table.from_pylist(rows, schema=table.schema), to / "episodes.parquet")
+    if edit_run is not None:
+        run = json.loads((to / "run.json").read_text())
+        (to / "run.json").write_text(json.dumps(edit_run(run)))
+    return to
+
+
+def _failed(folder: Path, **kw) -> dict[str, str]:
+    from roboview.eval.verification import verify_results
+
+    return {c.name: c.detail for c in verify_results(folder, **kw).checks if not c.passed}
+
+
+def test_completeness_is_judged_against_the_benchmarks_protocol_not_the_run_json(bundles, tmp_path):
+    from roboview.variation.instances import episode_seed
+
+    vision = bundles["vision"]
+    # One repeat dropped, run.json edited to say one repeat was asked for: still two under `quick`.
+    one = _copy_with(
+        vision,
+        tmp_path / "one",
+        lambda rows: [r for r in rows if r["repeat"] == 0],
+        lambda run: run | {"n_repeats": {SPLIT: 1}},
+    )
+    assert "camera_pose: 9 of 18 episodes missing" in _failed(one)["complete"]
+    # A value left out, run.json edited to say only the others were chosen.
+    dropped = sorted({r["value"] for r in pq.read_table(vision / "episodes.parquet").to_pylist()})[0]
+    values = _copy_with(
+        vision,
+        tmp_path / "values",
+        lambda rows: [r for r in rows if r["value"] != dropped],
+        lambda run: run | {"values": [dropped + "_not"]},
+    )
+    assert "episodes missing" in _failed(values)["complete"]
+
+    # Padded: repeats beyond the protocol, their seeds recomputed so every other check holds.
+    def pad(rows):
+        extra = [
+            r | {"repeat": 2, "episode_seed": episode_seed(r["context_id"], 2)}
+            for r in rows
+            if r["repeat"] == 0
+        ]
+        return rows + extra
+
+    padded = _copy_with(vision, tmp_path / "padded", pad, lambda run: run | {"n_repeats": {SPLIT: 3}})
+    assert "9 rows beyond the protocol (e.g." in _failed(padded)["complete"]
+    # Claiming a protocol whose repeats it does not have, or one the benchmark does not declare.
+    paper = _copy_with(vision, tmp_path / "paper", edit_run=lambda run: run | {"protocol": "paper"})
+    assert "protocol paper: camera_pose: 27 of 45 episodes missing" in _failed(paper)["complete"]
+    made_up = _copy_with(vision, tmp_path / "made_up", edit_run=lambda run: run | {"protocol": "lenient"})
+    assert (
+        "claims protocol 'lenient'; the benchmark declares adaptive, paper, quick"
+        in _failed(made_up)["complete"]
+    )
+    # The honest folder: whole for the split it covers, partial for the protocol.
+    from roboview.eval.verification import verify_results
+
+    honest = verify_results(vision)
+    assert honest.passed and honest.coverage == {"protocol": "quick", "covered": [SPLIT], "partial": True}
+
+
+def test_replay_draws_its_sample_here_and_keeps_its_stated_guarantee():
+    """By simulation: a forgery of 5 % of 400 rows is caught by the 59-episode sample in ≥ 95 % of verifications,
+    a single changed row in about n/N of them; two verifications draw different samples."""
+    import random
+
+    from roboview.eval.verification.replay import draw_sample, guarantee, replay_size
+
+    assert replay_size(0.05, 0.95) == 59 and replay_size(0.01, 0.99) == 459
+    with pytest.raises(ValueError, match="strictly between 0 and 1"):
+        replay_size(0.0, 0.95)
+    rows = [{"instance_id": f"i{i}", "repeat": 0, "status": "ok"} for i in range(400)]
+    forged, single = set(range(0, 400, 20)), {7}
+    rng, sims = random.Random(11), 4000
+    caught = one = 0
+    for _ in range(sims):
+        drawn = {int(r["instance_id"][1:]) for r in draw_sample(rows, 59, rng)}
+        caught += bool(drawn & forged)
+        one += bool(drawn & single)
+    assert caught / sims >= 0.95 - 3 * np.sqrt(0.05 * 0.95 / sims)
+    assert abs(one / sims - 59 / 400) < 3 * np.sqrt(0.15 * 0.85 / sims)
+    first, second = draw_sample(rows, 59), draw_sample(rows, 59)
+    assert {r["instance_id"] for r in first} != {r["instance_id"] for r in second}
+    words = guarantee(59, 400, 0.05)
+    assert (
+        "≥ 5% of the rows is caught with probability ≥ 95.2%" in words and "a smaller one can pass" in words
+    )
+
+
+def test_conformance_is_re_derived_and_the_schema_checked_first(bundles, tmp_path):
+    from roboview.eval.verification import verify_results
+
+    # provenance says the run's stack was `different`; the rows were relabelled `identical`.
+    relabelled = _copy_with(bundles["vision"], tmp_path / "relabelled")
+    entries = json.loads((relabelled / "provenance.json").read_text())
+    for e in entries:
+        if e.get("conformance"):
+            e["conformance"]["verdict"] = "different"
+    (relabelled / "provenance.json").write_text(json.dumps(entries))
+    detail = _failed(relabelled)["conformance"]
+    assert "ran on a stack whose conformance is 'different'" in detail
+    assert "rows labelled ['identical'], a verdict no run of this folder recorded" in detail
+    # provenance's recorded stack differences edited away from what its stack gives.
+    edited = _copy_with(bundles["vision"], tmp_path / "edited")
+    entries = json.loads((edited / "provenance.json").read_text())
+    for e in entries:
+        if e.get("conformance"):
+            e["conformance"]["stack"]["mujoco"] = "4.0.0"
+    (edited / "provenance.json").write_text(json.dumps(entries))
+    assert "mujoco: 3.8.1 vs 4.0.0" in _failed(edited)["conformance"]
+    # No `success` column: the schema check fails and nothing else is read.
+    blind = _copy_with(bundles["vision"], tmp_path / "blind")
+    table = pq.read_table(blind / "episodes.parquet")
+    pq.write_table(table.drop(["success"]), blind / "episodes.parquet")
+    result = verify_results(blind)
+    assert [c.name for c in result.checks] == ["schema"] and "no `success` column" in result.checks[0].detail
+    # A success with a timeout's reason cannot happen.
+    odd = _copy_with(
+        bundles["random"],
+        tmp_path / "odd",
+        lambda rows: [rows[0] | {"success": True}, *rows[1:]],
+    )
+    assert "a success with failure reason" in _failed(odd)["plausible"]
+
+
+def test_bad_bundles_are_listed_apart_and_the_board_goes_on(bundles, tmp_path, capsys):
+    from roboview.pipelines.verify import main as verify_main
+
+    no_repeat = _copy_with(bundles["random"], tmp_path / "no_repeat")
+    table = pq.read_table(no_repeat / "episodes.parquet")
+    pq.write_table(table.drop(["repeat"]), no_repeat / "episodes.parquet")
+    zeroed = _copy_with(bundles["random"], tmp_path / "zeroed")
+    data = bytearray((zeroed / "episodes.parquet").read_bytes())
+    data[len(data) // 3 : len(data) - 8] = bytes(len(data) - 8 - len(data) // 3)  # pages and footer zeroed
+    (zeroed / "episodes.parquet").write_bytes(bytes(data))
+    listed = _copy_with(bundles["random"], tmp_path / "listed")
+    (listed / "bundle.json").write_text("[]")
+    board = _board(bundles, tmp_path, no_repeat, zeroed, listed)
+    reasons = {Path(r.source).name: r.reason for r in board.rejected}
+    assert "schema: no `repeat` column" in reasons["no_repeat"]
+    assert "zeroed/episodes.parquet is not a readable parquet file" in reasons["zeroed"]
+    assert "bundle.json: holds no `files` object (it is a JSON list)" in reasons["listed"]
+    assert all("\n" not in r for r in reasons.values())
+    assert {e.label for e in board.entries} == {"expert", "random", "vision"}
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        verify_main([f"--results={zeroed}"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "is not a readable parquet file" in err and "Traceback" not in err
