@@ -296,3 +296,53 @@ def test_vlm_endpoint_flags_nest_and_the_flat_spelling_still_works_with_a_warnin
     with pytest.raises(SystemExit):
         parse(EvaluateConfig, [*base, "--policy.model=", "--sgl.endpoint.model=s"])
     assert "--policy.endpoint.model is empty" in capsys.readouterr().err
+
+
+SLOW_START = """
+import sys, time
+from roboview.core.workers import WorkerPool
+
+
+class SlowToStart:
+    def __init__(self):
+        time.sleep(60)  # a worker still starting (an env, a policy loading) when Ctrl-C comes
+
+    def run(self, item):
+        return item
+
+
+if __name__ == "__main__":
+    try:
+        with WorkerPool(2, SlowToStart) as pool:
+            futures = [pool.submit(i) for i in range(2)]
+            print("submitted", flush=True)
+            [f.result() for f in futures]
+    except KeyboardInterrupt:
+        print("interrupted: nothing saved", file=sys.stderr, flush=True)
+        sys.exit(130)
+"""
+
+
+def test_ctrl_c_while_workers_are_still_starting_prints_no_traceback(tmp_path):
+    """The command and its workers get SIGINT (a terminal's Ctrl-C) while both workers are in their start-up: the
+    workers ignore it, the parent ends them at once and says so, no traceback from any process."""
+    script = tmp_path / "slow_start.py"
+    script.write_text(SLOW_START)
+    proc = subprocess.Popen(
+        [sys.executable, str(script)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        cwd=ROOT,
+        env=ENV,
+    )
+    assert proc.stdout.readline().strip() == "submitted"
+    time.sleep(2)  # both workers spawned and inside their initializer
+    start = time.time()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, stderr = proc.communicate(timeout=50)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
+    assert stderr.strip().splitlines()[-1] == "interrupted: nothing saved"
+    assert time.time() - start < 30  # the workers were ended, not waited for

@@ -4,7 +4,9 @@ Each worker process builds one heavy object once — a `DemoCollector`, an `Inst
 `EvalWorker`: an env with its renderer and maybe a policy — and then runs one of its methods on each
 item it is sent. Processes are spawned (EGL contexts do not survive `fork`) and end with their
 parent: a worker blocks on its task queue, and when the parent is killed with SIGKILL nobody closes
-that queue, so without `exit_with_parent` it would linger forever (≈ 640 MB each).
+that queue, so without `exit_with_parent` it would linger forever (≈ 640 MB each). Workers ignore Ctrl-C (they are
+started with SIGINT ignored, so one still starting prints no traceback): the parent takes it, ends them and says
+what was saved.
 
     with WorkerPool(2, InstanceRenderer, (224, thresholds), method="record") as pool:
         for record in pool.imap(instances):     # ordered, bounded look-ahead
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 import threading
 import time
 from collections import deque
@@ -52,6 +55,7 @@ def exit_with_parent(poll_s: float = POLL_S) -> None:
 
 
 def _init(factory: Callable[..., Any], args: tuple, counter: Any) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the workers
     os.environ.setdefault("MUJOCO_GL", "egl")
     exit_with_parent()
     with counter.get_lock():  # ranks in start order: 0 … num_workers-1
@@ -81,7 +85,16 @@ class WorkerPool:
         )
 
     def submit(self, item: Any) -> Future:
-        return self._executor.submit(_call, self.method, item)
+        # A submit may start a worker process: started with SIGINT ignored (inherited across its exec, so Python
+        # there installs no KeyboardInterrupt handler), a Ctrl-C during its start-up leaves it alone.
+        starting = len(self._executor._processes or {}) < self.num_workers  # noqa: SLF001
+        if not starting or threading.current_thread() is not threading.main_thread():
+            return self._executor.submit(_call, self.method, item)
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            return self._executor.submit(_call, self.method, item)
+        finally:
+            signal.signal(signal.SIGINT, previous)
 
     def imap(self, items: Iterable[Any], lookahead: int | None = None) -> Iterator[Any]:
         """Results in the order of `items` (which may be endless), at most `lookahead` in flight."""
@@ -95,11 +108,15 @@ class WorkerPool:
         while pending:
             yield pending.popleft().result()
 
-    def close(self) -> None:
+    def close(self, now: bool = False) -> None:
+        """Wait for the items in flight and end the workers; `now`: end them at once (their items are lost)."""
+        if now:
+            for process in list((self._executor._processes or {}).values()):  # noqa: SLF001
+                process.terminate()
         self._executor.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> WorkerPool:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        self.close(now=kind is not None and issubclass(kind, KeyboardInterrupt))

@@ -150,6 +150,9 @@ def run_local(
                     yield from zip(work, results)
             for work in in_flight.values():
                 queue.append(work)
+        except (KeyboardInterrupt, GeneratorExit):  # Ctrl-C, or the consumer stopped: in-flight episodes are lost
+            pool.close(now=True)
+            raise
         finally:
             pool.close()
             if server is not None:
