@@ -1,5 +1,6 @@
 """build_benchmark on the tiny preset: frozen, reproducible, loadable; gate, decisions, publish."""
 
+import json
 import csv
 import hashlib
 import os
@@ -11,6 +12,7 @@ import datasets
 import mujoco
 import numpy as np
 import pytest
+import yaml
 
 from roboview.benchmark.fairness import FairnessThresholds
 from roboview.benchmark.render import InstanceRenderer
@@ -53,6 +55,17 @@ def test_splits_load_back_with_datasets_and_counts_match(built):
     card = (built / "README.md").read_text()
     assert card.startswith("---\nlicense: apache-2.0") and "split: camera_euler" in card
     assert "Suite hash" in card and "| color | 24 | 24 |" in card
+    # The Hub's benchmark file: one task per split, each with the protocols that cover it.
+    listing = yaml.safe_load((built / "eval.yaml").read_text())
+    assert listing["evaluation_framework"] == "roboview" and listing["name"] == "RoboView-Bias (tiny)"
+    assert [t["id"] for t in listing["tasks"]] == list(expected)
+    assert all(t["protocols"] == ["adaptive", "paper", "quick"] for t in listing["tasks"])
+    # The protocols the manifest declares, covered by the version.
+    manifest = json.loads((built / "benchmark.json").read_text())
+    assert manifest["protocols"]["paper"]["n_repeats"] == {s: 10 if "_x_" in s else 5 for s in expected}
+    assert manifest["protocols"]["adaptive"]["adaptive"]["max_repeats"] == 10
+    assert set(manifest["protocols"]["quick"]["n_repeats"].values()) == {3}
+    assert listing["version"] == manifest["benchmark_version"]
 
 
 def test_building_twice_gives_the_same_bytes(built, tmp_path):

@@ -775,3 +775,16 @@ def test_a_policy_server_feeds_every_worker_from_one_model(bench, tiny_checkpoin
     pd.testing.assert_frame_equal(rows(tmp_path / "served")[cols], rows(tmp_path / "alone")[cols])
     with pytest.raises(ValueError, match="needs a policy with one batched model"):
         evaluate(bench, tmp_path / "expert", policy_server=True)
+
+
+def test_inference_threads_fit_the_free_cores(monkeypatch):
+    """Threads per worker: the cores not already busy, split between the workers, at least one; the flag wins."""
+    import roboview.core.workers as workers
+
+    monkeypatch.setattr(workers.os, "cpu_count", lambda: 8)
+    monkeypatch.setattr(workers.os, "getloadavg", lambda: (0.2, 0.0, 0.0))
+    assert [workers.threads_per_worker(n) for n in (1, 2, 3, 8, 16)] == [7, 3, 2, 1, 1]
+    monkeypatch.setattr(workers.os, "getloadavg", lambda: (7.5, 0.0, 0.0))  # a busy machine: one thread each
+    assert workers.threads_per_worker(1) == 1 and workers.threads_per_worker(1, requested=4) == 4
+    with pytest.raises(ValueError, match="--eval.threads=-1 must be ≥ 0"):
+        EvalConfig(threads=-1)

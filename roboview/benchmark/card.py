@@ -44,6 +44,39 @@ def write_card(out: Path, manifest: dict) -> None:
         ]
     )
     (out / "README.md").write_text(text)
+    write_eval_yaml(out, manifest)
+
+
+EVAL_YAML = "eval.yaml"
+
+
+def write_eval_yaml(out: Path, manifest: dict) -> None:
+    """`out/eval.yaml`, the file by which the Hub lists a dataset as a benchmark of any evaluation framework: its
+    name, description, `evaluation_framework: roboview` and one task per split (the split a model repo's
+    `.eval_results` entry names as its `task_id`), each with the protocols that cover it."""
+    import yaml
+
+    protocols = manifest.get("protocols") or {}
+    splits = [s for s, counts in manifest["splits"].items() if counts.get("accepted")]
+    data = {
+        "name": f"RoboView-Bias ({manifest['suite']['preset']})",
+        "description": (
+            "Visual bias of robot policies: one visual factor varied at a time over the same task contexts and "
+            "seeds; success rate per split, and the spread across the factor's values beyond binomial noise."
+        ),
+        "evaluation_framework": "roboview",
+        "version": manifest["benchmark_version"],
+        "tasks": [
+            {
+                "id": split,
+                "split": split,
+                "metric": "success rate ×100",
+                "protocols": sorted(n for n, p in protocols.items() if split in p.get("splits", [])),
+            }
+            for split in splits
+        ],
+    }
+    (out / EVAL_YAML).write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
 
 
 def _front_matter(manifest: dict, total: int) -> str:

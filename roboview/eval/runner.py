@@ -5,7 +5,6 @@ infrastructure retries and adaptive rounds (`run_rounds`). `roboview-evaluate` p
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, replace
@@ -15,6 +14,7 @@ from tqdm import tqdm
 
 from roboview.benchmark.format import load_benchmark, select_items
 from roboview.core.cli_errors import flag_errors
+from roboview.core.workers import threads_per_worker
 from roboview.eval.config import DEFAULT_IMAGE_SIZE, VIDEO_FPS, BenchmarkConfig, EvaluateConfig
 from roboview.eval.running import provenance, videos
 from roboview.eval.running.backends import run_local, run_ray
@@ -219,8 +219,9 @@ class Runner:
             from roboview.eval.running.rerun_log import RerunLogger
 
             self.rerun = RerunLogger(Path(cfg.eval.rerun))
-        # CPU inference: split the cores between workers so num_workers × threads never oversubscribes.
-        self.threads = max(1, (os.cpu_count() or 1) // cfg.eval.num_workers)
+        # CPU inference: the free cores split between workers, so num_workers × threads never oversubscribes.
+        self.threads = threads_per_worker(cfg.eval.num_workers, cfg.eval.threads)
+        log.info("inference threads per worker: %d (--eval.threads)", self.threads)
         self.cluster: dict[str, dict] = {}
         self.per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
         self.policy_name: str | None = None  # the rows' policy name, for the rows of workers that died

@@ -63,6 +63,13 @@ from roboview.policies.base import (
     control_field,
 )
 from roboview.policies.errors import InfraError, open_with_retries
+from roboview.policies.serving.handshake import (
+    PROBE_S,
+    WrongProtocol,
+    hello_frame,
+    is_vla_eval,
+    vla_eval_server,
+)
 from roboview.policies.serving.openpi_wire import (
     ACTION_SPACES,
     EE_WIRE_DIMS,
@@ -110,17 +117,33 @@ class Connection:
         self._codec = msgpack_numpy
         self._packer = msgpack_numpy.Packer()
         headers = {"Authorization": f"Api-Key {api_key}"} if api_key else None
-        self.ws = connect(
-            url,
-            compression=None,
-            max_size=None,
-            additional_headers=headers,
-            open_timeout=open_timeout_s,
-            close_timeout=1,
-            legacy=True,
-        )
+
+        def open_ws():
+            return connect(
+                url,
+                compression=None,
+                max_size=None,
+                additional_headers=headers,
+                open_timeout=open_timeout_s,
+                close_timeout=1,
+                legacy=True,
+            )
+
+        self.ws = open_ws()
         try:
-            self.metadata = msgpack_numpy.unpackb(self.ws.recv(timeout=open_timeout_s))
+            try:
+                first = self.ws.recv(timeout=min(PROBE_S, open_timeout_s))
+            except (
+                TimeoutError
+            ):  # no metadata yet: a slow openpi server, or a vla-eval one waiting for a HELLO
+                self.ws.send(hello_frame())
+                first = self.ws.recv(timeout=open_timeout_s)
+                if is_vla_eval(first):
+                    raise vla_eval_server(url) from None
+                self.ws.close()  # metadata came late, and our HELLO went to the server: start afresh
+                self.ws = open_ws()
+                first = self.ws.recv(timeout=open_timeout_s)
+            self.metadata = msgpack_numpy.unpackb(first)
         except Exception:
             self.ws.close()
             raise
@@ -366,6 +389,8 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
         for url in self.url_list:
             try:
                 conn = connect(url, self.api_key_env, self.open_timeout_s, self.timeout_s)
+            except WrongProtocol as exc:
+                raise ValueError(f"--policy.url={url}: {exc}") from None
             except Exception as exc:
                 raise ValueError(
                     f"cannot reach the openpi server at --policy.url={url} ({type(exc).__name__}: "

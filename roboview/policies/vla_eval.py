@@ -42,6 +42,7 @@ import numpy as np
 from roboview.core.workers import worker_rank
 from roboview.policies.base import AgentView, Episode, PolicyConfig, ServedConnection
 from roboview.policies.errors import InfraError, open_with_retries
+from roboview.policies.serving.handshake import WrongProtocol, is_openpi_metadata, openpi_server
 from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
 from roboview.sim.control import CONTROLS
 from roboview.tasks import camera_names
@@ -83,7 +84,12 @@ class ServerConnection:
         )
         try:
             self.send(MessageType.HELLO, make_hello_payload(benchmark="roboview"))
-            reply = self._recv(open_timeout_s)
+            frame = self.ws.recv(timeout=open_timeout_s)
+            if is_openpi_metadata(frame):  # an openpi server greets every client with its metadata
+                raise openpi_server(url)
+            from vla_eval.protocol.messages import unpack_message
+
+            reply = unpack_message(frame)
             if reply.type != MessageType.HELLO:
                 raise ConnectionError(f"{url} answered HELLO with {reply.type.value}, not hello")
         except Exception:
@@ -349,6 +355,8 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
         for url in self.url_list:
             try:
                 connection = ServerConnection(url, self.open_timeout_s, self.timeout_s, self.image_format)
+            except WrongProtocol as exc:
+                raise ValueError(f"--policy.url={url}: {exc}") from None
             except Exception as exc:
                 raise ValueError(
                     f"cannot reach the vla-eval server at --policy.url={url} ({type(exc).__name__}: {exc}); "

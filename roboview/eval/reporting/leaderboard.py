@@ -142,9 +142,33 @@ def rank_metrics(
                 ci = {n: have[n][f"{metric}_ci95"] for n in values}
                 entry[metric] = _rows(values, pvalues, higher, ci, n_eps, alpha, reference)
         splits[split] = entry
+    splits |= _factorial(layouts, counted, reference, alpha)
     return _overall(
         layouts, counted, sorted(n for n in layouts if n not in partial), reference, alpha
     ), splits
+
+
+def _factorial(layouts, counted: pd.DataFrame, reference, alpha: float) -> dict[str, dict[str, list]]:
+    """Each factorial split's SR table (its bias measures are interaction coefficients, reported per bundle):
+    Wilson intervals, McNemar on the (instance, repeat) pairs two bundles share, Holm-adjusted."""
+    out: dict[str, dict[str, list]] = {}
+    for split in sorted({s for layout in layouts.values() for s in layout.get("interactions", {})}):
+        have = {
+            n: layout["interactions"][split]
+            for n, layout in layouts.items()
+            if split in layout.get("interactions", {})
+        }
+        rows = counted[counted["split"] == split]
+        names = sorted(have)
+        pvalues = {
+            frozenset((a, b)): pooled_p_sr(rows, a, b) for i, a in enumerate(names) for b in names[i + 1 :]
+        }
+        values = {n: m["sr"] for n, m in have.items() if m.get("sr") is not None}
+        if values:
+            ci = {n: have[n].get("sr_ci95") for n in values}
+            n_eps = {n: int(have[n]["n_episodes"]) for n in have}
+            out[split] = {"sr": _rows(values, pvalues, True, ci, n_eps, alpha, reference)}
+    return out
 
 
 def _overall(layouts, counted: pd.DataFrame, names: list[str], reference, alpha: float) -> dict[str, list]:

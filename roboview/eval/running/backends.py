@@ -150,7 +150,10 @@ def run_local(
                     yield from zip(work, results)
             for work in in_flight.values():
                 queue.append(work)
-        except (KeyboardInterrupt, GeneratorExit):  # Ctrl-C, or the consumer stopped: in-flight episodes are lost
+        except (
+            KeyboardInterrupt,
+            GeneratorExit,
+        ):  # Ctrl-C, or the consumer stopped: in-flight episodes are lost
             pool.close(now=True)
             raise
         finally:
