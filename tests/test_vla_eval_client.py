@@ -519,3 +519,29 @@ def test_images_go_only_on_the_steps_that_run_the_model(tiny_benchmark, tmp_path
     assert all("state" in obs for obs in server.seen)
     with pytest.raises(ValueError, match=r"--policy.images_every=0 must be 1 or more"):
         policy_config("vla_eval", url="ws://127.0.0.1:9", images_every=0)
+
+
+def test_a_raw_server_whose_model_acts_in_another_control_stops_before_any_episode(tiny_benchmark, tmp_path):
+    """LeRobot's server declares a `raw` action spec; its end-effector model answers 7 values. Without
+    --policy.control the run stops at the pre-flight step, naming the flag, and writes no episode; with it, it runs."""
+    from vla_eval.specs import RAW
+
+    ee_action = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0], np.float32)
+    server = FixedServer(ee_action, {"actions": RAW}, {"image": IMAGE_RGB, "language": LANGUAGE})
+    with serving(server) as url:
+        with pytest.raises(ValueError) as err:
+            evaluate(
+                tiny_benchmark,
+                tmp_path / "wrong",
+                policy_config("vla_eval", url=url, cameras="front", image_size=64),
+            )
+        message = str(err.value)
+        assert message.startswith("pre-flight: one step of") and "answered an action of 7 values" in message
+        assert "pass --policy.control=ee_delta or --policy.control=ee_abs" in message
+        assert not (tmp_path / "wrong" / "episodes.jsonl").exists()
+        result = evaluate(
+            tiny_benchmark,
+            tmp_path / "right",
+            policy_config("vla_eval", url=url, cameras="front", image_size=64, control="ee_delta"),
+        )
+    assert result.episodes == 2 and rows(tmp_path / "right")["status"].eq("ok").all()

@@ -36,7 +36,9 @@ def test_a_vla_eval_client_at_an_openpi_server_is_told_to_use_openpi(openpi_url)
     start = time.monotonic()
     with pytest.raises(ValueError) as err:
         policy_config("vla_eval", url=openpi_url)
-    assert "answered with openpi's metadata" in str(err.value) and "use --policy.type=openpi" in str(err.value)
+    assert "answered with openpi's metadata" in str(err.value) and "use --policy.type=openpi" in str(
+        err.value
+    )
     assert "cannot reach" not in str(err.value) and time.monotonic() - start < 5
 
 

@@ -155,6 +155,31 @@ def plan(cfg: EvaluateConfig) -> Plan:
     )
 
 
+def probe_policy(cfg: EvaluateConfig, p: Plan) -> None:
+    """Pre-flight for a policy whose protocol declares nothing of what it answers (an openpi server, a vla-eval
+    server with a `raw` action spec): one step of the first instance through the evaluation's own path. Anything but
+    a clean step (an action of the wrong width, a model that raises, a server that drops) is a wrong setup: it
+    stops the run here, named, before any episode is counted."""
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+
+    policy = cfg.policy
+    items = next((items for items in p.chosen.values() if items), None)
+    if policy.declares_outputs() or items is None:
+        return
+    worker = EvalWorker(WorkerSpec(policy, p.image_size, max_steps=1, task=items[0].instance.task))
+    try:
+        row = worker.run(WorkItem(items[0], 0)).row
+    finally:
+        worker.close()
+    reason = row.get("failure_reason") or ""
+    if row["status"] == "ok" and (row["success"] or reason.endswith("within 1 steps")):
+        return
+    raise ValueError(
+        f"pre-flight: one step of {items[0].record['instance_id']} with --policy.type={policy.type} failed, so no "
+        f"episode was run: {reason}"
+    )
+
+
 def check_conformance(bench: BenchmarkConfig, version: str) -> dict:
     """The start-of-run conformance check (roboview.benchmark.conformance.gate): `different` stops the run
     before any episode unless --benchmark.allow_drift=true. Returns what provenance records: the verdict, the
@@ -337,6 +362,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     cfg = replace(cfg, policy=cfg.sgl.wrap(cfg.policy))  # the SGL's endpoint is checked here
     p = plan(cfg)
     conformance = check_conformance(cfg.benchmark, p.version)
+    probe_policy(cfg, p)
     with flag_errors("--output_dir"):
         store = EpisodeStore(Path(cfg.output_dir), run_info(cfg, p))
     work = p.work

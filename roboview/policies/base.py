@@ -205,6 +205,12 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """Weights the policy loads (recorded in run.json as policy_path); None for weightless policies."""
         return None
 
+    def declares_outputs(self) -> bool:
+        """Whether what the policy answers (action width, control) is known before it runs: from its checkpoint, its
+        code or its server's handshake. False (a server whose protocol declares nothing of it): the evaluation runs
+        one step of the first instance before any episode counts, and stops, naming the cause, if that step fails."""
+        return True
+
     def served_by(self) -> dict | None:
         """For a policy served elsewhere: where, and what its server said about itself on connecting
         (recorded in provenance.json; no secrets). None for a policy that runs in the worker."""

@@ -400,6 +400,9 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
             conn.close()
         super().__post_init__()
 
+    def declares_outputs(self) -> bool:
+        return False  # openpi's metadata is free-form: the action chunk's width shows at the first answer
+
     @property
     def url_list(self) -> list[str]:
         return [u.strip() for u in self.url.split(",") if u.strip()]

@@ -385,6 +385,9 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
     def negotiated(self) -> Negotiated:
         return self._agreed
 
+    def declares_outputs(self) -> bool:
+        return self._agreed.gripper != "raw"  # a `raw` action spec (LeRobot's server): the checkpoint decides
+
     def server_name(self, url: str) -> str:
         return str(self._hello.get(url, {}).get("model_server", "server"))
 

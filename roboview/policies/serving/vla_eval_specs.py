@@ -120,10 +120,16 @@ class Negotiated:
         """The env action for one answered action; ValueError (the episode's failure) for a wrong width."""
         a = np.array(action, np.float32).reshape(-1)
         if a.shape[0] != self.action_dims or not np.isfinite(a).all():
+            fits = [c for c, d in ACTION_DIMS.items() if d == a.shape[0] and c != self.control]
+            hint = (
+                f": pass --policy.control={' or --policy.control='.join(fits)} (the spec is raw: the checkpoint decides)"
+                if self.gripper == "raw" and fits
+                else ""
+            )
             raise ValueError(
                 f"the vla-eval server answered an action of {a.shape[0]} values {a[:8].tolist()}; its "
                 f"spec {[(n, f) for n, _, f in self.action]} under {self.control} control takes "
-                f"{self.action_dims} finite values"
+                f"{self.action_dims} finite values{hint}"
             )
         if self.gripper == "raw":  # the env's own convention: passed as sent
             return a
