@@ -297,3 +297,25 @@ def test_per_value_p_value_is_exact_where_the_cmh_chi_square_is_not():
     assert exact_stratified_p(np.array([2]), np.array([8]), np.array([9]), np.array([18])) == pytest.approx(
         fisher_exact(table).pvalue, rel=1e-9
     )
+
+
+def test_the_control_arm_is_a_result_field_of_every_split():
+    """sr_control: the all-baseline instance of each (context, repeat) a split ran, on the same seed, whichever split
+    holds it (a deduplicated benchmark keeps it in one); with its Wilson interval."""
+    from roboview.variation.factors import baselines
+
+    red, near = baselines()["color"], baselines()["dist_scale"]
+    color = episodes(
+        {(red, "c1"): [1, 1], (red, "c2"): [1, 0], ("blue", "c1"): [0, 0], ("blue", "c2"): [0, 1]}
+    )
+    color = color.assign(color=color["value"], dist_scale=near)
+    dist = episodes({("3", "c1"): [0, 1]}, split="dist_scale", factor="dist_scale")
+    dist = dist.assign(color=red, dist_scale=dist["value"])
+    m = compute_metrics(pd.concat([color, dist], ignore_index=True), FAST)
+    c, d = m["splits"]["color"], m["splits"]["dist_scale"]
+    assert (c["sr_control"], c["n_control_episodes"]) == (0.75, 4)
+    assert c["sr_control_ci95"] == pytest.approx(list(wilson_interval(3, 4)))
+    # dist_scale ran c1's two repeats: its control arm is red's c1 episodes, taken from the color split.
+    assert (d["sr_control"], d["n_control_episodes"]) == (1.0, 2)
+    flat = compute_metrics(HAND, FAST)["splits"]["color"]  # no factor columns: no control arm to read
+    assert (flat["sr_control"], flat["n_control_episodes"]) == (None, 0)

@@ -24,7 +24,14 @@ import pandas as pd
 from scipy import stats as sps
 
 from roboview.eval.statistics.significance import paired_success_test
-from roboview.eval.statistics.tables import MetricsConfig, codes, conditional_cv, excess, group_sum
+from roboview.eval.statistics.tables import (
+    MetricsConfig,
+    codes,
+    conditional_cv,
+    excess,
+    group_sum,
+    wilson_ci95,
+)
 
 N_INNER = 100  # permutations behind each swap's noise floor
 N_SWAPS = 200  # swaps behind p_cv_excess
@@ -150,12 +157,9 @@ def compare_policies(episodes: pd.DataFrame, cfg: MetricsConfig) -> list[dict[st
     return out
 
 
-def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
-    """The built-in control arm: the all-baseline instance of a context runs in several single-factor
-    splits (color red, Euler (0, 0), distance 0) with the same seeds. Its outcomes should agree across
-    splits; `agreement` is the share of (context, repeat) pairs seen in ≥ 2 splits whose outcomes all
-    agree (1.0 for a deterministic policy), `sr_by_split` the baseline SR in each split.
-    None when the table lacks the factor columns or no pair repeats."""
+def all_baseline(episodes: pd.DataFrame) -> pd.DataFrame | None:
+    """The episodes of the all-baseline instances (every visual factor at its baseline) of the single-factor splits;
+    None when the table lacks the factor columns."""
     from roboview.variation.factors import baselines, visual_factors
 
     # Results written before a factor existed lack its column: there it was at its baseline.
@@ -165,6 +169,37 @@ def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
     base = episodes[~episodes["factor"].astype(str).str.contains("|", regex=False)]
     for factor in present:
         base = base[base[factor].astype(str) == str(baselines()[factor])]
+    return base
+
+
+def control_arm(episodes: pd.DataFrame, split_rows: pd.DataFrame) -> dict[str, Any]:
+    """A split's control arm as result fields: the success of the all-baseline instance of each (context, repeat) the
+    split ran, on the same seed (from whichever split ran it: they share the seed), with its Wilson interval.
+    `sr_control` None where no such episode was run (a sample without the baseline value)."""
+
+    base = all_baseline(episodes)
+    pairs = set(zip(split_rows["context_id"], split_rows["repeat"]))
+    if base is not None:
+        base = base[[p in pairs for p in zip(base["context_id"], base["repeat"])]]
+        base = base.drop_duplicates(["context_id", "repeat"])
+    n = 0 if base is None else len(base)
+    k = 0 if base is None else int(base["success"].sum())
+    return {
+        "sr_control": k / n if n else None,
+        "sr_control_ci95": list(wilson_ci95(k, n)) if n else None,
+        "n_control_episodes": n,
+    }
+
+
+def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
+    """The built-in control arm: the all-baseline instance of a context runs in several single-factor
+    splits (color red, Euler (0, 0), distance 0) with the same seeds. Its outcomes should agree across
+    splits; `agreement` is the share of (context, repeat) pairs seen in ≥ 2 splits whose outcomes all
+    agree (1.0 for a deterministic policy), `sr_by_split` the baseline SR in each split.
+    None when the table lacks the factor columns or no pair repeats."""
+    base = all_baseline(episodes)
+    if base is None:
+        return None
     groups = base.groupby(["context_id", "repeat"])["success"]
     spread = groups.agg(["nunique", "size"])
     spread = spread[spread["size"] >= 2]
