@@ -66,16 +66,16 @@ $(STAMP): pyproject.toml requirements.lock $(PLUGIN)/pyproject.toml
 
 # The first leaderboard (docs/results/board): the policies that run on this machine — the privileged expert, the
 # `vision` agent, `vlm_simple` against the classic-CV stand-in endpoint, and the random floor — on the `tiny`
-# benchmark, 3 repeats, every bundle verified, ranked with significance groups.
+# benchmark under its `quick` protocol (3 repeats), every bundle verified, ranked with significance groups.
 board: install
 	$(VENV)/bin/roboview-build-benchmark --output_dir=$(BOARD_DIR)/benchmark --preset=tiny --num_workers=2
 	@set -e; for p in expert vision random; do \
 	  $(VENV)/bin/roboview-evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=$$p \
-	    --eval.n_repeats=3 --eval.num_workers=2 --output_dir=$(BOARD_DIR)/eval/$$p; done
+	    --eval.protocol=quick --eval.num_workers=2 --output_dir=$(BOARD_DIR)/eval/$$p; done
 	@set -e; $(VENV)/bin/roboview-serve-vlm --port=$(BOARD_VLM_PORT) & server=$$!; trap "kill $$server" EXIT; sleep 5; \
 	  $(VENV)/bin/roboview-evaluate --benchmark.path=$(BOARD_DIR)/benchmark --policy.type=vlm_simple \
 	    --policy.name=vlm_simple_standin --policy.endpoint.base_url=http://127.0.0.1:$(BOARD_VLM_PORT)/v1 \
-	    --policy.endpoint.model=roboview-classic-cv-standin --eval.n_repeats=3 --eval.num_workers=2 \
+	    --policy.endpoint.model=roboview-classic-cv-standin --eval.protocol=quick --eval.num_workers=2 \
 	    --output_dir=$(BOARD_DIR)/eval/vlm_simple_standin
 	$(VENV)/bin/roboview-leaderboard --benchmark.path=$(BOARD_DIR)/benchmark --plots=false --output_dir=$(BOARD_PAGE) \
 	  --results=$(BOARD_DIR)/eval/expert,$(BOARD_DIR)/eval/vision,$(BOARD_DIR)/eval/vlm_simple_standin,$(BOARD_DIR)/eval/random
@@ -85,7 +85,7 @@ demo: install
 	  --dataset.root=$(DEMO_DIR)/dataset --dataset.num_episodes=6 --num_workers=2
 	$(VENV)/bin/roboview-build-benchmark --output_dir=$(DEMO_DIR)/benchmark --preset=tiny --num_workers=2
 	$(VENV)/bin/roboview-evaluate --benchmark.path=$(DEMO_DIR)/benchmark --policy.type=vision \
-	  --eval.n_repeats=3 --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
+	  --eval.protocol=quick --eval.num_workers=2 --eval.rerun=$(DEMO_DIR)/eval/vision.rrd \
 	  --output_dir=$(DEMO_DIR)/eval/vision
 	$(VENV)/bin/roboview-report --results=$(DEMO_DIR)/eval/vision/episodes.parquet --output_dir=$(DEMO_DIR)/report
 	@echo "Report:         $(DEMO_DIR)/report/report.html (open it in a browser; report.md, metrics.json and the plots beside it)"

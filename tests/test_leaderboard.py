@@ -70,7 +70,7 @@ def test_letters_of_a_known_order():
 
 @pytest.fixture(scope="module")
 def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
-    """expert, random and vision evaluated on one split of the tiny benchmark under its `quick` protocol (2
+    """expert, random and vision evaluated on one split of the tiny benchmark under its `quick` protocol (3
     repeats): each a partial results folder, that split whole."""
     from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run as evaluate
@@ -112,7 +112,7 @@ def test_board_ranks_verified_bundles_with_groups_and_links(bundles, tmp_path):
         sr["random"]["group"],
     ) == (2, "b")
     assert sr["random"]["rank_range"] == [2, 2] and sr["vision"]["rank_range"] == [1, 1]
-    assert sr["random"]["episodes"] == 18 and sr["random"]["ci95"][1] == pytest.approx(0.1759, abs=1e-3)
+    assert sr["random"]["episodes"] == 27 and sr["random"]["ci95"][1] == pytest.approx(0.1246, abs=1e-3)
     assert all(r["protocol"] == "quick" and r["partial"] and not r["replayed"] for r in sr.values())
     assert list(board.splits) == [SPLIT]
     entries = {e.label: e for e in board.entries}
@@ -176,7 +176,7 @@ def test_replay_refuses_edited_rows(bundles, tmp_path):
 
     edited = tmp_path / "edited"
     shutil.copytree(bundles["random"], edited)
-    _flip_success(edited / "episodes.parquet", n=18)
+    _flip_success(edited / "episodes.parquet", n=27)  # every row: any sample finds them
     result = verify_results(edited, replay=6)
     replay = {c.name: c for c in result.checks}["replay"]
     assert not replay.passed and "6 of 6 re-run episodes end differently" in replay.detail
@@ -278,7 +278,7 @@ def test_publish_refuses_results_that_do_not_verify(bundles, tmp_path):
     pq.write_table(table.slice(0, 10), partial / "episodes.parquet")
     with pytest.raises(
         PublishError,
-        match=r"does not verify.*complete: protocol quick: camera_pose: 8 of 18 episodes missing",
+        match=r"does not verify.*complete: protocol quick: camera_pose: 17 of 27 episodes missing",
     ):
         publish(PublishConfig(results=str(partial), repo_id="lab/x", dry_run=True))
     assert not (tmp_path / "partial_bundle").exists()
@@ -331,14 +331,14 @@ def test_completeness_is_judged_against_the_benchmarks_protocol_not_the_run_json
     from roboview.variation.instances import episode_seed
 
     vision = bundles["vision"]
-    # One repeat dropped, run.json edited to say one repeat was asked for: still two under `quick`.
+    # Repeats dropped, run.json edited to say one repeat was asked for: still three under `quick`.
     one = _copy_with(
         vision,
         tmp_path / "one",
         lambda rows: [r for r in rows if r["repeat"] == 0],
         lambda run: run | {"n_repeats": {SPLIT: 1}},
     )
-    assert "camera_pose: 9 of 18 episodes missing" in _failed(one)["complete"]
+    assert "camera_pose: 18 of 27 episodes missing" in _failed(one)["complete"]
     # A value left out, run.json edited to say only the others were chosen.
     dropped = sorted({r["value"] for r in pq.read_table(vision / "episodes.parquet").to_pylist()})[0]
     values = _copy_with(
@@ -352,17 +352,17 @@ def test_completeness_is_judged_against_the_benchmarks_protocol_not_the_run_json
     # Padded: repeats beyond the protocol, their seeds recomputed so every other check holds.
     def pad(rows):
         extra = [
-            r | {"repeat": 2, "episode_seed": episode_seed(r["context_id"], 2)}
+            r | {"repeat": 3, "episode_seed": episode_seed(r["context_id"], 3)}
             for r in rows
             if r["repeat"] == 0
         ]
         return rows + extra
 
-    padded = _copy_with(vision, tmp_path / "padded", pad, lambda run: run | {"n_repeats": {SPLIT: 3}})
+    padded = _copy_with(vision, tmp_path / "padded", pad, lambda run: run | {"n_repeats": {SPLIT: 4}})
     assert "9 rows beyond the protocol (e.g." in _failed(padded)["complete"]
     # Claiming a protocol whose repeats it does not have, or one the benchmark does not declare.
     paper = _copy_with(vision, tmp_path / "paper", edit_run=lambda run: run | {"protocol": "paper"})
-    assert "protocol paper: camera_pose: 27 of 45 episodes missing" in _failed(paper)["complete"]
+    assert "protocol paper: camera_pose: 18 of 45 episodes missing" in _failed(paper)["complete"]
     made_up = _copy_with(vision, tmp_path / "made_up", edit_run=lambda run: run | {"protocol": "lenient"})
     assert (
         "claims protocol 'lenient'; the benchmark declares adaptive, paper, quick"

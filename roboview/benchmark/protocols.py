@@ -8,7 +8,7 @@ never against the folder's own run.json: a covered split misses no row and holds
 folder that covers only some of the protocol's splits is `partial` (ranked per split only).
 
 Every benchmark declares `paper` (5 repeats per single-factor instance, 10 per factorial one: the paper's protocol)
-and `adaptive`; a preset may add its own (`tiny`: `quick`, 2 repeats, the demo's). A benchmark built before
+and `adaptive`; a preset may add its own (`tiny`: `quick`, 3 repeats, the demo's and the first board's). A benchmark built before
 protocols were declared gets these defaults from its splits.
 """
 
@@ -20,7 +20,7 @@ from typing import Any
 PAPER_REPEATS, FACTORIAL_REPEATS = 5, 10
 ADAPTIVE_DESIGN = {"max_repeats": 10, "alpha": 0.05, "tau": 0.3, "power": 0.8}
 # Protocols a preset declares beyond the defaults: name → repeats per instance, every split.
-PRESET_PROTOCOLS: dict[str, dict[str, int]] = {"tiny": {"quick": 2}}
+PRESET_PROTOCOLS: dict[str, dict[str, int]] = {"tiny": {"quick": 3}}
 
 
 def is_factorial(split: str) -> bool:

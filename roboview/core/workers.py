@@ -5,7 +5,7 @@ Each worker process builds one heavy object once — a `DemoCollector`, an `Inst
 item it is sent. Processes are spawned (EGL contexts do not survive `fork`) and end with their
 parent: a worker blocks on its task queue, and when the parent is killed with SIGKILL nobody closes
 that queue, so without `exit_with_parent` it would linger forever (≈ 640 MB each). Workers ignore Ctrl-C (they are
-started with SIGINT ignored, so one still starting prints no traceback): the parent takes it, ends them and says
+started with SIGINT blocked, so one still starting prints no traceback): the parent takes it, ends them and says
 what was saved.
 
     with WorkerPool(2, InstanceRenderer, (224, thresholds), method="record") as pool:
@@ -70,6 +70,7 @@ def exit_with_parent(poll_s: float = POLL_S) -> None:
 
 def _init(factory: Callable[..., Any], args: tuple, counter: Any) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the workers
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked while the process started
     os.environ.setdefault("MUJOCO_GL", "egl")
     exit_with_parent()
     with counter.get_lock():  # ranks in start order: 0 … num_workers-1
@@ -99,16 +100,16 @@ class WorkerPool:
         )
 
     def submit(self, item: Any) -> Future:
-        # A submit may start a worker process: started with SIGINT ignored (inherited across its exec, so Python
-        # there installs no KeyboardInterrupt handler), a Ctrl-C during its start-up leaves it alone.
-        starting = len(self._executor._processes or {}) < self.num_workers  # noqa: SLF001
-        if not starting or threading.current_thread() is not threading.main_thread():
+        # A submit may start a worker process: it is started with SIGINT blocked (the mask is inherited across its
+        # exec; its initializer then ignores SIGINT and unblocks it), so a Ctrl-C during its start-up leaves it
+        # alone. Here the signal is only held back while the process starts, and delivered right after.
+        if threading.current_thread() is not threading.main_thread():
             return self._executor.submit(_call, self.method, item)
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             return self._executor.submit(_call, self.method, item)
         finally:
-            signal.signal(signal.SIGINT, previous)
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
     def imap(self, items: Iterable[Any], lookahead: int | None = None) -> Iterator[Any]:
         """Results in the order of `items` (which may be endless), at most `lookahead` in flight."""

@@ -148,12 +148,7 @@ def card(
         "",
         "## Verification",
         "",
-        "| Check | Result | Detail |",
-        "|---|---|---|",
-        *(
-            f"| {c['name']} | {'not run' if c['passed'] is None else 'pass' if c['passed'] else 'FAIL'} | {c['detail']} |"
-            for c in checks
-        ),
+        *_checks_table(checks),
         "",
         table1(report_md),
         "",
@@ -165,6 +160,16 @@ def card(
         "",
     ]
     return "\n".join(lines)
+
+
+def _checks_table(checks: Sequence[dict[str, Any]]) -> list[str]:
+    """The verification table: each check passed, failed or not run (`passed` None: the replay staging skips)."""
+    result = {None: "not run", True: "pass", False: "FAIL"}
+    return [
+        "| Check | Result | Detail |",
+        "|---|---|---|",
+        *(f"| {c['name']} | {result[c['passed']]} | {c['detail']} |" for c in checks),
+    ]
 
 
 def eval_result_entries(

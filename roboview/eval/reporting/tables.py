@@ -165,6 +165,13 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
         "success rate, successes / episodes of the split, ×100, with its Wilson 95 % interval",
     ),
     Column(
+        "control SR [95 % CI]",
+        "sr_control",
+        lambda row: pct(row[1].get("sr_control")) + pct_ci(row[1].get("sr_control_ci95")),
+        "the control arm: success of the all-baseline instance on the same contexts and seeds, ×100, with its "
+        "Wilson 95 % interval; N/A: none of it was run",
+    ),
+    Column(
         "CV",
         "cv",
         lambda row: pct(row[1]["cv"]),
