@@ -1,8 +1,8 @@
 """build_benchmark on the tiny preset: frozen, reproducible, loadable; gate, decisions, publish."""
 
-import json
 import csv
 import hashlib
+import json
 import os
 import subprocess
 import sys
