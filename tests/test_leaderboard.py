@@ -463,3 +463,14 @@ def test_bad_bundles_are_listed_apart_and_the_board_goes_on(bundles, tmp_path, c
         verify_main([f"--results={zeroed}"])
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and "is not a readable parquet file" in err and "Traceback" not in err
+
+
+def test_the_board_replays_bundles_whose_policy_runs_here(bundles, tmp_path):
+    board = _board(bundles, tmp_path, replay=2)
+    assert not board.rejected and all(e.replayed for e in board.entries)
+    for e in board.entries:
+        assert (
+            e.replay_note.startswith("2 episodes re-run with") and "a smaller one can pass" in e.replay_note
+        )
+    rows = json.loads((tmp_path / "board" / "leaderboard.json").read_text())["splits"][SPLIT]["sr"]
+    assert all(r["replayed"] for r in rows)
