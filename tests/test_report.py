@@ -154,6 +154,7 @@ def test_report_tables_equal_metrics(report):
         "Split",
         "Policy",
         "SR [95 % CI]",
+        "control SR [95 % CI]",
         "CV",
         "noise floor",
         "cv_excess",
@@ -177,13 +178,14 @@ def test_report_tables_equal_metrics(report):
             p = "N/A" if m["p_value"] is None else f"{m['p_value']:.4f}"
             expected = [
                 _with_ci(m["sr"], m["sr_ci95"]),
+                _with_ci(m["sr_control"], m["sr_control_ci95"]),
                 _pct(m["cv"]),
                 _pct(m["cv_null"]),
                 _pct(m["cv_excess"]),
                 p,
                 str(m["n_episodes"]),
             ]
-            assert table1[title, policy][:6] == expected
+            assert table1[title, policy][:7] == expected
         label = "expert (privileged)" if policy == "expert" else policy
         assert summary[label][:3] == [_pct(layout["average"][k]) for k in ("sr", "cv", "cv_excess")]
         f = layout["interactions"]["color_x_camera_pose"]
@@ -192,8 +194,8 @@ def test_report_tables_equal_metrics(report):
             _pct(f["iec"]["color|camera_pose"]),
             _pct(f["iec_null"]["color|camera_pose"]),
         ]
-    assert table1["Color", "random"][1] == "N/A"
-    assert table1["Color", "random"][6] == "not testable: every episode failed"
+    assert table1["Color", "random"][2] == "N/A"
+    assert table1["Color", "random"][7] == "not testable: every episode failed"
     comparisons = _table_rows(markdown, "Policy comparisons")
     color = next(c for c in report.metrics["comparisons"] if c["split"] == "color")
     assert comparisons["color"][:3] == ["random − expert", str(color["n_pairs"]), _pct(color["delta_sr"])]

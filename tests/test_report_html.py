@@ -88,6 +88,7 @@ def test_split_blocks_print_metrics_json(report):
         assert header == [
             "Policy",
             "SR [95 % CI]",
+            "control SR [95 % CI]",
             "CV",
             "noise floor",
             "cv_excess",
@@ -98,8 +99,9 @@ def test_split_blocks_print_metrics_json(report):
         assert sorted(r[0] for r in rows) == sorted(policies)
         for row in rows:
             m = policies[row[0]]["splits"][split]
-            assert row[1:7] == [
+            assert row[1:8] == [
                 pct(m["sr"]) + pct_ci(m["sr_ci95"]),
+                pct(m["sr_control"]) + pct_ci(m["sr_control_ci95"]),
                 pct(m["cv"]),
                 pct(m["cv_null"]),
                 pct(m["cv_excess"]),
@@ -113,12 +115,12 @@ def test_split_blocks_print_metrics_json(report):
                 if m["p_value"] < 0.05
                 else "no bias detected"
             )
-            assert row[7].startswith(expected)
+            assert row[8].startswith(expected)
     # The value-dependent policy is flagged on color; the all-failing one is not testable, never "no bias".
     color = {r[0]: r for r in parser.tables["split-color"][0][1:]}
     assert (
-        color["biased"][7].startswith("bias (p")
-        and color["random"][7] == "not testable: every episode failed"
+        color["biased"][8].startswith("bias (p")
+        and color["random"][8] == "not testable: every episode failed"
     )
     summary = {r[0]: r for r in parser.tables["summary"][0][1:]}
     n = len(policies["random"]["splits"])
@@ -164,7 +166,17 @@ def test_report_md_and_html_print_the_same_tables(report):
         assert (
             header[1:]
             == html_header
-            == ["Policy", "SR [95 % CI]", "CV", "noise floor", "cv_excess", "p", "episodes", "verdict"]
+            == [
+                "Policy",
+                "SR [95 % CI]",
+                "control SR [95 % CI]",
+                "CV",
+                "noise floor",
+                "cv_excess",
+                "p",
+                "episodes",
+                "verdict",
+            ]
         )
         md_rows = [r[1:] for r in rows if r[0] == title]
         assert md_rows == html_rows and len(md_rows) == len(policies)

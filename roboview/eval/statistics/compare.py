@@ -180,7 +180,7 @@ def control_arm(episodes: pd.DataFrame, split_rows: pd.DataFrame) -> dict[str, A
     base = all_baseline(episodes)
     pairs = set(zip(split_rows["context_id"], split_rows["repeat"]))
     if base is not None:
-        base = base[[p in pairs for p in zip(base["context_id"], base["repeat"])]]
+        base = base.loc[np.array([p in pairs for p in zip(base["context_id"], base["repeat"])], dtype=bool)]
         base = base.drop_duplicates(["context_id", "repeat"])
     n = 0 if base is None else len(base)
     k = 0 if base is None else int(base["success"].sum())
