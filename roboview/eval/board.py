@@ -79,7 +79,10 @@ def check_bundle(path: Path, benchmark: Path, version: str, replay: int = 0) -> 
     replay_note = (
         f"not replayed: {unreachable[0].detail}"
         if unreachable
-        else next((c.detail for c in result.checks if c.name == "replay"), "not replayed: the board ran with --replay=0")
+        else next(
+            (c.detail for c in result.checks if c.name == "replay"),
+            "not replayed: the board ran with --replay=0",
+        )
     )
     return Checked(
         path,
