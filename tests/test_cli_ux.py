@@ -28,6 +28,13 @@ def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedPro
     )
 
 
+def terminal_signals() -> None:
+    """In the child, before exec: Ctrl-C as a terminal's shell leaves it (default action, not blocked), whatever the
+    test process inherited (a test runner's worker may run with SIGINT ignored; exec keeps that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
     from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
     from roboview.policies.types import policy_config
@@ -49,6 +56,7 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=terminal_signals,
         cwd=ROOT,
         env=ENV,
     )
@@ -334,6 +342,7 @@ def test_ctrl_c_while_workers_are_still_starting_prints_no_traceback(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=terminal_signals,
         cwd=ROOT,
         env=ENV,
     )

@@ -359,7 +359,7 @@ def test_repeats_per_split_and_the_benchmarks_protocols():
     assert (paper.repeats_for("color"), paper.repeats_for("color_x_camera_pose")) == (5, 10)
     quick = EvalConfig(protocol="quick")
     quick.follow(protocols["quick"])
-    assert [quick.repeats_for(s) for s in ("color", "color_x_camera_pose")] == [2, 2]
+    assert [quick.repeats_for(s) for s in ("color", "color_x_camera_pose")] == [3, 3]
     adaptive = EvalConfig(protocol="adaptive")
     adaptive.follow(protocols["adaptive"])
     assert (

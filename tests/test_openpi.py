@@ -168,16 +168,21 @@ def test_client_actions_equal_the_checkpoint_in_process(tiny_benchmark, tiny_che
     env.close()
 
 
-def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, openpi_server, tmp_path):
-    # The server expects DROID keys; LIBERO's make it raise: its traceback frame is the episode's reason.
-    evaluate(tiny_benchmark, tmp_path / "libero", client(openpi_server, obs_format="libero"), limit=2)
-    df = rows(tmp_path / "libero")
-    assert len(df) == 2 and not df["success"].any()
-    assert all(
-        "server error: ValueError: request has no" in r and "observation/exterior_image_1_left" in r
-        for r in df["failure_reason"]
+def test_a_server_that_errors_or_answers_the_wrong_shape_stops_the_run_before_any_episode(
+    tiny_benchmark, openpi_server, tmp_path
+):
+    """openpi's metadata declares nothing of what the model answers, so the first step of the first instance runs
+    as a pre-flight: a server that raises on the request (it expects DROID keys and is sent LIBERO's) or answers
+    7-D actions to an 8-D env stops the run there with the cause, and no episode is written."""
+    with pytest.raises(ValueError) as err:
+        evaluate(tiny_benchmark, tmp_path / "libero", client(openpi_server, obs_format="libero"), limit=2)
+    message = str(err.value)
+    assert message.startswith("pre-flight: one step of") and "no episode was run" in message
+    assert (
+        "server error: ValueError: request has no" in message
+        and "observation/exterior_image_1_left" in message
     )
-    assert df["steps"].tolist() == [0, 0]
+    assert not (tmp_path / "libero" / "episodes.jsonl").exists()
 
     # A server (openpi-server's own) whose policy answers 7-D actions: wrong shape, named.
     from openpi_server.websocket_policy_server import WebsocketPolicyServer
@@ -197,9 +202,9 @@ def test_error_frame_and_wrong_chunk_fail_only_that_episode(tiny_benchmark, open
             break
         except OSError:
             time.sleep(0.1)
-    evaluate(tiny_benchmark, tmp_path / "seven", client(port), limit=1, workers=1)
-    reason = rows(tmp_path / "seven")["failure_reason"][0]
-    assert "answered actions of shape (5, 7)" in reason and "(H, 8)" in reason
+    with pytest.raises(ValueError) as err:
+        evaluate(tiny_benchmark, tmp_path / "seven", client(port), limit=1, workers=1)
+    assert "answered actions of shape (5, 7)" in str(err.value) and "(H, 8)" in str(err.value)
 
 
 def test_every_layout_carries_the_observation_there_and_back(env):

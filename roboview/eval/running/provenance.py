@@ -108,11 +108,22 @@ def checkpoint_info(path: str | None) -> dict | None:
     }
 
 
+def _short(word: str) -> str:
+    """A path under the working directory as typed relative to it (`cwd` is recorded beside the command): a console
+    script's interpreter is absolute in `sys.orig_argv`."""
+    if not word.startswith("/"):
+        return word
+    try:
+        return os.path.relpath(word) if Path(word).resolve().is_relative_to(Path.cwd().resolve()) else word
+    except (OSError, ValueError):
+        return word
+
+
 def start_entry(benchmark_version: str, checkpoint: str | None, argv: list[str] | None = None) -> dict:
     return {
         "started": now(),
         "ended": None,
-        "command": " ".join(getattr(sys, "orig_argv", sys.argv) if argv is None else argv),
+        "command": " ".join(map(_short, getattr(sys, "orig_argv", sys.argv) if argv is None else argv)),
         "cwd": os.getcwd(),
         "roboview_commit": git_commit(),
         "packages": package_versions(),
