@@ -171,3 +171,45 @@ def test_the_plugin_runs_an_end_effector_checkpoint_in_its_control(tiny_benchmar
         )
     finally:
         env.close()
+
+
+def test_the_plugin_fits_the_checkpoint_lerobot_eval_loads(tiny_benchmark, tmp_path, monkeypatch):
+    """The checkpoint's own image side is adopted (and a different --env.image_size refused); an end-effector
+    checkpoint under the default joint control is refused naming --env.control. The checkpoint is the one
+    lerobot-eval's own parser reads from --policy.path; its config.json is written by LeRobot's ACTConfig."""
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+    from lerobot.utils.constants import ACTION
+
+    from roboview.integrations.lerobot import RoboViewEnv
+
+    def checkpoint(name: str, side: int, width: int) -> Path:
+        folder = tmp_path / name
+        folder.mkdir()
+        ACTConfig(
+            input_features={
+                "observation.images.left_top": PolicyFeature(FeatureType.VISUAL, (3, side, side)),
+                "observation.state": PolicyFeature(FeatureType.STATE, (8,)),
+            },
+            output_features={ACTION: PolicyFeature(FeatureType.ACTION, (width,))},
+        )._save_pretrained(folder)
+        return folder
+
+    joint64, ee64 = checkpoint("joint64", 64, 8), checkpoint("ee64", 64, 7)
+    monkeypatch.setattr("sys.argv", ["lerobot-eval", f"--policy.path={joint64}", "--env.type=roboview"])
+    config = RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark))
+    assert config.image_size == 64 and config.features["pixels/left_top"].shape == (64, 64, 3)
+    with pytest.raises(ValueError) as error:
+        RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), image_size=96)
+    assert str(error.value) == (
+        f"--env.image_size=96 but the checkpoint {joint64} was trained on 64×64 images; drop the flag (its size is "
+        "used) or pass 64"
+    )
+    monkeypatch.setattr("sys.argv", ["lerobot-eval", f"--policy.path={ee64}"])
+    with pytest.raises(
+        ValueError, match=r"takes 8-d actions but the checkpoint .* answers 7: pass --env.control=ee_delta"
+    ):
+        RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark))
+    assert RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), control="ee_delta").image_size == 64
+    monkeypatch.setattr("sys.argv", ["lerobot-train", "--policy.type=act"])  # no checkpoint to read: 96
+    assert RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark)).image_size == 96

@@ -2,7 +2,7 @@
 
     lerobot-eval --env.type=roboview \
         --env.benchmark_path=outputs/benchmark --env.task=color,camera_pose --env.cameras=left_top,wrist \
-        --env.image_size=96 --policy.path=CKPT/pretrained_model --eval.n_episodes=141 --eval.batch_size=8 \
+        --policy.path=CKPT/pretrained_model --eval.n_episodes=141 --eval.batch_size=8 \
         --output_dir=outputs/lerobot_eval
     python -m roboview.integrations.lerobot.convert --eval_info=outputs/lerobot_eval/eval_info.json \
         --env.benchmark_path=outputs/benchmark --output_dir=outputs/eval/lerobot_eval
@@ -26,6 +26,8 @@ evals, one success rate per split. The same env is offered as a LeRobot EnvHub e
 from __future__ import annotations
 
 import functools
+import json
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,6 +46,21 @@ if GYM_ID not in gym.registry:
     )
 
 
+DEFAULT_IMAGE_SIZE = 96
+log = logging.getLogger(__name__)
+
+
+def checkpoint_features(path: str | None) -> tuple[int | None, int | None]:
+    """(image side, action width) of a local LeRobot checkpoint (its config.json); (None, None) without one."""
+    config = Path(path) / "config.json" if path else None
+    if config is None or not config.is_file():
+        return None, None
+    data = json.loads(config.read_text())
+    images = [f["shape"] for f in (data.get("input_features") or {}).values() if f.get("type") == "VISUAL"]
+    action = (data.get("output_features") or {}).get(ACTION, {}).get("shape") or [None]
+    return (int(images[0][-1]) if images else None), (int(action[0]) if action[0] else None)
+
+
 @EnvConfig.register_subclass("roboview")
 @dataclass
 class RoboViewEnv(EnvConfig):
@@ -57,8 +74,9 @@ class RoboViewEnv(EnvConfig):
     benchmark_path: str = "outputs/benchmark"
     # The checkpoint's cameras (comma-separated): what it was trained on (LIBERO's scenes: image,image2).
     cameras: str = "left_top,wrist"
-    # The checkpoint's square image side (pixels): what it was trained on.
-    image_size: int = 96
+    # The checkpoint's square image side (pixels): what it was trained on. 0: read from the checkpoint lerobot-eval
+    # loads (--policy.path, its config.json), else 96; a side that disagrees with the checkpoint's is refused.
+    image_size: int = 0
     # Episodes of a split: its selected instances × n_repeats, in the order roboview.pipelines.evaluate uses
     # (--eval.n_episodes runs that many per split; the count is printed when the envs are made).
     n_repeats: int = 1
@@ -93,11 +111,12 @@ class RoboViewEnv(EnvConfig):
         for name in ("n_repeats", "max_steps", "fps"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
-        check_image_size(self.image_size, "--env.image_size")
         from roboview.sim.control import CONTROLS
 
         if self.control not in CONTROLS:
             raise ValueError(f"--env.control={self.control!r} unknown; allowed: {', '.join(CONTROLS)}")
+        self._fit_checkpoint()
+        check_image_size(self.image_size, "--env.image_size")
         if not self.split_names_given:
             raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
         self.features = {
@@ -110,6 +129,31 @@ class RoboViewEnv(EnvConfig):
                 type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3)
             )
             self.features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
+
+    def _fit_checkpoint(self) -> None:
+        """The pre-flight against the checkpoint lerobot-eval will load (`--policy.path`, read as lerobot's own parser
+        reads it): its image side is adopted when --env.image_size is 0 and refused when it differs; an action width
+        that is not --env.control's is refused naming the flag. Nothing to read (training, a Hub id): 96, no check."""
+        from lerobot.configs import parser
+
+        path = parser.get_path_arg("policy")
+        side, width = checkpoint_features(path)
+        if self.image_size == 0:
+            self.image_size = side or DEFAULT_IMAGE_SIZE
+            if side:
+                log.info("--env.image_size: %d, the checkpoint's own (%s)", side, path)
+        elif side and side != self.image_size:
+            raise ValueError(
+                f"--env.image_size={self.image_size} but the checkpoint {path} was trained on {side}×{side} images; "
+                f"drop the flag (its size is used) or pass {side}"
+            )
+        takes = 8 if self.control == "joint" else 7
+        if width and width != takes:
+            fix = "--env.control=joint" if width == 8 else "--env.control=ee_delta (or ee_abs)"
+            raise ValueError(
+                f"--env.control={self.control} takes {takes}-d actions but the checkpoint {path} answers {width}: "
+                f"pass {fix}, as its dataset was collected"
+            )
 
     @property
     def camera_list(self) -> tuple[str, ...]:
