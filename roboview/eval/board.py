@@ -52,7 +52,7 @@ class Checked:
     replay_note: str
 
 
-def check_bundle(path: Path, benchmark: Path, version: str, replay: int = 0) -> Checked | str:
+def check_bundle(path: Path, benchmark: Path, version: str, replay: int = 0, loaded=None) -> Checked | str:
     """The bundle at `path` verified against the board's `benchmark` (version `version`), `replay` episodes drawn
     at random and re-run where its policy is reachable here; or why it cannot be ranked (one line: any file that
     cannot be read, any failed check)."""
@@ -66,7 +66,7 @@ def check_bundle(path: Path, benchmark: Path, version: str, replay: int = 0) -> 
         recorded = read_version(path / PARQUET)
         if recorded != version:
             return f"results of benchmark {recorded}; this board ranks {version}"
-        result = verify_results(path, benchmark, replay)
+        result = verify_results(path, benchmark, replay, loaded=loaded)
         policy = bundle_policy(path)
     except Exception as exc:  # an unreadable or malformed bundle is listed apart, the board goes on
         return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
@@ -127,10 +127,10 @@ def sort_bundles(
         except RuntimeError as exc:
             rejected.append(Rejected(source, str(exc)))
     root = board_benchmark(benchmark, local)
-    version = load_benchmark(root).version
+    bench = load_benchmark(root)  # loaded and checked once; every bundle is verified against it
     verified: dict[str, Checked] = {}
     for source, path in local.items():
-        checked = check_bundle(path, root, version, replay)
+        checked = check_bundle(path, root, bench.version, replay, bench)
         if isinstance(checked, str):
             rejected.append(Rejected(source, checked))
         else:
@@ -143,7 +143,7 @@ def sort_bundles(
         for s, c in verified.items()
         if c.protocol != ranked
     ]
-    return version, ranked, accepted, rejected
+    return bench.version, ranked, accepted, rejected
 
 
 def bundle_policy(path: Path) -> str:

@@ -172,12 +172,11 @@ def all_baseline(episodes: pd.DataFrame) -> pd.DataFrame | None:
     return base
 
 
-def control_arm(episodes: pd.DataFrame, split_rows: pd.DataFrame) -> dict[str, Any]:
+def control_arm(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str, Any]:
     """A split's control arm as result fields: the success of the all-baseline instance of each (context, repeat) the
     split ran, on the same seed (from whichever split ran it: they share the seed), with its Wilson interval.
-    `sr_control` None where no such episode was run (a sample without the baseline value)."""
-
-    base = all_baseline(episodes)
+    `base`: the table's all-baseline episodes (`all_baseline`, selected once for every split). `sr_control` None
+    where no such episode was run (a sample without the baseline value)."""
     pairs = set(zip(split_rows["context_id"], split_rows["repeat"]))
     if base is not None:
         base = base.loc[np.array([p in pairs for p in zip(base["context_id"], base["repeat"])], dtype=bool)]

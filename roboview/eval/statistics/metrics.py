@@ -29,7 +29,7 @@ from roboview.eval.running import isolation
 from roboview.eval.running.results import counted, infra_mask
 from roboview.eval.statistics import ranking
 from roboview.eval.statistics import significance as stats
-from roboview.eval.statistics.compare import baseline_retest, compare_policies, control_arm
+from roboview.eval.statistics.compare import all_baseline, baseline_retest, compare_policies, control_arm
 from roboview.eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
     EPSILON,
     SEQUENTIAL_H,
@@ -358,12 +358,13 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     episodes = episodes.assign(success=episodes["success"].astype(np.int64))
     splits: dict[str, Any] = {}
     interactions: dict[str, Any] = {}
+    baseline = all_baseline(episodes)  # every split's control arm is drawn from it
     for split, rows in episodes.groupby("split", sort=False):
         n_factors = len(str(rows["factor"].iloc[0]).split("|"))
         extra = {
             "isolation": certificate[str(split)],
             "n_infra_errors": infra.get(str(split), 0),
-            **control_arm(episodes, rows),
+            **control_arm(baseline, rows),
         }
         if n_factors == 1:
             splits[str(split)] = split_metrics(rows, cfg) | extra

@@ -285,13 +285,18 @@ def check_own_run(rows: list[dict], bench, run: dict, results: Path) -> Check:
 
 
 def verify_results(
-    results: str | Path, benchmark: str | Path | None = None, replay: int = 0, detect: float = 0.05
+    results: str | Path,
+    benchmark: str | Path | None = None,
+    replay: int = 0,
+    detect: float = 0.05,
+    loaded=None,
 ) -> Report:
     """A results folder against its benchmark (`benchmark`, else the one its provenance names): the table's schema
     first, then files, identity, instances, seeds, duplicates, isolation, completeness for the protocol it claims,
     infrastructure errors, plausibility, conformance re-derived, and with `replay` > 0 that many episodes drawn at
-    random and re-run here (`detect`: the forged share the stated guarantee speaks of). ResultsError for a folder
-    that holds no readable results; ValueError when no benchmark can be found."""
+    random and re-run here (`detect`: the forged share the stated guarantee speaks of). `loaded`: that benchmark
+    already loaded and checked (a board verifying many bundles against one). ResultsError for a folder that holds no
+    readable results; ValueError when no benchmark can be found."""
     from roboview.benchmark.format import BenchmarkError, load_benchmark
     from roboview.eval.verification.replay import check_replay
 
@@ -304,7 +309,8 @@ def verify_results(
     rows = table.to_pylist()
     root = benchmark_path(results, benchmark)
     try:
-        bench = load_benchmark(root)
+        same = loaded is not None and Path(loaded.path).resolve() == Path(root).resolve()
+        bench = loaded if same else load_benchmark(root)
     except BenchmarkError as exc:
         return Report([schema, Check("benchmark", False, str(exc))], time.perf_counter() - start)
     checks = [schema, Check("benchmark", True, f"{root}: version {bench.version}, every cell as built")]
