@@ -150,12 +150,19 @@ def test_end_effector_control_runs_and_is_recorded(bench, tmp_path):
         evaluate(bench, out, splits="color", limit=2, workers=1)
 
 
-def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path):
+def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path, monkeypatch):
     evaluate(bench, tmp_path / "local", splits="color,camera_pose", limit=1, repeats=2)
+    # A home without a Ray token: the local instance authenticates with a private one and writes none there.
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    for name in ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH"):
+        monkeypatch.delenv(name, raising=False)
     evaluate(bench, tmp_path / "ray", splits="color,camera_pose", limit=1, repeats=2, backend="ray")
     import ray
 
     ray.shutdown()
+    token = Path(os.environ.pop("RAY_AUTH_TOKEN_PATH"))
+    assert len(token.read_text()) == 64 and not str(token).startswith(str(tmp_path / "home"))
+    assert not (tmp_path / "home" / ".ray").exists()
     local, remote = rows(tmp_path / "local"), rows(tmp_path / "ray")
     assert len(local) == 4
     pd.testing.assert_frame_equal(local, remote)

@@ -186,6 +186,14 @@ def test_vla_eval_runs_the_benchmark_and_its_results_convert_to_the_native_run(t
     assert "Spec validation passed" in proc.stderr
     aggregate = json.loads((tmp_path / "vla" / "RoboView_aggregate.json").read_text())
     assert aggregate["num_episodes_total"] == 6 * repeats and aggregate["num_errors"] == 0
+    # RoboView's episodes carry their context: the audit maps split, value, context and repeat by default.
+    from roboview.pipelines.audit import main as audit
+
+    audit([f"--results={tmp_path / 'vla'}", "--format=vla_eval", f"--output_dir={tmp_path / 'audit'}",
+           "--metrics.n_perm=50", "--metrics.n_glm=10", "--metrics.max_perm=50"])  # fmt: skip
+    audited = json.loads((tmp_path / "audit" / "metrics.json").read_text())["splits"][SPLIT]
+    assert audited["n_contexts"] == 1 and audited["n_episodes"] == 6 * repeats
+    assert {v["n_episodes"] for v in audited["per_value"].values()} == {repeats} and audited["sr"] == 1.0
 
     converted = tmp_path / "converted"
     convert(
@@ -266,23 +274,68 @@ def test_vla_evals_lerobot_server_runs_a_roboview_checkpoint_as_roboview_does(
     assert list(native["steps"]) == [6, 6] and native["failure_reason"].str.endswith("within 6 steps").all()
 
 
-def test_an_episode_the_model_server_failed_is_an_infrastructure_row(tiny_benchmark, tmp_path):
-    with served(FailingServer({})) as url:  # its predict raises
-        orchestrate(
-            url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=1, send_images=False, max_steps=3
+class SeeingFailingServer(FailingServer):
+    def get_observation_spec(self):
+        return {"left_top": IMAGE_RGB, "state": STATE_JOINT, "language": LANGUAGE}
+
+
+def test_a_model_that_raises_is_the_policys_failure_through_vla_eval_as_through_the_client(tiny_benchmark, tmp_path):
+    from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.pipelines.verify import VerifyConfig
+    from roboview.pipelines.verify import run as verify
+    from roboview.policies.types import policy_config
+
+    with served(SeeingFailingServer({})) as url:  # its predict raises
+        orchestrate(url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=1, image_size=64, max_steps=3)
+        evaluate(
+            EvaluateConfig(
+                BenchmarkConfig(str(tiny_benchmark), "color"),
+                policy_config("vla_eval", url=url, image_size=64),
+                EvalConfig(n_repeats=1, limit=1, num_workers=1, max_steps=3),
+                str(tmp_path / "client"),
+            )
         )
     rows = pd.read_parquet(convert(tmp_path / "vla", "", tmp_path / "converted"))
-    assert list(rows["status"]) == ["infra_error"] and not rows["success"].any()
-    assert (
-        rows["failure_reason"][0].startswith("infrastructure error: vla-eval model_act")
-        and "model crashed" in (rows["failure_reason"][0])
-    )
+    client = pd.read_parquet(tmp_path / "client" / "episodes.parquet")
+    # One rule: counted (status ok), failed, with the model's own message, on both paths.
+    for table_ in (rows, client):
+        assert list(table_["status"]) == ["ok"] and not table_["success"].any(), table_["failure_reason"][0]
+        assert table_["failure_reason"][0].startswith("policy error: ") and "model crashed" in table_["failure_reason"][0]
+    # The certificate vla-eval did not return is re-derived: the one the client's episode measured.
+    assert rows["isolation"][0] == client["isolation"][0] and rows["episode_seed"][0] == client["episode_seed"][0]
+    checks = {c.name: c for c in verify(VerifyConfig(results=str(tmp_path / "converted"))).checks}
+    assert checks["isolation"].passed and checks["conformance"].passed, checks["conformance"].detail
+    entries = json.loads((tmp_path / "converted" / "provenance.json").read_text())
+    assert entries[-1]["isolation_rederived"] == 1
+    assert entries[-1]["benchmark_path"] == str(Path(tiny_benchmark).resolve())
     other = read_aggregates(tmp_path / "vla")[0] | {"config": {"benchmark": "x:Other"}}
     (tmp_path / "other.json").write_text(json.dumps(other))
     with pytest.raises(
         ValueError, match="hold no roboview.integrations.vla_eval.benchmark:RoboViewBenchmark entry"
     ):
         convert(tmp_path / "other.json", str(tiny_benchmark), tmp_path / "other")
+
+
+def test_an_episode_lost_to_the_connection_is_infrastructure_and_verify_names_the_benchmark(
+    tiny_benchmark, tmp_path
+):
+    from roboview.eval.verification.results import benchmark_path
+
+    with served(FailingServer({})) as url:
+        orchestrate(
+            url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=1, send_images=False, max_steps=3
+        )
+    aggregate = read_aggregates(tmp_path / "vla")[0]
+    for task in aggregate["tasks"]:
+        for episode in task["episodes"]:
+            episode["failure_reason"], episode["failure_detail"] = "connection_closed", "code=1006 reason="
+    (tmp_path / "lost.json").write_text(json.dumps(aggregate))
+    rows = pd.read_parquet(convert(tmp_path / "lost.json", str(tiny_benchmark), tmp_path / "converted"))
+    assert list(rows["status"]) == ["infra_error"]
+    assert rows["failure_reason"][0] == "infrastructure error: vla-eval connection_closed: code=1006 reason="
+    # No episode returned the benchmark's record, yet the folder names the benchmark convert was given.
+    assert benchmark_path(tmp_path / "converted") == Path(tiny_benchmark).resolve()
 
 
 def test_specs_follow_the_control_and_bad_params_fail_before_any_episode(tiny_benchmark):
@@ -370,3 +423,21 @@ def test_vla_eval_runs_the_benchmark_in_end_effector_control(tiny_benchmark, tmp
     native = table(tmp_path / "native" / "episodes.parquet")
     pd.testing.assert_frame_equal(table(tmp_path / "converted" / "episodes.parquet"), native)
     assert len(native) == 6 and native["success"].all()
+
+
+def test_a_bad_param_ends_vla_eval_run_with_one_line_before_any_episode(tiny_benchmark, tmp_path):
+    with served(ReplayServer({})) as url:
+        for param, message in (
+            (f"benchmark_path={tmp_path / 'nope'}", "no such folder (a benchmark folder written by"),
+            ("splits=colour", "params.splits='colour': unknown split(s) ['colour']"),
+        ):
+            proc = subprocess.run(
+                [str(Path(sys.executable).parent / "vla-eval"), "run", "-c", str(CONFIG), "--no-docker",
+                 "--server-url", url, "--output-dir", str(tmp_path / "vla"),
+                 "--param", f"benchmark_path={tiny_benchmark}", "--param", param],
+                capture_output=True, text=True, timeout=120, env=os.environ | {"PYTHONPATH": str(ROOT)},
+            )  # fmt: skip
+            assert proc.returncode == 2, proc.stderr[-2000:]
+            assert "Traceback" not in proc.stderr and proc.stderr.strip().splitlines()[-1].startswith("error: params.")
+            assert message in proc.stderr
+    assert not list((tmp_path / "vla").glob("*.json"))  # no result, no aggregate

@@ -22,6 +22,7 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import replace
+from pathlib import Path
 
 from roboview.core.workers import WorkerPool
 from roboview.eval.running.policy_server import PolicyServer
@@ -269,6 +270,7 @@ def _connect(address: str | None, num_workers: int) -> None:
             ) from None
     else:
         # "local": a new instance of our own, never a cluster `ray start` left on this machine.
+        private_token()
         ray.init(
             address="local",
             num_cpus=num_workers,
@@ -276,6 +278,27 @@ def _connect(address: str | None, num_workers: int) -> None:
             log_to_driver=False,
             runtime_env=env,
         )
+
+
+def private_token() -> None:
+    """A local Ray instance authenticates with a token of its own, in a private temporary file: Ray would otherwise
+    write one to ~/.ray/auth_token, after which every `ray start` on the machine expects it (a cluster started
+    without it then refuses its nodes with InvalidAuthToken). A token or mode the user set is left alone."""
+    if {"RAY_AUTH_MODE", "RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH"} & set(os.environ):
+        return
+    if (Path.home() / ".ray" / "auth_token").is_file():
+        return  # the user's own token
+    import atexit
+    import secrets
+    import shutil
+    import tempfile
+
+    folder = Path(tempfile.mkdtemp(prefix="roboview-ray-"))
+    token = folder / "auth_token"
+    token.write_text(secrets.token_hex(32))
+    token.chmod(0o600)
+    os.environ["RAY_AUTH_TOKEN_PATH"] = str(token)
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
 
 
 class _RayWorkers:

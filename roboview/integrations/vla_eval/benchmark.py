@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -92,6 +93,14 @@ def _chosen_splits(benchmark_path: str, splits: str | list[str]) -> list[str]:
     return chosen
 
 
+def _stop_cli(exc: ValueError) -> None:
+    """Under `vla-eval run`, a bad param ends the run with one line and exit status 2 (vla-eval would print the
+    traceback of its orchestrator); called from a library, the ValueError propagates."""
+    if Path(sys.argv[0]).name == "vla-eval":
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+
+
 class RoboViewBenchmark(StepBenchmark):
     """The (instance, repeat) episodes of a RoboView benchmark folder's splits.
 
@@ -142,11 +151,15 @@ class RoboViewBenchmark(StepBenchmark):
         super().__init__()
         from roboview.benchmark.format import load_benchmark, select_items
 
-        if control not in ACTION_SPECS:
-            raise ValueError(f"params.control={control!r} unknown; allowed: {', '.join(ACTION_SPECS)}")
-        self.cameras = _cameras(cameras)
-        _check_sizes(image_size, n_repeats, max_steps, contexts, limit)
-        chosen = _chosen_splits(benchmark_path, splits)
+        try:
+            if control not in ACTION_SPECS:
+                raise ValueError(f"params.control={control!r} unknown; allowed: {', '.join(ACTION_SPECS)}")
+            self.cameras = _cameras(cameras)
+            _check_sizes(image_size, n_repeats, max_steps, contexts, limit)
+            chosen = _chosen_splits(benchmark_path, splits)
+        except ValueError as exc:
+            _stop_cli(exc)
+            raise
         bench = load_benchmark(benchmark_path, chosen)
         self.benchmark_path = str(Path(benchmark_path).resolve())
         self.version = bench.version
@@ -181,6 +194,7 @@ class RoboViewBenchmark(StepBenchmark):
                 "suite": split,
                 "instance_id": item.record["instance_id"],
                 "split": split,
+                "context_id": item.record["context_id"],
                 "repeat": repeat,
                 "episode_seed": episode_seed(item.record["context_id"], repeat),
                 "value": item.record["value"],

@@ -1,15 +1,20 @@
 """vla-eval's results of a RoboView benchmark → a RoboView results folder (`episodes.parquet`).
 
-    python -m roboview.integrations.vla_eval.convert --results=results/vla_eval/RoboView_aggregate.json \
+    python -m roboview.integrations.vla_eval.convert --results=outputs/vla_eval/RoboView_aggregate.json \
         --benchmark.path=outputs/benchmark --output_dir=outputs/eval/vla_eval [--policy_name=NAME]
 
 `--results` takes what `vla-eval run` writes: its aggregate JSON (`<name>_aggregate.json`), its SQLite
 recording (`recording-<eval_id>.sqlite`, read through vla-eval's own exporter, e.g. for a sharded run before
 `vla-eval export`) or the output folder holding them. Every episode of a `RoboViewBenchmark` entry becomes the
 row `roboview.pipelines.evaluate` writes for its (instance, repeat): the instance's record, the episode seed, success,
-steps, failure reason, isolation certificate and conformance verdict as the benchmark measured them. An
-episode vla-eval itself recorded as errored (server unreachable, connection closed, timeout, an exception)
-is a row with status `infra_error`, counted in no rate, as in `roboview.pipelines.evaluate`. `provenance.json` records
+steps, failure reason, isolation certificate and conformance verdict as the benchmark measured them.
+
+One rule for a crash, as `roboview-evaluate --policy.type=vla_eval` scores it: an episode whose model raised on
+its observation (vla-eval's `model_act`) is the policy's failure, counted (a model that crashes on gray cubes
+only is biased against gray cubes); its isolation certificate, which vla-eval does not return for an errored
+episode, is re-derived by resetting the instance with the episode's seed. Every other error vla-eval recorded
+(server unreachable, connection closed, timeout, the environment failing to start or step) is a row with status
+`infra_error`, counted in no rate, as in `roboview.pipelines.evaluate`. `provenance.json` records
 vla-eval's run (eval id, harness version, model server, config) and the conformance record of each process
 that ran episodes; `roboview.pipelines.report` and `roboview.pipelines.verify --results=OUT` read the folder as any other.
 """
@@ -28,6 +33,8 @@ from roboview.eval.running.row import INFRA_ERROR, EpisodeRow
 from roboview.integrations.vla_eval.benchmark import RoboViewBenchmark
 
 BENCHMARK_CLASS = f"{RoboViewBenchmark.__module__}:{RoboViewBenchmark.__name__}"
+# vla-eval's failure phases that are the policy's own: the model raised on this input.
+POLICY_PHASES = frozenset({"model_act"})
 PARAM_DEFAULTS = {
     name: p.default
     for name, p in inspect.signature(RoboViewBenchmark.__init__).parameters.items()
@@ -54,9 +61,10 @@ def roboview_entries(aggregates: list[dict]) -> list[dict]:
     return ours
 
 
-def episode_row(episode: dict, record: dict, policy: str, verdict: str) -> dict:
+def episode_row(episode: dict, record: dict, policy: str, verdict: str, isolation: str | None = None) -> dict:
     """The RoboView row of one vla-eval episode (its task fields sit at the top, the result under metrics);
-    `verdict`: the conformance verdict of the process that ran it, for an episode that returned no result."""
+    `verdict`: the conformance verdict of the process that ran it, for an episode that returned no result;
+    `isolation`: the re-derived certificate of an episode whose model raised (`POLICY_PHASES`)."""
     metrics = episode.get("metrics") or {}
     common = dict(
         record=record,
@@ -69,6 +77,15 @@ def episode_row(episode: dict, record: dict, policy: str, verdict: str) -> dict:
     if episode.get("failure_reason") or "steps" not in metrics:  # vla-eval recorded the episode as errored
         detail = (episode.get("failure_detail") or "").strip().splitlines()
         reason = episode.get("failure_reason") or "no result"
+        if reason in POLICY_PHASES:  # the model raised: the policy's failure (vla-eval does not say after how many steps)
+            return EpisodeRow(
+                **common,
+                success=False,
+                steps=int(episode.get("steps") or 0),
+                failure_reason="policy error: " + (detail[-1].split("Error: ", 1)[-1] if detail else reason),
+                isolation=isolation,
+                conformance=verdict,
+            ).as_dict()
         return EpisodeRow(
             **common,
             success=False,
@@ -106,12 +123,54 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
     verdicts = {
         e.get("sid"): e["metrics"]["conformance"] for _, e in episodes if "conformance" in e["metrics"]
     }
+    crashed = [e for _, e in episodes if e.get("failure_reason") in POLICY_PHASES]
+    certificates, local = rederive_isolation(crashed, params[0], root)
+    crashed_ids = {id(e) for e in crashed}
     for _, episode in episodes:
-        verdict = verdicts.get(episode.get("sid"), "")
-        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict))
+        verdict = verdicts.get(episode.get("sid")) or (local["verdict"] if id(episode) in crashed_ids else "")
+        key = (episode["instance_id"], int(episode["repeat"]))
+        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict, certificates.get(key)))
     store.close()
-    provenance.write(Path(output_dir), provenance_entries(entries, episodes, bench.version, root))
+    entries_out = provenance_entries(entries, episodes, bench.version, root)
+    if local or not entries_out:  # this process's own check, or the benchmark named where no episode returned one
+        entries_out.append(convert_entry(entries[0], bench.version, root, local, len(crashed)))
+    provenance.write(Path(output_dir), entries_out)
     return Path(output_dir) / "episodes.parquet"
+
+
+def rederive_isolation(crashed: list[dict], params: dict, root: str) -> tuple[dict, dict]:
+    """The isolation certificate of each episode whose model raised, keyed by (instance id, repeat): the instance
+    reset with the episode's seed by the same `RoboViewBenchmark` vla-eval ran, after its conformance check of
+    this machine (the record, returned second; empty when nothing crashed)."""
+    if not crashed:
+        return {}, {}
+    names = list(dict.fromkeys(e["split"] for e in crashed))
+    names_kept = ("n_repeats", "contexts", "limit", "cameras", "image_size", "max_steps", "control", "allow_drift")
+    keep = {k: params[k] for k in names_kept}
+    bench = RoboViewBenchmark(root, names, send_images=False, **keep)
+    try:
+        tasks = {(t["instance_id"], t["repeat"]): t for t in bench.get_tasks()}  # runs the conformance check
+        out = {}
+        for episode in crashed:
+            key = (episode["instance_id"], int(episode["repeat"]))
+            bench.reset(tasks[key])
+            out[key] = bench._isolation
+        return out, bench.conformance
+    finally:
+        bench.cleanup()
+
+
+def convert_entry(aggregate: dict, version: str, root: str, conformance: dict, rederived: int) -> dict:
+    """Provenance of the conversion itself: the benchmark it was given, and (when it re-derived certificates)
+    its own conformance record."""
+    return provenance.start_entry(version, None) | {
+        "ended": provenance.now(),
+        "benchmark_path": str(Path(root).resolve()),
+        "conformance": conformance or None,
+        "isolation_rederived": rederived,
+        "vla_eval": {"eval_id": aggregate.get("eval_id"), "config": aggregate.get("config")},
+        "episodes_run": 0,
+    }
 
 
 def _benchmark_root(benchmark_path: str, params: list[dict]) -> str:
