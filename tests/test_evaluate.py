@@ -139,11 +139,12 @@ def test_end_effector_control_runs_and_is_recorded(bench, tmp_path):
     cfg = EvaluateConfig(
         BenchmarkConfig(str(bench), "color"),
         policy_config("expert", control="ee_delta"),
-        EvalConfig(n_repeats=1, limit=2, num_workers=1, image_size=64),
+        EvalConfig(n_repeats=1, limit=2, num_workers=1, image_size=64, torch_threads=2),
         str(out),
     )
     result = run(cfg)
     assert result.new_episodes == 2 and rows(out)["success"].all()
+    assert provenance.read(out)[-1]["torch_threads"]["per_worker"] == 2
     assert json.loads((out / "run.json").read_text())["control"] == "ee_delta"
     assert provenance.read(out)[-1]["control"] == "ee_delta"
     with pytest.raises(ResultsError, match="control: existing 'ee_delta' vs requested 'joint'"):
@@ -793,5 +794,5 @@ def test_inference_threads_fit_the_free_cores(monkeypatch):
     assert [workers.threads_per_worker(n) for n in (1, 2, 3, 8, 16)] == [7, 3, 2, 1, 1]
     monkeypatch.setattr(workers.os, "getloadavg", lambda: (7.5, 0.0, 0.0))  # a busy machine: one thread each
     assert workers.threads_per_worker(1) == 1 and workers.threads_per_worker(1, requested=4) == 4
-    with pytest.raises(ValueError, match="--eval.threads=-1 must be ≥ 0"):
-        EvalConfig(threads=-1)
+    with pytest.raises(ValueError, match="--eval.torch_threads=-1 must be ≥ 0"):
+        EvalConfig(torch_threads=-1)

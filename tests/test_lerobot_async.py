@@ -180,6 +180,14 @@ def test_a_server_that_is_down_fails_before_any_rollout(tiny_benchmark, tiny_che
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and f"policy server at {address} does not answer" in err, err
     assert not out.exists()
+    # A checkpoint readable here acts in its own control: another one stops the run naming the flag, before the
+    # server is even reached, and nothing is written.
+    with pytest.raises(SystemExit) as exit_:
+        main([f"--benchmark.path={tiny_benchmark}", "--policy.type=lerobot_async", f"--policy.server={address}",
+              f"--policy.path={tiny_checkpoint}", "--policy.control=ee_delta", f"--output_dir={out}"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "acts in 'joint'" in err and "pass --policy.control=joint" in err, err
+    assert "Traceback" not in err and not out.exists()
     # A checkpoint not readable here needs its facts as flags, named in the error.
     with pytest.raises(
         ValueError, match=r"not a folder on this machine.*--policy\.cameras=.*--policy\.image_size="

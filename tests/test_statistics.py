@@ -64,6 +64,8 @@ def test_type_one_error_of_p_value_is_nominal(null_dense, null_sparse):
         rate = float(np.mean(sims["p"] < 0.05))
         assert within_binomial(rate, 0.05, len(sims)), rate
         assert rate > 0.0  # a test that never rejects is not calibrated either
+    # Below the permutations' floor (1/41 here) the stretched χ² tail decides: still no more rejections than α.
+    assert within_binomial(float(np.mean(null_sparse["p"] < 0.01)), 0.01, len(null_sparse))
 
 
 def test_q_values_control_false_discoveries_under_no_bias(null_dense, null_sparse):
@@ -199,9 +201,14 @@ def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_bi
     m = split_metrics(frame)  # default: up to 20,000 permutations
     assert m["p_value_cv"] < 1e-4 and m["p_value_cv_draws"] == 20_000 and m["p_value_cv_at_floor"]
     assert p_fmt(m["p_value_cv"], m["p_value_cv_at_floor"]) == "≤ 5.0e-05"
-    # the GLM calibration's floor (200 draws)
-    assert m["p_value_method"] == "permutation" and m["p_value_at_floor"]
-    assert p_fmt(m["p_value"], m["p_value_at_floor"]) == "≤ 0.0050"
+    # None of the GLM calibration's 200 refits reaches the statistic: beyond their floor the p-value is the χ² tail
+    # stretched over their upper quantiles, so it resolves (no "≤ 0.0050").
+    assert m["p_value_method"] == "permutation+scaled_chi2_tail" and not m["p_value_at_floor"]
+    assert m["p_value"] < 1e-4 and not p_fmt(m["p_value"], m["p_value_at_floor"]).startswith("≤")
+    # --metrics.max_glm=N refits more permutations instead (Besag–Clifford), down to 1 / (N + 1).
+    refined = split_metrics(frame, MetricsConfig(n_perm=100, max_perm=100, n_glm=50, max_glm=300))
+    assert refined["p_value"] == pytest.approx(1 / 301) and refined["p_value_at_floor"]
+    assert refined["lrt"]["draws"] == 300 and refined["p_value_method"] == "permutation"
     null, _ = simulate_split(np.random.default_rng(4), 9, 4, 5, 0.0, 0.7)
     quiet = split_metrics(null)
     # stops early when p is large

@@ -279,7 +279,9 @@ class SeeingFailingServer(FailingServer):
         return {"left_top": IMAGE_RGB, "state": STATE_JOINT, "language": LANGUAGE}
 
 
-def test_a_model_that_raises_is_the_policys_failure_through_vla_eval_as_through_the_client(tiny_benchmark, tmp_path):
+def test_a_model_that_raises_is_the_policys_failure_through_vla_eval_as_through_the_client(
+    tiny_benchmark, tmp_path
+):
     from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run as evaluate
     from roboview.pipelines.verify import VerifyConfig
@@ -287,7 +289,9 @@ def test_a_model_that_raises_is_the_policys_failure_through_vla_eval_as_through_
     from roboview.policies.types import policy_config
 
     with served(SeeingFailingServer({})) as url:  # its predict raises
-        orchestrate(url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=1, image_size=64, max_steps=3)
+        orchestrate(
+            url, tmp_path / "vla", benchmark_path=str(tiny_benchmark), limit=1, image_size=64, max_steps=3
+        )
         evaluate(
             EvaluateConfig(
                 BenchmarkConfig(str(tiny_benchmark), "color"),
@@ -301,9 +305,15 @@ def test_a_model_that_raises_is_the_policys_failure_through_vla_eval_as_through_
     # One rule: counted (status ok), failed, with the model's own message, on both paths.
     for table_ in (rows, client):
         assert list(table_["status"]) == ["ok"] and not table_["success"].any(), table_["failure_reason"][0]
-        assert table_["failure_reason"][0].startswith("policy error: ") and "model crashed" in table_["failure_reason"][0]
+        assert (
+            table_["failure_reason"][0].startswith("policy error: ")
+            and "model crashed" in table_["failure_reason"][0]
+        )
     # The certificate vla-eval did not return is re-derived: the one the client's episode measured.
-    assert rows["isolation"][0] == client["isolation"][0] and rows["episode_seed"][0] == client["episode_seed"][0]
+    assert (
+        rows["isolation"][0] == client["isolation"][0]
+        and rows["episode_seed"][0] == client["episode_seed"][0]
+    )
     checks = {c.name: c for c in verify(VerifyConfig(results=str(tmp_path / "converted"))).checks}
     assert checks["isolation"].passed and checks["conformance"].passed, checks["conformance"].detail
     entries = json.loads((tmp_path / "converted" / "provenance.json").read_text())
@@ -438,6 +448,8 @@ def test_a_bad_param_ends_vla_eval_run_with_one_line_before_any_episode(tiny_ben
                 capture_output=True, text=True, timeout=120, env=os.environ | {"PYTHONPATH": str(ROOT)},
             )  # fmt: skip
             assert proc.returncode == 2, proc.stderr[-2000:]
-            assert "Traceback" not in proc.stderr and proc.stderr.strip().splitlines()[-1].startswith("error: params.")
+            assert "Traceback" not in proc.stderr and proc.stderr.strip().splitlines()[-1].startswith(
+                "error: params."
+            )
             assert message in proc.stderr
     assert not list((tmp_path / "vla").glob("*.json"))  # no result, no aggregate

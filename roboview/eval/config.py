@@ -96,7 +96,7 @@ class EvalConfig:
     max_infra_retries: int = 2
     # CPU threads of each worker's inference (torch); 0: the cores not already busy (the load average) split between
     # the workers, at least 1.
-    threads: int = 0
+    torch_threads: int = 0
     # Camera image side (pixels); 0: the policy's own (a checkpoint's input size), else 224.
     # A size that disagrees with the checkpoint's fails before any rollout.
     image_size: int = 0
@@ -125,7 +125,7 @@ class EvalConfig:
             "shard",
             "rerun",
             "max_infra_retries",
-            "threads",
+            "torch_threads",
         ),
         "adaptive evaluation, --eval.adaptive=true (docs/adaptive.md)": (
             "adaptive",
@@ -142,8 +142,8 @@ class EvalConfig:
         for name in ("n_repeats", "num_workers", "max_steps", "envs_per_worker"):
             if getattr(self, name) is not None and getattr(self, name) <= 0:
                 raise ValueError(f"--eval.{name}={getattr(self, name)} must be a positive count")
-        if self.threads < 0:
-            raise ValueError(f"--eval.threads={self.threads} must be ≥ 0 (0 = fit the machine)")
+        if self.torch_threads < 0:
+            raise ValueError(f"--eval.torch_threads={self.torch_threads} must be ≥ 0 (0 = fit the machine)")
         if self.limit < 0:
             raise ValueError(f"--eval.limit={self.limit} must be ≥ 0 (0 = every instance)")
         if self.max_infra_retries < 0:

@@ -5,6 +5,7 @@ infrastructure retries and adaptive rounds (`run_rounds`). `roboview-evaluate` p
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, replace
@@ -245,8 +246,8 @@ class Runner:
 
             self.rerun = RerunLogger(Path(cfg.eval.rerun))
         # CPU inference: the free cores split between workers, so num_workers × threads never oversubscribes.
-        self.threads = threads_per_worker(cfg.eval.num_workers, cfg.eval.threads)
-        log.info("inference threads per worker: %d (--eval.threads)", self.threads)
+        self.threads = threads_per_worker(cfg.eval.num_workers, cfg.eval.torch_threads)
+        log.info("inference threads per worker: %d (--eval.torch_threads)", self.threads)
         self.cluster: dict[str, dict] = {}
         self.per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])
         self.policy_name: str | None = None  # the rows' policy name, for the rows of workers that died
@@ -367,8 +368,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
         store = EpisodeStore(Path(cfg.output_dir), run_info(cfg, p))
     work = p.work
     entry = provenance.start_entry(p.version, cfg.policy.checkpoint)
-    entry["benchmark_path"] = str(Path(cfg.benchmark.path).resolve())
-    entry["conformance"] = conformance
+    entry |= {"benchmark_path": str(Path(cfg.benchmark.path).resolve()), "conformance": conformance}
     entry["control"] = cfg.policy.env_control()
     verdict = conformance["verdict"]
     if cfg.policy.served_by() is not None:
@@ -382,6 +382,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     )
     runner = Runner(cfg, p, store, len(work))
     runner.conformance = verdict
+    entry["torch_threads"] = {"per_worker": runner.threads, "load_average_1m": round(os.getloadavg()[0], 2)}
     t0 = time.perf_counter()
     try:
         if p.adaptive:

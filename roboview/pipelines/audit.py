@@ -68,6 +68,7 @@ class AuditConfig:
     # Bias size (logit SD of the value effects) the power line is computed for, as roboview.pipelines.plan.
     tau: float = 0.3
     # How the statistics are computed, as roboview.pipelines.report: --metrics.n_perm, --metrics.n_glm, --metrics.max_perm,
+    # --metrics.max_glm,
     # --metrics.seed, --metrics.epsilon (docs/statistics.md).
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
 

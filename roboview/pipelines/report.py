@@ -27,8 +27,8 @@ class ReportConfig:
     results: str = ""
     # Folder that receives metrics.json, report.md, report.html (one self-contained page) and the PNG plots.
     output_dir: str = "outputs/report"
-    # How the statistics are computed: --metrics.n_perm, --metrics.n_glm, --metrics.max_perm, --metrics.seed,
-    # --metrics.epsilon (docs/statistics.md).
+    # How the statistics are computed: --metrics.n_perm, --metrics.n_glm, --metrics.max_perm, --metrics.max_glm,
+    # --metrics.seed, --metrics.epsilon (docs/statistics.md).
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     # Draw the PNG plots (false: metrics.json and report.md only).
     plots: bool = True

@@ -365,10 +365,33 @@ class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
             if getattr(self, name) < 0:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
         self._resolve()  # the checkpoint's facts, before any connection
+        if self.local:
+            self._check_control()
         for server in servers:  # reachable before any rollout
             with flag_errors("--policy.server"):
                 check_reachable(server, self.open_timeout_s)
         super().__post_init__()
+
+    def _check_control(self) -> None:
+        """A checkpoint readable here acts in the control --policy.control names (its action width and its
+        dataset's action names), else the run stops naming the flag: the served action would not fit the env."""
+        from roboview.policies.lerobot_policy import checkpoint_control
+
+        with flag_errors("--policy.path"):
+            found = checkpoint_control(self.path)
+        if found is None and self.control == "joint":
+            raise ValueError(
+                f"--policy.control=joint but the checkpoint {self.path} has a 7-d (end-effector) action: pass "
+                "--policy.control=ee_delta or --policy.control=ee_abs"
+            )
+        if found is not None and found != self.control:
+            raise ValueError(
+                f"--policy.control={self.control!r} but the checkpoint {self.path} acts in {found!r} (its action "
+                f"shape and its dataset's action names): pass --policy.control={found}"
+            )
+
+    def declares_outputs(self) -> bool:
+        return self.local  # a checkpoint not readable here: its action width shows at the pre-flight step
 
     # -- the checkpoint: read here when it is a folder here, else from the flags --------------------
     @property

@@ -75,6 +75,16 @@ def directions(m: dict) -> tuple[list[tuple[str, float]], list[tuple[str, float]
     return [(v, o) for o, v in low], [(v, o) for o, v in high]
 
 
+def against_control(m: dict) -> str | None:
+    """A split's values that differ from its control arm on the same (context, repeat) seeds (McNemar p < ALPHA),
+    as text: "blue −50.00 (p 0.004)"; "none" where none does; None where no control episode ran."""
+    paired = {v: s for v, s in m["per_value"].items() if s.get("p_control") is not None}
+    if not paired:
+        return None
+    sig = sorted((s["delta_control"], v) for v, s in paired.items() if s["p_control"] < ALPHA)
+    return ", ".join(f"{v} {100 * d:+.2f} (p {p_fmt(paired[v]['p_control'])})" for d, v in sig) or "none"
+
+
 def split_title(split: str) -> str:
     """A split's title: its factor's own title (factor registry), else the split name."""
     return FACTORS[split].title if split in FACTORS else split

@@ -141,6 +141,9 @@ def rank_metrics(
                 pvalues = {pair: c[p_key] for pair, c in comps.items()}
                 ci = {n: have[n][f"{metric}_ci95"] for n in values}
                 entry[metric] = _rows(values, pvalues, higher, ci, n_eps, alpha, reference)
+        for row in entry.get("sr", []):  # the control arm beside each SR: same contexts, same seeds
+            row["sr_control"] = have[row["policy"]].get("sr_control")
+            row["sr_control_ci95"] = have[row["policy"]].get("sr_control_ci95")
         splits[split] = entry
     splits |= _factorial(layouts, counted, reference, alpha)
     return _overall(
@@ -269,6 +272,12 @@ def _table(rows: list[dict[str, Any]], metric: str, entries: dict[str, Entry]) -
         '<th data-key="range">Possible ranks</th><th data-key="episodes">Episodes</th>'
         '<th data-key="replay">Replayed</th></tr>'
     )
+    control = metric == "sr" and any(r.get("sr_control") is not None for r in rows)
+    if control:
+        head = head.replace(
+            '<th data-key="group">',
+            '<th data-key="control">Control SR ×100 [95 % CI]</th><th data-key="group">',
+        )
     body = []
     for r in rows:
         e = entries.get(r["policy"])
@@ -285,12 +294,19 @@ def _table(rows: list[dict[str, Any]], metric: str, entries: dict[str, Entry]) -
             f'<td data-sort="{r["rank"] if r["rank"] is not None else 0}">{rank}</td>'
             f'<td class="name" data-sort="{html.escape(r["policy"])}">{name}</td>'
             f'<td data-sort="{r["value"]:.10g}">{pct(r["value"])}{html.escape(pct_ci(r["ci95"]))}</td>'
-            f'<td class="group" data-sort="{html.escape(r["group"])}">{html.escape(r["group"])}</td>'
+            + (_control_cell(r) if control else "")
+            + f'<td class="group" data-sort="{html.escape(r["group"])}">{html.escape(r["group"])}</td>'
             f'<td data-sort="{lo}">{lo}–{hi}</td>'
             f'<td data-sort="{r["episodes"]}">{r["episodes"]}</td>'
             f'<td data-sort="{replay}" title="{html.escape(e.replay_note if e else "")}">{replay}</td></tr>'
         )
     return f'<table class="ranked" data-metric="{metric}"><thead>{head}</thead><tbody>{"".join(body)}</tbody></table>'
+
+
+def _control_cell(r: dict[str, Any]) -> str:
+    value = r.get("sr_control")
+    sort = -1 if value is None else value
+    return f'<td data-sort="{sort:.10g}">{pct(value)}{html.escape(pct_ci(r.get("sr_control_ci95")))}</td>'
 
 
 def _section(title: str, tables: dict[str, list], entries: dict[str, Entry], level: str = "h3") -> list[str]:

@@ -17,6 +17,7 @@ import numpy as np
 from roboview.eval.reporting import run_sections
 from roboview.eval.reporting.format import (
     ALPHA,
+    against_control,
     directions,
     p_fmt,
     pct,
@@ -266,7 +267,15 @@ def _directions(layouts: dict[str, dict]) -> list[str]:
                     or "none"
                 )
 
-            lines.append(f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}")
+            control = against_control(m)
+            lines.append(
+                f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}"
+                + (
+                    ""
+                    if control is None
+                    else f"; against the control arm (same seeds, McNemar p < 0.05): {control}"
+                )
+            )
     return [*lines, ""]
 
 

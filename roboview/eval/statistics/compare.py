@@ -190,6 +190,29 @@ def control_arm(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str
     }
 
 
+def control_deltas(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str, dict[str, Any]]:
+    """Per value of a single-factor split, its paired difference to the control arm: `delta_control` = SR(value) −
+    SR(control) over the (context, repeat) pairs both ran (same seed), `n_control_pairs`, and `p_control`, McNemar's
+    test on those pairs (`paired_success_test`). Empty where no control episode was run."""
+    if base is None or base.empty:
+        return {}
+    control = base.drop_duplicates(["context_id", "repeat"]).set_index(["context_id", "repeat"])["success"]
+    out = {}
+    for value, rows in split_rows.groupby("value", sort=False):
+        joined = rows.set_index(["context_id", "repeat"])["success"].groupby(level=[0, 1]).first()
+        both = joined.index.intersection(control.index)
+        if not len(both):
+            continue
+        a = joined.loc[both].to_numpy().astype(bool)
+        b = control.loc[both].to_numpy().astype(bool)
+        out[str(value)] = {
+            "delta_control": float(a.mean() - b.mean()),
+            "n_control_pairs": int(len(both)),
+            "p_control": paired_success_test(a, b),
+        }
+    return out
+
+
 def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
     """The built-in control arm: the all-baseline instance of a context runs in several single-factor
     splits (color red, Euler (0, 0), distance 0) with the same seeds. Its outcomes should agree across

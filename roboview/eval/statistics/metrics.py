@@ -29,7 +29,13 @@ from roboview.eval.running import isolation
 from roboview.eval.running.results import counted, infra_mask
 from roboview.eval.statistics import ranking
 from roboview.eval.statistics import significance as stats
-from roboview.eval.statistics.compare import all_baseline, baseline_retest, compare_policies, control_arm
+from roboview.eval.statistics.compare import (
+    all_baseline,
+    baseline_retest,
+    compare_policies,
+    control_arm,
+    control_deltas,
+)
 from roboview.eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
     EPSILON,
     SEQUENTIAL_H,
@@ -152,7 +158,15 @@ def _cv_tests(
         SEQUENTIAL_H,
         cfg.max_perm,
     )
-    lrt = stats.factor_lrt(table.k, table.n, table.codes([factor]), ctx, permuted[: cfg.n_glm])
+    lrt = stats.factor_lrt(
+        table.k,
+        table.n,
+        table.codes([factor]),
+        ctx,
+        permuted[: cfg.n_glm],
+        lambda b: table.permuted_k(["context_id"], b, rng),
+        cfg.max_glm,
+    )
     return {
         "cv": cv,
         "cv_null": cv_null,
@@ -368,6 +382,8 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
         }
         if n_factors == 1:
             splits[str(split)] = split_metrics(rows, cfg) | extra
+            for value, delta in control_deltas(baseline, rows).items():
+                splits[str(split)]["per_value"].get(value, {}).update(delta)
         elif n_factors == 2:
             interactions[str(split)] = interaction_metrics(rows, cfg) | extra
         else:
@@ -416,7 +432,13 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
 
 
 def _resampling(cfg: MetricsConfig) -> dict[str, int]:
-    return {"n_perm": cfg.n_perm, "n_glm": cfg.n_glm, "max_perm": cfg.max_perm, "seed": cfg.seed}
+    return {
+        "n_perm": cfg.n_perm,
+        "n_glm": cfg.n_glm,
+        "max_perm": cfg.max_perm,
+        "max_glm": cfg.max_glm,
+        "seed": cfg.seed,
+    }
 
 
 def policy_layouts(metrics: dict[str, Any]) -> dict[str, dict[str, Any]]:

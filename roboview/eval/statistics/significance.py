@@ -16,7 +16,7 @@ reference distribution from within-block permutations of value labels instead (a
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,6 +25,8 @@ import statsmodels.api as sm
 from scipy import stats
 from statsmodels.stats.contingency_tables import StratifiedTable, mcnemar
 from threadpoolctl import threadpool_limits
+
+from roboview.eval.statistics.tables import SEQUENTIAL_H
 
 SPARSE_EXPECTED = 5.0  # Cochran: expected counts below this make χ² approximations doubtful
 SPARSE_FRACTION = 0.2  # ... in more than this fraction of the cells
@@ -89,9 +91,13 @@ class LRT:
     statistic: float
     df: int
     p_value: float
-    method: str  # "asymptotic" (χ²), "permutation" or "parametric_bootstrap"
+    # "asymptotic" (χ²), "permutation", "parametric_bootstrap", or "permutation+scaled_chi2_tail": beyond the
+    # permutations' floor, χ² stretched over their upper quantiles (`factor_lrt`).
+    method: str
     # Calibrated by draws none of which reached the statistic: p is the floor 1 / (draws + 1).
     at_floor: bool = False
+    # Permutation draws behind a sequential p-value (0: a fixed set, or none).
+    draws: int = 0
 
 
 def lrt_fields(test: LRT | None) -> dict[str, Any]:
@@ -103,18 +109,27 @@ def lrt_fields(test: LRT | None) -> dict[str, Any]:
         "p_value": test.p_value,
         "p_value_method": test.method,
         "p_value_at_floor": test.at_floor,
-        "lrt": {"statistic": test.statistic, "df": test.df},
+        "lrt": {"statistic": test.statistic, "df": test.df} | ({"draws": test.draws} if test.draws else {}),
     }
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")  # hundreds of small refits: threads only contend
 def factor_lrt(
-    k: np.ndarray, n: np.ndarray, value: np.ndarray, strata: np.ndarray, permuted_k: np.ndarray | None
+    k: np.ndarray,
+    n: np.ndarray,
+    value: np.ndarray,
+    strata: np.ndarray,
+    permuted_k: np.ndarray | None,
+    more: Callable[[int], np.ndarray] | None = None,
+    max_draws: int = 0,
 ) -> LRT | None:
     """Does success depend on `value`? Binomial GLM `value + strata` against `strata`.
 
     `permuted_k` (n_perm, n_cells): success counts with value labels shuffled within blocks; used
-    as the reference distribution when the table is sparse. None when no stratum is informative.
+    as the reference distribution when the table is sparse. `more(size)`: further such permutations, drawn
+    (Besag–Clifford, `sequential_p`) while fewer than SEQUENTIAL_H of the refits reach the observed statistic, up
+    to `max_draws` in all, so a strong effect resolves below 1 / (len(permuted_k) + 1). None when no stratum is
+    informative.
     """
     keep = informative(k, n, strata)
     if not keep.any():
@@ -133,20 +148,42 @@ def factor_lrt(
     # the same for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit
     # starts from them (value dummies at zero), which halves its iterations.
     start = np.concatenate([null_params, np.zeros(df)])
-    null = np.array(
-        [
-            max(
-                0.0,
-                2.0
-                * (
-                    binomial_llf(kp[keep], n[keep], full, start)[0]
-                    - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]
-                ),
-            )
-            for kp in permuted_k
-        ]
-    )
-    return LRT(observed, df, permutation_p(observed, null), "permutation", not _reaches(observed, null).any())
+
+    def refits(batch: np.ndarray) -> np.ndarray:
+        return np.array(
+            [
+                max(
+                    0.0,
+                    2.0
+                    * (
+                        binomial_llf(kp[keep], n[keep], full, start)[0]
+                        - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]
+                    ),
+                )
+                for kp in batch
+            ]
+        )
+
+    null = refits(permuted_k)
+    floor = not _reaches(observed, null).any()
+    if not floor:
+        return LRT(observed, df, permutation_p(observed, null), "permutation")
+    if more is not None and max_draws > len(permuted_k):  # more permutations, while fewer than h reach it
+        mc = sequential_p(observed, null, lambda size: refits(more(size)), SEQUENTIAL_H, max_draws)
+        return LRT(observed, df, mc.p_value, "permutation", mc.at_floor, mc.draws)
+    # No permutation reached the statistic: beyond their floor 1 / (draws + 1), the χ² tail scaled to lie above
+    # the permutation null at its upper quantiles (never below the floor's own evidence).
+    tail = float(stats.chi2.sf(observed / tail_scale(null, df), df))
+    if tail < 1 / (len(null) + 1):
+        return LRT(observed, df, tail, "permutation+scaled_chi2_tail")
+    return LRT(observed, df, permutation_p(observed, null), "permutation", True)
+
+
+def tail_scale(null: np.ndarray, df: int, levels: Sequence[float] = (0.9, 0.95, 0.99)) -> float:
+    """The factor c ≥ 1 by which χ²(df) must be stretched to lie at or above the permutation null of an LRT at its
+    upper quantiles `levels` (sparse tables give a heavier null than χ²): p = P(c·χ² ≥ observed) then errs on the
+    large side wherever the draws can see."""
+    return float(max(1.0, np.max(np.quantile(null, levels) / stats.chi2.ppf(levels, df))))
 
 
 def _reaches(observed: float, null: np.ndarray) -> np.ndarray:

@@ -40,6 +40,10 @@ class MetricsConfig:
     # time) while fewer than SEQUENTIAL_H reach the observed CV (Besag–Clifford), so a strong bias gets a
     # p-value down to 1 / (max_perm + 1) instead of 1 / (n_perm + 1).
     max_perm: int = 20_000
+    # A permutation-calibrated GLM p_value that none of its n_glm refits reaches: 0 reads it from the χ² tail
+    # stretched over the refits' upper quantiles (docs/statistics.md); N > n_glm draws more permutations instead,
+    # while fewer than SEQUENTIAL_H reach the statistic, down to 1 / (N + 1) (each one a GLM refit: slow).
+    max_glm: int = 0
 
     def __post_init__(self) -> None:
         if not self.epsilon > 0:
@@ -48,6 +52,8 @@ class MetricsConfig:
             raise ValueError(f"n_perm={self.n_perm} and n_glm={self.n_glm} must be ≥ 1")
         if self.max_perm < self.n_perm:
             raise ValueError(f"max_perm={self.max_perm} must be ≥ n_perm={self.n_perm}")
+        if self.max_glm and self.max_glm < self.n_glm:
+            raise ValueError(f"max_glm={self.max_glm} must be 0 (the χ² tail) or ≥ n_glm={self.n_glm}")
         if self.seed < 0:
             raise ValueError(f"seed={self.seed} must be ≥ 0")
 

@@ -77,7 +77,9 @@ def episode_row(episode: dict, record: dict, policy: str, verdict: str, isolatio
     if episode.get("failure_reason") or "steps" not in metrics:  # vla-eval recorded the episode as errored
         detail = (episode.get("failure_detail") or "").strip().splitlines()
         reason = episode.get("failure_reason") or "no result"
-        if reason in POLICY_PHASES:  # the model raised: the policy's failure (vla-eval does not say after how many steps)
+        if (
+            reason in POLICY_PHASES
+        ):  # the model raised: the policy's failure (vla-eval does not say after how many steps)
             return EpisodeRow(
                 **common,
                 success=False,
@@ -129,10 +131,14 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
     for _, episode in episodes:
         verdict = verdicts.get(episode.get("sid")) or (local["verdict"] if id(episode) in crashed_ids else "")
         key = (episode["instance_id"], int(episode["repeat"]))
-        store.add(episode_row(episode, records[episode["instance_id"]], policy, verdict, certificates.get(key)))
+        store.add(
+            episode_row(episode, records[episode["instance_id"]], policy, verdict, certificates.get(key))
+        )
     store.close()
     entries_out = provenance_entries(entries, episodes, bench.version, root)
-    if local or not entries_out:  # this process's own check, or the benchmark named where no episode returned one
+    if (
+        local or not entries_out
+    ):  # this process's own check, or the benchmark named where no episode returned one
         entries_out.append(convert_entry(entries[0], bench.version, root, local, len(crashed)))
     provenance.write(Path(output_dir), entries_out)
     return Path(output_dir) / "episodes.parquet"
@@ -145,7 +151,16 @@ def rederive_isolation(crashed: list[dict], params: dict, root: str) -> tuple[di
     if not crashed:
         return {}, {}
     names = list(dict.fromkeys(e["split"] for e in crashed))
-    names_kept = ("n_repeats", "contexts", "limit", "cameras", "image_size", "max_steps", "control", "allow_drift")
+    names_kept = (
+        "n_repeats",
+        "contexts",
+        "limit",
+        "cameras",
+        "image_size",
+        "max_steps",
+        "control",
+        "allow_drift",
+    )
     keep = {k: params[k] for k in names_kept}
     bench = RoboViewBenchmark(root, names, send_images=False, **keep)
     try:
