@@ -726,6 +726,18 @@ def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpo
         converted[cols].sort_values(key).reset_index(drop=True),
         ours[cols].sort_values(key).reset_index(drop=True),
     )
+    # eval_info.json carries each group's control arm beside pc_success, as the native run's metrics.json has it.
+    from roboview.eval.statistics.metrics import MetricsConfig, compute_metrics
+
+    groups = json.loads((tmp_path / "le" / "eval_info.json").read_text())["per_group"]
+    native = compute_metrics(ours, MetricsConfig(n_perm=20, n_glm=5, max_perm=20))["splits"]
+    assert groups["color"]["n_control_episodes"] >= 1  # the first instances of color hold its baseline value
+    for split in ("color", "dist_scale"):
+        assert "pc_success" in groups[split]
+        assert (groups[split]["sr_control"], groups[split]["sr_control_ci95"]) == (
+            native[split]["sr_control"],
+            native[split]["sr_control_ci95"],
+        )
 
 
 def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):

@@ -164,15 +164,21 @@ def factor_lrt(
             ]
         )
 
-    null = refits(permuted_k)
-    floor = not _reaches(observed, null).any()
-    if not floor:
+    more_null = None if more is None else lambda size: refits(more(size))
+    return _permutation_lrt(observed, df, refits(permuted_k), more_null, max_draws)
+
+
+def _permutation_lrt(
+    observed: float, df: int, null: np.ndarray, more: Callable[[int], np.ndarray] | None, max_draws: int
+) -> LRT:
+    """The permutation-calibrated LRT from its first null draws `null`. Where none reaches the statistic, p below
+    their floor 1 / (draws + 1) comes from more draws (`more`, Besag–Clifford, up to `max_draws`) when asked, else
+    from the χ² tail stretched over the null's upper quantiles (`tail_scale`)."""
+    if _reaches(observed, null).any():
         return LRT(observed, df, permutation_p(observed, null), "permutation")
-    if more is not None and max_draws > len(permuted_k):  # more permutations, while fewer than h reach it
-        mc = sequential_p(observed, null, lambda size: refits(more(size)), SEQUENTIAL_H, max_draws)
+    if more is not None and max_draws > len(null):  # more permutations, while fewer than h reach it
+        mc = sequential_p(observed, null, more, SEQUENTIAL_H, max_draws)
         return LRT(observed, df, mc.p_value, "permutation", mc.at_floor, mc.draws)
-    # No permutation reached the statistic: beyond their floor 1 / (draws + 1), the χ² tail scaled to lie above
-    # the permutation null at its upper quantiles (never below the floor's own evidence).
     tail = float(stats.chi2.sf(observed / tail_scale(null, df), df))
     if tail < 1 / (len(null) + 1):
         return LRT(observed, df, tail, "permutation+scaled_chi2_tail")

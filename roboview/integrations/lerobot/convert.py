@@ -7,7 +7,8 @@
 Pass the `--env.*` flags given to lerobot-eval: every split lerobot-eval ran (a `per_task` entry of
 eval_info.json) is converted; lerobot's episode i of a split is the split's i-th (instance, repeat) (reset
 seed start_seed + i), and its success is that entry's `successes[i]`. lerobot-eval records
-no step counts or failure reasons, so those columns say so.
+no step counts or failure reasons, so those columns say so. eval_info.json's `per_group.<split>` then carries the
+split's control arm beside `pc_success` (`sr_control`, `sr_control_ci95`, `n_control_episodes`).
 """
 
 from __future__ import annotations
@@ -92,7 +93,27 @@ def convert(
                 ).as_dict()
             )
     store.close()
+    add_control_arm(Path(eval_info), info, list(store.rows.values()))
     return Path(output_dir) / "episodes.parquet"
+
+
+def add_control_arm(path: Path, info: dict, rows: list[dict]) -> None:
+    """eval_info.json's `per_group.<split>` gains the split's control arm beside `pc_success`: `sr_control` (the
+    all-baseline instance of each (context, repeat) the split ran, on the same seed), `sr_control_ci95` (Wilson) and
+    `n_control_episodes`; written back atomically."""
+    import pandas as pd
+
+    from roboview.eval.statistics.compare import all_baseline, control_arm
+
+    episodes = pd.DataFrame(rows)
+    base = all_baseline(episodes)
+    for split, split_rows in episodes.groupby("split", sort=False):
+        group = (info.get("per_group") or {}).get(str(split))
+        if isinstance(group, dict):
+            group.update(control_arm(base, split_rows))
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(info, indent=2))
+    tmp.replace(path)
 
 
 _ENV_DEFAULTS = {f.name: f.default for f in dataclasses.fields(RoboViewEnv)}
