@@ -478,3 +478,26 @@ def test_the_board_replays_bundles_whose_policy_runs_here(bundles, tmp_path):
         )
     rows = json.loads((tmp_path / "board" / "leaderboard.json").read_text())["splits"][SPLIT]["sr"]
     assert all(r["replayed"] for r in rows)
+
+
+def test_compare_decides_expert_against_random_in_one_round_and_leaves_equals_not_separated(bundles, tmp_path, capsys):
+    """roboview-compare on real bundles (3 rounds of tiny's camera_pose): the expert wins all 9 pairs of round 1
+    (exact McNemar p 0.0039, under the 0.005 the first of 10 looks spends); expert and vision never disagree."""
+    from roboview.pipelines.compare import main
+
+    result = main([f"--results={bundles['random']},{bundles['expert']}", f"--output_dir={tmp_path}"])
+    sr = result["splits"][SPLIT]["sr"]
+    assert result["policies"] == ["random", "expert"] and result["splits"][SPLIT]["rounds"] == 3
+    assert (sr["verdict"], sr["look"], sr["delta"]) == ("B better", 1, 1.0)
+    assert sr["p"] == pytest.approx(2 / 2**9) and sr["alpha_spent"] == pytest.approx(0.005)
+    assert json.loads((tmp_path / "compare.json").read_text())["overall"]["sr"]["verdict"] == "B better"
+    out = capsys.readouterr().out
+    assert "sr B better at round 1" in out
+    same = main([f"--results={bundles['vision']},{bundles['expert']}", "--max_repeats=3", "--stop_exit_code=true"])
+    assert same["overall"]["sr"]["verdict"] == "not separated" and same["overall"]["sr"]["needs"] is None
+    with pytest.raises(SystemExit) as undecided:  # 3 of 10 planned rounds, nothing seen: keep running rounds
+        main([f"--results={bundles['vision']},{bundles['expert']}", "--stop_exit_code=true"])
+    assert undecided.value.code == 3
+    with pytest.raises(SystemExit) as bad:
+        main([f"--results={bundles['vision']}"])
+    assert bad.value.code == 2 and "give exactly two results folders" in capsys.readouterr().err

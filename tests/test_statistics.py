@@ -214,3 +214,34 @@ def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_bi
     quiet = split_metrics(null)
     # stops early when p is large
     assert quiet["p_value_cv_draws"] < 1000 and not quiet["p_value_cv_at_floor"]
+
+
+def test_adaptive_paired_comparison_keeps_alpha_under_optional_stopping_and_stops_early():
+    """Two policies on the same pairs, looked at after every round and stopped at the first crossing: equal
+    policies are called different in at most α of comparisons; a 15-point SR gap is called, the right way round,
+    in well under the planned rounds."""
+    from roboview.eval.statistics.sequential_compare import CompareDesign, rounds_needed, sr_looks
+
+    def simulate(rng, delta, pairs=40, rounds=8):
+        p = rng.uniform(0.3, 0.8, pairs)[:, None]
+        u = rng.random((pairs, rounds))
+        v = np.where(rng.random((pairs, rounds)) < 0.5, u, rng.random((pairs, rounds)))  # common random numbers
+        return u < p, v < p + delta
+
+    rng, design = np.random.default_rng(7), CompareDesign(alpha=0.05, max_repeats=8)
+    null = [sr_looks(*simulate(rng, 0.0), design) for _ in range(600)]
+    false = np.mean([r["verdict"] in ("A better", "B better") for r in null])
+    assert within_binomial(float(false), 0.05, len(null)), false
+    assert {r["verdict"] for r in null} >= {"not separated"}
+    gap = [sr_looks(*simulate(rng, 0.15), design) for _ in range(200)]
+    assert np.mean([r["verdict"] == "B better" for r in gap]) > 0.9
+    assert not any(r["verdict"] == "A better" for r in gap)
+    assert np.mean([r["look"] or 8 for r in gap]) < 4  # of 8 planned rounds
+    # Each look spends its share; the spending sums to α.
+    assert sum(design.spent(k) for k in range(1, 9)) == pytest.approx(0.05)
+    # Undecided after 2 rounds of a clear trend: the rounds still needed, from its discordant pairs.
+    a, b = np.zeros((20, 2), bool), np.zeros((20, 2), bool)
+    b[0:4, 0] = b[4:7, 1] = a[7, 1] = True  # B wins 7 of the 8 discordant pairs: p 0.07, not yet
+    early = sr_looks(a, b, design)
+    assert early["verdict"] == "undecided" and early["needs"] == 2  # 4 discordant a round at 7:1 cross at round 4
+    assert rounds_needed(a, a, design) is None  # no discordant pair: no difference to wait for

@@ -16,6 +16,7 @@ MODULES = (
     "roboview.pipelines.audit",
     "roboview.pipelines.build_benchmark",
     "roboview.pipelines.collect",
+    "roboview.pipelines.compare",
     "roboview.pipelines.coverage",
     "roboview.pipelines.evaluate",
     "roboview.pipelines.export_dataset",
