@@ -9,12 +9,13 @@ p_i + δ (capped at 0.99) for B; common random numbers: B's uniform is A's with 
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
 
 import numpy as np
 
 from roboview.eval.statistics.sequential_compare import SR_VERDICTS, CompareDesign, sr_looks
 from roboview.eval.statistics.significance import paired_success_test
+from roboview.pipelines._cli import cli_main
 
 
 def simulate(rng, pairs: int, rounds: int, delta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -51,23 +52,38 @@ def study(sims: int, pairs: int, max_repeats: int, delta: float, seed: int = 0) 
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sims", type=int, default=2000)
-    parser.add_argument("--pairs", type=int, default=57)
-    parser.add_argument("--max_repeats", type=int, default=10)
-    args = parser.parse_args()
+@dataclass
+class PairedCompareConfig:
+    # Simulated comparisons per SR gap.
+    sims: int = 2000
+    # Instance pairs per round (both policies).
+    pairs: int = 57
+    # Planned rounds (looks) of the adaptive comparison, and the rounds of the fixed design.
+    max_repeats: int = 10
+
+    def __post_init__(self) -> None:
+        for name in ("sims", "pairs", "max_repeats"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
+
+
+def run(cfg: PairedCompareConfig) -> None:
     print(
         "| δ (SR) | adaptive: verdicts | mean rounds | fixed, all K rounds: verdicts | fixed: rounds for the "
         "adaptive power |"
     )
     print("|---|---|---|---|---|")
     for delta in (0.0, 0.05, 0.1, 0.2):
-        r = study(args.sims, args.pairs, args.max_repeats, delta)
+        r = study(cfg.sims, cfg.pairs, cfg.max_repeats, delta)
         print(
             f"| {delta:g} | {r['adaptive_rejects']:.3f} | {r['mean_rounds']:.2f} | {r['fixed_rejects']:.3f} | "
-            f"{r['fixed_rounds_equal_power']} |"
+            f"{r['fixed_rounds_equal_power']} |",
+            flush=True,
         )
+
+
+def main(args: list[str] | None = None) -> None:
+    cli_main(PairedCompareConfig, run, args=args)
 
 
 if __name__ == "__main__":

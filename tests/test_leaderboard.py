@@ -121,7 +121,7 @@ def test_board_ranks_verified_bundles_with_groups_and_links(bundles, tmp_path):
     assert saved["benchmark_version"] == board.benchmark_version and saved["adjustment"] == "holm"
     assert saved["protocol"] == "quick" and saved["splits"][SPLIT]["sr"][0]["replay_note"]
     page = (tmp_path / "board" / "leaderboard.html").read_text()
-    assert "(privileged: reference, not ranked)" in page and "cv_excess ×100 (no interval)" in page
+    assert "(privileged: reference, not ranked)" in page and "cv_excess ×100 [95 % CI]" in page
     # The control arm beside each SR: none here (tiny's camera_pose split holds no `original` pose and no other
     # split ran), so the rows say so and the page shows no empty column.
     assert all(r["sr_control"] is None and r["sr_control_ci95"] is None for r in sr.values())
@@ -480,7 +480,9 @@ def test_the_board_replays_bundles_whose_policy_runs_here(bundles, tmp_path):
     assert all(r["replayed"] for r in rows)
 
 
-def test_compare_decides_expert_against_random_in_one_round_and_leaves_equals_not_separated(bundles, tmp_path, capsys):
+def test_compare_decides_expert_against_random_in_one_round_and_leaves_equals_not_separated(
+    bundles, tmp_path, capsys
+):
     """roboview-compare on real bundles (3 rounds of tiny's camera_pose): the expert wins all 9 pairs of round 1
     (exact McNemar p 0.0039, under the 0.005 the first of 10 looks spends); expert and vision never disagree."""
     from roboview.pipelines.compare import main
@@ -493,7 +495,9 @@ def test_compare_decides_expert_against_random_in_one_round_and_leaves_equals_no
     assert json.loads((tmp_path / "compare.json").read_text())["overall"]["sr"]["verdict"] == "B better"
     out = capsys.readouterr().out
     assert "sr B better at round 1" in out
-    same = main([f"--results={bundles['vision']},{bundles['expert']}", "--max_repeats=3", "--stop_exit_code=true"])
+    same = main(
+        [f"--results={bundles['vision']},{bundles['expert']}", "--max_repeats=3", "--stop_exit_code=true"]
+    )
     assert same["overall"]["sr"]["verdict"] == "not separated" and same["overall"]["sr"]["needs"] is None
     with pytest.raises(SystemExit) as undecided:  # 3 of 10 planned rounds, nothing seen: keep running rounds
         main([f"--results={bundles['vision']},{bundles['expert']}", "--stop_exit_code=true"])

@@ -181,7 +181,7 @@ def test_report_tables_equal_metrics(report):
                 _with_ci(m["sr_control"], m["sr_control_ci95"]),
                 _pct(m["cv"]),
                 _pct(m["cv_null"]),
-                _pct(m["cv_excess"]),
+                _with_ci(m["cv_excess"], m["cv_excess_ci95"]),
                 p,
                 str(m["n_episodes"]),
             ]

@@ -91,7 +91,7 @@ def test_split_blocks_print_metrics_json(report):
             "control SR [95 % CI]",
             "CV",
             "noise floor",
-            "cv_excess",
+            "cv_excess [95 % CI]",
             "p",
             "episodes",
             "verdict",
@@ -104,7 +104,7 @@ def test_split_blocks_print_metrics_json(report):
                 pct(m["sr_control"]) + pct_ci(m["sr_control_ci95"]),
                 pct(m["cv"]),
                 pct(m["cv_null"]),
-                pct(m["cv_excess"]),
+                pct(m["cv_excess"]) + pct_ci(m.get("cv_excess_ci95")),
                 p_fmt(m["p_value"], m["p_value_at_floor"]),
                 str(m["n_episodes"]),
             ]

@@ -18,7 +18,7 @@ from roboview.eval.statistics.simulate import simulate_additive_factorial, simul
 from roboview.tasks import load_preset
 from roboview.variation.instances import episode_seed, generate_suite
 
-SIM = MetricsConfig(n_perm=100, n_glm=40, max_perm=100)  # fixed-B: what these simulations study
+SIM = MetricsConfig(n_perm=100, n_glm=40, max_perm=100, n_boot=0)  # fixed-B: what these simulations study
 
 
 def run_many(n_sims: int, seed: int, **design) -> pd.DataFrame:
@@ -225,7 +225,9 @@ def test_adaptive_paired_comparison_keeps_alpha_under_optional_stopping_and_stop
     def simulate(rng, delta, pairs=40, rounds=8):
         p = rng.uniform(0.3, 0.8, pairs)[:, None]
         u = rng.random((pairs, rounds))
-        v = np.where(rng.random((pairs, rounds)) < 0.5, u, rng.random((pairs, rounds)))  # common random numbers
+        v = np.where(
+            rng.random((pairs, rounds)) < 0.5, u, rng.random((pairs, rounds))
+        )  # common random numbers
         return u < p, v < p + delta
 
     rng, design = np.random.default_rng(7), CompareDesign(alpha=0.05, max_repeats=8)
@@ -243,5 +245,23 @@ def test_adaptive_paired_comparison_keeps_alpha_under_optional_stopping_and_stop
     a, b = np.zeros((20, 2), bool), np.zeros((20, 2), bool)
     b[0:4, 0] = b[4:7, 1] = a[7, 1] = True  # B wins 7 of the 8 discordant pairs: p 0.07, not yet
     early = sr_looks(a, b, design)
-    assert early["verdict"] == "undecided" and early["needs"] == 2  # 4 discordant a round at 7:1 cross at round 4
+    assert (
+        early["verdict"] == "undecided" and early["needs"] == 2
+    )  # 4 discordant a round at 7:1 cross at round 4
     assert rounds_needed(a, a, design) is None  # no discordant pair: no difference to wait for
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.6])
+def test_cv_excess_interval_covers_the_noise_free_cv(tau):
+    """The bootstrap interval of cv_excess holds the true (noise-free) CV of the simulated policy at about its
+    nominal 95 % (the full grid, τ ∈ {0, 0.3, 0.6} × n ∈ {2, 5, 10}, is benchmarks/cv_excess_interval.py)."""
+    rng = np.random.default_rng(11 + int(10 * tau))
+    cfg = MetricsConfig(n_perm=100, n_glm=1, max_perm=100, n_boot=100)
+    hits, reps = 0, 30
+    for _ in range(reps):
+        frame, truth = simulate_split(rng, 9, 4, 5, tau, 0.7)
+        m = split_metrics(frame, cfg)
+        lo, hi = m["cv_excess_ci95"]
+        assert lo <= m["cv_excess"] + 0.1 and hi >= 0.0  # an interval, near its estimate
+        hits += lo - 1e-12 <= truth <= hi + 1e-12
+    assert hits / reps >= 0.95 - 3 * math.sqrt(0.95 * 0.05 / reps), hits

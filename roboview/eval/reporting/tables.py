@@ -186,12 +186,12 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
         "repeat), ×100",
     ),
     Column(
+        "cv_excess [95 % CI]",
         "cv_excess",
-        "cv_excess",
-        lambda row: pct(row[1]["cv_excess"]),
-        "√max(0, CV² − noise floor²), the bias beyond binomial noise, ×100: rank policies on it, not on "
-        "CV; bold: the lowest, where it is significantly lower than the next policy's (paired test, "
-        "p < 0.05)",
+        lambda row: pct(row[1]["cv_excess"]) + pct_ci(row[1].get("cv_excess_ci95")),
+        "√max(0, CV² − noise floor²), the bias beyond binomial noise, ×100, with its bootstrap 95 % interval "
+        "(docs/statistics.md): rank policies on it, not on CV; bold: the lowest, where it is significantly lower "
+        "than the next policy's (paired test, p < 0.05)",
     ),
     Column(
         "p",
@@ -236,7 +236,7 @@ def split_table(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -
     rows = [(name, layout["splits"][split]) for name, layout in layouts.items() if split in layout["splits"]]
     table = Table.of((POLICY, *SPLIT_COLUMNS), rows)
     best = _best(metrics, split, {name: m["cv_excess"] for name, m in rows})
-    j = table.headings.index("cv_excess")
+    j = table.headings.index("cv_excess [95 % CI]")
     for (name, _), cells in zip(rows, table.rows):
         if name == best:
             cells[j] = replace(cells[j], strong=True)

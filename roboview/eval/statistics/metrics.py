@@ -36,6 +36,7 @@ from roboview.eval.statistics.compare import (
     control_arm,
     control_deltas,
 )
+from roboview.eval.statistics.intervals import cv_excess_interval
 from roboview.eval.statistics.tables import (  # noqa: F401 — re-exported: the metrics' vocabulary
     EPSILON,
     SEQUENTIAL_H,
@@ -110,6 +111,9 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
     }
     if k:
         out |= _cv_tests(table, factor, ctx, cfg.rng(split, "perm"), cfg)
+        out["cv_excess_ci95"] = cv_excess_interval(
+            table, ctx, out["cv"], out["cv_excess"], cfg.n_boot, cfg.epsilon, cfg.rng(split, "boot")
+        )
     return out
 
 
@@ -437,6 +441,7 @@ def _resampling(cfg: MetricsConfig) -> dict[str, int]:
         "n_glm": cfg.n_glm,
         "max_perm": cfg.max_perm,
         "max_glm": cfg.max_glm,
+        "n_boot": cfg.n_boot,
         "seed": cfg.seed,
     }
 

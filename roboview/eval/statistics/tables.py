@@ -44,6 +44,8 @@ class MetricsConfig:
     # stretched over the refits' upper quantiles (docs/statistics.md); N > n_glm draws more permutations instead,
     # while fewer than SEQUENTIAL_H reach the statistic, down to 1 / (N + 1) (each one a GLM refit: slow).
     max_glm: int = 0
+    # Bootstrap tables behind cv_excess_ci95 (roboview.eval.statistics.intervals); 0: no interval.
+    n_boot: int = 200
 
     def __post_init__(self) -> None:
         if not self.epsilon > 0:
@@ -52,6 +54,8 @@ class MetricsConfig:
             raise ValueError(f"n_perm={self.n_perm} and n_glm={self.n_glm} must be ≥ 1")
         if self.max_perm < self.n_perm:
             raise ValueError(f"max_perm={self.max_perm} must be ≥ n_perm={self.n_perm}")
+        if self.n_boot < 0:
+            raise ValueError(f"n_boot={self.n_boot} must be ≥ 0 (0: no cv_excess interval)")
         if self.max_glm and self.max_glm < self.n_glm:
             raise ValueError(f"max_glm={self.max_glm} must be 0 (the χ² tail) or ≥ n_glm={self.n_glm}")
         if self.seed < 0:
