@@ -157,7 +157,7 @@ def test_report_tables_equal_metrics(report):
         "control SR [95 % CI]",
         "CV",
         "noise floor",
-        "cv_excess",
+        "cv_excess [95 % CI]",
         "p",
         "episodes",
         "verdict",

@@ -172,7 +172,7 @@ def test_report_md_and_html_print_the_same_tables(report):
                 "control SR [95 % CI]",
                 "CV",
                 "noise floor",
-                "cv_excess",
+                "cv_excess [95 % CI]",
                 "p",
                 "episodes",
                 "verdict",

@@ -453,3 +453,12 @@ def test_a_bad_param_ends_vla_eval_run_with_one_line_before_any_episode(tiny_ben
             )
             assert message in proc.stderr
     assert not list((tmp_path / "vla").glob("*.json"))  # no result, no aggregate
+
+
+def test_the_documented_vla_eval_run_writes_under_a_git_ignored_folder():
+    import yaml
+
+    out = yaml.safe_load(CONFIG.read_text())["output_dir"]
+    assert out == "outputs/vla_eval"
+    ignored = subprocess.run(["git", "check-ignore", "-q", f"{out}/recording-x.sqlite"], cwd=ROOT)
+    assert ignored.returncode == 0  # git check-ignore: 0 = ignored
