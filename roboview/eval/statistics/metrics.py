@@ -170,6 +170,7 @@ def _cv_tests(
         permuted[: cfg.n_glm],
         lambda b: table.permuted_k(["context_id"], b, rng),
         cfg.max_glm,
+        stretch_tail=True,
     )
     return {
         "cv": cv,
@@ -260,13 +261,23 @@ def _factor_tests(
 ) -> None:
     """Factor `f`'s CV against its permutation null (values of f shuffled within (other, context)) and its GLM
     likelihood-ratio test, into `out`'s per-factor entries."""
-    permuted = table.permuted_k([other, "context_id"], cfg.n_perm, cfg.rng(split, f"perm:{f}"))
+    rng = cfg.rng(split, f"perm:{f}")
+    permuted = table.permuted_k([other, "context_id"], cfg.n_perm, rng)
     null = statistics(permuted / table.n)[f]
     out["cv"][f] = float(point[f])
     out["cv_null"][f] = float(null.mean())
     out["cv_excess"][f] = excess(out["cv"][f], out["cv_null"][f])
     out["p_value_cv"][f] = stats.permutation_p(out["cv"][f], null)
-    test = stats.factor_lrt(table.k, table.n, table.codes([f]), groups, permuted[: cfg.n_glm])
+    test = stats.factor_lrt(
+        table.k,
+        table.n,
+        table.codes([f]),
+        groups,
+        permuted[: cfg.n_glm],
+        lambda b: table.permuted_k([other, "context_id"], b, rng),
+        cfg.max_glm,
+        stretch_tail=True,
+    )
     out["p_value"][f] = None if test is None else test.p_value
     out["p_value_method"][f] = None if test is None else test.method
 

@@ -122,14 +122,16 @@ def factor_lrt(
     permuted_k: np.ndarray | None,
     more: Callable[[int], np.ndarray] | None = None,
     max_draws: int = 0,
+    stretch_tail: bool = False,
 ) -> LRT | None:
     """Does success depend on `value`? Binomial GLM `value + strata` against `strata`.
 
     `permuted_k` (n_perm, n_cells): success counts with value labels shuffled within blocks; used
     as the reference distribution when the table is sparse. `more(size)`: further such permutations, drawn
     (Besag–Clifford, `sequential_p`) while fewer than SEQUENTIAL_H of the refits reach the observed statistic, up
-    to `max_draws` in all, so a strong effect resolves below 1 / (len(permuted_k) + 1). None when no stratum is
-    informative.
+    to `max_draws` in all, so a strong effect resolves below 1 / (len(permuted_k) + 1); else, with `stretch_tail`,
+    a statistic none of them reaches gets the stretched χ² tail's p (`tail_scale`). Without either, p is the plain
+    permutation p-value (1 + exceedances) / (1 + draws). None when no stratum is informative.
     """
     keep = informative(k, n, strata)
     if not keep.any():
@@ -165,11 +167,16 @@ def factor_lrt(
         )
 
     more_null = None if more is None else lambda size: refits(more(size))
-    return _permutation_lrt(observed, df, refits(permuted_k), more_null, max_draws)
+    return _permutation_lrt(observed, df, refits(permuted_k), more_null, max_draws, stretch_tail)
 
 
 def _permutation_lrt(
-    observed: float, df: int, null: np.ndarray, more: Callable[[int], np.ndarray] | None, max_draws: int
+    observed: float,
+    df: int,
+    null: np.ndarray,
+    more: Callable[[int], np.ndarray] | None,
+    max_draws: int,
+    stretch_tail: bool,
 ) -> LRT:
     """The permutation-calibrated LRT from its first null draws `null`. Where none reaches the statistic, p below
     their floor 1 / (draws + 1) comes from more draws (`more`, Besag–Clifford, up to `max_draws`) when asked, else
@@ -179,7 +186,7 @@ def _permutation_lrt(
     if more is not None and max_draws > len(null):  # more permutations, while fewer than h reach it
         mc = sequential_p(observed, null, more, SEQUENTIAL_H, max_draws)
         return LRT(observed, df, mc.p_value, "permutation", mc.at_floor, mc.draws)
-    tail = float(stats.chi2.sf(observed / tail_scale(null, df), df))
+    tail = float(stats.chi2.sf(observed / tail_scale(null, df), df)) if stretch_tail else 1.0
     if tail < 1 / (len(null) + 1):
         return LRT(observed, df, tail, "permutation+scaled_chi2_tail")
     return LRT(observed, df, permutation_p(observed, null), "permutation", True)
