@@ -174,8 +174,8 @@ def _task_table1(
         "",
         *to_markdown(table),
         Table(SPLIT_COLUMNS).legend(),
-        "SR is weighted by episodes, not averaged over instances as in the paper. No interval is given "
-        "for CV or cv_excess: none has passed the coverage simulation.",
+        "SR is weighted by episodes, not averaged over instances as in the paper. cv_excess's interval is a "
+        "parametric bootstrap whose coverage was checked by simulation (docs/statistics.md); CV has none.",
         "",
         *averages,
         *_noise_floor_line(layouts),
