@@ -265,3 +265,20 @@ def test_cv_excess_interval_covers_the_noise_free_cv(tau):
         assert lo <= m["cv_excess"] + 0.1 and hi >= 0.0  # an interval, near its estimate
         hits += lo - 1e-12 <= truth <= hi + 1e-12
     assert hits / reps >= 0.95 - 3 * math.sqrt(0.95 * 0.05 / reps), hits
+
+
+def test_paired_rounds_compare_the_instances_and_rounds_both_policies_completed():
+    import pandas as pd
+
+    from roboview.eval.statistics.sequential_compare import paired_rounds
+
+    rows = pd.DataFrame(
+        {
+            "policy": ["A"] * 5 + ["B"] * 6,
+            "instance_id": ["i1", "i1", "i2", "i2", "i1", "i1", "i1", "i2", "i2", "i3", "i3"],
+            "repeat": [0, 1, 0, 1, 2, 0, 1, 0, 1, 0, 1],
+            "success": [1, 0, 1, 1, 1, 0, 0, 1, 1, 1, 0],
+        }
+    ).astype({"success": bool})
+    a, b = paired_rounds(rows, "A", "B")  # i3 only B ran; round 2 only A started
+    assert a.tolist() == [[True, False], [True, True]] and b.tolist() == [[False, False], [True, True]]

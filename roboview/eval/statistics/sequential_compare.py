@@ -134,8 +134,13 @@ def compare_in_rounds(
 
 
 def paired_rounds(rows: pd.DataFrame, name_a: str, name_b: str) -> tuple[np.ndarray, np.ndarray]:
-    """(instances, rounds) success arrays of both policies on one split: the instances both ran, and the leading
-    rounds 0 … r−1 that every one of them completed for both (a round in progress is not looked at)."""
+    """(instances, rounds) success arrays of both policies on one split: the instances both ran (say, under two
+    different `--eval.limit`s), and the leading rounds 0 … r−1 that every one of them completed for both (a round
+    in progress is not looked at)."""
+    shared = set(rows.loc[rows["policy"] == name_a, "instance_id"]) & set(
+        rows.loc[rows["policy"] == name_b, "instance_id"]
+    )
+    rows = rows[rows["instance_id"].isin(shared)]
     wide = rows.pivot_table(
         index="instance_id", columns=["policy", "repeat"], values="success", aggfunc="first"
     )
