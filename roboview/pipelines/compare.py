@@ -28,7 +28,7 @@ from roboview.eval.reporting.report import load_results
 from roboview.eval.running.results import counted
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
 from roboview.eval.statistics.sequential_compare import CompareDesign, compare_in_rounds
-from roboview.pipelines._cli import cli_main
+from roboview.pipelines._cli import cli_main, result_entries
 
 UNDECIDED_EXIT = 3
 
@@ -59,11 +59,7 @@ class CompareConfig:
 
     @property
     def entries(self) -> list[tuple[str | None, Path]]:
-        out = []
-        for item in filter(None, (x.strip() for x in self.results.split(","))):
-            name, sep, path = item.partition("=")
-            out.append((name.strip(), Path(path.strip())) if sep and "/" not in name else (None, Path(item)))
-        return out
+        return result_entries(self.results)
 
     @property
     def design(self) -> CompareDesign:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from roboview.eval.reporting.report import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
-from roboview.pipelines._cli import cli_main
+from roboview.pipelines._cli import cli_main, result_entries
 
 
 @dataclass
@@ -42,13 +42,7 @@ class ReportConfig:
     @property
     def result_entries(self) -> list[tuple[str | None, Path]]:
         """(name or None, path) per entry; NAME=PATH renames the file's policy."""
-        entries = []
-        for item in filter(None, (x.strip() for x in self.results.split(","))):
-            name, sep, path = item.partition("=")
-            entries.append(
-                (name.strip(), Path(path.strip())) if sep and "/" not in name else (None, Path(item))
-            )
-        return entries
+        return result_entries(self.results)
 
     @property
     def result_paths(self) -> list[Path]:

@@ -75,14 +75,16 @@ def directions(m: dict) -> tuple[list[tuple[str, float]], list[tuple[str, float]
     return [(v, o) for o, v in low], [(v, o) for o, v in high]
 
 
-def against_control(m: dict) -> str | None:
-    """A split's values that differ from its control arm on the same (context, repeat) seeds (McNemar p < ALPHA),
-    as text: "blue −50.00 (p 0.004)"; "none" where none does; None where no control episode ran."""
+def against_control(m: dict) -> str:
+    """The clause that names a split's values differing from its control arm on the same (context, repeat) seeds
+    (McNemar p < ALPHA): "; against the control arm (…): blue −50.00 (p 0.004)", "…: none" where none does; empty
+    where no control episode ran."""
     paired = {v: s for v, s in m["per_value"].items() if s.get("p_control") is not None}
     if not paired:
-        return None
+        return ""
     sig = sorted((s["delta_control"], v) for v, s in paired.items() if s["p_control"] < ALPHA)
-    return ", ".join(f"{v} {100 * d:+.2f} (p {p_fmt(paired[v]['p_control'])})" for d, v in sig) or "none"
+    named = ", ".join(f"{v} {100 * d:+.2f} (p {p_fmt(paired[v]['p_control'])})" for d, v in sig) or "none"
+    return f"; against the control arm (same seeds, McNemar p < 0.05): {named}"
 
 
 def split_title(split: str) -> str:

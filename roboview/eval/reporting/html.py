@@ -78,12 +78,7 @@ def _values_line(m: dict[str, Any]) -> str:
             or "none"
         )
 
-    control = fmt.against_control(m)
-    return f"below the rest: {text(low)}; above the rest: {text(high)}" + (
-        ""
-        if control is None
-        else f"; against the control arm (same seeds, McNemar p &lt; 0.05): {_e(control)}"
-    )
+    return f"below the rest: {text(low)}; above the rest: {text(high)}" + _e(fmt.against_control(m))
 
 
 def _split_block(

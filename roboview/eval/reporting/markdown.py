@@ -267,14 +267,9 @@ def _directions(layouts: dict[str, dict]) -> list[str]:
                     or "none"
                 )
 
-            control = against_control(m)
             lines.append(
                 f"- {name}, {split}: below the rest: {text(low)}; above the rest: {text(high)}"
-                + (
-                    ""
-                    if control is None
-                    else f"; against the control arm (same seeds, McNemar p < 0.05): {control}"
-                )
+                + against_control(m)
             )
     return [*lines, ""]
 

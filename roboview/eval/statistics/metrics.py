@@ -162,16 +162,7 @@ def _cv_tests(
         SEQUENTIAL_H,
         cfg.max_perm,
     )
-    lrt = stats.factor_lrt(
-        table.k,
-        table.n,
-        table.codes([factor]),
-        ctx,
-        permuted[: cfg.n_glm],
-        lambda b: table.permuted_k(["context_id"], b, rng),
-        cfg.max_glm,
-        stretch_tail=True,
-    )
+    lrt = _glm_test(table, table.codes([factor]), ctx, permuted, ["context_id"], rng, cfg)
     return {
         "cv": cv,
         "cv_null": cv_null,
@@ -181,6 +172,30 @@ def _cv_tests(
         "p_value_cv_at_floor": mc.at_floor,
         **stats.lrt_fields(lrt),
     }
+
+
+def _glm_test(
+    table: CellTable,
+    value: np.ndarray,
+    strata: np.ndarray,
+    permuted: np.ndarray,
+    within: list[str],
+    rng: np.random.Generator,
+    cfg: MetricsConfig,
+) -> stats.LRT | None:
+    """The factor's GLM likelihood-ratio test, permutation-calibrated on the first n_glm of `permuted` (value labels
+    shuffled within `within` and repeat); beyond their floor, more permutations drawn from `rng` up to max_glm, else
+    the stretched χ² tail."""
+    return stats.factor_lrt(
+        table.k,
+        table.n,
+        value,
+        strata,
+        permuted[: cfg.n_glm],
+        lambda size: table.permuted_k(within, size, rng),
+        cfg.max_glm,
+        stretch_tail=True,
+    )
 
 
 def _factorial_statistics(table: CellTable, epsilon: float) -> tuple[Callable, dict[str, np.ndarray]]:
@@ -268,16 +283,7 @@ def _factor_tests(
     out["cv_null"][f] = float(null.mean())
     out["cv_excess"][f] = excess(out["cv"][f], out["cv_null"][f])
     out["p_value_cv"][f] = stats.permutation_p(out["cv"][f], null)
-    test = stats.factor_lrt(
-        table.k,
-        table.n,
-        table.codes([f]),
-        groups,
-        permuted[: cfg.n_glm],
-        lambda b: table.permuted_k([other, "context_id"], b, rng),
-        cfg.max_glm,
-        stretch_tail=True,
-    )
+    test = _glm_test(table, table.codes([f]), groups, permuted, [other, "context_id"], rng, cfg)
     out["p_value"][f] = None if test is None else test.p_value
     out["p_value_method"][f] = None if test is None else test.method
 

@@ -165,19 +165,31 @@ class CellTable:
         """Group code of each cell by `columns` (see `codes`)."""
         return codes(self.cells, columns)
 
-    def permuted_k(self, within: Sequence[str], n_perm: int, rng: np.random.Generator) -> np.ndarray:
+    def permuted_k(
+        self,
+        within: Sequence[str],
+        n_perm: int,
+        rng: np.random.Generator,
+        success: np.ndarray | None = None,
+        blocks: list[np.ndarray] | None = None,
+    ) -> np.ndarray:
         """(n_perm, n_cells) success counts with episodes' cell labels shuffled within blocks.
 
         A block is a combination of `within` columns plus the repeat: under the null every
-        episode of a block is exchangeable (the same seed, the same context, any value).
+        episode of a block is exchangeable (the same seed, the same context, any value). `success` replaces the
+        episodes' own outcomes (a bootstrap table of the same design); `blocks`, `self.blocks(within)` computed
+        once for many calls.
         """
         eps = self.episodes
-        blocks = codes(eps, [*within, "repeat"])
-        success = eps["success"].to_numpy().astype(np.int8)
+        success = (eps["success"].to_numpy() if success is None else success).astype(np.int8)
         shuffled = np.empty((n_perm, len(eps)), dtype=np.int8)
-        order = np.argsort(blocks, kind="stable")
-        bounds = np.searchsorted(blocks[order], np.arange(blocks.max() + 2))
-        for lo, hi in zip(bounds[:-1], bounds[1:]):
-            idx = order[lo:hi]
+        for idx in self.blocks(within) if blocks is None else blocks:
             shuffled[:, idx] = rng.permuted(np.tile(success[idx], (n_perm, 1)), axis=1)
         return group_sum(shuffled.astype(np.int64), eps["cell"].to_numpy())
+
+    def blocks(self, within: Sequence[str]) -> list[np.ndarray]:
+        """The episodes' indices in each block of `within` plus the repeat (`permuted_k`), in block order."""
+        codes_ = codes(self.episodes, [*within, "repeat"])
+        order = np.argsort(codes_, kind="stable")
+        bounds = np.searchsorted(codes_[order], np.arange(codes_.max() + 2))
+        return [order[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]

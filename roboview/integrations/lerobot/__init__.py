@@ -26,7 +26,6 @@ evals, one success rate per split. The same env is offered as a LeRobot EnvHub e
 from __future__ import annotations
 
 import functools
-import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,14 +50,15 @@ log = logging.getLogger(__name__)
 
 
 def checkpoint_features(path: str | None) -> tuple[int | None, int | None]:
-    """(image side, action width) of a local LeRobot checkpoint (its config.json); (None, None) without one."""
-    config = Path(path) / "config.json" if path else None
-    if config is None or not config.is_file():
+    """(image side, action width) of a local LeRobot checkpoint folder (one holding config.json), read as
+    `roboview-evaluate` reads it; (None, None) without one."""
+    if not path or not (Path(path) / "config.json").is_file():
         return None, None
-    data = json.loads(config.read_text())
-    images = [f["shape"] for f in (data.get("input_features") or {}).values() if f.get("type") == "VISUAL"]
-    action = (data.get("output_features") or {}).get(ACTION, {}).get("shape") or [None]
-    return (int(images[0][-1]) if images else None), (int(action[0]) if action[0] else None)
+    from roboview.policies.lerobot_policy import checkpoint_image_size, load_config
+
+    _, config = load_config(path)
+    action = config.output_features.get(ACTION)
+    return checkpoint_image_size(path), (int(action.shape[0]) if action is not None else None)
 
 
 @EnvConfig.register_subclass("roboview")
@@ -147,9 +147,14 @@ class RoboViewEnv(EnvConfig):
                 f"--env.image_size={self.image_size} but the checkpoint {path} was trained on {side}×{side} images; "
                 f"drop the flag (its size is used) or pass {side}"
             )
-        takes = 8 if self.control == "joint" else 7
+        from roboview.policies.lerobot_policy import EE_ACTION_DIMS
+        from roboview.tasks.env import ACTION_NAMES
+
+        takes = len(ACTION_NAMES) if self.control == "joint" else EE_ACTION_DIMS
         if width and width != takes:
-            fix = "--env.control=joint" if width == 8 else "--env.control=ee_delta (or ee_abs)"
+            fix = (
+                "--env.control=joint" if width == len(ACTION_NAMES) else "--env.control=ee_delta (or ee_abs)"
+            )
             raise ValueError(
                 f"--env.control={self.control} takes {takes}-d actions but the checkpoint {path} answers {width}: "
                 f"pass {fix}, as its dataset was collected"

@@ -77,9 +77,8 @@ def episode_row(episode: dict, record: dict, policy: str, verdict: str, isolatio
     if episode.get("failure_reason") or "steps" not in metrics:  # vla-eval recorded the episode as errored
         detail = (episode.get("failure_detail") or "").strip().splitlines()
         reason = episode.get("failure_reason") or "no result"
-        if (
-            reason in POLICY_PHASES
-        ):  # the model raised: the policy's failure (vla-eval does not say after how many steps)
+        # The model raised: the policy's failure (vla-eval does not say after how many steps).
+        if reason in POLICY_PHASES:
             return EpisodeRow(
                 **common,
                 success=False,
@@ -136,9 +135,8 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
         )
     store.close()
     entries_out = provenance_entries(entries, episodes, bench.version, root)
-    if (
-        local or not entries_out
-    ):  # this process's own check, or the benchmark named where no episode returned one
+    # This process's own conformance check, or the benchmark named where no episode returned one.
+    if local or not entries_out:
         entries_out.append(convert_entry(entries[0], bench.version, root, local, len(crashed)))
     provenance.write(Path(output_dir), entries_out)
     return Path(output_dir) / "episodes.parquet"
@@ -151,18 +149,8 @@ def rederive_isolation(crashed: list[dict], params: dict, root: str) -> tuple[di
     if not crashed:
         return {}, {}
     names = list(dict.fromkeys(e["split"] for e in crashed))
-    names_kept = (
-        "n_repeats",
-        "contexts",
-        "limit",
-        "cameras",
-        "image_size",
-        "max_steps",
-        "control",
-        "allow_drift",
-    )
-    keep = {k: params[k] for k in names_kept}
-    bench = RoboViewBenchmark(root, names, send_images=False, **keep)
+    kept = ("n_repeats", "contexts", "limit", "cameras", "image_size", "max_steps", "control", "allow_drift")
+    bench = RoboViewBenchmark(root, names, send_images=False, **{k: params[k] for k in kept})
     try:
         tasks = {(t["instance_id"], t["repeat"]): t for t in bench.get_tasks()}  # runs the conformance check
         out = {}

@@ -199,9 +199,8 @@ def _mapped(table: pd.DataFrame, source: str) -> HarnessTable:
             table["factor"] = "task_config"
             mapping.update(factor="factor", value="params.task_config", context="task")
             return HarnessTable(table, mapping, f"vla-eval RoboTwin results in {source}", missing)
-    if {"context_id", "split", "value"} <= set(
-        table.columns
-    ):  # RoboView's own benchmark, run inside vla-eval
+    # RoboView's own benchmark, run inside vla-eval.
+    if {"context_id", "split", "value"} <= set(table.columns):
         mapping.update(factor="split", value="value", context="context_id", repeat="repeat")
         return HarnessTable(table, mapping, f"vla-eval RoboView results in {source}", missing)
     fields = [c for c in table.columns if not c.startswith(("metrics.", "params."))]
