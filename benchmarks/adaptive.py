@@ -1,14 +1,15 @@
 """Adaptive against fixed-n evaluation on simulated splits with a known bias: episodes to a decision.
 
-    python -m benchmarks.adaptive --output=outputs/bench/adaptive.json [--sims=100]
+    python -m benchmarks.adaptive --output=outputs/bench/adaptive.json [--sims=1000]
     python -m benchmarks.adaptive --results=outputs/eval/act_ref_adaptive --output=outputs/bench/adaptive_real.json
 
 For each design (values × contexts at SR 0.7, the paper's camera_euler / camera_pose shapes and a small
 one) and true bias τ ∈ {0, 0.3, 0.6} (logit SD), `roboview.eval.statistics.adaptive.simulate` runs the group-sequential
 design (α = 0.05, futility against τ = 0.6 at power 0.8, at most `max_repeats` rounds) on real binomial
-tables with the real test. The fixed-n reference is the smallest number of repeats whose LRT power at
-τ = 0.6 (`roboview.eval.statistics.significance.lrt_power`, asymptotic; sparse tables fall short of it, so it favours the fixed
-design) reaches the adaptive design's simulated power at τ = 0.6. `saving` = 1 − adaptive episodes / fixed.
+tables with the real statistic and boundaries. The fixed-n reference is the number of repeats (interpolated between
+whole repeats) at which the fixed design reaches the adaptive design's simulated power at τ = 0.6; its power is
+simulated too (`roboview.eval.statistics.adaptive.fixed_power`: the same statistic, its critical value from
+simulated null splits), so neither design is helped by the χ² reference. `saving` = 1 − adaptive episodes / fixed.
 
 With `--results=DIR` (a folder written by `roboview.pipelines.evaluate --eval.adaptive=true`) it reads that run instead:
 per split, the episodes the adaptive run spent and why it stopped, against the fixed-n design that reaches the
@@ -22,9 +23,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
-from roboview.eval.statistics.adaptive import Design, read_record, simulate
+from roboview.eval.statistics.adaptive import Design, fixed_power, read_record, simulate
 from roboview.eval.statistics.significance import lrt_power
 from roboview.pipelines._cli import cli_main
 
@@ -36,7 +38,7 @@ class AdaptiveBenchConfig:
     # JSON file to write.
     output: str = "outputs/bench/adaptive.json"
     # Simulated splits per design and τ.
-    sims: int = 100
+    sims: int = 1000
     # A results folder of an adaptive evaluation: compare that run with fixed-n instead of simulating.
     results: str = ""
 
@@ -100,6 +102,18 @@ def real_run(results: Path) -> dict:
     }
 
 
+def fixed_reference(
+    n_values: int, n_contexts: int, power: float, max_repeats: int
+) -> tuple[list[float], float]:
+    """Simulated power of the fixed design at 1 … max_repeats + 4 repeats against τ = 0.6 (`fixed_power`: the same
+    statistic, critical value from simulated null splits), and the repeats that reach `power`, interpolated
+    between whole repeats (rounding up would flatter the adaptive design)."""
+    curve = [fixed_power(n_values, n_contexts, 0.7, 0.6, n, 0.05) for n in range(1, max_repeats + 5)]
+    if power > curve[-1]:
+        return curve, float(len(curve))
+    return curve, float(np.interp(power, np.maximum.accumulate(curve), np.arange(1, len(curve) + 1)))
+
+
 def run(cfg: AdaptiveBenchConfig) -> dict:
     if cfg.results:
         out = real_run(Path(cfg.results))
@@ -114,7 +128,7 @@ def run(cfg: AdaptiveBenchConfig) -> dict:
             tau: simulate(n_values, n_contexts, 0.7, tau, design, cfg.sims, seed=7) for tau in (0.0, 0.3, 0.6)
         }
         power = rows[0.6]["rejection_rate"]
-        fixed = next((n for n in range(1, 41) if lrt_power(n_values, n_contexts, n, 0.6, 0.7) >= power), 40)
+        curve, fixed = fixed_reference(n_values, n_contexts, power, max_repeats)
         fixed_episodes = fixed * n_values * n_contexts
         results.append(
             {
@@ -122,8 +136,9 @@ def run(cfg: AdaptiveBenchConfig) -> dict:
                 "contexts": n_contexts,
                 "max_repeats": max_repeats,
                 "adaptive": {str(t): r for t, r in rows.items()},
-                "fixed_repeats_equal_power": fixed,
-                "fixed_episodes": fixed_episodes,
+                "fixed_power_by_repeats": [round(p, 4) for p in curve],
+                "fixed_repeats_equal_power": round(fixed, 3),
+                "fixed_episodes": round(fixed_episodes, 1),
                 "saving": {
                     str(t): round(1 - r["mean_episodes"] / fixed_episodes, 3) for t, r in rows.items()
                 },
@@ -131,10 +146,11 @@ def run(cfg: AdaptiveBenchConfig) -> dict:
             }
         )
         print(
-            f"[adaptive] {n_values}×{n_contexts}: type-I {rows[0.0]['rejection_rate']:.3f}, power(0.6) {power:.2f}; "
+            f"[adaptive] {n_values}×{n_contexts}: type-I {rows[0.0]['rejection_rate']:.3f}, power(0.6) {power:.3f}; "
             f"episodes τ=0/0.3/0.6: "
             + "/".join(f"{rows[t]['mean_episodes']:.0f}" for t in (0.0, 0.3, 0.6))
-            + f" vs fixed {fixed_episodes} ({fixed} repeats)",
+            + f" vs fixed {fixed_episodes:.0f} ({fixed:.2f} repeats); saving "
+            + "/".join(f"{results[-1]['saving'][str(t)]:.0%}" for t in (0.0, 0.3, 0.6)),
             flush=True,
         )
     out = {"sims": cfg.sims, "alpha": 0.05, "tau_design": 0.6, "sr": 0.7, "designs": results}

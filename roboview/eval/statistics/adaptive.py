@@ -2,29 +2,27 @@
 
 A split is a table of cells (value × context); a *round* runs one more repeat of every cell, and after each
 round from `min_rounds` to `max_repeats` (the planned looks) the evaluator asks "does success depend on the
-value?" with the split's own test, the binomial GLM likelihood-ratio test of `value + context` against
-`context` (`roboview.eval.statistics.significance.factor_lrt`, χ² reference). Looking after every round would inflate the error rate of
-a fixed-n test; a **group-sequential design** spends it instead (Jennison & Turnbull, *Group Sequential
-Methods*, ch. 15, χ² tests):
+value?" with the split's own statistic, the likelihood ratio of the binomial GLM `value + context` against
+`context` (`roboview.eval.statistics.batch_glm.value_lrt`, the statistic `significance.factor_lrt` computes).
+Looking after every round would inflate the error rate of a fixed-n test; a **group-sequential design** spends it
+instead (Jennison & Turnbull, *Group Sequential Methods*, ch. 7 and 15: error spending):
 
-- **efficacy** (`bias`): at look k the test may spend α·((k/K)^ρ − ((k−1)/K)^ρ) of the type-I error (an
-  error-spending function of the power family; ρ = 1, the default, spends evenly and stops earliest under a
-  strong bias). Where the table is dense (Cochran's rule, as the fixed analysis decides), the LRT is compared
-  with a boundary c_k set so that, under "no bias", crossing first at look k has exactly that probability.
-  Where it is sparse (few episodes per cell: the usual case in early rounds) the χ² reference is
-  anticonservative and looks are less correlated than it assumes, so the look tests the exact
-  within-context permutation p-value of the LRT against the error it spends alone; by the union bound such
-  looks cost at most what they spend. Over all K looks the type-I error is at most α.
-- **futility** (`no_bias`, non-binding): the LRT is below f_k, which a bias of logit SD τ exceeds except with
-  probability β·((k/K)^ρ − ((k−1)/K)^ρ), β = 1 − `power`; over all looks at most a share β of τ-biased
-  splits stops this way, so futility costs at most β of the power against τ. It never rejects, so it
-  cannot raise the type-I error.
+- **efficacy** (`bias`): the statistic reaches c_k, set so that under "no bias" crossing first at look k has
+  probability α·((k/K)^ρ − ((k−1)/K)^ρ) (an error-spending function of the power family; ρ = 1 spends evenly and
+  stops earliest under a strong bias). Over all K looks the type-I error is α.
+- **futility** (`no_bias`, non-binding): the statistic is below f_k, under which a split with a bias of logit SD
+  τ falls first at look k with probability β·((k/K)^ρ − ((k−1)/K)^ρ), β = 1 − `power`; futility costs at most β
+  of the power against τ, and since it never rejects it cannot raise the type-I error.
 - `max_repeats`: the last look passed without crossing either boundary.
 
-The dense-table boundaries (and the futility boundaries) come from the χ² process the LRT follows across
-looks: with df = values − 1, LRT_k ≈ ‖W_k‖² / k for a df-dimensional random walk W with N(0, I) steps under "no bias" and N(μ, I) steps under a bias of
-per-round non-centrality ‖μ‖² = λ (λ drawn from the τ prior as `roboview.eval.statistics.significance.lrt_power` does). They depend on
-the design (values, contexts, success rate) only through df and λ, and are computed by Monte Carlo.
+**The boundaries are calibrated on the design's own look sequence.** With a few episodes per cell the χ² law of
+the statistic is far off (on 9 values × 4 contexts a χ²-calibrated look rejects 12 % of null splits at a nominal
+5 %), and how strongly successive looks are correlated depends on the table. So `boundaries` simulates PATHS whole
+splits of the design's shape and success rate, round by round up to `max_repeats`, once under "no bias" and once
+with value effects ~ N(0, τ²), computes the statistic at every look of every path (`value_lrt` fits all paths at
+once), and sets each c_k and f_k by the spending rule above on those paths. Boundaries depend on the shape (values,
+contexts), the success rate (its logit rounded to LOGIT_GRID) and the design; they are computed once and kept in
+memory and in RoboView's cache folder (`cache_dir("adaptive")`).
 
 The looks are planned (every round up to `max_repeats`): the guarantee covers them, not rounds beyond.
 Why not an e-process (valid with no plan at all)? A running-MLE likelihood ratio, simulated on the paper's
@@ -36,16 +34,24 @@ keeps the fixed test's efficiency and stops early where the answer is clear.
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import math
-from dataclasses import dataclass
+import os
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy.special import expit
 
-from roboview.eval.statistics.significance import factor_lrt, informative, is_sparse
+from roboview.core.files import cache_dir
+from roboview.eval.statistics.batch_glm import value_lrt
 
 STOP_REASONS = ("bias", "no_bias", "max_repeats")
-PATHS = 20_000  # Monte Carlo paths behind each boundary
-PERMUTATION_BATCH = 100  # permuted tables per factor_lrt call in a sparse look
+PATHS = 4000  # simulated look sequences behind each boundary, under "no bias" and under the τ bias each
+LOGIT_GRID = 0.25  # boundaries are calibrated at the split's success rate, its logit rounded to this step
+LOGIT_LIMIT = 3.0  # ... and clipped to ±this (SR 4.7 % – 95.3 %)
+CALIBRATION = 1  # version of the calibration: cached boundaries of another version are not read
 
 
 @dataclass(frozen=True)
@@ -55,8 +61,8 @@ class Design:
     tau: float = 0.3
     power: float = 0.8
     max_repeats: int = 10
-    # First look after this many rounds (one round's table is too sparse for the χ² reference).
-    min_rounds: int = 2
+    # First look after this many rounds.
+    min_rounds: int = 1
     # Shape of the error spending: α·(k/K)^ρ spent by look k.
     rho: float = 1.0
 
@@ -83,96 +89,101 @@ class Design:
         return (k / len(self.looks)) ** self.rho
 
 
-def noncentrality(n_values: int, n_contexts: int, sr: float, tau: float, draws: int) -> np.ndarray:
-    """Per-round non-centrality of the LRT under value effects ~ N(0, τ²) (one draw per path)."""
-    beta = np.random.default_rng(1).normal(0.0, tau, (draws, n_values))
-    logit = math.log(sr / (1 - sr))
-    p = 1 / (1 + np.exp(-(logit + beta)))
-    w = p * (1 - p)
-    return n_contexts * ((w * beta**2).sum(axis=1) - (w * beta).sum(axis=1) ** 2 / w.sum(axis=1))
+def grid(n_values: int, n_contexts: int) -> tuple[np.ndarray, np.ndarray]:
+    """Value and context codes of a split's cells, one per (value, context)."""
+    return np.repeat(np.arange(n_values), n_contexts), np.tile(np.arange(n_contexts), n_values)
 
 
-@functools.lru_cache(maxsize=64)
-def boundaries(df: int, n_contexts: int, sr: float, design: Design) -> tuple[np.ndarray, np.ndarray]:
-    """(efficacy c_k, futility f_k) for the planned looks, on the LRT statistic."""
+def calibration_rate(successes: float, episodes: float) -> float:
+    """The success rate a split's boundaries are calibrated at: its own, on a grid of logits."""
+    sr = min(max(successes / episodes, 1e-6), 1 - 1e-6) if episodes else 0.5
+    logit = float(
+        np.clip(round(math.log(sr / (1 - sr)) / LOGIT_GRID) * LOGIT_GRID, -LOGIT_LIMIT, LOGIT_LIMIT)
+    )
+    return round(1 / (1 + math.exp(-logit)), 6)
+
+
+def outcomes(
+    rng: np.random.Generator,
+    paths: int,
+    rounds: int,
+    n_values: int,
+    n_contexts: int,
+    sr: float | Sequence[float],
+    tau: float,
+) -> np.ndarray:
+    """(paths, rounds, cells) episode outcomes of simulated splits whose values have logit effects ~ N(0, τ²)
+    (one draw per path; τ = 0: no bias) around a success rate `sr`, one for all contexts or one per context."""
+    value, context = grid(n_values, n_contexts)
+    base = np.broadcast_to(np.asarray(sr, float), (n_contexts,))
+    effects = rng.normal(0.0, tau, (paths, n_values)) if tau > 0 else np.zeros((paths, n_values))
+    p = expit(np.log(base / (1 - base))[context] + effects[:, value])
+    return rng.random((paths, rounds, len(value))) < p[:, None, :]
+
+
+def look_statistics(x: np.ndarray, n_values: int, n_contexts: int, looks: list[int]) -> np.ndarray:
+    """(paths, looks) LRT of each simulated split at each look (`x` from `outcomes`)."""
+    value, context = grid(n_values, n_contexts)
+    total = x.cumsum(axis=1, dtype=np.int32)
+    return np.stack([value_lrt(total[:, look - 1], look, value, context) for look in looks], axis=1)
+
+
+@functools.lru_cache(maxsize=128)
+def boundaries(n_values: int, n_contexts: int, sr: float, design: Design) -> tuple[np.ndarray, np.ndarray]:
+    """(efficacy c_k, futility f_k) on the statistic at each planned look, calibrated on the design's own look
+    sequence: PATHS simulated splits of this shape and success rate under "no bias" and under the τ bias. Kept
+    in RoboView's cache folder, so a resumed run or a verify computes them once."""
+    key = json.dumps([CALIBRATION, PATHS, n_values, n_contexts, sr, asdict(design)])
+    path = cache_dir("adaptive") / f"{hashlib.sha256(key.encode()).hexdigest()[:32]}.json"
+    try:
+        stored = json.loads(path.read_text())
+        return np.array(stored["efficacy"]), np.array(stored["futility"])
+    except (OSError, ValueError, KeyError):
+        pass
     rng = np.random.default_rng(0)
-    K = len(design.looks)
-    lam = noncentrality(df + 1, n_contexts, float(np.clip(sr, 0.05, 0.95)), design.tau, PATHS)
-    mu = np.sqrt(lam)
-    w0 = np.zeros((PATHS, df))
-    w1 = np.zeros((PATHS, df))
-    alive0 = np.ones(PATHS, bool)
-    alive1 = np.ones(PATHS, bool)
-    c, f = np.empty(K), np.empty(K)
-    rounds_done = 0
-    for i, look in enumerate(design.looks):
-        steps = look - rounds_done
-        rounds_done = look
-        w0 += rng.normal(0, math.sqrt(steps), (PATHS, df))
-        w1 += rng.normal(0, math.sqrt(steps), (PATHS, df))
-        w1[:, 0] += mu * steps
-        s0 = (w0**2).sum(axis=1) / look
-        s1 = (w1**2).sum(axis=1) / look
-        a_k = design.alpha * (design.spent(i + 1) - design.spent(i))
-        b_k = (1 - design.power) * (design.spent(i + 1) - design.spent(i))
-        # c_k: the largest boundary whose crossing by still-running null paths has probability a_k.
-        live = np.sort(s0[alive0])[::-1]
-        n_cross = int(math.floor(a_k * PATHS))
-        c[i] = live[n_cross] if n_cross < len(live) else 0.0
-        alive0 &= s0 < c[i]
-        # f_k: below it lie a share b_k of the τ-biased paths still running.
-        live1 = np.sort(s1[alive1])
-        n_fut = int(math.floor(b_k * PATHS))
-        f[i] = min(live1[n_fut] if n_fut < len(live1) else c[i], c[i]) if i + 1 < K else c[i]
-        alive1 &= (s1 < c[i]) & (s1 >= f[i])
+    args = (n_values, n_contexts, design.looks)
+    null = look_statistics(outcomes(rng, PATHS, design.max_repeats, n_values, n_contexts, sr, 0.0), *args)
+    biased = look_statistics(
+        outcomes(rng, PATHS, design.max_repeats, n_values, n_contexts, sr, design.tau), *args
+    )
+    c, f = spend(null, biased, design)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"key": json.loads(key), "efficacy": c.tolist(), "futility": f.tolist()}))
+        tmp.replace(path)
+    except OSError:  # a read-only cache costs the calibration again next time, nothing else
+        pass
     return c, f
 
 
-def _sparse(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray) -> bool:
-    """Cochran's rule on the context-only fit, as the fixed analysis decides its p-value's reference."""
-    keep = informative(k, n, context)
-    if not keep.any():
-        return False
-    p_ctx = np.bincount(context, weights=k) / np.bincount(context, weights=n)
-    return is_sparse(n[keep], p_ctx[context][keep])
+def spend(null: np.ndarray, biased: np.ndarray, design: Design) -> tuple[np.ndarray, np.ndarray]:
+    """Boundaries from simulated look statistics (paths × looks): c_k lets at most α·(s_k − s_{k−1}) of the null
+    paths cross first at look k; f_k stops at most (1 − power)·(s_k − s_{k−1}) of the τ-biased paths there."""
+    looks = null.shape[1]
+    alive0 = np.ones(len(null), bool)
+    alive1 = np.ones(len(biased), bool)
+    c, f = np.empty(looks), np.empty(looks)
+    for i in range(looks):
+        share = design.spent(i + 1) - design.spent(i)
+        live = np.sort(null[alive0, i])[::-1]
+        allowed = int(math.floor(design.alpha * share * len(null)))
+        # Crossing is "≥ c": c sits just above the (allowed + 1)-th largest, so ties cannot overspend.
+        c[i] = live[allowed] * (1 + 1e-7) + 1e-9 if allowed < len(live) else 0.0
+        alive0 &= null[:, i] < c[i]
+        stopped = int(math.floor((1 - design.power) * share * len(biased)))
+        live1 = np.sort(biased[alive1, i])
+        f[i] = min(live1[stopped] if stopped < len(live1) else c[i], c[i]) if i + 1 < looks else c[i]
+        alive1 &= (biased[:, i] < c[i]) & (biased[:, i] >= f[i])
+    return c, f
 
 
-def permutation_confirms(
-    k: np.ndarray,
-    n: np.ndarray,
-    value: np.ndarray,
-    context: np.ndarray,
-    observed: float,
-    level: float,
-    seed: int = 0,
-    max_draws: int = 4000,
-) -> bool:
-    """Whether the within-context permutation p-value of the LRT is ≤ `level`.
-
-    Under "no bias" the successes of a context are exchangeable across its episodes, so a permuted table
-    deals each context's successes among its cells at random (a multivariate hypergeometric draw with the
-    cells' sizes). The permuted tables go through `factor_lrt`'s own permutation calibration, a batch at a
-    time; drawing stops once too many reach the observed statistic for p ≤ `level` to remain possible.
-    """
-    rng = np.random.default_rng(seed)
-    draws = min(max_draws, max(100, int(math.ceil(2 / level))))
-    allowed = level * (draws + 1) - 1  # exceedances that still leave (1 + e) / (1 + draws) ≤ level
-    members = [np.flatnonzero(context == c) for c in range(int(context.max() + 1))]
-    totals = [int(k[m].sum()) for m in members]
-    exceed = seen = 0
-    while seen < draws:
-        batch = min(PERMUTATION_BATCH, draws - seen)
-        permuted = np.empty((batch, len(k)))
-        for m, total in zip(members, totals):
-            permuted[:, m] = rng.multivariate_hypergeometric(n[m].astype(np.int64), total, size=batch)
-        test = factor_lrt(k.astype(float), n.astype(float), value, context, permuted)
-        if test is None or test.method != "permutation":  # not sparse after all: its χ² p is the answer
-            return test is not None and test.p_value <= level
-        exceed += round(test.p_value * (batch + 1)) - 1  # p = (1 + exceedances) / (1 + batch)
-        seen += batch
-        if exceed > allowed:
-            return False
-    return True
+def _stop(statistic: float, efficacy: float, futility: float, last: bool) -> str | None:
+    if statistic >= efficacy:
+        return "bias"
+    if last:
+        return "max_repeats"
+    return "no_bias" if statistic < futility else None
 
 
 @dataclass(frozen=True)
@@ -202,66 +213,59 @@ def decide(
         return Decision(rounds, None, None, None, None)
     if rounds not in design.looks:
         return Decision(rounds, None, None, None, "max_repeats")
-    test = factor_lrt(k.astype(float), n.astype(float), value, context, None)
-    statistic = 0.0 if test is None else test.statistic  # no informative context: no evidence of a bias
-    n_values, n_contexts = int(value.max() + 1), int(context.max() + 1)
-    sr = float(k.sum() / n.sum())
-    c, f = boundaries(n_values - 1, n_contexts, round(sr, 2), design)
+    statistic = float(value_lrt(k, n, value, context)[0])
+    sr = calibration_rate(float(k.sum()), float(n.sum()))
+    c, f = boundaries(int(value.max() + 1), int(context.max() + 1), sr, design)
     i = design.looks.index(rounds)
-    if _sparse(k, n, value, context):
-        # Sparse cells: the χ² reference is anticonservative and the looks' statistics are less correlated
-        # than the χ² process assumes. Such a look tests the exact within-context permutation p-value against
-        # the error it spends alone, α·(s_k − s_{k−1}): by the union bound these looks cost at most what
-        # they spend, whatever their correlation. (χ² p above ten times that level cannot cross: not tested.)
-        level = design.alpha * (design.spent(i + 1) - design.spent(i))
-        crossed = (
-            test is not None
-            and test.p_value <= 10 * level
-            and permutation_confirms(k, n, value, context, statistic, level, seed=rounds)
-        )
-    else:
-        crossed = statistic >= c[i]
-    if crossed:
-        stop = "bias"
-    elif rounds == design.max_repeats:
-        stop = "max_repeats"
-    elif statistic < f[i]:
-        stop = "no_bias"
-    else:
-        stop = None
+    stop = _stop(statistic, c[i], f[i], rounds == design.max_repeats)
     return Decision(rounds, statistic, float(c[i]), float(f[i]), stop)
 
 
 def simulate(
-    n_values: int, n_contexts: int, sr: float, tau: float, design: Design, sims: int, seed: int = 0
+    n_values: int,
+    n_contexts: int,
+    sr: float | Sequence[float],
+    tau: float,
+    design: Design,
+    sims: int,
+    seed: int = 0,
 ) -> dict[str, float]:
-    """Adaptive runs of simulated splits with a known bias of logit SD `tau` (0: none), every context at
-    `sr`: how often each stop happens, mean rounds and episodes (real binomial tables, the real test)."""
-    rng = np.random.default_rng(seed)
-    value = np.repeat(np.arange(n_values), n_contexts)
-    context = np.tile(np.arange(n_contexts), n_values)
-    logit = math.log(sr / (1 - sr))
-    rounds, stops = [], []
-    for _ in range(sims):
-        p = (
-            1 / (1 + np.exp(-(logit + rng.normal(0, tau, n_values))))[value]
-            if tau > 0
-            else np.full(len(value), sr)
-        )
-        x = rng.random((design.max_repeats, len(value))) < p
-        for t in range(1, design.max_repeats + 1):
-            decision = decide(x[:t].sum(axis=0), np.full(len(value), t), value, context, t, design)
-            if decision.stopped:
+    """Adaptive runs of simulated splits with a known bias of logit SD `tau` (0: none) around `sr` (one rate, or
+    one per context): how often each stop happens, mean rounds and episodes. The tables are binomial draws; the
+    statistic and the boundaries are the ones `decide` uses, looked at after every planned round."""
+    x = outcomes(np.random.default_rng(seed), sims, design.max_repeats, n_values, n_contexts, sr, tau)
+    statistic = look_statistics(x, n_values, n_contexts, design.looks)
+    successes = x.cumsum(axis=1)[:, [look - 1 for look in design.looks]].sum(axis=2)
+    rounds = np.full(sims, design.max_repeats)
+    stops = np.full(sims, "max_repeats", dtype=object)
+    for path in range(sims):
+        for i, look in enumerate(design.looks):
+            rate = calibration_rate(successes[path, i], look * n_values * n_contexts)
+            c, f = boundaries(n_values, n_contexts, rate, design)
+            stop = _stop(statistic[path, i], c[i], f[i], look == design.max_repeats)
+            if stop:
+                rounds[path], stops[path] = look, stop
                 break
-        rounds.append(decision.rounds)
-        stops.append(decision.stopped)
-    stops_a = np.array(stops)
     return {
-        "rejection_rate": float(np.mean(stops_a == "bias")),
+        "rejection_rate": float(np.mean(stops == "bias")),
         "mean_rounds": float(np.mean(rounds)),
-        "mean_episodes": float(np.mean(rounds)) * len(value),
-        **{f"stopped_{s}": float(np.mean(stops_a == s)) for s in STOP_REASONS},
+        "mean_episodes": float(np.mean(rounds)) * n_values * n_contexts,
+        **{f"stopped_{s}": float(np.mean(stops == s)) for s in STOP_REASONS},
     }
+
+
+def fixed_power(
+    n_values: int, n_contexts: int, sr: float, tau: float, repeats: int, alpha: float, paths: int = PATHS
+) -> float:
+    """Power of the fixed design with `repeats` repeats against a bias of logit SD τ: the same LRT, its critical
+    value the (1 − α) quantile of simulated null splits of this shape and success rate (so neither design is
+    helped by the χ² reference, anticonservative on sparse tables)."""
+    rng = np.random.default_rng(1)
+    args = (n_values, n_contexts, [repeats])
+    null = look_statistics(outcomes(rng, paths, repeats, n_values, n_contexts, sr, 0.0), *args)[:, 0]
+    biased = look_statistics(outcomes(rng, paths, repeats, n_values, n_contexts, sr, tau), *args)[:, 0]
+    critical = np.sort(null)[::-1][int(math.floor(alpha * paths))] * (1 + 1e-7) + 1e-9
+    return float(np.mean(biased >= critical))
 
 
 RECORD_FILE = "adaptive.json"
@@ -284,8 +288,6 @@ def decide_split(rows: list[dict], rounds: int, design: Design) -> Decision:
 
 def write_record(folder, design: Design, records: dict[str, dict]) -> None:
     """OUT/adaptive.json: the design and, per split that stopped, when and why (atomic)."""
-    import json
-    from dataclasses import asdict
     from pathlib import Path
 
     path = Path(folder) / RECORD_FILE
@@ -295,7 +297,6 @@ def write_record(folder, design: Design, records: dict[str, dict]) -> None:
 
 
 def read_record(folder) -> dict | None:
-    import json
     from pathlib import Path
 
     path = Path(folder) / RECORD_FILE

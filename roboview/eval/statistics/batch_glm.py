@@ -1,0 +1,128 @@
+"""The split test's likelihood-ratio statistic for many tables at once.
+
+A split's test is the binomial GLM `value + context` against `context` (`significance.factor_lrt`). Calibrating a
+sequential design on its own look sequence means that statistic for thousands of simulated tables per look, where
+one statsmodels fit per table would take minutes. The tables of a split share their layout (a value × context
+grid), so Newton's method runs on all of them together, and the two-way structure makes each step cheap: the value
+block of the Hessian is diagonal, so a step solves only the contexts' Schur complement (η_vc = a_v + b_c,
+b_0 = 0). The context-only fit has a closed form (each context's success rate).
+
+Contexts with only successes or only failures carry no information about the value and are left out, as
+`factor_lrt` leaves them out: their cells get weight zero. A value that never fails (or never succeeds) sends
+its coefficient to ±∞ and fits its cells exactly: it adds nothing to the maximised log-likelihood and is left out
+of the fit; the statistic is the limit statsmodels' iterations approach. `tests/test_batch_glm.py` checks the statistic against `factor_lrt`'s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import expit
+
+ITERATIONS = 60  # Newton steps at most (a table typically needs 4–8)
+RIDGE = 1e-9  # keeps the Hessian of a drifting (separated) coefficient invertible
+MAX_STEP = 5.0  # per coefficient and step: a near-singular Hessian cannot throw a fit far off
+CHUNK = 4096  # tables per Newton solve
+HALVINGS = 30  # step halvings at most per Newton step
+
+
+def _xlogy_sum(k: np.ndarray, n: np.ndarray, axis: tuple[int, ...]) -> np.ndarray:
+    """Σ k log(k/n) + (n − k) log(1 − k/n) over `axis`: the log-likelihood of cells at their own rate."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.where(n > 0, k / np.where(n > 0, n, 1), 0.5)
+        terms = np.where(k > 0, k * np.log(np.where(k > 0, p, 1)), 0.0)
+        terms += np.where(n - k > 0, (n - k) * np.log(np.where(n - k > 0, 1 - p, 1)), 0.0)
+    return terms.sum(axis=axis)
+
+
+def _llf(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    eta = a[:, :, None] + b[:, None, :]
+    return (k * eta - n * np.logaddexp(0.0, eta)).sum(axis=(1, 2))
+
+
+def _newton_direction(
+    k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Newton's direction for the additive fit η = a_v + b_c (b_0 = 0) on grids (tables, values, contexts), and
+    the largest score component (0 at the maximum)."""
+    mu = expit(a[:, :, None] + b[:, None, :])
+    w = n * mu * (1 - mu)
+    r = k - n * mu
+    ga, gb = r.sum(axis=2), r.sum(axis=1)[:, 1:]
+    wv = w.sum(axis=2) + RIDGE
+    x = w[:, :, 1:]
+    schur = -np.einsum("bvi,bv,bvj->bij", x, 1 / wv, x, optimize=True)
+    idx = np.arange(x.shape[2])
+    schur[:, idx, idx] += w.sum(axis=1)[:, 1:] + RIDGE
+    rhs = gb - np.einsum("bvi,bv->bi", x, ga / wv)
+    db = np.linalg.solve(schur, rhs[..., None])[..., 0] if x.shape[2] else np.zeros_like(gb)
+    da = (ga - np.einsum("bvi,bi->bv", x, db)) / wv
+    return (
+        np.clip(da, -MAX_STEP, MAX_STEP),
+        np.clip(db, -MAX_STEP, MAX_STEP),
+        float(max(np.abs(ga).max(initial=0), np.abs(gb).max(initial=0))),
+    )
+
+
+def _fit(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Maximised log-likelihood of the additive fit from (a, b): Newton steps, each halved for a table until its
+    log-likelihood does not fall (Newton alone can oscillate on a logistic likelihood from a poor start)."""
+    current = _llf(k, n, a, b)
+    for _ in range(ITERATIONS):
+        da, db, score = _newton_direction(k, n, a, b)
+        if score < 1e-9:
+            break
+        scale = np.ones(len(k))
+        for _ in range(HALVINGS):
+            trial = _llf(k, n, a + scale[:, None] * da, b + scale[:, None] * np.pad(db, ((0, 0), (1, 0))))
+            worse = trial < current - 1e-12 * np.abs(current)
+            if not worse.any():
+                break
+            scale[worse] /= 2
+        else:  # a table still worse after every halving keeps its coefficients
+            scale[worse] = 0.0
+            trial = np.where(worse, current, trial)
+        a += scale[:, None] * da
+        b[:, 1:] += scale[:, None] * db
+        current = trial
+    return current
+
+
+def _grid_lrt(k: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """The statistic for grids (tables, values, contexts) of successes k in n episodes."""
+    ks, ns = k.sum(axis=1), n.sum(axis=1)
+    informative = (ks > 0) & (ks < ns)
+    n = np.where(informative[:, None, :], n, 0.0)
+    k = np.where(informative[:, None, :], k, 0.0)
+    # A value that always succeeds (or always fails) in the informative contexts fits its cells exactly at
+    # a_v = ±∞: they add nothing to the maximised log-likelihood, and leaving them out spares the slow drift.
+    kv, nv = k.sum(axis=2), n.sum(axis=2)
+    separated = ((kv == 0) | (kv == nv))[:, :, None]
+    n_fit, k_fit = np.where(separated, 0.0, n), np.where(separated, 0.0, k)
+    rate = np.clip(np.where(ns > 0, ks / np.where(ns > 0, ns, 1), 0.5), 1e-3, 1 - 1e-3)
+    b = np.log(rate / (1 - rate))
+    a = np.repeat(b[:, :1], k.shape[1], axis=1)
+    full = _fit(k_fit, n_fit, a, b - b[:, :1])
+    reduced = _xlogy_sum(k.sum(axis=1), n.sum(axis=1), axis=(1,))
+    return np.where(informative.any(axis=1), np.maximum(0.0, 2 * (full - reduced)), 0.0)
+
+
+def value_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarray) -> np.ndarray:
+    """2 (ℓ(value + context) − ℓ(context)) for each row of `k` (tables × cells), clipped at 0.
+
+    Cells are distinct (value, context) pairs with codes 0..V−1 and 0..C−1; `n`: episodes per cell, shape
+    (cells,) or like `k`. 0 for a table with no informative context.
+    """
+    k = np.atleast_2d(np.asarray(k, float))
+    n = np.broadcast_to(np.asarray(n, float), k.shape)
+    n_values, n_contexts = int(value.max()) + 1, int(context.max()) + 1
+    flat = value * n_contexts + context
+    if len(np.unique(flat)) != len(flat):
+        raise ValueError("value_lrt needs one cell per (value, context) pair")
+    out = np.empty(len(k))
+    for lo in range(0, len(k), CHUNK):
+        kg = np.zeros((min(CHUNK, len(k) - lo), n_values * n_contexts))
+        ng = np.zeros_like(kg)
+        kg[:, flat], ng[:, flat] = k[lo : lo + CHUNK], n[lo : lo + CHUNK]
+        shape = (len(kg), n_values, n_contexts)
+        out[lo : lo + CHUNK] = _grid_lrt(kg.reshape(shape), ng.reshape(shape))
+    return out
