@@ -30,7 +30,7 @@ from roboview.eval.statistics.adaptive import Design, fixed_power, read_record, 
 from roboview.eval.statistics.significance import lrt_power
 from roboview.pipelines._cli import cli_main
 
-DESIGNS = ((9, 4, 10), (9, 11, 6), (21, 11, 4))  # values, contexts, max_repeats
+DESIGNS = ((9, 4, 12), (9, 11, 5), (21, 11, 6))  # values, contexts, max_repeats
 
 
 @dataclass

@@ -1,5 +1,10 @@
 """The adaptive paired comparison (`roboview-compare`) by simulation: type-I error under optional stopping, power
-and rounds used, against the fixed design that runs every round and tests once (docs/adaptive.md).
+and rounds used, against the fixed design that runs every round and tests once, and against an e-process
+(docs/adaptive.md).
+
+The e-process is the mixture likelihood ratio of the discordant pairs, the anytime-valid alternative: B wins each
+discordant pair with probability θ, θ ~ Beta(1, 1) against θ = ½, so E_k = 2^D·B(1 + W, 1 + D − W) (D discordant
+pairs, W won by B); it declares a difference once E_k ≥ 1/α (Ville's inequality), at any look, planned or not.
 
     python -m benchmarks.paired_compare [--sims=2000] [--pairs=57] [--max_repeats=10]
 
@@ -12,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special
 
 from roboview.eval.statistics.sequential_compare import SR_VERDICTS, CompareDesign, sr_looks
 from roboview.eval.statistics.significance import paired_success_test
@@ -25,16 +31,30 @@ def simulate(rng, pairs: int, rounds: int, delta: float) -> tuple[np.ndarray, np
     return u < p, v < np.minimum(p + delta, 0.99)
 
 
+def e_process_look(a: np.ndarray, b: np.ndarray, alpha: float) -> int | None:
+    """The first round after which the Beta(1, 1)-mixture e-value of the discordant pairs reaches 1/α (None: none
+    of the rounds)."""
+    d = np.cumsum(np.sum(a != b, axis=0))
+    w = np.cumsum(np.sum(b & ~a, axis=0))
+    log_e = d * np.log(2) + special.betaln(1 + w, 1 + d - w)
+    hit = np.flatnonzero(log_e >= np.log(1 / alpha))
+    return int(hit[0]) + 1 if len(hit) else None
+
+
 def study(sims: int, pairs: int, max_repeats: int, delta: float, seed: int = 0) -> dict[str, float]:
     rng = np.random.default_rng(seed)
     design = CompareDesign(max_repeats=max_repeats)
     decided, rounds = 0, []
+    e_decided, e_rounds = 0, []
     fixed = np.zeros(max_repeats)  # verdicts of the fixed test after r rounds, r = 1 … K
     for _ in range(sims):
         a, b = simulate(rng, pairs, max_repeats, delta)
         r = sr_looks(a, b, design)
         decided += r["verdict"] in SR_VERDICTS
         rounds.append(r["look"] or max_repeats)
+        e_look = e_process_look(a, b, design.alpha)
+        e_decided += e_look is not None
+        e_rounds.append(e_look or max_repeats)
         fixed += [
             paired_success_test(a[:, :k].ravel(), b[:, :k].ravel()) < design.alpha
             for k in range(1, max_repeats + 1)
@@ -46,6 +66,8 @@ def study(sims: int, pairs: int, max_repeats: int, delta: float, seed: int = 0) 
         "delta": delta,
         "adaptive_rejects": power,
         "mean_rounds": float(np.mean(rounds)),
+        "e_process_rejects": e_decided / sims,
+        "e_process_mean_rounds": float(np.mean(e_rounds)),
         "fixed_rejects": fixed[-1] / sims,
         "fixed_rounds": max_repeats,
         "fixed_rounds_equal_power": equal,
@@ -69,14 +91,15 @@ class PairedCompareConfig:
 
 def run(cfg: PairedCompareConfig) -> None:
     print(
-        "| δ (SR) | adaptive: verdicts | mean rounds | fixed, all K rounds: verdicts | fixed: rounds for the "
-        "adaptive power |"
+        "| δ (SR) | adaptive: verdicts | mean rounds | e-process: verdicts | mean rounds | fixed, all K rounds: "
+        "verdicts | fixed: rounds for the adaptive power |"
     )
-    print("|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     for delta in (0.0, 0.05, 0.1, 0.2):
         r = study(cfg.sims, cfg.pairs, cfg.max_repeats, delta)
         print(
-            f"| {delta:g} | {r['adaptive_rejects']:.3f} | {r['mean_rounds']:.2f} | {r['fixed_rejects']:.3f} | "
+            f"| {delta:g} | {r['adaptive_rejects']:.3f} | {r['mean_rounds']:.2f} | {r['e_process_rejects']:.3f} | "
+            f"{r['e_process_mean_rounds']:.2f} | {r['fixed_rejects']:.3f} | "
             f"{r['fixed_rounds_equal_power']} |",
             flush=True,
         )

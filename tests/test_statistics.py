@@ -220,7 +220,12 @@ def test_adaptive_paired_comparison_keeps_alpha_under_optional_stopping_and_stop
     """Two policies on the same pairs, looked at after every round and stopped at the first crossing: equal
     policies are called different in at most α of comparisons; a 15-point SR gap is called, the right way round,
     in well under the planned rounds."""
-    from roboview.eval.statistics.sequential_compare import CompareDesign, rounds_needed, sr_looks
+    from roboview.eval.statistics.sequential_compare import (
+        CompareDesign,
+        rounds_needed,
+        sign_boundaries,
+        sr_looks,
+    )
 
     def simulate(rng, delta, pairs=40, rounds=8):
         p = rng.uniform(0.3, 0.8, pairs)[:, None]
@@ -241,6 +246,13 @@ def test_adaptive_paired_comparison_keeps_alpha_under_optional_stopping_and_stop
     assert np.mean([r["look"] or 8 for r in gap]) < 4  # of 8 planned rounds
     # Each look spends its share; the spending sums to α.
     assert sum(design.spent(k) for k in range(1, 9)) == pytest.approx(0.05)
+    # The SR boundaries spend it jointly and exactly: null walks over the looks cross at close to α, not below
+    # it as the union bound of per-look levels would.
+    discordant = [30 * k for k in range(1, 9)]
+    bounds = np.array(sign_boundaries(discordant, design))
+    walks = np.cumsum(rng.random((20_000, 240)) < 0.5, axis=1)[:, np.array(discordant) - 1]
+    crossed = (np.abs(2 * walks - np.array(discordant)) >= bounds).any(axis=1).mean()
+    assert 0.04 <= crossed <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / 20_000), crossed
     # Undecided after 2 rounds of a clear trend: the rounds still needed, from its discordant pairs.
     a, b = np.zeros((20, 2), bool), np.zeros((20, 2), bool)
     b[0:4, 0] = b[4:7, 1] = a[7, 1] = True  # B wins 7 of the 8 discordant pairs: p 0.07, not yet

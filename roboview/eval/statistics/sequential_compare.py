@@ -6,17 +6,23 @@ numbers), so they separate fast when they differ: only the *discordant* pairs (o
 carry evidence about the difference in success rate, and McNemar's test uses exactly those. A round is one more
 repeat of every instance by both policies; after round k (a *look*) the comparison asks:
 
-- **SR**: McNemar's test (`paired_success_test`: exact binomial on the discordant pairs below 25, else χ² with
-  continuity correction) on every pair of rounds 1…k, pooled over the splits and per split.
+- **SR**: McNemar's test on every pair of rounds 1…k (the discordant pairs and how many of them each policy won),
+  pooled over the splits and per split.
 - **cv_excess** (per single-factor split): the paired permutation test of the difference in cv_excess
   (`compare_pair`, policy labels swapped within each instance).
 
 Looking after every round would inflate a fixed-n test's error rate. Each look instead spends
-α·((k/K)^ρ − ((k−1)/K)^ρ) of the type-I error (K = `max_repeats`, the planned looks; ρ = 1 spends evenly) and
-declares a difference only where its p-value is below what it spends; by the union bound the chance of any false
-verdict over all K looks is at most α, whatever the dependence between looks (the design of the adaptive splits'
-sparse looks, docs/adaptive.md). The suite checks by simulation that two equal policies are declared different in
-at most α of comparisons stopped at the first crossing.
+α·((k/K)^ρ − ((k−1)/K)^ρ) of the type-I error (K = `max_repeats`, the planned looks; ρ = 1 spends evenly):
+
+- **SR** crosses an exact group-sequential boundary (`sign_boundaries`): given the discordant pairs seen by each
+  look, the pairs B won follow a binomial random walk under "equal SR", whose law across looks is computed exactly,
+  so the looks spend α jointly, with no union bound and no approximation.
+- **cv_excess** has no such closed form: each look's permutation p-value is tested against the error it spends, and
+  by the union bound the chance of a false verdict over all K looks is at most α whatever the dependence between
+  looks.
+
+The suite checks by simulation that two equal policies are declared different in at most α of comparisons stopped
+at the first crossing.
 
 Verdicts: `A better` / `B better` (SR), `A less biased` / `B less biased` (cv_excess), `not separated` (every
 planned look passed without a crossing), or `undecided` with `needs`: the rounds after which the crossing would
@@ -66,17 +72,44 @@ class CompareDesign:
         return self.alpha * ((look / k) ** self.rho - ((look - 1) / k) ** self.rho)
 
 
+def sign_boundaries(discordant: list[int], design: CompareDesign) -> list[int]:
+    """Exact group-sequential boundaries of McNemar's test: b_k on |2·W_k − D_k| at each look, where D_k is the number
+    of discordant pairs by look k and W_k how many of them B won.
+
+    Under "equal SR", given the discordant counts, each discordant pair is B's with probability ½ independently, so
+    W_1, W_2, … is a binomial random walk observed at D_1 ≤ D_2 ≤ …. Its law is propagated exactly (a convolution per
+    look); b_k is the smallest boundary that the walks still running cross at look k with probability at most
+    α·((k/K)^ρ − ((k−1)/K)^ρ). Every b_j depends only on D_1 … D_j, so each look recomputes the same earlier
+    boundaries, and the chance of any false verdict over the K looks is at most α given the discordant counts,
+    hence overall."""
+    alive = np.ones(1)
+    bounds, before = [], 0
+    for k, d in enumerate(discordant, start=1):
+        alive = np.convolve(alive, stats.binom.pmf(np.arange(d - before + 1), d - before, 0.5))
+        before = d
+        distance = np.abs(2 * np.arange(d + 1) - d)
+        # P(|2W − D| ≥ b) among the running walks, for every candidate b = D, D − 1, …, 0.
+        tail = np.cumsum(np.bincount(distance, weights=alive, minlength=d + 1)[::-1])[::-1]
+        allowed = np.flatnonzero(tail <= design.spent(k) * (1 + 1e-9))
+        bound = int(allowed[0]) if len(allowed) else d + 1
+        bounds.append(bound)
+        alive = np.where(distance >= bound, 0.0, alive)
+    return bounds
+
+
 def sr_looks(a: np.ndarray, b: np.ndarray, design: CompareDesign) -> dict[str, Any]:
     """The sequential SR comparison of paired outcomes `a`, `b` ((pairs per round, rounds) bool arrays, column k the
-    round-k outcome of each pair): the verdict, the look it was reached at, and each look's p-value."""
+    round-k outcome of each pair): the verdict, the look it was reached at, and each look's McNemar p-value."""
     rounds = min(a.shape[1], design.max_repeats)
+    wins_b = np.cumsum(np.sum(b & ~a, axis=0))[:rounds]
+    discordant = np.cumsum(np.sum(a != b, axis=0))[:rounds]
+    bounds = sign_boundaries([int(d) for d in discordant], design)
     looks = []
     for k in range(1, rounds + 1):
-        p = paired_success_test(a[:, :k].ravel(), b[:, :k].ravel())
-        looks.append(p)
-        if p <= design.spent(k):
+        looks.append(paired_success_test(a[:, :k].ravel(), b[:, :k].ravel()))
+        if abs(2 * int(wins_b[k - 1]) - int(discordant[k - 1])) >= bounds[k - 1]:
             delta = float(b[:, :k].mean() - a[:, :k].mean())
-            return _decided(SR_VERDICTS[delta > 0], k, delta, p, design, looks)
+            return _decided(SR_VERDICTS[delta > 0], k, delta, looks[-1], design, looks)
     delta = float(b[:, :rounds].mean() - a[:, :rounds].mean()) if rounds else 0.0
     return _open(rounds, delta, looks, design) | {
         "needs": rounds_needed(a[:, :rounds], b[:, :rounds], design)
