@@ -13,7 +13,7 @@ simulated null splits), so neither design is helped by the χ² reference. `savi
 
 With `--results=DIR` (a folder written by `roboview.pipelines.evaluate --eval.adaptive=true`) it reads that run instead:
 per split, the episodes the adaptive run spent and why it stopped, against the fixed-n design that reaches the
-run's power at its τ with the split's shape and observed success rate (`lrt_power`).
+run's power at its τ with the split's shape and observed success rate (`fixed_power`, simulated).
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ import numpy as np
 import pandas as pd
 
 from roboview.eval.statistics.adaptive import Design, fixed_power, read_record, simulate
-from roboview.eval.statistics.significance import lrt_power
 from roboview.pipelines._cli import cli_main
 
 DESIGNS = ((9, 4, 12), (9, 11, 5), (21, 11, 6))  # values, contexts, max_repeats
@@ -65,13 +64,12 @@ def real_run(results: Path) -> dict:
             rows["context_id"].nunique(),
             float(rows["success"].mean()),
         )
+        rate = min(max(sr, 0.02), 0.98)
         fixed = next(
             (
                 n
                 for n in range(1, 41)
-                if lrt_power(
-                    n_values, n_contexts, n, design["tau"], min(max(sr, 0.02), 0.98), design["alpha"]
-                )
+                if fixed_power(n_values, n_contexts, rate, design["tau"], n, design["alpha"], paths=2000)
                 >= design["power"]
             ),
             40,
