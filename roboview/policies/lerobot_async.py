@@ -375,20 +375,16 @@ class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
     def _check_control(self) -> None:
         """A checkpoint readable here acts in the control --policy.control names (its action width and its
         dataset's action names), else the run stops naming the flag: the served action would not fit the env."""
-        from roboview.policies.lerobot_policy import checkpoint_control
+        from roboview.policies.lerobot_policy import checkpoint_control, refuse_control
 
         with flag_errors("--policy.path"):
             found = checkpoint_control(self.path)
-        if found is None and self.control == "joint":
-            raise ValueError(
-                f"--policy.control=joint but the checkpoint {self.path} has a 7-d (end-effector) action: pass "
-                "--policy.control=ee_delta or --policy.control=ee_abs"
-            )
-        if found is not None and found != self.control:
-            raise ValueError(
-                f"--policy.control={self.control!r} but the checkpoint {self.path} acts in {found!r} (its action "
-                f"shape and its dataset's action names): pass --policy.control={found}"
-            )
+        fix = (
+            f"pass --policy.control={found}"
+            if found
+            else "pass --policy.control=ee_delta or --policy.control=ee_abs"
+        )
+        refuse_control(self.path, self.control, found, fix)
 
     def declares_outputs(self) -> bool:
         return self.local  # a checkpoint not readable here: its action width shows at the pre-flight step

@@ -109,6 +109,20 @@ def dataset_action_names(root: Path) -> list[str] | None:
     return None
 
 
+def refuse_control(path: str, given: str, found: str | None, fix: str) -> None:
+    """Refuse `--policy.control=given` for a checkpoint that acts in `found` (None: an end-effector control its
+    dataset does not name), ending the message with `fix`; nothing when the control fits."""
+    if found is not None and given != found:
+        raise ValueError(
+            f"--policy.control={given!r} but the checkpoint {path} acts in {found!r} (its action shape and its "
+            f"dataset's action names); {fix}"
+        )
+    if found is None and given == "joint":
+        raise ValueError(
+            f"--policy.control='joint' but the checkpoint {path} has a 7-d (end-effector) action; {fix}"
+        )
+
+
 def checkpoint_control(path: str | None) -> str | None:
     """The control a checkpoint acts in: joint for an 8-d action; for a 7-d one the EE control whose action
     names its training dataset records (None when that dataset cannot be read here)."""
@@ -291,15 +305,8 @@ class LeRobotConfig(PolicyConfig):
         if given and given not in CONTROLS:
             raise ValueError(f"unknown --policy.control={given!r}; allowed: {', '.join(CONTROLS)}")
         found = checkpoint_control(self.path)
-        if given and found and given != found:
-            raise ValueError(
-                f"--policy.control={given!r} but the checkpoint {self.path} acts in {found!r} (its action "
-                "shape and its dataset's action names); drop the flag"
-            )
-        if given == "joint" and found is None:
-            raise ValueError(
-                f"--policy.control='joint' but the checkpoint {self.path} has a 7-d (end-effector) action"
-            )
+        if given:
+            refuse_control(self.path, given, found, "drop the flag")
         self.control = given or found or ""  # "": open until the run's envs settle it (settle_control)
         if self.control:
             control_field(self)

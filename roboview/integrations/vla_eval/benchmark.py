@@ -246,6 +246,11 @@ class RoboViewBenchmark(StepBenchmark):
         self._error, self._success = "", False
         return obs
 
+    @property
+    def isolation(self) -> str:
+        """The isolation certificate of the episode the last `reset` started ("" before any)."""
+        return self._isolation
+
     def step(self, action: Action) -> StepResult:
         env = self._env
         raw = np.asarray(action.get("actions", action.get("action")), dtype=np.float32)

@@ -157,7 +157,7 @@ def rederive_isolation(crashed: list[dict], params: dict, root: str) -> tuple[di
         for episode in crashed:
             key = (episode["instance_id"], int(episode["repeat"]))
             bench.reset(tasks[key])
-            out[key] = bench._isolation
+            out[key] = bench.isolation
         return out, bench.conformance
     finally:
         bench.cleanup()
