@@ -100,9 +100,9 @@ class EvalConfig:
     # Camera image side (pixels); 0: the policy's own (a checkpoint's input size), else 224.
     # A size that disagrees with the checkpoint's fails before any rollout.
     image_size: int = 0
-    # Adaptive evaluation (docs/adaptive.md): repeats run in rounds over every instance of a split; from the
-    # second round on, a group-sequential likelihood-ratio test stops the split for "bias" (type-I error
-    # ≤ alpha over every look), for "no_bias" (a bias of logit SD tau would have shown, at the target power)
+    # Adaptive evaluation (docs/adaptive.md): repeats run in rounds over every instance of a split; after each
+    # round a group-sequential likelihood-ratio test stops the split for "bias" (type-I error ≤ alpha over
+    # every look), for "no_bias" (a bias of logit SD tau would have shown, at the target power)
     # or at max_repeats. Two-factor splits run their fixed repeats.
     adaptive: bool = False
     # Adaptive: the most rounds (repeats per instance) a split runs before it stops undecided.
