@@ -25,8 +25,9 @@ def test_type_one_error_stays_at_alpha_when_looking_after_every_round():
     assert within(result["rejection_rate"], 0.05, 600), result
     assert result["rejection_rate"] > 0.02  # calibrated: α is spent, not wasted as by a union bound
     assert result["stopped_no_bias"] > 0.5  # under no bias most splits stop early for futility
-    # Contexts at very different rates: the boundaries, calibrated at the pooled rate, still hold α.
-    mixed = simulate(9, 4, (0.45, 0.7, 0.9, 0.97), 0.0, design, 600, seed=3)
+    # Contexts at very different rates: the boundaries, calibrated at the contexts' spread, still hold α (at the
+    # pooled rate alone these splits rejected 6.8 % of 3,000).
+    mixed = simulate(9, 4, (0.3, 0.5, 0.7, 0.9), 0.0, design, 600, seed=3)
     assert within(mixed["rejection_rate"], 0.05, 600), mixed
 
 
@@ -57,7 +58,7 @@ def test_boundaries_are_calibrated_and_decide_from_the_lrt(tmp_path, monkeypatch
     stored = list((tmp_path / "roboview" / "adaptive").glob("*.json"))
     assert len(stored) == 1
     efficacy = np.array(json.loads(stored[0].read_text())["efficacy"])
-    np.testing.assert_array_equal(efficacy, boundaries(6, 3, 0.5, design)[0])
+    np.testing.assert_array_equal(efficacy, boundaries(6, 3, 0.0, 0.0, design)[0])
     boundaries.cache_clear()
     stored[0].write_text(json.dumps({"efficacy": [1.0] * 4, "futility": [0.0] * 4}))
     assert decide(flat, np.full(18, 2), value, context, 2, design).efficacy == 1.0

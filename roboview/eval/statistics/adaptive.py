@@ -19,11 +19,11 @@ instead (Jennison & Turnbull, *Group Sequential Methods*, ch. 7 and 15: error sp
 **The boundaries are calibrated on the design's own look sequence.** With a few episodes per cell the χ² law of
 the statistic is far off (on 9 values × 4 contexts a χ²-calibrated look rejects 12 % of null splits at a nominal
 5 %), and how strongly successive looks are correlated depends on the table. So `boundaries` simulates PATHS whole
-splits of the design's shape and success rate, round by round up to `max_repeats`, once under "no bias" and once
+splits of the design's shape and success rates, round by round up to `max_repeats`, once under "no bias" and once
 with value effects ~ N(0, τ²), computes the statistic at every look of every path (`value_lrt` fits all paths at
 once), and sets each c_k and f_k by the spending rule above on those paths. Boundaries depend on the shape (values,
-contexts), the success rate (its logit rounded to LOGIT_GRID) and the design; they are computed once and kept in
-memory and in RoboView's cache folder (`cache_dir("adaptive")`).
+contexts), the contexts' success rates (`calibration_key`: their mean logit and their spread) and the design;
+they are computed once and kept in memory and in RoboView's cache folder (`cache_dir("adaptive")`).
 
 The looks are planned (every round up to `max_repeats`): the guarantee covers them, not rounds beyond.
 Why not an e-process (valid with no plan at all)? A running-MLE likelihood ratio, simulated on the paper's
@@ -43,6 +43,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy import stats
 from scipy.special import expit
 
 from roboview.core.files import cache_dir
@@ -50,9 +51,12 @@ from roboview.eval.statistics.batch_glm import value_lrt
 
 STOP_REASONS = ("bias", "no_bias", "max_repeats")
 PATHS = 4000  # simulated look sequences behind each boundary, under "no bias" and under the τ bias each
-LOGIT_GRID = 0.25  # boundaries are calibrated at the split's success rate, its logit rounded to this step
+LOGIT_GRID = 0.25  # boundaries are calibrated at the contexts' mean logit success rate, rounded to this step
 LOGIT_LIMIT = 3.0  # ... and clipped to ±this (SR 4.7 % – 95.3 %)
-CALIBRATION = 4  # version of the calibration: cached boundaries of another version are not read
+SPREAD_GRID = 0.5  # ... and at the SD of the contexts' logits, rounded to this step
+SPREAD_LIMIT = 2.0  # ... and at most this
+LOGIT_CAP = 4.6  # no simulated context beyond ±this logit (SR 1 % – 99 %)
+CALIBRATION = 5  # version of the calibration: cached boundaries of another version are not read
 
 
 @dataclass(frozen=True)
@@ -95,13 +99,27 @@ def grid(n_values: int, n_contexts: int) -> tuple[np.ndarray, np.ndarray]:
     return np.repeat(np.arange(n_values), n_contexts), np.tile(np.arange(n_contexts), n_values)
 
 
-def calibration_rate(successes: float, episodes: float) -> float:
-    """The success rate a split's boundaries are calibrated at: its own, on a grid of logits."""
-    sr = min(max(successes / episodes, 1e-6), 1 - 1e-6) if episodes else 0.5
-    logit = float(
-        np.clip(round(math.log(sr / (1 - sr)) / LOGIT_GRID) * LOGIT_GRID, -LOGIT_LIMIT, LOGIT_LIMIT)
+def calibration_key(k_context: np.ndarray, n_context: np.ndarray) -> tuple[float, float]:
+    """(centre, spread) of the contexts' success rates a split's boundaries are calibrated at, from each context's
+    successes and episodes: the mean of their logits, on a grid of LOGIT_GRID within ±LOGIT_LIMIT, and their SD
+    beyond sampling noise (method of moments: the logits' variance less the mean of 1 / (n·p·(1 − p))), on a grid of
+    SPREAD_GRID up to SPREAD_LIMIT. Contexts at different rates make sparse cells where a pooled rate would not."""
+    p = (np.asarray(k_context, float) + 0.5) / (np.asarray(n_context, float) + 1)
+    logit = np.log(p / (1 - p))
+    centre = float(np.clip(round(logit.mean() / LOGIT_GRID) * LOGIT_GRID, -LOGIT_LIMIT, LOGIT_LIMIT))
+    between = (
+        logit.var(ddof=1) - np.mean(1 / ((np.asarray(n_context) + 1) * p * (1 - p))) if len(p) > 1 else 0.0
     )
-    return round(1 / (1 + math.exp(-logit)), 6)
+    spread = min(round(math.sqrt(max(between, 0.0)) / SPREAD_GRID) * SPREAD_GRID, SPREAD_LIMIT)
+    return centre, float(spread)
+
+
+def context_rates(n_contexts: int, centre: float, spread: float) -> np.ndarray:
+    """Success rates of `n_contexts` contexts whose logits have mean `centre` and SD `spread`, spaced as normal
+    quantiles: the contexts a calibration simulates."""
+    z = stats.norm.ppf((np.arange(n_contexts) + 0.5) / n_contexts)
+    z = z / z.std() if n_contexts > 1 and spread > 0 else np.zeros(n_contexts)
+    return expit(np.clip(centre + spread * z, -LOGIT_CAP, LOGIT_CAP))
 
 
 def outcomes(
@@ -130,11 +148,13 @@ def look_statistics(x: np.ndarray, n_values: int, n_contexts: int, looks: list[i
 
 
 @functools.lru_cache(maxsize=128)
-def boundaries(n_values: int, n_contexts: int, sr: float, design: Design) -> tuple[np.ndarray, np.ndarray]:
+def boundaries(
+    n_values: int, n_contexts: int, centre: float, spread: float, design: Design
+) -> tuple[np.ndarray, np.ndarray]:
     """(efficacy c_k, futility f_k) on the statistic at each planned look, calibrated on the design's own look
-    sequence: PATHS simulated splits of this shape and success rate under "no bias" and under the τ bias. Kept
-    in RoboView's cache folder, so a resumed run or a verify computes them once."""
-    key = json.dumps([CALIBRATION, PATHS, n_values, n_contexts, sr, asdict(design)])
+    sequence: PATHS simulated splits of this shape, contexts at `context_rates(centre, spread)`, under "no bias"
+    and under the τ bias. Kept in RoboView's cache folder, so a resumed run or a verify computes them once."""
+    key = json.dumps([CALIBRATION, PATHS, n_values, n_contexts, centre, spread, asdict(design)])
     path = cache_dir("adaptive") / f"{hashlib.sha256(key.encode()).hexdigest()[:32]}.json"
     try:
         stored = json.loads(path.read_text())
@@ -142,6 +162,7 @@ def boundaries(n_values: int, n_contexts: int, sr: float, design: Design) -> tup
     except (OSError, ValueError, KeyError):
         pass
     rng = np.random.default_rng(0)
+    sr = context_rates(n_contexts, centre, spread)
     args = (n_values, n_contexts, design.looks)
     null = look_statistics(outcomes(rng, PATHS, design.max_repeats, n_values, n_contexts, sr, 0.0), *args)
     biased = look_statistics(
@@ -237,8 +258,12 @@ def decide(
     if rounds not in design.looks:
         return Decision(rounds, None, None, None, "max_repeats")
     statistic = float(value_lrt(k, n, value, context)[0])
-    sr = calibration_rate(float(k.sum()), float(n.sum()))
-    c, f = boundaries(int(value.max() + 1), int(context.max() + 1), sr, design)
+    n_contexts = int(context.max() + 1)
+    centre, spread = calibration_key(
+        np.bincount(context, weights=k, minlength=n_contexts),
+        np.bincount(context, weights=n, minlength=n_contexts),
+    )
+    c, f = boundaries(int(value.max() + 1), n_contexts, centre, spread, design)
     i = design.looks.index(rounds)
     stop = _stop(statistic, c[i], f[i], rounds == design.max_repeats)
     finite = [float(x) if np.isfinite(x) else None for x in (c[i], f[i])]
@@ -259,13 +284,15 @@ def simulate(
     statistic and the boundaries are the ones `decide` uses, looked at after every planned round."""
     x = outcomes(np.random.default_rng(seed), sims, design.max_repeats, n_values, n_contexts, sr, tau)
     statistic = look_statistics(x, n_values, n_contexts, design.looks)
-    successes = x.cumsum(axis=1)[:, [look - 1 for look in design.looks]].sum(axis=2)
+    # Successes per context at each look: (paths, looks, contexts).
+    cum = x.cumsum(axis=1, dtype=np.int32)[:, [look - 1 for look in design.looks]]
+    successes = cum.reshape(sims, len(design.looks), n_values, n_contexts).sum(axis=2)
     rounds = np.full(sims, design.max_repeats)
     stops = np.full(sims, "max_repeats", dtype=object)
     for path in range(sims):
         for i, look in enumerate(design.looks):
-            rate = calibration_rate(successes[path, i], look * n_values * n_contexts)
-            c, f = boundaries(n_values, n_contexts, rate, design)
+            key = calibration_key(successes[path, i], np.full(n_contexts, look * n_values))
+            c, f = boundaries(n_values, n_contexts, *key, design)
             stop = _stop(statistic[path, i], c[i], f[i], look == design.max_repeats)
             if stop:
                 rounds[path], stops[path] = look, stop
