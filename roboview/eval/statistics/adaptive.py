@@ -315,7 +315,7 @@ def fixed_power(
     args = (n_values, n_contexts, [repeats])
     null = look_statistics(outcomes(rng, paths, repeats, n_values, n_contexts, sr, 0.0), *args)[:, 0]
     biased = look_statistics(outcomes(rng, paths, repeats, n_values, n_contexts, sr, tau), *args)[:, 0]
-    critical = np.sort(null)[::-1][int(math.floor(alpha * paths))] * (1 + 1e-7) + 1e-9
+    critical = _above(np.sort(null)[::-1], int(math.floor(alpha * paths)))
     return float(np.mean(biased >= critical))
 
 

@@ -16,7 +16,7 @@ of the fit; the statistic is the limit statsmodels' iterations approach. `tests/
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import expit
+from scipy.special import expit, xlogy
 
 ITERATIONS = 60  # Newton steps at most (a table typically needs 4–8)
 RIDGE = 1e-9  # keeps the Hessian of a drifting (separated) coefficient invertible
@@ -25,13 +25,10 @@ CHUNK = 4096  # tables per Newton solve
 HALVINGS = 30  # step halvings at most per Newton step
 
 
-def _xlogy_sum(k: np.ndarray, n: np.ndarray, axis: tuple[int, ...]) -> np.ndarray:
-    """Σ k log(k/n) + (n − k) log(1 − k/n) over `axis`: the log-likelihood of cells at their own rate."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        p = np.where(n > 0, k / np.where(n > 0, n, 1), 0.5)
-        terms = np.where(k > 0, k * np.log(np.where(k > 0, p, 1)), 0.0)
-        terms += np.where(n - k > 0, (n - k) * np.log(np.where(n - k > 0, 1 - p, 1)), 0.0)
-    return terms.sum(axis=axis)
+def _own_rate_llf(k: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Σ k log(k/n) + (n − k) log(1 − k/n) over the last axis: the log-likelihood of cells at their own rate."""
+    p = k / np.where(n > 0, n, 1)
+    return (xlogy(k, p) + xlogy(n - k, 1 - p)).sum(axis=-1)
 
 
 def _llf(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -102,7 +99,7 @@ def _grid_lrt(k: np.ndarray, n: np.ndarray) -> np.ndarray:
     b = np.log(rate / (1 - rate))
     a = np.repeat(b[:, :1], k.shape[1], axis=1)
     full = _fit(k_fit, n_fit, a, b - b[:, :1])
-    reduced = _xlogy_sum(k.sum(axis=1), n.sum(axis=1), axis=(1,))
+    reduced = _own_rate_llf(ks, ns)  # the context-only fit (an uninformative context adds 0)
     return np.where(informative.any(axis=1), np.maximum(0.0, 2 * (full - reduced)), 0.0)
 
 
