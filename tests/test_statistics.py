@@ -260,6 +260,9 @@ def test_adaptive_paired_comparison_keeps_alpha_under_optional_stopping_and_stop
     assert (
         early["verdict"] == "undecided" and early["needs"] == 2
     )  # 4 discordant a round at 7:1 cross at round 4
+    # The projection uses the boundaries the looks use: two more rounds like the first two decide at exactly that look.
+    later = sr_looks(np.hstack([a, a]), np.hstack([b, b]), design)
+    assert later["verdict"] == "B better" and later["look"] == 2 + early["needs"]
     assert rounds_needed(a, a, design) is None  # no discordant pair: no difference to wait for
 
 

@@ -26,8 +26,8 @@ at the first crossing.
 
 Verdicts: `A better` / `B better` (SR), `A less biased` / `B less biased` (cv_excess), `not separated` (every
 planned look passed without a crossing), or `undecided` with `needs`: the rounds after which the crossing would
-come if the observed rates held (normal approximation of the discordant-pair count), or None when no difference
-is seen at all.
+come if the discordant pairs kept their rate and split (against the same exact boundaries), or None when no
+difference is seen at all.
 """
 
 from __future__ import annotations
@@ -117,18 +117,20 @@ def sr_looks(a: np.ndarray, b: np.ndarray, design: CompareDesign) -> dict[str, A
 
 
 def rounds_needed(a: np.ndarray, b: np.ndarray, design: CompareDesign) -> int | None:
-    """Further rounds until the SR crossing, if the observed discordant pairs per round and their split held: the
-    first later look j whose spent error the normal approximation of McNemar's statistic, |2w − 1|·√D_j, would
-    beat. None when no difference is seen (no discordant pair, or as many each way) or none of the planned looks
-    would show it."""
+    """Further rounds until the SR crossing, if the discordant pairs kept coming at the rate seen so far and split as
+    they have: the first later look j whose exact boundary (`sign_boundaries` over the looks seen and the projected
+    ones) the projected |2W_j − D_j| would reach. None when no difference is seen (no discordant pair, or as many
+    each way) or none of the planned looks would show it."""
     k = a.shape[1]
     wins_b, wins_a = int(np.sum(b & ~a)), int(np.sum(a & ~b))
     discordant = wins_a + wins_b
     if k == 0 or discordant == 0 or wins_a == wins_b:
         return None
-    effect = abs(2 * wins_b / discordant - 1)
-    for j in range(k + 1, design.max_repeats + 1):
-        if discordant / k * j * effect**2 >= stats.norm.isf(design.spent(j) / 2) ** 2:
+    seen = [int(d) for d in np.cumsum(np.sum(a != b, axis=0))]
+    planned = [round(discordant / k * j) for j in range(k + 1, design.max_repeats + 1)]
+    bounds = sign_boundaries(seen + planned, design)
+    for j, d in enumerate(planned, start=k + 1):
+        if abs(2 * round(wins_b / discordant * d) - d) >= bounds[j - 1]:
             return j - k
     return None
 
