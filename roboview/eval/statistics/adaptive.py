@@ -39,7 +39,7 @@ import hashlib
 import json
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -147,6 +147,20 @@ def look_statistics(x: np.ndarray, n_values: int, n_contexts: int, looks: list[i
     return np.stack([value_lrt(total[:, look - 1], look, value, context) for look in looks], axis=1)
 
 
+def live_statistics(x: np.ndarray, n_values: int, n_contexts: int, looks: list[int]) -> Callable:
+    """`look_statistics` on demand: `at(i, rows)` is the LRT at look i of the paths where `rows` is True (NaN for
+    the others), so a calibration fits only the splits still running at each look."""
+    value, context = grid(n_values, n_contexts)
+    total = x.cumsum(axis=1, dtype=np.int32)
+
+    def at(i: int, rows: np.ndarray) -> np.ndarray:
+        out = np.full(len(x), np.nan)
+        out[rows] = value_lrt(total[rows, looks[i] - 1], looks[i], value, context)
+        return out
+
+    return at
+
+
 @functools.lru_cache(maxsize=128)
 def boundaries(
     n_values: int, n_contexts: int, centre: float, spread: float, design: Design
@@ -164,11 +178,11 @@ def boundaries(
     rng = np.random.default_rng(0)
     sr = context_rates(n_contexts, centre, spread)
     args = (n_values, n_contexts, design.looks)
-    null = look_statistics(outcomes(rng, PATHS, design.max_repeats, n_values, n_contexts, sr, 0.0), *args)
-    biased = look_statistics(
+    null = live_statistics(outcomes(rng, PATHS, design.max_repeats, n_values, n_contexts, sr, 0.0), *args)
+    biased = live_statistics(
         outcomes(rng, PATHS, design.max_repeats, n_values, n_contexts, sr, design.tau), *args
     )
-    c, f = spend(null, biased, design)
+    c, f = spend(null, biased, design, PATHS)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
@@ -179,8 +193,8 @@ def boundaries(
     return c, f
 
 
-def spend(null: np.ndarray, biased: np.ndarray, design: Design) -> tuple[np.ndarray, np.ndarray]:
-    """Boundaries from simulated look statistics (paths × looks): c_k lets at most α·(s_k − s_{k−1}) of the null
+def spend(null: Callable, biased: Callable, design: Design, paths: int) -> tuple[np.ndarray, np.ndarray]:
+    """Boundaries from simulated look statistics (`live_statistics` of `paths` splits each): c_k lets at most α·(s_k − s_{k−1}) of the null
     paths cross first at look k; f_k stops at most (1 − power)·(s_k − s_{k−1}) of the τ-biased paths there. A look
     where futility would stop every τ-biased split still running is the last: it spends the α left, every split
     stops there, and later looks get c = f = ∞ (a split reaching one stops for `no_bias`).
@@ -188,29 +202,29 @@ def spend(null: np.ndarray, biased: np.ndarray, design: Design) -> tuple[np.ndar
     Futility is binding: a null path that stopped for futility no longer counts towards later crossings, so the
     efficacy boundaries spend the whole α (with non-binding futility the type-I error of a design that stops
     most null splits early for futility fell to 0.02 on the 21 × 11 shape)."""
-    looks = null.shape[1]
-    alive0 = np.ones(len(null), bool)
-    alive1 = np.ones(len(biased), bool)
+    looks = len(design.looks)
+    alive0, alive1 = np.ones(paths, bool), np.ones(paths, bool)
     c, f = np.empty(looks), np.empty(looks)
     crossed = 0
     for i in range(looks):
         if not alive0.any() and i:  # every split stopped at an earlier look: none may continue to this one
             c[i] = f[i] = np.inf
             continue
-        live = np.sort(null[alive0, i])[::-1]
-        live1 = np.sort(biased[alive1, i])
-        stopped = int(math.floor((1 - design.power) * (design.spent(i + 1) - design.spent(i)) * len(biased)))
-        c[i] = _above(live, int(math.floor(design.alpha * design.spent(i + 1) * len(null))) - crossed)
+        at0, at1 = null(i, alive0), biased(i, alive1)  # NaN for the splits already stopped
+        live = np.sort(at0[alive0])[::-1]
+        live1 = np.sort(at1[alive1])
+        stopped = int(math.floor((1 - design.power) * (design.spent(i + 1) - design.spent(i)) * paths))
+        c[i] = _above(live, int(math.floor(design.alpha * design.spent(i + 1) * paths)) - crossed)
         futility = live1[stopped] if stopped < len(live1) else np.inf
         if i + 1 == looks or futility >= c[i]:
             # Every split stops here (the τ-biased ones still running are all above the efficacy boundary, or
             # few enough for futility to take them all): this look spends all the α left.
-            c[i] = _above(live, int(math.floor(design.alpha * len(null))) - crossed)
+            c[i] = _above(live, int(math.floor(design.alpha * paths)) - crossed)
             futility = c[i]
         f[i] = futility
-        crossed += int(np.sum(alive0 & (null[:, i] >= c[i])))
-        alive0 &= (null[:, i] < c[i]) & (null[:, i] >= f[i])
-        alive1 &= (biased[:, i] < c[i]) & (biased[:, i] >= f[i])
+        crossed += int(np.sum(alive0 & (at0 >= c[i])))
+        alive0 &= (at0 < c[i]) & (at0 >= f[i])
+        alive1 &= (at1 < c[i]) & (at1 >= f[i])
     return c, f
 
 
