@@ -195,6 +195,21 @@ def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():
     assert extreme.at_floor and extreme.draws == 50_000 and extreme.p_value == pytest.approx(1 / 50_001)
 
 
+def test_one_repeat_has_no_noise_floor_for_the_cv_but_the_glm_still_tests():
+    """With one episode per cell every within-block permutation leaves the CV unchanged, so cv_excess would read 0
+    under any bias: it is null, and the GLM test still finds a strong bias."""
+    frame, _ = simulate_split(np.random.default_rng(5), 12, 4, 1, 3.0, 0.5)
+    cfg = MetricsConfig(n_perm=50, max_perm=50, n_glm=50, n_boot=20)
+    single = split_metrics(frame, cfg)
+    assert single["cv"] > 0.5 and single["cv_null"] is None and single["cv_excess"] is None
+    assert single["p_value_cv"] is None and single["cv_excess_ci95"] is None
+    assert single["p_value"] < 0.05
+    # A second repeat gives the permutations something to move: the floor and the excess are measured.
+    two, _ = simulate_split(np.random.default_rng(5), 12, 4, 2, 3.0, 0.5)
+    double = split_metrics(two, cfg)
+    assert double["cv_null"] is not None and double["cv_excess"] > 0 and double["p_value_cv"] < 0.05
+
+
 def test_a_strong_bias_reports_p_below_1e_4_and_the_report_says_where_a_floor_binds():
     from roboview.eval.reporting.format import p_fmt
 

@@ -23,7 +23,7 @@ IMAGE_PREFIX = "observation.images."
 @dataclass(frozen=True)
 class ActRecipe:
     """The reference recipe's settings: optimizer steps, checkpoint interval, batch size, learning rate, action
-    chunk and the actions of each chunk run, and the torch device."""
+    chunk and the actions of each chunk run, the torch device and the data-loading workers."""
 
     steps: int = 6000
     save_freq: int = 1000
@@ -32,6 +32,7 @@ class ActRecipe:
     chunk_size: int = 20
     n_action_steps: int = 10
     device: str = "cpu"
+    num_workers: int = 0
 
 
 @dataclass(frozen=True)
@@ -113,7 +114,7 @@ def fresh_command(
         f"--steps={recipe.steps}",
         f"--save_freq={recipe.save_freq}",
         f"--log_freq={min(100, recipe.save_freq)}",
-        "--num_workers=0",
+        f"--num_workers={recipe.num_workers}",
         "--wandb.enable=false",
         f"--output_dir={output_dir}",
         f"--job_name={output_dir.name}",

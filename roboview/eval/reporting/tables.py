@@ -183,7 +183,7 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
         "cv_null",
         lambda row: pct(row[1]["cv_null"]),
         "the CV this table shows when the value does not matter (value labels permuted within context and "
-        "repeat), ×100",
+        "repeat), ×100; N/A with one episode per cell, where every permutation leaves the CV as it is",
     ),
     Column(
         "cv_excess [95 % CI]",

@@ -143,6 +143,16 @@ def _split_per_value(
     return per_value
 
 
+# A single repeat leaves the CV's permutation floor undefined: its fields when that is so.
+CV_UNMEASURED = {
+    "cv_null": None,
+    "cv_excess": None,
+    "p_value_cv": None,
+    "p_value_cv_draws": None,
+    "p_value_cv_at_floor": None,
+}
+
+
 def _cv_tests(
     table: CellTable, factor: str, ctx: np.ndarray, rng: np.random.Generator, cfg: MetricsConfig
 ) -> dict[str, Any]:
@@ -153,6 +163,12 @@ def _cv_tests(
         return conditional_cv(sr, ctx, cfg.epsilon).mean(axis=-1)
 
     permuted = table.permuted_k(["context_id"], cfg.n_perm, rng)
+    if table.n.max() == 1:
+        # One episode per cell (a single repeat): shuffling the values within a (context, repeat) block keeps each
+        # context's outcomes, so every permuted CV equals the CV. There is no noise floor to measure it against,
+        # and cv_excess would read 0 whatever the bias; the GLM test still uses the permutations.
+        glm = _glm_test(table, table.codes([factor]), ctx, permuted, ["context_id"], rng, cfg)
+        return {"cv": float(statistic(table.sr)), **CV_UNMEASURED, **stats.lrt_fields(glm)}
     null = statistic(permuted / table.n)
     cv, cv_null = float(statistic(table.sr)), float(null.mean())
     mc = stats.sequential_p(
