@@ -56,7 +56,7 @@ LOGIT_LIMIT = 3.0  # ... and clipped to ±this (SR 4.7 % – 95.3 %)
 SPREAD_GRID = 0.5  # ... and at the SD of the contexts' logits, rounded to this step
 SPREAD_LIMIT = 2.0  # ... and at most this
 LOGIT_CAP = 4.6  # no simulated context beyond ±this logit (SR 1 % – 99 %)
-CALIBRATION = 5  # version of the calibration: cached boundaries of another version are not read
+CALIBRATION = 6  # version of the calibration: cached boundaries of another version are not read
 
 
 @dataclass(frozen=True)

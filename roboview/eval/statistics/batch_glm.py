@@ -38,9 +38,9 @@ def _llf(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarr
 
 def _newton_direction(
     k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, float]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Newton's direction for the additive fit η = a_v + b_c (b_0 = 0) on grids (tables, values, contexts), and
-    the largest score component (0 at the maximum)."""
+    each table's largest score component (0 at its maximum)."""
     mu = expit(a[:, :, None] + b[:, None, :])
     w = n * mu * (1 - mu)
     r = k - n * mu
@@ -56,31 +56,37 @@ def _newton_direction(
     return (
         np.clip(da, -MAX_STEP, MAX_STEP),
         np.clip(db, -MAX_STEP, MAX_STEP),
-        float(max(np.abs(ga).max(initial=0), np.abs(gb).max(initial=0))),
+        np.maximum(np.abs(ga).max(axis=1, initial=0), np.abs(gb).max(axis=1, initial=0)),
     )
 
 
 def _fit(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Maximised log-likelihood of the additive fit from (a, b): Newton steps, each halved for a table until its
-    log-likelihood does not fall (Newton alone can oscillate on a logistic likelihood from a poor start)."""
+    log-likelihood does not fall (Newton alone can oscillate on a logistic likelihood from a poor start). A table
+    leaves the iteration once its score vanishes, so the slowest tables do not hold the rest."""
     current = _llf(k, n, a, b)
+    live = np.arange(len(k))
     for _ in range(ITERATIONS):
-        da, db, score = _newton_direction(k, n, a, b)
-        if score < 1e-9:
+        kl, nl, al, bl = k[live], n[live], a[live], b[live]
+        da, db, score = _newton_direction(kl, nl, al, bl)
+        moving = score >= 1e-9
+        if not moving.any():
             break
-        scale = np.ones(len(k))
+        live, kl, nl, al, bl = live[moving], kl[moving], nl[moving], al[moving], bl[moving]
+        da, db, now = da[moving], db[moving], current[live]
+        scale = np.ones(len(live))
         for _ in range(HALVINGS):
-            trial = _llf(k, n, a + scale[:, None] * da, b + scale[:, None] * np.pad(db, ((0, 0), (1, 0))))
-            worse = trial < current - 1e-12 * np.abs(current)
+            trial = _llf(kl, nl, al + scale[:, None] * da, bl + scale[:, None] * np.pad(db, ((0, 0), (1, 0))))
+            worse = trial < now - 1e-12 * np.abs(now)
             if not worse.any():
                 break
             scale[worse] /= 2
         else:  # a table still worse after every halving keeps its coefficients
             scale[worse] = 0.0
-            trial = np.where(worse, current, trial)
-        a += scale[:, None] * da
-        b[:, 1:] += scale[:, None] * db
-        current = trial
+            trial = np.where(worse, now, trial)
+        a[live] = al + scale[:, None] * da
+        b[live, 1:] = bl[:, 1:] + scale[:, None] * db
+        current[live] = trial
     return current
 
 
