@@ -168,6 +168,12 @@ def test_paired_comparison_of_two_policies():
     assert diff["p_sr"] == pytest.approx(chi2.sf(39**2 / 40, 1))
     # Swapping whole instances puts all 8 of v0's on one side with probability 2/256: p can reach it.
     assert diff["delta_cv_excess"] > 0.3 and diff["p_cv_excess"] < 0.05
+    # One repeat: one episode per cell leaves cv_excess undefined for both, so no cv verdict can come from
+    # floating-point residue (SR is still compared).
+    first = pd.concat([a, b])
+    single = compare_policies(first[first["repeat"] == 0], SIM)[0]
+    assert single["delta_cv_excess"] is None and single["p_cv_excess"] is None
+    assert single["n_pairs"] == 48 and single["delta_sr"] == pytest.approx(-8 / 48)
 
 
 def test_sequential_p_is_valid_under_the_null_and_resolves_small_p():

@@ -48,10 +48,11 @@ class _Paired:
     epsilon: float
 
     def cv_excess(self, success: np.ndarray, seed: int) -> float | None:
-        """cv and its within-(context, repeat) permutation floor for one success matrix."""
+        """cv against its within-(context, repeat) permutation floor for one success matrix; None when nothing
+        succeeded, or with one episode per cell, where every permutation leaves the CV as it is (no floor)."""
         n_rep = success.shape[1]
         n_cell = np.bincount(self.cell) * n_rep
-        if not success.any():
+        if not success.any() or n_cell.max() == 1:
             return None
         cv = conditional_cv(
             group_sum(success.sum(axis=1), self.cell) / n_cell, self.context, self.epsilon
