@@ -151,6 +151,21 @@ def test_end_effector_control_runs_and_is_recorded(bench, tmp_path):
         evaluate(bench, out, splits="color", limit=2, workers=1)
 
 
+def test_more_repeats_extend_a_run_in_rounds_and_fewer_are_refused(bench, tmp_path):
+    """Evaluating in rounds (`--eval.n_repeats=1`, then 2, …, as roboview-compare's loop does): each call keeps the
+    rows written and runs only the new repeat; asking for fewer repeats than the folder holds is a different run."""
+    from roboview.eval.running.results import ResultsError
+
+    out = tmp_path / "rounds"
+    first = evaluate(bench, out, splits="color", limit=2, repeats=1, workers=1, max_steps=4)
+    second = evaluate(bench, out, splits="color", limit=2, repeats=2, workers=1, max_steps=4)
+    assert (first.new_episodes, second.new_episodes) == (2, 2)
+    assert sorted(rows(out)["repeat"]) == [0, 0, 1, 1]
+    assert json.loads((out / "run.json").read_text())["n_repeats"] == {"color": 2}
+    with pytest.raises(ResultsError, match="n_repeats: existing"):
+        evaluate(bench, out, splits="color", limit=2, repeats=1, workers=1, max_steps=4)
+
+
 def test_local_and_ray_backends_agree_row_for_row(bench, tmp_path, monkeypatch):
     evaluate(bench, tmp_path / "local", splits="color,camera_pose", limit=1, repeats=2)
     # A home without a Ray token: the local instance authenticates with a private one and writes none there.

@@ -52,6 +52,18 @@ FORMAT_KEY = b"roboview_results_format"
 RESULTS_FORMAT = 2
 
 
+def more_repeats(existing, requested) -> bool:
+    """Whether `requested` (run.json's n_repeats: split → repeats) only adds repeats to the same splits: the rows
+    already written are then a prefix of the larger run, which resumes them and runs the new repeats (evaluating in
+    rounds, one more repeat per call)."""
+    return (
+        isinstance(existing, dict)
+        and isinstance(requested, dict)
+        and existing.keys() == requested.keys()
+        and all(requested[k] >= existing[k] for k in existing)
+    )
+
+
 class ResultsError(ValueError):
     """The output folder holds results that cannot be continued by this run."""
 
@@ -86,7 +98,9 @@ class EpisodeStore:
             diffs = [
                 f"{k}: existing {previous.get(k, RUN_DEFAULTS.get(k))!r} vs requested {v!r}"
                 for k, v in self.run_info.items()
-                if previous.get(k, RUN_DEFAULTS.get(k)) != v and (k in previous or k not in RUN_DERIVED)
+                if previous.get(k, RUN_DEFAULTS.get(k)) != v
+                and (k in previous or k not in RUN_DERIVED)
+                and not (k == "n_repeats" and more_repeats(previous.get(k), v))
             ]
             if diffs:
                 raise ResultsError(
