@@ -142,9 +142,8 @@ def outcomes(
 
 def look_statistics(x: np.ndarray, n_values: int, n_contexts: int, looks: list[int]) -> np.ndarray:
     """(paths, looks) LRT of each simulated split at each look (`x` from `outcomes`)."""
-    value, context = grid(n_values, n_contexts)
-    total = x.cumsum(axis=1, dtype=np.int32)
-    return np.stack([value_lrt(total[:, look - 1], look, value, context) for look in looks], axis=1)
+    at, every = live_statistics(x, n_values, n_contexts, looks), np.ones(len(x), bool)
+    return np.stack([at(i, every) for i in range(len(looks))], axis=1)
 
 
 def live_statistics(x: np.ndarray, n_values: int, n_contexts: int, looks: list[int]) -> Callable:
@@ -194,9 +193,9 @@ def boundaries(
 
 
 def spend(null: Callable, biased: Callable, design: Design, paths: int) -> tuple[np.ndarray, np.ndarray]:
-    """Boundaries from simulated look statistics (`live_statistics` of `paths` splits each): c_k lets at most α·(s_k − s_{k−1}) of the null
-    paths cross first at look k; f_k stops at most (1 − power)·(s_k − s_{k−1}) of the τ-biased paths there. A look
-    where futility would stop every τ-biased split still running is the last: it spends the α left, every split
+    """Boundaries from simulated look statistics (`live_statistics` of `paths` splits each): c_k lets at most
+    α·(s_k − s_{k−1}) of the null paths cross first at look k; f_k stops at most (1 − power)·(s_k − s_{k−1}) of
+    the τ-biased paths there. A look where futility would stop every τ-biased split still running is the last: it spends the α left, every split
     stops there, and later looks get c = f = ∞ (a split reaching one stops for `no_bias`).
 
     Futility is binding: a null path that stopped for futility no longer counts towards later crossings, so the
