@@ -369,7 +369,8 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     work = p.work
     entry = provenance.start_entry(p.version, cfg.policy.checkpoint)
     entry |= {"benchmark_path": str(Path(cfg.benchmark.path).resolve()), "conformance": conformance}
-    entry["control"] = cfg.policy.env_control()
+    # What the episodes ran with, as run.json records it too: roboview-verify holds the two to each other.
+    entry |= {k: store.run_info[k] for k in ("control", "image_size", "max_steps")}
     verdict = conformance["verdict"]
     if cfg.policy.served_by() is not None:
         entry["policy_server"] = cfg.policy.served_by()

@@ -187,6 +187,13 @@ class PolicyConfig(draccus.ChoiceRegistry):
     plans_joints: ClassVar[bool] = False
     # One line for listings and error messages.
     doc: ClassVar[str] = ""
+    # The rows' `policy` column when --policy.name is not given: an fnmatch pattern formatted with `type` and the
+    # type's recorded options (run.json's policy_options). roboview-verify holds a folder's rows to it.
+    row_name: ClassVar[str] = "{type}"
+    # Whether an episode re-run with its seed ends as it did: the policy's randomness, if any, is drawn from the
+    # episode seed. False for a policy whose answers come from elsewhere (a server, a VLM endpoint): a replay that
+    # disagrees then shows a stochastic policy, not a forged row.
+    reproducible: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         """Subclasses validate their fields here (and call this first)."""

@@ -349,6 +349,8 @@ class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
     load_timeout_s: float = 600.0
 
     doc = "a LeRobot checkpoint served by lerobot.async_inference.policy_server (--policy.server=HOST:PORT)"
+    row_name = "lerobot:*"  # lerobot:<the checkpoint's policy type>
+    reproducible = False  # the episode seed does not reach the server's randomness
 
     def __post_init__(self) -> None:
         control_field(self)

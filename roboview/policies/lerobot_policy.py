@@ -291,6 +291,7 @@ class LeRobotConfig(PolicyConfig):
     control: str = ""
 
     doc = "any LeRobot checkpoint (--policy.path=DIR)"
+    row_name = "lerobot:*"  # lerobot:<the checkpoint's policy type>
 
     def __post_init__(self) -> None:
         with flag_errors("--policy.path"):

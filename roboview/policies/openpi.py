@@ -342,6 +342,8 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
     api_key_env: str = "OPENPI_API_KEY"
 
     doc = "a policy served over openpi's websocket protocol (--policy.url=ws://HOST:PORT)"
+    row_name = "openpi:{obs_format}"
+    reproducible = False  # the episode seed does not reach the server's randomness
 
     def __post_init__(self) -> None:
         control_field(self)

@@ -44,3 +44,23 @@ def policy_config(type_name: str, **settings: Any) -> PolicyConfig:
     if type_name not in known:
         raise ValueError(f"unknown policy type {type_name!r}; allowed: {', '.join(known)}")
     return PolicyConfig.get_choice_class(type_name)(**settings)
+
+
+def policy_class(type_name: str) -> type[PolicyConfig] | None:
+    """The config class of policy type `type_name`; None for a name no registered type has (a run converted from
+    another harness records its own name there)."""
+    return PolicyConfig.get_choice_class(type_name) if type_name in load_policy_types() else None
+
+
+def row_name_pattern(type_name: str, options: dict[str, Any]) -> str:
+    """The fnmatch pattern the rows' `policy` column of a run of `type_name` with `options` (run.json's
+    policy_options) matches when --policy.name was not given: the type's `row_name`, "+sgl" after it when the SGL
+    wrapped the policy; `type_name` itself for a converted run."""
+    cls = policy_class(type_name)
+    if cls is None:
+        return type_name
+    try:
+        pattern = cls.row_name.format_map({**options, "type": type_name})
+    except (KeyError, IndexError, ValueError):  # options that do not name what the pattern reads
+        pattern = cls.row_name.split("{")[0] + "*"
+    return pattern + ("+sgl" if options.get("sgl") else "")

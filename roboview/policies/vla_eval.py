@@ -321,6 +321,8 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
     images_every: int = 1
 
     doc = "any vla-eval model server (--policy.url=ws://HOST:PORT)"
+    row_name = "vla_eval:*"  # vla_eval:<the model server's name, from its HELLO>
+    reproducible = False  # the episode seed does not reach the server's randomness
 
     def __post_init__(self) -> None:
         if not self.url_list:

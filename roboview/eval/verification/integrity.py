@@ -1,6 +1,7 @@
 """What a results folder's own files must agree on before its numbers mean anything: the episode table against the
-row's declared schema (roboview.eval.running.row.SCHEMA), each row plausible, and every row's conformance verdict
-re-derived from provenance.json against the benchmark's stack, never taken from the row."""
+row's declared schema (roboview.eval.running.row.SCHEMA), each row plausible, run.json against what the rows and
+provenance.json record of the same run, and every row's conformance verdict re-derived from provenance.json against
+the benchmark's stack, never taken from the row."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from roboview.eval.running.row import ALLOWED, SCHEMA, STATUS
+from roboview.eval.running.row import ALLOWED, INFRA_ERROR, SCHEMA, STATUS
 from roboview.eval.verification.report import Check, listed
 
 _KINDS = {
@@ -109,4 +110,50 @@ def check_conformance(rows: list[dict], results: Path, bench_stack: dict | None)
         f"{tally}; {len(entries)} run(s), each verdict re-derived from its stack"
         if not problems
         else f"{tally} — " + "; ".join(problems),
+    )
+
+
+def check_record(rows: list[dict], run: dict, table_policy: str | None, entries: list[dict]) -> Check:
+    """run.json against what the folder's other files record of the same run: the rows' `policy` column (run.json's
+    policy_name, else the name its policy type gives its rows), the table's own policy, and the control, image size
+    and step budget each run's provenance entry records, the budget also against the rows' timeouts."""
+    from fnmatch import fnmatchcase
+
+    from roboview.eval.running.results import RUN_DEFAULTS
+    from roboview.policies.types import row_name_pattern
+
+    kind = str(run.get("policy") or "")
+    counted = [r for r in rows if r.get(STATUS) != INFRA_ERROR]
+    expected = run.get("policy_name") or row_name_pattern(kind, run.get("policy_options") or {})
+    names = Counter(str(r.get("policy")) for r in counted)
+    problems = [
+        f"{n} rows name policy {name!r}, run.json's policy {kind!r} names its rows {expected!r}"
+        for name, n in sorted(names.items())
+        if not fnmatchcase(name, expected)
+    ]
+    if table_policy is not None and table_policy != kind:
+        problems.append(f"episodes.parquet records policy {table_policy!r}, run.json {kind!r}")
+    for key, label in (("control", "control"), ("image_size", "image size"), ("max_steps", "max steps")):
+        mine = run.get(key, RUN_DEFAULTS.get(key))
+        theirs = sorted({str(e[key]) for e in entries if key in e and e[key] != mine})
+        if theirs:
+            problems.append(
+                f"run.json's {label} is {mine}, a run in provenance.json ran with {', '.join(theirs)}"
+            )
+    budget = run.get("max_steps")
+    timeouts = sorted(
+        {int(m.group(1)) for r in counted if (m := _TIMEOUT.search(r.get("failure_reason") or ""))}
+    )
+    if budget is not None and any(t != budget for t in timeouts):
+        problems.append(
+            f"run.json's max steps is {budget}, the rows time out within {listed(timeouts)} steps"
+        )
+    return Check(
+        "record",
+        not problems,
+        "; ".join(problems)
+        if problems
+        else f"run.json, the rows and provenance agree: policy {kind} ({', '.join(sorted(names)) or 'no rows'}), "
+        f"control {run.get('control', RUN_DEFAULTS['control'])}, image size {run.get('image_size')}, "
+        f"max steps {budget}",
     )

@@ -16,17 +16,21 @@ import pyarrow.parquet as pq
 from roboview.benchmark.format import read_manifest
 from roboview.core.folders import folder_problem
 from roboview.eval.reporting.bundle import BUNDLE_FILE, manifest_problems
+from roboview.eval.running import provenance
 from roboview.eval.running.row import INFRA_ERROR, STATUS
 from roboview.eval.statistics.adaptive import read_record
-from roboview.eval.verification.integrity import check_conformance, check_plausible, check_schema
+from roboview.eval.verification.integrity import (
+    check_conformance,
+    check_plausible,
+    check_record,
+    check_schema,
+)
 from roboview.eval.verification.report import Check, Report, listed
 
 
 def benchmark_path(results: str | Path, benchmark: str | Path | None = None) -> Path:
     """The benchmark folder `results` are checked against: `benchmark` if given, else the one its provenance
     names."""
-    from roboview.eval.running import provenance
-
     results = Path(results)
     if benchmark:
         return Path(benchmark)
@@ -315,6 +319,7 @@ def verify_results(
         return Report([schema, Check("benchmark", False, str(exc))], time.perf_counter() - start)
     checks = [schema, Check("benchmark", True, f"{root}: version {bench.version}, every cell as built")]
     checks += _file_checks(results, run, bench)
+    checks.append(check_record(rows, run, _table_policy(table), provenance.read(results)))
     checks += check_rows(rows, bench)
     checks.append(check_isolation(rows))
     complete, coverage = check_complete(rows, bench, run, results)
@@ -325,6 +330,12 @@ def verify_results(
         check, replayed = check_replay(rows, bench, run, replay, detect)
         checks.append(check)
     return Report(checks, time.perf_counter() - start, coverage=coverage, replay=replayed)
+
+
+def _table_policy(table) -> str | None:
+    """The policy episodes.parquet's own metadata records (None: it records none)."""
+    raw = (table.schema.metadata or {}).get(b"roboview_policy")
+    return None if raw is None else raw.decode()
 
 
 def _file_checks(results: Path, run: dict, bench) -> list[Check]:

@@ -35,6 +35,7 @@ class VLMConfig(ControlledConfig):
 
     depth = True
     plans_joints = True
+    reproducible = False  # the endpoint's answers are not drawn from the episode seed
     # The endpoint's settings were once flags of their own: --policy.model still means
     # --policy.endpoint.model.
     flag_aliases: ClassVar[dict[str, str]] = endpoint_aliases()
