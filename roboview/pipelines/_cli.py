@@ -23,6 +23,33 @@ class BenchmarkPath:
     path: str = ""
 
 
+@dataclass
+class ReplayConfig:
+    """`--replay.*`: episodes of a results folder re-run here, drawn at random (`--replay=N` is `--replay.n=N`)."""
+
+    # Episodes to re-run (0: none); unset: as many as the guarantee below needs.
+    n: int | None = None
+    # Size the sample to catch any forgery of at least this share of the rows (e.g. 0.05; 0: no replay) ...
+    detect: float = 0.0
+    # ... with at least this probability.
+    confidence: float = 0.95
+
+    def size(self) -> int:
+        """Episodes to re-run (0: none)."""
+        from roboview.eval.verification.replay import replay_size
+
+        if self.n is not None and self.n < 0:
+            raise ValueError(f"--replay.n={self.n} must be 0 or more")
+        if self.n is not None:
+            return self.n
+        return replay_size(self.detect, self.confidence) if self.detect else 0
+
+
+def replay_flag(args: list[str]) -> list[str]:
+    """`--replay=N`, the short form of `--replay.n=N`, spelled out for the parser."""
+    return [a.replace("--replay=", "--replay.n=", 1) if a.startswith("--replay=") else a for a in args]
+
+
 def result_entries(results: str) -> list[tuple[str | None, Path]]:
     """`--results=A,B,…` of the commands that read several results: (name or None, path) per entry; NAME=PATH names
     the file's policy."""

@@ -7,8 +7,14 @@
 `roboview.pipelines.publish --results` wrote) or Hub dataset ids of published bundles (downloaded with
 huggingface_hub; `hf://datasets/ORG/NAME` or ORG/NAME when no such folder exists here). Every bundle is verified
 against the board's benchmark (`--benchmark.path`; default: the one the first bundle's provenance names) exactly
-as `roboview.pipelines.verify --results` does; a bundle that fails, or that holds results of another benchmark or
-version, is listed apart with the reason and never ranked. The ranked bundles' episodes are measured together
+as `roboview.pipelines.verify --results` does, and a sample of its episodes drawn at random is re-run here, sized as
+`roboview-verify --replay.detect=0.05 --replay.confidence=0.95` sizes it (59 episodes; the guarantee is printed and
+recorded in leaderboard.json). Only bundles whose replay passed are ranked. A bundle whose episodes cannot be re-run
+here (its policy unreachable or not reproducible from the episode seed, or run on another simulation stack) is a
+claim: listed apart with the reason, measured alone, never ranked or compared. A bundle that fails a check, whose
+replay disagrees with its rows, or that holds results of another benchmark or version is rejected with the reason.
+`--replay=0` re-runs nothing: the page's title then says so and no row is called verified. The ranked bundles'
+episodes are measured together
 (the statistics of `roboview.pipelines.report`): per split and overall, success rate and cv_excess with their 95 %
 intervals, episodes, and significance groups (compact letters from Holm-adjusted paired tests: policies that
 share a letter are not significantly different). Each row links to a report.html written for its bundle under
@@ -20,10 +26,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from roboview.eval.board import build_board
+from roboview.eval.board import Replay, build_board
 from roboview.eval.reporting.leaderboard import BOARD_HTML, Board
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
-from roboview.pipelines._cli import BenchmarkPath, cli_main
+from roboview.pipelines._cli import BenchmarkPath, ReplayConfig, cli_main, replay_flag
+
+
+@dataclass
+class BoardReplayConfig(ReplayConfig):
+    """The board's replay: the guarantee roboview-verify states, 5 % at 95 %, unless told otherwise."""
+
+    # Size each bundle's sample to catch any forgery of at least this share of its rows (0: no replay) ...
+    detect: float = 0.05
 
 
 @dataclass
@@ -45,17 +59,18 @@ class LeaderboardConfig:
     # The benchmark protocol the board ranks (every ranked bundle claims it; the others are listed apart). Empty:
     # the one most verified bundles claim.
     protocol: str = ""
-    # Episodes of each bundle re-run here, drawn at random (0: none; a bundle whose policy cannot be rebuilt here is
-    # marked "not replayed" with the reason, one whose replay disagrees is listed apart).
-    replay: int = 0
+    # Episodes of each bundle re-run here, drawn at random: by default as many as catch a forgery of ≥ 5 % of its
+    # rows with probability ≥ 95 % (--replay.detect, --replay.confidence); --replay=N fixes N, --replay=0 re-runs
+    # none (the page then says so in its title). Only bundles whose replay passed are ranked; one whose episodes
+    # cannot be re-run here is a claim, listed apart; one whose replay disagrees is rejected.
+    replay: BoardReplayConfig = field(default_factory=lambda: BoardReplayConfig())
 
     def __post_init__(self) -> None:
         if not self.sources:
             raise ValueError(
                 "--results is required: result bundles (folders or Hub dataset ids), comma-separated"
             )
-        if self.replay < 0:
-            raise ValueError(f"--replay={self.replay} must be 0 or more")
+        self.replay.size()  # a bad n, detect or confidence fails here
         if len(set(self.sources)) != len(self.sources):
             raise ValueError(f"--results names a bundle twice: {self.results}")
         if self.benchmark.path:
@@ -70,6 +85,8 @@ class LeaderboardConfig:
 
 
 def run(cfg: LeaderboardConfig) -> Board:
+    replay = Replay(cfg.replay.size(), cfg.replay.detect or 0.05)
+    print(f"[leaderboard] replay: {replay.words()}", flush=True)
     return build_board(
         cfg.sources,
         cfg.output_dir,
@@ -78,7 +95,7 @@ def run(cfg: LeaderboardConfig) -> Board:
         cfg.cache_dir,
         cfg.plots,
         cfg.protocol,
-        cfg.replay,
+        replay,
     )
 
 
@@ -86,18 +103,29 @@ def _summary(cfg: LeaderboardConfig, board: Board) -> None:
     for row in board.overall.get("sr", []):
         rank = "ref" if row["rank"] is None else f"{row['rank']:>2}."
         print(f"  {rank:>3} {row['policy']:<30} SR {100 * row['value']:6.2f}  group {row['group']}")
+    for c in board.claims:
+        print(f"  claim (not ranked): {c.label} SR {100 * c.sr:6.2f}: {c.replay_note}")
     for r in board.rejected:
-        print(f"  listed apart: {r.source}: {r.reason}")
+        print(f"  rejected: {r.source}: {r.reason}")
+    replayed = (
+        f"replayed in {board.replay['seconds']:.0f} s"
+        if board.replayed
+        else "NOT REPLAYED (--replay=0): no ranked row is verified"
+    )
     print(
-        f"[leaderboard] {Path(cfg.output_dir) / BOARD_HTML}: {len(board.entries)} ranked, "
-        f"{len(board.rejected)} listed apart (benchmark {board.benchmark_version}, protocol {board.protocol or 'none'})"
+        f"[leaderboard] {Path(cfg.output_dir) / BOARD_HTML}: {len(board.entries)} ranked, {len(board.claims)} "
+        f"claims listed apart, {len(board.rejected)} rejected ({replayed}; benchmark {board.benchmark_version}, "
+        f"protocol {board.protocol or 'none'})"
     )
 
 
 def main(args: list[str] | None = None) -> Board:
+    import sys
+
     from roboview.eval.running.results import ResultsError
 
-    return cli_main(LeaderboardConfig, run, _summary, (ValueError, EpisodesError, ResultsError), args)
+    argv = replay_flag(args if args is not None else sys.argv[1:])
+    return cli_main(LeaderboardConfig, run, _summary, (ValueError, EpisodesError, ResultsError), argv)
 
 
 if __name__ == "__main__":

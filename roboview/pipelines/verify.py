@@ -35,27 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from roboview.eval.verification import Report, verify_benchmark, verify_results
-from roboview.pipelines._cli import BenchmarkPath, cli_main
-
-
-@dataclass
-class ReplayConfig:
-    # Episodes to re-run, drawn at random here; 0 with detect = 0: no replay. Set: overrides detect / confidence.
-    n: int = 0
-    # Size the sample to catch any forgery of at least this share of the rows (e.g. 0.05) ...
-    detect: float = 0.0
-    # ... with at least this probability.
-    confidence: float = 0.95
-
-    def size(self) -> int:
-        """Episodes to re-run (0: none)."""
-        from roboview.eval.verification.replay import replay_size
-
-        if self.n < 0:
-            raise ValueError(f"--replay.n={self.n} must be 0 or more")
-        if self.n:
-            return self.n
-        return replay_size(self.detect, self.confidence) if self.detect else 0
+from roboview.pipelines._cli import BenchmarkPath, ReplayConfig, cli_main, replay_flag
 
 
 @dataclass
@@ -143,11 +123,7 @@ def main(args: list[str] | None = None) -> Report:
 
     from roboview.eval.running.results import ResultsError
 
-    # `--replay=N` is the short form of `--replay.n=N`.
-    argv = [
-        a.replace("--replay=", "--replay.n=", 1) if a.startswith("--replay=") else a
-        for a in (args if args is not None else sys.argv[1:])
-    ]
+    argv = replay_flag(args if args is not None else sys.argv[1:])
     return cli_main(VerifyConfig, run, _summary, (ValueError, ResultsError), argv)
 
 

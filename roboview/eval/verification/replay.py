@@ -11,8 +11,10 @@ forgery of fewer rows can pass: one changed row of N is caught with probability 
 from __future__ import annotations
 
 import datetime
+import json
 import math
 import secrets
+import time
 
 from roboview.eval.verification.report import Check, listed
 
@@ -47,9 +49,13 @@ def draw_sample(rows: list[dict], n: int, rng=None) -> list[dict]:
     return counted if n >= len(counted) else rng.sample(counted, n)
 
 
-def check_replay(rows: list[dict], bench, run: dict, n: int, detect: float) -> tuple[Check, dict]:
+def check_replay(
+    rows: list[dict], bench, run: dict, n: int, detect: float, replayer: Replayer | None = None
+) -> tuple[Check, dict]:
     """Re-run a random sample of the episodes with the recorded policy; every one must end as its row says.
-    Returns the check and what verify.json records."""
+    Returns the check and what verify.json records (`reproducible`: whether the policy type says a re-run can
+    reproduce its episodes; `error`: why the policy could not be rebuilt here). `replayer`: workers kept across
+    calls (a board replaying many bundles); default: ones opened and closed here."""
     sample = draw_sample(rows, n)
     total = sum(r.get("status") != "infra_error" for r in rows)
     record = {
@@ -60,20 +66,83 @@ def check_replay(rows: list[dict], bench, run: dict, n: int, detect: float) -> t
         "passed": False,
         "disagreements": [],
     }
+    own = replayer is None
+    replayer = replayer or Replayer()
     try:
-        policy = _recorded_policy(run)
-    except Exception as exc:  # any failure to rebuild the policy is the check's answer
-        detail = f"cannot rebuild policy {run.get('policy')!r} from run.json: {type(exc).__name__}: {exc}"
-        return Check("replay", False, detail), record | {"error": detail}
-    differ = _rerun(sample, bench, run, policy)
-    record |= {"passed": not differ, "disagreements": differ}
+        try:
+            policy = replayer.policy(run)
+        except Exception as exc:  # any failure to rebuild the policy is the check's answer
+            detail = f"cannot rebuild policy {run.get('policy')!r} from run.json: {type(exc).__name__}: {exc}"
+            return Check("replay", False, " ".join(detail.split())), record | {"error": detail}
+        start = time.perf_counter()
+        differ = replayer.rerun(sample, bench, run, policy)
+    finally:
+        if own:
+            replayer.close()
+    reproducible = bool(getattr(policy, "reproducible", True))
+    record |= {
+        "passed": not differ,
+        "disagreements": differ,
+        "reproducible": reproducible,
+        "seconds": round(time.perf_counter() - start, 2),
+    }
     words = guarantee(len(sample), total, detect)
     detail = (
         f"{len(sample)} episodes re-run with {run['policy']}, each ended as recorded ({words})"
         if not differ
         else f"{len(differ)} of {len(sample)} re-run episodes end differently from their rows: {listed(differ)}"
+        + ("" if reproducible else f" ({run['policy']} is not reproducible from the episode seed)")
     )
     return Check("replay", not differ, detail), record
+
+
+class Replayer:
+    """Policies rebuilt from run.json and the workers that re-run their episodes, each kept for every later sample
+    that needs the same one: a heavy policy (a checkpoint, a connection) is loaded once per board, not once per
+    bundle or episode."""
+
+    def __init__(self) -> None:
+        self._policies: dict[str, object] = {}
+        self._workers: dict[tuple, object] = {}
+
+    @staticmethod
+    def _key(run: dict) -> str:
+        keys = ("policy", "policy_options", "policy_path", "policy_name")
+        return json.dumps({k: run.get(k) for k in keys}, sort_keys=True, default=str)
+
+    def policy(self, run: dict):
+        """The policy config run.json records (built once per distinct record)."""
+        key = self._key(run)
+        if key not in self._policies:
+            self._policies[key] = _recorded_policy(run)
+        return self._policies[key]
+
+    def rerun(self, sample: list[dict], bench, run: dict, policy) -> list[str]:
+        """Each sampled row's episode again; the rows whose outcome differs, described."""
+        from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+
+        items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
+        image_size, max_steps = run.get("image_size", 224), run.get("max_steps", 120)
+        differ = []
+        for row in sample:
+            item = items[row["instance_id"]]
+            key = (self._key(run), image_size, max_steps, item.instance.task)
+            if key not in self._workers:
+                self._workers[key] = EvalWorker(WorkerSpec(policy, image_size, max_steps, task=key[-1]))
+            again = self._workers[key].run(WorkItem(item, int(row["repeat"]))).row
+            changed = [
+                f"{k} {row.get(k)!r} → {again.get(k)!r}"
+                for k in REPLAYED
+                if (row.get(k) or None) != (again.get(k) or None)
+            ]
+            if changed:
+                differ.append(f"{row['instance_id']} repeat {row['repeat']}: {', '.join(changed)}")
+        return differ
+
+    def close(self) -> None:
+        for worker in self._workers.values():
+            worker.close()
+        self._workers.clear()
 
 
 def _recorded_policy(run: dict):
@@ -85,32 +154,3 @@ def _recorded_policy(run: dict):
     if run.get("policy_name"):
         settings["name"] = run["policy_name"]
     return policy_config(run["policy"], **settings)
-
-
-def _rerun(sample: list[dict], bench, run: dict, policy) -> list[str]:
-    """Each sampled row's episode again; the rows whose outcome differs, described."""
-    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
-
-    items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
-    workers: dict[str, EvalWorker] = {}
-    differ = []
-    try:
-        for row in sample:
-            item = items[row["instance_id"]]
-            task = item.instance.task
-            if task not in workers:
-                workers[task] = EvalWorker(
-                    WorkerSpec(policy, run.get("image_size", 224), run.get("max_steps", 120), task=task)
-                )
-            again = workers[task].run(WorkItem(item, int(row["repeat"]))).row
-            changed = [
-                f"{k} {row.get(k)!r} → {again.get(k)!r}"
-                for k in REPLAYED
-                if (row.get(k) or None) != (again.get(k) or None)
-            ]
-            if changed:
-                differ.append(f"{row['instance_id']} repeat {row['repeat']}: {', '.join(changed)}")
-    finally:
-        for worker in workers.values():
-            worker.close()
-    return differ

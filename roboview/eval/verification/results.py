@@ -294,13 +294,15 @@ def verify_results(
     replay: int = 0,
     detect: float = 0.05,
     loaded=None,
+    replayer=None,
 ) -> Report:
     """A results folder against its benchmark (`benchmark`, else the one its provenance names): the table's schema
-    first, then files, identity, instances, seeds, duplicates, isolation, completeness for the protocol it claims,
-    infrastructure errors, plausibility, conformance re-derived, and with `replay` > 0 that many episodes drawn at
-    random and re-run here (`detect`: the forged share the stated guarantee speaks of). `loaded`: that benchmark
-    already loaded and checked (a board verifying many bundles against one). ResultsError for a folder that holds no
-    readable results; ValueError when no benchmark can be found."""
+    first, then files, identity, the record, instances, seeds, duplicates, isolation, completeness for the protocol
+    it claims, infrastructure errors, plausibility, conformance re-derived, and with `replay` > 0 that many episodes
+    drawn at random and re-run here (`detect`: the forged share the stated guarantee speaks of). `loaded`: that
+    benchmark already loaded and checked (a board verifying many bundles against one); `replayer`: the
+    `replay.Replayer` whose workers outlive this call (a board's). ResultsError for a folder that holds no readable
+    results; ValueError when no benchmark can be found."""
     from roboview.benchmark.format import BenchmarkError, load_benchmark
     from roboview.eval.verification.replay import check_replay
 
@@ -327,7 +329,7 @@ def verify_results(
     checks.append(check_conformance(rows, results, read_manifest(root).get("stack")))
     replayed = None
     if replay > 0:
-        check, replayed = check_replay(rows, bench, run, replay, detect)
+        check, replayed = check_replay(rows, bench, run, replay, detect, replayer)
         checks.append(check)
     return Report(checks, time.perf_counter() - start, coverage=coverage, replay=replayed)
 
