@@ -246,6 +246,12 @@ class PolicyConfig(draccus.ChoiceRegistry):
         skip = {"name", "path", "control"}
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skip}
 
+    @classmethod
+    def from_options(cls, settings: dict[str, Any]) -> PolicyConfig:
+        """The config `options()` recorded (with `path`, `name` and `control` beside them where the type has them):
+        what a replay rebuilds from run.json. Types whose options are not their fields as they are override it."""
+        return cls(**settings)
+
     def build(self, view: AgentView) -> Policy:
         """The policy, from the agent's view of the env (privileged types: from the env itself)."""
         raise NotImplementedError(f"policy type {self.type!r} does not say how to build its policy")

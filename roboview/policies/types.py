@@ -64,3 +64,24 @@ def row_name_pattern(type_name: str, options: dict[str, Any]) -> str:
     except (KeyError, IndexError, ValueError):  # options that do not name what the pattern reads
         pattern = cls.row_name.split("{")[0] + "*"
     return pattern + ("+sgl" if options.get("sgl") else "")
+
+
+def recorded_config(run: dict[str, Any]) -> PolicyConfig:
+    """The policy config a results folder's run.json records (type, options, checkpoint, name and control), rebuilt
+    as a replay needs it; ValueError for a type no registered one has (a run converted from another harness)."""
+    import dataclasses
+
+    cls = policy_class(str(run.get("policy") or ""))
+    if cls is None:
+        raise ValueError(
+            f"run.json's policy {run.get('policy')!r} is no policy type here (a run converted from another harness "
+            "cannot be re-run)"
+        )
+    settings = dict(run.get("policy_options") or {})
+    if run.get("policy_path"):
+        settings["path"] = run["policy_path"]
+    if run.get("policy_name"):
+        settings["name"] = run["policy_name"]
+    if "control" in {f.name for f in dataclasses.fields(cls)}:
+        settings["control"] = run.get("control", "joint")
+    return cls.from_options(settings)

@@ -122,7 +122,7 @@ def _replay_note(board: Board) -> str:
         return (
             "<p class=note><b>Not replayed.</b> This board was built with <code>--replay=0</code>: no episode of any "
             "bundle was re-run here, so a bundle whose outcomes were edited to match its own files ranks like an "
-            "honest one. Nothing on this page is verified beyond the bundles' own files.</p>"
+            "honest one: only the bundles' own files were checked.</p>"
         )
     return (
         f"<p class=note><b>Replayed here</b>: {html.escape(board.replay['guarantee'])} "

@@ -107,14 +107,16 @@ class Replayer:
 
     @staticmethod
     def _key(run: dict) -> str:
-        keys = ("policy", "policy_options", "policy_path", "policy_name")
+        keys = ("policy", "policy_options", "policy_path", "policy_name", "control")
         return json.dumps({k: run.get(k) for k in keys}, sort_keys=True, default=str)
 
     def policy(self, run: dict):
         """The policy config run.json records (built once per distinct record)."""
+        from roboview.policies.types import recorded_config
+
         key = self._key(run)
         if key not in self._policies:
-            self._policies[key] = _recorded_policy(run)
+            self._policies[key] = recorded_config(run)
         return self._policies[key]
 
     def rerun(self, sample: list[dict], bench, run: dict, policy) -> list[str]:
@@ -143,14 +145,3 @@ class Replayer:
         for worker in self._workers.values():
             worker.close()
         self._workers.clear()
-
-
-def _recorded_policy(run: dict):
-    from roboview.policies.types import policy_config
-
-    settings = dict(run.get("policy_options") or {})
-    if run.get("policy_path"):
-        settings["path"] = run["policy_path"]
-    if run.get("policy_name"):
-        settings["name"] = run["policy_name"]
-    return policy_config(run["policy"], **settings)

@@ -55,6 +55,14 @@ class VLMConfig(ControlledConfig):
         own = {k: v for k, v in super().options().items() if k != "endpoint"}
         return {"base_url": self.endpoint.base_url, "model": self.endpoint.model, **own}
 
+    @classmethod
+    def from_options(cls, settings: dict[str, Any]) -> VLMConfig:
+        own = {k: v for k, v in settings.items() if k not in ("base_url", "model")}
+        endpoint = Endpoint(
+            base_url=settings.get("base_url", Endpoint.base_url), model=settings.get("model", "")
+        )
+        return cls(endpoint=endpoint, **own)
+
 
 def check_point(value: Any, key: str, width: int, height: int) -> tuple[float, float] | None:
     """A VLM's [x, y] pixel point (None: the model says it sees none); anything else raises ValueError."""
