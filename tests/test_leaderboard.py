@@ -91,11 +91,18 @@ def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
     return out
 
 
-def _board(bundles, tmp_path, *extra, **kw):
-    from roboview.pipelines.leaderboard import LeaderboardConfig, run
+def _board(bundles, tmp_path, *extra, replay=None, **kw):
+    """A board of expert, random, vision and `extra`; `replay` None: --replay=0 (the checks of the bundles' files
+    alone, fast), else the board's replay config."""
+    from roboview.pipelines.leaderboard import BoardReplayConfig, LeaderboardConfig, run
 
     sources = ",".join([str(bundles[n]) for n in ("expert", "random", "vision")] + [str(e) for e in extra])
-    return run(LeaderboardConfig(results=sources, output_dir=str(tmp_path / "board"), plots=False, **kw))
+    replay = replay if replay is not None else BoardReplayConfig(n=0)
+    return run(
+        LeaderboardConfig(
+            results=sources, output_dir=str(tmp_path / "board"), plots=False, replay=replay, **kw
+        )
+    )
 
 
 def test_board_ranks_verified_bundles_with_groups_and_links(bundles, tmp_path):
@@ -122,6 +129,10 @@ def test_board_ranks_verified_bundles_with_groups_and_links(bundles, tmp_path):
     assert saved["protocol"] == "quick" and saved["splits"][SPLIT]["sr"][0]["replay_note"]
     page = (tmp_path / "board" / "leaderboard.html").read_text()
     assert "(privileged: reference, not ranked)" in page and "cv_excess ×100 [95 % CI]" in page
+    # Built with --replay=0: the title says so and no row is called verified.
+    assert "<h1>RoboView-Bias leaderboard (not replayed: outcomes as the bundles report them)</h1>" in page
+    assert "3 bundle(s) checked but not replayed" in page and "verified" not in page.split("<h2>")[0]
+    assert saved["replay"]["n"] == 0 and all(e["table"] == "ranked" for e in saved["entries"])
     # The control arm beside each SR: none here (tiny's camera_pose split holds no `original` pose and no other
     # split ran), so the rows say so and the page shows no empty column.
     assert all(r["sr_control"] is None and r["sr_control_ci95"] is None for r in sr.values())
@@ -470,7 +481,9 @@ def test_bad_bundles_are_listed_apart_and_the_board_goes_on(bundles, tmp_path, c
 
 
 def test_the_board_replays_bundles_whose_policy_runs_here(bundles, tmp_path):
-    board = _board(bundles, tmp_path, replay=2)
+    from roboview.pipelines.leaderboard import BoardReplayConfig
+
+    board = _board(bundles, tmp_path, replay=BoardReplayConfig(n=2))
     assert not board.rejected and all(e.replayed for e in board.entries)
     for e in board.entries:
         assert (
@@ -505,3 +518,184 @@ def test_compare_decides_expert_against_random_in_one_round_and_leaves_equals_no
     with pytest.raises(SystemExit) as bad:
         main([f"--results={bundles['vision']}"])
     assert bad.value.code == 2 and "give exactly two results folders" in capsys.readouterr().err
+
+
+# --- a board that checks before it ranks ----------------------------------------------------------------------
+
+
+def _forge(bundle: Path, to: Path, flips: int = 15, edit_run=None, table_policy: str | None = None) -> Path:
+    """A copy whose first `flips` failures are successes, episodes.parquet and episodes.jsonl rewritten to match
+    (each a plausible success: no failure reason, 60 steps), run.json edited by `edit_run`, the table's own policy
+    record set to `table_policy`."""
+    shutil.copytree(bundle, to)
+    table = pq.read_table(to / "episodes.parquet")
+    rows, done = table.to_pylist(), 0
+    for row in rows:
+        if not row["success"] and done < flips:
+            row.update(success=True, failure_reason="", steps=60)
+            done += 1
+    meta = dict(table.schema.metadata)
+    if table_policy is not None:
+        meta[b"roboview_policy"] = table_policy.encode()
+    forged = pa.Table.from_pylist(rows, schema=table.schema.with_metadata(meta))
+    pq.write_table(forged, to / "episodes.parquet")
+    (to / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    if edit_run is not None:
+        (to / "run.json").write_text(json.dumps(edit_run(json.loads((to / "run.json").read_text()))))
+    return to
+
+
+def _served_elsewhere(run: dict) -> dict:
+    """run.json naming a policy served at an address that answers nothing."""
+    return run | {"policy": "openpi", "policy_options": {"url": "ws://127.0.0.1:9", "obs_format": "droid"}}
+
+
+def test_a_forged_bundle_never_ranks_above_its_honest_original_on_a_default_board(bundles, tmp_path, capsys):
+    """random's failures turned into successes (15 of 27): with its own reachable policy the default board's replay
+    rejects it; naming an unreachable served policy in run.json fails the record check; made consistent with that
+    policy, it is a claim, listed apart, never among the ranked rows or their letters."""
+    from roboview.pipelines.leaderboard import LeaderboardConfig, run
+
+    local = _forge(bundles["random"], tmp_path / "forged_local")
+    naive = _forge(bundles["random"], tmp_path / "forged_naive", edit_run=_served_elsewhere)
+    served = _forge(
+        bundles["random"],
+        tmp_path / "forged_served",
+        edit_run=lambda run: _served_elsewhere(run) | {"policy_name": "random"},
+        table_policy="openpi",
+    )
+    sources = [bundles["vision"], bundles["random"], local, naive, served]
+    board = run(
+        LeaderboardConfig(
+            results=",".join(map(str, sources)), output_dir=str(tmp_path / "board"), plots=False
+        )
+    )
+    printed = capsys.readouterr().out
+    assert "[leaderboard] replay: 59 episodes of each bundle" in printed and "probability ≥ 95.2%" in printed
+    assert board.replay["n"] == 59 and board.replay["detect"] == 0.05 and board.replay["confidence"] > 0.95
+    reasons = {Path(r.source).name: r.reason for r in board.rejected}
+    assert set(reasons) == {"forged_local", "forged_naive"}
+    assert "replay: 15 of 27 re-run episodes end differently" in reasons["forged_local"]
+    assert "success True → False" in reasons["forged_local"]
+    assert (
+        "record: 27 rows name policy 'random', run.json's policy 'openpi' names its rows 'openpi:droid'"
+        in reasons["forged_naive"]
+    )
+    # Ranked: the honest bundles only, both replayed whole; the forged copy is a claim with its 15 of 27.
+    sr = {r["policy"]: r for r in board.splits[SPLIT]["sr"]}
+    assert set(sr) == {"vision", "random@random"} and sr["random@random"]["value"] == 0.0
+    assert all(r["replayed"] and r["table"] == "ranked" for r in sr.values())
+    assert all(e.replay_note.startswith("27 episodes re-run with") for e in board.entries)
+    (claim,) = board.claims
+    assert claim.source == str(served) and claim.table == "claims" and not claim.replayed
+    assert claim.sr == pytest.approx(15 / 27) and claim.episodes == 27
+    assert claim.replay_note.startswith("unreachable: cannot rebuild policy 'openpi'")
+    assert "Connection refused" in claim.replay_note
+    saved = json.loads((tmp_path / "board" / "leaderboard.json").read_text())
+    assert [c["table"] for c in saved["claims"]] == ["claims"] and saved["replay"]["n"] == 59
+    assert {e["label"]: e["table"] for e in saved["entries"]} == {
+        "vision": "ranked",
+        "random@random": "ranked",
+    }
+    page = (tmp_path / "board" / "leaderboard.html").read_text()
+    ranked_part, claims_part = page.split("<h2>Claims (not replayed here: not ranked, not compared)</h2>")
+    assert "random@forged_served" not in ranked_part and "random@forged_served" in claims_part
+    assert "55.56 [37.31, 72.41]" in claims_part and "<h1>RoboView-Bias leaderboard</h1>" in page
+    assert "2 ranked bundle(s) (replay passed), 1 claim(s) listed apart, 2 rejected" in page
+
+
+def test_an_unreplayable_honest_bundle_is_a_claim_not_in_the_groups(bundles, tmp_path, monkeypatch):
+    """vision's own bundle, its provenance saying it ran on another renderer: a claim ("another stack"), not
+    replayed; a forged random bundle whose policy type says a re-run cannot reproduce it: a claim ("stochastic"),
+    where the same forgery of a reproducible policy is rejected."""
+    from roboview.pipelines.leaderboard import BoardReplayConfig
+    from roboview.policies.adapters import RandomConfig
+
+    other = _copy_with(bundles["vision"], tmp_path / "gpu_vision")
+    entries = json.loads((other / "provenance.json").read_text())
+    for e in entries:
+        if e.get("conformance"):
+            renderer = e["conformance"]["stack"]["renderer"]
+            e["conformance"]["stack_differences"] = [
+                f"renderer: {renderer['renderer']} vs NVIDIA H100/PCIe/SSE2"
+            ]
+            renderer["renderer"] = "NVIDIA H100/PCIe/SSE2"
+    (other / "provenance.json").write_text(json.dumps(entries))
+    stochastic = _forge(bundles["random"], tmp_path / "sampled", flips=27)
+    monkeypatch.setattr(RandomConfig, "reproducible", False)
+    board = _board(bundles, tmp_path, other, stochastic, replay=BoardReplayConfig(n=3))
+    assert not board.rejected
+    claims = {Path(c.source).name: c for c in board.claims}
+    assert set(claims) == {"gpu_vision", "sampled"}
+    assert claims["gpu_vision"].replay_note.startswith("another stack: it ran on MuJoCo")
+    assert "renderer: NVIDIA H100/PCIe/SSE2 vs " in claims["gpu_vision"].replay_note
+    assert claims["sampled"].replay_note.startswith("stochastic: 3 of 3 re-run episodes end differently")
+    assert claims["gpu_vision"].sr == 1.0 and claims["sampled"].sr == 1.0
+    # The groups hold the replayed bundles only; the claims get no letter and no row there.
+    ranked = {r["policy"] for r in board.splits[SPLIT]["sr"]} | {
+        r["policy"] for r in board.splits[SPLIT]["cv_excess"]
+    }
+    assert ranked == {"expert", "random@random", "vision@vision"}
+    assert {e.label for e in board.entries} == ranked and all(e.replayed for e in board.entries)
+    assert {c.label for c in board.claims} == {"vision@gpu_vision", "random@sampled"}
+    for c in board.claims:  # each measured alone: a report of its own episodes only
+        metrics = json.loads((tmp_path / "board" / Path(c.report).parent / "metrics.json").read_text())
+        assert metrics["policy"] == c.label and metrics["splits"][SPLIT]["n_episodes"] == 27
+
+
+def test_a_run_json_that_disagrees_with_its_rows_fails_verify(bundles, tmp_path, capsys):
+    from roboview.eval.verification import verify_results
+    from roboview.pipelines.verify import main as verify_main
+
+    honest = {c.name: c for c in verify_results(bundles["random"]).checks}["record"]
+    assert (
+        honest.passed
+        and "policy random (random), control joint, image size 64, max steps 120" in honest.detail
+    )
+    served = _copy_with(bundles["vision"], tmp_path / "served", edit_run=_served_elsewhere)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        verify_main([f"--results={served}"])
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("FAIL")]
+    assert exit_.value.code == 1 and len(lines) == 1
+    assert lines[0].split()[1] == "record" and "27 rows name policy 'vision'" in lines[0]
+    assert "episodes.parquet records policy 'vision', run.json 'openpi'" in lines[0]
+    # The step budget and the control, against the rows' timeouts and what provenance recorded.
+    longer = _copy_with(bundles["random"], tmp_path / "longer", edit_run=lambda run: run | {"max_steps": 200})
+    detail = _failed(longer)["record"]
+    assert "run.json's max steps is 200, a run in provenance.json ran with 120" in detail
+    assert "the rows time out within 120 steps" in detail
+    ee = _copy_with(bundles["random"], tmp_path / "ee", edit_run=lambda run: run | {"control": "ee_delta"})
+    assert _failed(ee) == {
+        "record": "run.json's control is ee_delta, a run in provenance.json ran with joint"
+    }
+    # --policy.name is what the rows carry: run.json naming another one fails.
+    renamed = _copy_with(
+        bundles["random"], tmp_path / "renamed", edit_run=lambda run: run | {"policy_name": "x"}
+    )
+    assert (
+        "27 rows name policy 'random', run.json's policy 'random' names its rows 'x'"
+        in _failed(renamed)["record"]
+    )
+
+
+def test_make_board_replays_and_its_page_says_what_it_replayed():
+    """The Makefile's board target runs the leaderboard with its default replay, the stand-in VLM endpoint still up
+    (its bundle can be re-run), and the page in git says what the board re-ran."""
+    root = Path(__file__).parents[1]
+    makefile = (root / "Makefile").read_text()
+    recipe = makefile.split("\nboard: ")[1].split("\n\n")[0]
+    commands = recipe.replace("\\\n", " ").splitlines()
+    (board,) = [c for c in commands if "roboview-leaderboard" in c]
+    assert "--replay=0" not in board and "--replay.n=0" not in board and "--replay.detect=0 " not in board
+    assert "roboview-serve-vlm" in board and board.index("roboview-serve-vlm") < board.index(
+        "roboview-leaderboard"
+    )
+    saved = json.loads((root / "docs/results/board/leaderboard.json").read_text())
+    assert saved["replay"]["n"] == 59 and saved["replay"]["detect"] == 0.05
+    assert all(e["replayed"] and e["table"] == "ranked" for e in saved["entries"])
+    page = (root / "docs/results/board/leaderboard.html").read_text()
+    assert (
+        "<b>Replayed here</b>: 59 episodes of each bundle" in page
+        and "not replayed" not in page.split("<h2>")[0]
+    )
