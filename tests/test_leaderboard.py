@@ -679,6 +679,26 @@ def test_a_run_json_that_disagrees_with_its_rows_fails_verify(bundles, tmp_path,
     )
 
 
+def test_the_board_replays_5_percent_at_95_by_default_and_replay_0_turns_it_off():
+    from roboview.eval.board import Replay
+    from roboview.pipelines._cli import parse, replay_flag
+    from roboview.pipelines.leaderboard import LeaderboardConfig
+
+    def size(*flags: str) -> int:
+        return parse(LeaderboardConfig, replay_flag(["--results=a,b", *flags])).replay.size()
+
+    assert size() == 59 and size("--replay=0") == 0 and size("--replay.n=0") == 0
+    assert size("--replay=7") == 7 and size("--replay.detect=0.2") == 14
+    assert size("--replay.detect=0.01", "--replay.confidence=0.99") == 459
+    assert Replay(59).record() | {"guarantee": ""} == {
+        "n": 59,
+        "detect": 0.05,
+        "confidence": 0.9515,
+        "guarantee": "",
+    }
+    assert "nothing replayed (--replay=0)" in Replay(0).words()
+
+
 def test_make_board_replays_and_its_page_says_what_it_replayed():
     """The Makefile's board target runs the leaderboard with its default replay, the stand-in VLM endpoint still up
     (its bundle can be re-run), and the page in git says what the board re-ran."""
