@@ -1,0 +1,321 @@
+"""LIBERO episodes per hour with both cameras rendered every step, against the same episodes with no image read.
+
+    python -m benchmarks.libero_render_rate --suite=libero_object --task=0 --episodes=3 --steps=104 \
+        --output=outputs/bench/libero_render_rate.json [--processes=8] [--modes=images,state]
+
+P processes (spawned) each build one `roboview.libero.env.LiberoWorld` (LeRobot's exact LIBERO env: cameras
+`agentview` + `robot0_eye_in_hand` at 256², control_freq 20, hard_reset, OSC_POSE delta) and, per mode, run
+`--episodes` episodes of `--steps` steps of a fixed seeded random action stream:
+
+- `images`: both cameras are read every step (what a policy that looks every step costs: LeRobot's LiberoEnv);
+- `state`: no image is read, so RoboView's lazy observation renders nothing (physics, control and the reset alone).
+
+All processes start each mode together (a barrier after the world is built and one untimed warm-up episode). Per
+mode it writes the steps/s and the seconds per reset (mean over processes; LeRobot's reset with its 10 settle steps, in
+`images` including the first frame's read), the measured episodes/hour of all processes together, and the episodes/hour
+a 104-step and a 280-step episode (LeRobot's libero_object budget) would give: P × 3600 / (reset + L × step).
+Also the GL renderer (GL_RENDERER, read in a worker), MUJOCO_GL, nvidia-smi's GPU and the platform.
+
+Imports only the world (`roboview.libero.env`: numpy, yaml, torch for the init states, mujoco, LIBERO, robosuite),
+so it runs where RoboView's other dependencies are absent. Headless rendering: `MUJOCO_GL=egl` (the default here);
+on an NVIDIA machine EGL renders on the GPU, on a CPU machine Mesa's llvmpipe does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # P single-threaded simulators, not P × cores threads
+
+MODES = ("images", "state")
+CAMERA_KEYS = ("agentview_image", "robot0_eye_in_hand_image")
+EPISODE_LENGTHS = (104, 280)  # a short success, and libero_object's full LeRobot budget
+
+
+def gl_renderer() -> dict[str, str]:
+    """GL_VENDOR / GL_RENDERER / GL_VERSION of the context current in this process (robosuite's offscreen one)."""
+    try:
+        from OpenGL import GL
+
+        out = {}
+        for name in ("GL_VENDOR", "GL_RENDERER", "GL_VERSION"):
+            value = GL.glGetString(getattr(GL, name))
+            out[name] = value.decode() if isinstance(value, bytes) else str(value)
+        return out
+    except Exception as exc:  # noqa: BLE001 - informative only
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
+    """Build one world, then per mode: wait for every process, run the episodes, report the timings."""
+    try:
+        import numpy as np
+
+        start = time.perf_counter()
+        from roboview.libero.env import LiberoWorld
+
+        import_s = time.perf_counter() - start
+        start = time.perf_counter()
+        world = LiberoWorld(args.suite, args.task, args.init_state)
+        create_s = time.perf_counter() - start
+        rng = np.random.default_rng(1000 + index)
+        actions = rng.uniform(-1.0, 1.0, size=(args.steps, 7)) * np.array([0.5] * 6 + [1.0])
+        out: dict = {
+            "index": index,
+            "pid": os.getpid(),
+            "import_s": import_s,
+            "create_s": create_s,
+            "modes": {},
+        }
+        start = time.perf_counter()
+        # Untimed warm-up: first-call costs (numba compiles, GL shader builds) stay out of the rates.
+        for _ in range(args.warmup):
+            obs = world.reset(seed=999_999)
+            for action in actions[:5]:
+                obs, *_ = world.step(action)
+                [obs[key] for key in CAMERA_KEYS]
+        out["warmup_s"] = time.perf_counter() - start
+        for mode in args.modes:
+            barrier.wait(timeout=args.timeout)
+            resets, steps, pixel_means = [], [], []
+            for episode in range(args.episodes):
+                t0 = time.perf_counter()
+                obs = world.reset(seed=1000 * index + episode)
+                if mode == "images":
+                    for key in CAMERA_KEYS:
+                        obs[key]
+                t1 = time.perf_counter()
+                for action in actions:
+                    obs, *_ = world.step(action)
+                    if mode == "images":
+                        frames = [obs[key] for key in CAMERA_KEYS]
+                t2 = time.perf_counter()
+                resets.append(t1 - t0)
+                steps.append((t2 - t1) / args.steps)
+                if mode == "images":
+                    pixel_means.append([float(f.mean()) for f in frames])
+                    if "gl" not in out:
+                        out["gl"] = gl_renderer()
+                        out["image_shapes"] = [list(f.shape) for f in frames]
+            out["modes"][mode] = {
+                "reset_s": resets,
+                "step_s": steps,
+                "end": time.time(),
+                "pixel_means": pixel_means,
+            }
+        if "gl" not in out:
+            world.render("agentview")
+            out["gl"] = gl_renderer()
+        world.close()
+        results.put(out)
+    except BaseException as exc:  # report, never hang the parent on a barrier
+        import traceback
+
+        results.put(
+            {"index": index, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
+        )
+        barrier.abort()
+
+
+def nvidia_smi() -> str | None:
+    if shutil.which("nvidia-smi") is None:
+        return None
+    try:
+        return subprocess.run(
+            ["nvidia-smi", "--query-gpu=name,driver_version,memory.total", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        ).stdout.strip()
+    except Exception as exc:  # noqa: BLE001
+        return f"{type(exc).__name__}: {exc}"
+
+
+def cpu_model() -> str | None:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or None
+
+
+def versions() -> dict[str, str | None]:
+    from importlib import metadata
+
+    out = {}
+    for dist in ("mujoco", "robosuite", "hf-libero", "numpy", "torch", "PyOpenGL"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, float]) -> dict:
+    import numpy as np
+
+    modes = {}
+    for mode in args.modes:
+        per = [r["modes"][mode] for r in reports]
+        step_s = float(np.mean([np.mean(p["step_s"]) for p in per]))
+        reset_s = float(np.mean([np.mean(p["reset_s"]) for p in per]))
+        episodes = args.episodes * len(reports)
+        row = {
+            "steps_per_s_per_process": 1.0 / step_s,
+            "steps_per_s_total": len(reports) / step_s,
+            "step_ms": 1000 * step_s,
+            "reset_s": reset_s,
+            "wall_s": walls[mode],
+            f"episodes_per_hour_measured_{args.steps}_steps": 3600 * episodes / walls[mode],
+        }
+        for length in EPISODE_LENGTHS:
+            row[f"episodes_per_hour_{length}_steps"] = len(reports) * 3600 / (reset_s + length * step_s)
+            row[f"episodes_per_hour_{length}_steps_per_process"] = 3600 / (reset_s + length * step_s)
+        if mode == "images":
+            row["pixel_mean_last_frame"] = per[0]["pixel_means"][-1]
+        modes[mode] = row
+    if "images" in modes and "state" in modes:
+        modes["images_over_state_episodes_per_hour_280"] = (
+            modes["images"]["episodes_per_hour_280_steps"] / modes["state"]["episodes_per_hour_280_steps"]
+        )
+    return {
+        "suite": args.suite,
+        "task": args.task,
+        "init_state": args.init_state,
+        "processes": len(reports),
+        "episodes_per_process": args.episodes,
+        "steps_per_episode": args.steps,
+        "modes": modes,
+        "renderer": {
+            "MUJOCO_GL": os.environ.get("MUJOCO_GL"),
+            "PYOPENGL_PLATFORM": os.environ.get("PYOPENGL_PLATFORM"),
+            "gl": reports[0].get("gl"),
+            "image_shapes": reports[0].get("image_shapes"),
+            "nvidia_smi": nvidia_smi(),
+        },
+        "platform": {
+            "python": sys.version.split()[0],
+            "platform": platform.platform(),
+            "machine": platform.machine(),
+            "cpu_model": cpu_model(),
+            "cpu_count": os.cpu_count(),
+            "versions": versions(),
+        },
+        "world": {
+            "import_s": float(np.mean([r["import_s"] for r in reports])),
+            "create_s": float(np.mean([r["create_s"] for r in reports])),
+            "warmup_s": float(np.mean([r["warmup_s"] for r in reports])),
+        },
+        "per_process": [
+            {
+                "index": r["index"],
+                **{
+                    mode: {
+                        "step_ms": 1000 * float(np.mean(r["modes"][mode]["step_s"])),
+                        "reset_s": [round(x, 4) for x in r["modes"][mode]["reset_s"]],
+                    }
+                    for mode in args.modes
+                },
+            }
+            for r in reports
+        ],
+    }
+
+
+def parse(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--suite", default="libero_object")
+    parser.add_argument("--task", type=int, default=0)
+    parser.add_argument("--init_state", "--init-state", type=int, default=0)
+    parser.add_argument("--episodes", type=int, default=2, help="episodes per process and mode")
+    parser.add_argument("--steps", type=int, default=104, help="control steps per episode")
+    parser.add_argument("--processes", type=int, default=1)
+    parser.add_argument("--modes", default=",".join(MODES), help="comma-separated subset of images,state")
+    parser.add_argument("--output", default="outputs/bench/libero_render_rate.json")
+    parser.add_argument(
+        "--warmup", type=int, default=1, help="untimed warm-up episodes (a reset + 5 steps) per process"
+    )
+    parser.add_argument("--timeout", type=float, default=3600, help="seconds to wait for the workers")
+    args = parser.parse_args(argv)
+    args.modes = tuple(m for m in args.modes.split(",") if m)
+    if not args.modes or any(m not in MODES for m in args.modes):
+        parser.error(f"--modes {args.modes!r}; allowed: {', '.join(MODES)}")
+    if min(args.episodes, args.steps, args.processes) < 1:
+        parser.error("--episodes, --steps and --processes must be ≥ 1")
+    return args
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = parse(argv)
+    ctx = mp.get_context("spawn")
+    barrier = ctx.Barrier(args.processes + 1)  # the workers and this process, which times each mode's wall
+    results = ctx.Queue()
+    procs = [
+        ctx.Process(target=worker, args=(i, args, barrier, results), daemon=True)
+        for i in range(args.processes)
+    ]
+    start = time.perf_counter()
+    for p in procs:
+        p.start()
+    walls: dict[str, float] = {}
+    try:
+        for mode in args.modes:
+            barrier.wait(timeout=args.timeout)
+            walls[mode] = time.time()  # the workers' `end` stamps are time.time() too
+        reports = [results.get(timeout=args.timeout) for _ in procs]
+    except Exception as exc:  # noqa: BLE001 - a worker failed: show its error
+        reports = []
+        while not results.empty():
+            reports.append(results.get())
+        errors = [r for r in reports if "error" in r]
+        for r in errors:
+            print(r.get("traceback", r["error"]), file=sys.stderr)
+        raise SystemExit(
+            f"libero_render_rate failed: {errors[0]['error'] if errors else repr(exc)}"
+        ) from None
+    for p in procs:
+        p.join(timeout=60)
+    errors = [r for r in reports if "error" in r]
+    if errors:
+        print(errors[0].get("traceback"), file=sys.stderr)
+        raise SystemExit(f"libero_render_rate failed: {errors[0]['error']}")
+    # Each mode's wall: from its barrier to the last process's end of that mode.
+    for mode in args.modes:
+        walls[mode] = max(r["modes"][mode]["end"] for r in reports) - walls[mode]
+    summary = summarize(args, sorted(reports, key=lambda r: r["index"]), walls)
+    summary["total_s"] = time.perf_counter() - start
+    path = Path(args.output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(summary, indent=2) + "\n")
+    gl = (summary["renderer"]["gl"] or {}).get("GL_RENDERER", summary["renderer"]["gl"])
+    print(
+        f"renderer: MUJOCO_GL={summary['renderer']['MUJOCO_GL']} GL_RENDERER={gl} GPU={summary['renderer']['nvidia_smi']}"
+    )
+    for mode, row in summary["modes"].items():
+        if isinstance(row, dict):
+            print(
+                f"{mode:6s} P={args.processes}: {row['steps_per_s_total']:.1f} steps/s total "
+                f"({row['step_ms']:.1f} ms/step/process), reset {row['reset_s']:.2f} s, "
+                f"{row['episodes_per_hour_104_steps']:.0f} ep/h @104, {row['episodes_per_hour_280_steps']:.0f} ep/h @280, "
+                f"measured {row[f'episodes_per_hour_measured_{args.steps}_steps']:.0f} ep/h @{args.steps}"
+            )
+    print(f"wrote {path}")
+    return summary
+
+
+if __name__ == "__main__":
+    main()
