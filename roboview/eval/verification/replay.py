@@ -88,7 +88,8 @@ def check_replay(
     }
     words = guarantee(len(sample), total, detect)
     detail = (
-        f"{len(sample)} episodes re-run with {run['policy']}, each ended as recorded ({words})"
+        f"{len(sample)} episodes re-run with {run['policy']} in {record['seconds']:.1f} s, each ended as recorded "
+        f"({words})"
         if not differ
         else f"{len(differ)} of {len(sample)} re-run episodes end differently from their rows: {listed(differ)}"
         + ("" if reproducible else f" ({run['policy']} is not reproducible from the episode seed)")
