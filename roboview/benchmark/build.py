@@ -29,7 +29,7 @@ from roboview.benchmark.screen import agreement
 from roboview.benchmark.screen import write_decisions as write_screen_decisions
 from roboview.core.folders import folder_problem
 from roboview.core.workers import WorkerPool
-from roboview.tasks import DEFAULT_TASK
+from roboview.tasks import DEFAULT_TASK, load_task
 from roboview.variation.instances import SuiteConfig, generate_suite
 
 OFFENDERS_FILE = "fairness_report.csv"
@@ -116,21 +116,37 @@ def check_output_dir(out: Path) -> None:
         raise ValueError(problem)
 
 
+def world_batches(instances: list, num_workers: int, most: int = 64) -> list[list[int]]:
+    """Indices of `instances` in batches that each hold one world's instances (a LIBERO task's: one compiled model
+    serves them all), at most `most` and at most an even share of the whole per worker, so every worker is busy."""
+    groups: dict[str, list[int]] = {}
+    for i, instance in enumerate(instances):
+        groups.setdefault(load_task(instance.task).world_of(instance), []).append(i)
+    size = max(1, min(most, -(-len(instances) // max(1, num_workers))))
+    return [group[i : i + size] for group in groups.values() for i in range(0, len(group), size)]
+
+
 def render_all(spec: BuildSpec, instances: list) -> list[dict]:
-    """Every instance's record (cameras, fairness, preview), rendered by the worker pool in suite order."""
+    """Every instance's record (cameras, fairness, preview), in suite order: the worker pool renders one world's
+    instances per call (`world_batches`), so a world is built once per batch, not once per instance."""
     args = (spec.image_size, spec.fairness, DEFAULT_TASK, spec.screen)
     bar = tqdm(total=len(instances), desc="build", unit="inst", dynamic_ncols=True)
-    records, passed = [], 0
+    batches = world_batches(instances, spec.num_workers)
+    records: list[dict | None] = [None] * len(instances)
+    passed = done = 0
     try:
-        with WorkerPool(spec.num_workers, InstanceRenderer, args, method="record") as pool:
-            for record in pool.imap(instances, lookahead=8 * spec.num_workers):
-                records.append(record)
-                passed += record["fairness"]["passed"]
-                bar.update(1)
-                bar.set_postfix(passed=f"{passed / len(records):.1%}")
+        with WorkerPool(spec.num_workers, InstanceRenderer, args, method="records") as pool:
+            work = ([instances[i] for i in batch] for batch in batches)
+            for batch, rendered in zip(batches, pool.imap(work, lookahead=2 * spec.num_workers)):
+                for i, record in zip(batch, rendered):
+                    records[i] = record
+                    passed += record["fairness"]["passed"]
+                done += len(batch)
+                bar.update(len(batch))
+                bar.set_postfix(passed=f"{passed / done:.1%}")
     finally:  # also on Ctrl-C: the bar ends its line before the closing message
         bar.close()
-    return records
+    return records  # type: ignore[return-value]
 
 
 def build(spec: BuildSpec, output_dir: Path) -> BuildResult:

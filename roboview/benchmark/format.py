@@ -36,6 +36,7 @@ from roboview.core.files import files_sha256
 from roboview.core.folders import folder_problem
 from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
 from roboview.variation.instances import TaskInstance, canonical_json
+from roboview.variation.repetition import SEED_ONLY, Repetition, repetition_of
 
 MANIFEST = "benchmark.json"
 CHECKSUMS = "checksums.json"
@@ -280,6 +281,12 @@ def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[st
 class BenchmarkItem:
     instance: TaskInstance
     record: dict  # the row's columns but fairness and preview: they travel into every episode row
+    # What repeat r of the instance runs (roboview.variation.repetition): the seed alone, or LIBERO's next init state.
+    repetition: Repetition = SEED_ONLY
+
+    def episode(self, repeat: int) -> TaskInstance:
+        """The instance the env is reset with for repeat `repeat` (the row is recorded under `record`)."""
+        return self.repetition.instance(self.instance, repeat)
 
 
 @dataclass(frozen=True)
@@ -375,14 +382,16 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
             f"unknown split(s) {unknown}; the benchmark at {root} has: {', '.join(available)}"
         )
     out: dict[str, list[BenchmarkItem]] = {}
+    rules: dict[str, Repetition] = {}
     for split in chosen:
         rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
-        out[split] = [
-            BenchmarkItem(
-                instance_from_record(row), {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
-            )
-            for row in rows
-        ]
+        out[split] = []
+        for row in rows:
+            instance = instance_from_record(row)
+            if instance.task not in rules:
+                rules[instance.task] = repetition_of(instance.task, manifest.get("suite"))
+            record = {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
+            out[split].append(BenchmarkItem(instance, record, rules[instance.task]))
     return Benchmark(root, manifest["benchmark_version"], out, declared(manifest, available))
 
 

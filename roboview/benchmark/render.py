@@ -75,6 +75,10 @@ class InstanceRenderer:
             "preview": {"bytes": preview_png([rgb[c] for c in cameras]), "path": None},
         }
 
+    def records(self, instances: list[TaskInstance]) -> list[dict]:
+        """`record` of each of `instances` (one world's, in one call: its model is compiled once)."""
+        return [self.record(instance) for instance in instances]
+
     def _recorded_cameras(self) -> tuple[str, ...]:
         """Every camera of RoboView's scene (the observed ones and `right_top`); LIBERO's two."""
         return ALL_CAMERAS if self.env.world == "roboview" else self.probe.cameras

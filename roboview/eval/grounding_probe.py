@@ -88,7 +88,7 @@ def probe(rows: pd.DataFrame, bench: Benchmark, grounder: Any, settings: ProbeSe
             if item is None:
                 continue
             seed = episode_seed(row["context_id"], int(row["repeat"]))
-            obs, _ = env.reset(seed=seed, options={"instance": item.instance})
+            obs, _ = env.reset(seed=seed, options={"instance": item.episode(int(row["repeat"]))})
             text = str(row[DESCRIPTION])
             word, base, rises = substitutions(
                 grounder, obs[IMAGE_KEY.format(settings.camera)], text, settings.neighbours

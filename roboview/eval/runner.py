@@ -8,7 +8,7 @@ import logging
 import os
 import time
 from collections import defaultdict
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -24,6 +24,7 @@ from roboview.eval.running.rollout import WorkerSpec, WorkItem
 from roboview.policies.base import PolicyConfig
 from roboview.policies.fit import fit_policy
 from roboview.tasks import DEFAULT_TASK, load_task
+from roboview.variation.repetition import Repetition, check_repeats
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +58,8 @@ def resolve_image_size(policy: PolicyConfig, requested: int) -> int:
 @dataclass
 class Plan:
     """What a run evaluates: the instances per split (after --benchmark.values, --eval.contexts / limit and
-    --eval.shard), repeats per split, the adaptive splits, tasks and the image size."""
+    --eval.shard), repeats per split, the adaptive splits, tasks, the image size, and per task whose repeats advance
+    a context factor (LIBERO's init state) the rule (run.json records it)."""
 
     version: str
     chosen: dict[str, list]
@@ -65,6 +67,7 @@ class Plan:
     adaptive: set[str]
     tasks: list[str]
     image_size: int
+    repetition: dict[str, Repetition] = field(default_factory=dict)
 
     @property
     def work(self) -> list[WorkItem]:
@@ -143,17 +146,11 @@ def plan(cfg: EvaluateConfig) -> Plan:
         }
     tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
     fit_policy(policy, tasks)
-    return Plan(
-        version=bench.version,
-        chosen=chosen,
-        adaptive=adaptive,
-        repeats={
-            split: cfg.eval.max_repeats if split in adaptive else cfg.eval.repeats_for(split)
-            for split in bench.splits
-        },
-        tasks=tasks,
-        image_size=resolve_image_size(policy, cfg.eval.image_size),
-    )
+    repeats = {s: cfg.eval.max_repeats if s in adaptive else cfg.eval.repeats_for(s) for s in bench.splits}
+    with flag_errors("--eval.max_repeats" if adaptive else "--eval.n_repeats"):
+        rules = check_repeats([(i.instance, i.repetition, repeats[s]) for s in chosen for i in chosen[s]])
+    image_size = resolve_image_size(policy, cfg.eval.image_size)
+    return Plan(bench.version, chosen, repeats, adaptive, tasks, image_size, rules)
 
 
 def probe_policy(cfg: EvaluateConfig, p: Plan) -> None:
@@ -206,6 +203,7 @@ def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
         "policy_options": policy.options(),
         "control": policy.env_control(),
         "n_repeats": p.repeats,
+        **({"repetition": {t: asdict(r) for t, r in p.repetition.items()}} if p.repetition else {}),
         "max_steps": max_steps(cfg, p.tasks),
         "image_size": p.image_size,
         **(

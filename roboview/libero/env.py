@@ -25,7 +25,8 @@ operations as `lerobot.processor.env_processor.LiberoProcessorStep`, so the numb
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import mujoco
@@ -110,6 +111,9 @@ class LiberoWorld:
         self._frames = _FrameStore()
         self._step_count = 0
         self._visual_snapshot: dict[str, np.ndarray] | None = None
+        # The last factors left an edit a soft reset cannot undo: the next reset compiles a new model.
+        self._dirty = False
+        self.hard_resets = 0
         self.timings: dict[str, float] = {}
         ensure_libero()
         from libero.libero.envs import OffScreenRenderEnv
@@ -173,11 +177,31 @@ class LiberoWorld:
 
     # ---- episode -------------------------------------------------------------------------------------------
     def reset(self, seed: int = 0) -> LazyObservation:
-        """LeRobot's reset: seed → reset → factors → init state → settle steps; same seed, same frames."""
+        """LeRobot's reset: seed → reset → factors → init state → settle steps; same seed, same frames.
+
+        With `hard_reset=False` the model is compiled once and reused: the visual arrays are restored in place and
+        the state robosuite keeps outside `MjData` is reset as a fresh model has it, so the episode is bit-identical
+        to LeRobot's hard-reset one. After a factor whose edit cannot be undone in place (`in_place = False`: a
+        texture uploaded to the render context) the next reset is a hard one."""
+        with self.own_gl():
+            return self._reset(seed)
+
+    def _reset(self, seed: int) -> LazyObservation:
         start = time.perf_counter()
+        hard = self.hard_reset or self._dirty
+        self.inner.hard_reset = hard
+        if hard:
+            self._visual_snapshot = None  # a new model: snapshot its pristine visuals again
+        else:
+            for (
+                robot
+            ) in self.env.robots:  # a hard reset rebuilds the gripper model, whose action ramp starts at 0
+                robot.gripper.current_action = np.zeros(robot.gripper.dof)
         self.env.seed(seed)  # LIBERO: np.random.seed(seed); fixture placement draws from it
         self.env.reset()
         self.timings["inner_reset_s"] = time.perf_counter() - start
+        self.timings["hard"] = float(hard)
+        self.hard_resets += int(hard)
         self._apply_factors()
         raw = self.env.set_init_state(self._init_state)
         for _ in range(self.settle_steps):
@@ -212,7 +236,8 @@ class LiberoWorld:
         def render(cam: str):
             def lazy() -> np.ndarray:
                 if cam not in cache:  # both cameras in one swap of the snapshot
-                    cache.update(self._frames.render(self.data, CAMERAS))
+                    with self.own_gl():
+                        cache.update(self._frames.render(self.data, CAMERAS))
                 return cache[cam]
 
             return lazy
@@ -228,7 +253,39 @@ class LiberoWorld:
         """`camera` rendered from the live state now (raw robosuite orientation), e.g. after changing a factor."""
         if camera not in CAMERAS:
             raise ValueError(f"unknown camera {camera!r}; allowed: {', '.join(CAMERAS)}")
-        return np.array(self._frames.renderers[camera]({}))
+        with self.own_gl():
+            return np.array(self._frames.renderers[camera]({}))
+
+    def _live_context(self):
+        """The render context, or None once the env is closed (robosuite drops its sim on close)."""
+        env = getattr(self, "env", None)
+        inner = getattr(env, "env", None)
+        return None if inner is None else inner.sim._render_context_offscreen
+
+    @contextmanager
+    def own_gl(self) -> Iterator[None]:
+        """This world's GL context current for the block, the one current before restored after it.
+
+        robosuite draws, uploads and frees GL objects in whatever context is current, and makes its own current
+        only when it builds it. Two worlds in one process (a worker with several envs; LeRobot's own LiberoEnv beside
+        ours in a fidelity check) would otherwise draw into, or free the textures of, each other's context; a world
+        that compiles its model once keeps its context for its whole life, so it must take it for each use."""
+        ctx = self._live_context()
+        if ctx is None:  # no context (before the first reset, after close): nothing to guard
+            yield
+            return
+        egl = _egl() if hasattr(ctx.gl_ctx, "_context") else None
+        previous = egl.eglGetCurrentContext() if egl is not None else None
+        entry = _address(ctx.gl_ctx)
+        ctx.gl_ctx.make_current()
+        try:
+            yield
+        finally:  # a hard reset in the block built a new context: neither it nor the freed one is "previous"
+            exit_ = _address(self._live_context().gl_ctx) if self._live_context() is not None else None
+            if egl is not None and previous and previous.address not in (entry, exit_):
+                from robosuite.renderers.context import egl_context
+
+                egl.eglMakeCurrent(egl_context.EGL_DISPLAY, egl.EGL_NO_SURFACE, egl.EGL_NO_SURFACE, previous)
 
     def set_init_state(self, init_state_id: int) -> None:
         """Start from LIBERO's init state `init_state_id` of this task from the next reset on."""
@@ -249,10 +306,12 @@ class LiberoWorld:
                 restore_visuals(self, self._visual_snapshot)
         for factor in self.factors:
             factor.apply(self)
+        self._dirty = any(not getattr(factor, "in_place", True) for factor in self.factors)
 
     def close(self) -> None:
         if getattr(self, "env", None) is not None:
-            self.env.close()
+            with self.own_gl():  # its GL objects are freed in the current context: make it this world's
+                self.env.close()
             self.env = None
 
     def __enter__(self) -> LiberoWorld:
@@ -260,6 +319,19 @@ class LiberoWorld:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _address(gl) -> int | None:
+    """The address of an EGL context object's handle (None: freed, or not an EGL context)."""
+    handle = getattr(gl, "_context", None)
+    return handle.address if handle else None
+
+
+def _egl():
+    """PyOpenGL's EGL binding, which robosuite's EGL contexts use."""
+    from OpenGL import EGL
+
+    return EGL
 
 
 def quat2axisangle(quat: np.ndarray) -> np.ndarray:

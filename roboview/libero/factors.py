@@ -317,6 +317,9 @@ class TableTexture:
     """The support surface's texture replaced by `pattern` (one of TEXTURE_PATTERNS)."""
 
     pattern: str
+    # Restoring the texture in place leaves edge pixels of later renders off by a few levels (the render
+    # context's texture state): the world compiles a new model after an episode with this factor.
+    in_place = False
 
     def __post_init__(self) -> None:
         texture_pixels(self.pattern, 1, 1, 1)  # validates the name

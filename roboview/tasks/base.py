@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -22,6 +22,9 @@ import numpy as np
 from roboview.sim.motion import MotionPlanner
 from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS
 from roboview.variation.factors import DEFAULT_TASK, context_factors
+
+if TYPE_CHECKING:
+    from roboview.variation.instances import TaskInstance
 
 
 def resolve(target: str) -> Any:
@@ -50,6 +53,18 @@ class Task:
     # Whether an episode's step budget depends on its context (LIBERO: its suite's); the env then sets it per
     # reset, and an evaluation without --eval.max_steps records none.
     steps_per_context: bool = False
+    # What the episode seed randomizes in this task's scenes ("": nothing, so a repeat is a copy unless
+    # `repeat_factor` makes it another episode). roboview.variation.repetition reads both.
+    seed_randomizes: str = "the object's start: up to 1 cm of position jitter and ±20° of heading"
+    # The context factor a repeat advances where the seed is not the episode's randomness (LIBERO's `init_state`).
+    repeat_factor: str = ""
+    # The context factor whose value names the compiled world an instance runs in (LIBERO's `libero_task`: one
+    # model per LIBERO task); builds and evaluations hand a worker one world's instances together. "": one world.
+    world_factor: str = ""
+
+    def world_of(self, instance: TaskInstance) -> str:
+        """The world `instance` runs in: the task's name, and its `world_factor`'s value where it has one."""
+        return f"{self.name}/{instance.get(self.world_factor)}" if self.world_factor else self.name
 
     def default_steps(self) -> int | None:
         """The step budget of an evaluation that sets none: the task's, or None when each context has its own."""

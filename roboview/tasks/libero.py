@@ -10,7 +10,8 @@ LeRobot 0.6.1's `LiberoEnv` builds and resets it (`roboview.libero.env.LiberoWor
 at its baseline is the LIBERO episode every other harness runs.
 
 **Randomizations.** None beyond LIBERO's: the episode seed seeds LIBERO before every reset (fixture placement
-repeats for every value of a (context, repeat)); objects start at the init state.
+repeats for every value of a (context, repeat)); objects start at the init state. A repeat therefore runs another
+init state (`repeat_factor`; roboview.variation.repetition): LIBERO's unit of randomness, as in its own harnesses.
 
 **Visual factors** (what each changes; `roboview.libero.factors` says how), every baseline being LIBERO's scene
 unchanged:
@@ -204,7 +205,8 @@ class LiberoTaskEnv(gym.Env):
         if current is None or (current.task.suite, current.task.task_id) != (suite, task_id):
             if current is not None:
                 current.close()
-            self.libero_world = LiberoWorld(suite, task_id, image_size=self.image_size)
+            # One compiled model per task: later resets restore it in place (bit-identical to a hard reset).
+            self.libero_world = LiberoWorld(suite, task_id, image_size=self.image_size, hard_reset=False)
         return self.libero_world
 
     def _observation(self, raw) -> LazyObservation:
@@ -385,5 +387,8 @@ register_task(
         small_contexts=(("libero_task", ("libero_object/0",)), ("init_state", ("0",))),
         max_episode_steps=LIBERO_MAX_STEPS,
         steps_per_context=True,
+        seed_randomizes="fixture placement (cabinets, stoves…) in some scenes, nothing in others",
+        repeat_factor="init_state",
+        world_factor="libero_task",
     )
 )

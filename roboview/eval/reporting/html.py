@@ -139,6 +139,7 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> li
 # report.md's sections the page renders as they are, in this order, with their titles in the page's index.
 _MARKDOWN_TITLES = {
     "infra": "Episodes ended by infrastructure",
+    "copies": "Repeats that were copies",
     "interactions": "Interactions",
     "rankings": "Rankings",
     "comparisons": "Policy comparisons",

@@ -55,6 +55,7 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
         "summary": _summary(layouts),
         "table1": _table1(metrics, layouts),
         "infra": run_sections.infra_section(layouts),
+        "copies": run_sections.copies_section(layouts),
         "directions": _directions(layouts),
         "interactions": _table2(layouts),
         "comparisons": _comparisons(metrics),

@@ -176,6 +176,29 @@ def infra_section(layouts: dict[str, dict]) -> list[str]:
     ]
 
 
+def copies_section(layouts: dict[str, dict]) -> list[str]:
+    """Per split: the seed-only repeats of LIBERO episodes, copies of repeat 0 left out (`n_seed_only_copies`)."""
+    lines = [
+        f"- {name}, {split}: {m['n_seed_only_copies']} repeat(s) of an instance from its own init state, not counted"
+        for name, layout in layouts.items()
+        for split, m in {**layout["splits"], **layout.get("interactions", {})}.items()
+        if m.get("n_seed_only_copies")
+    ]
+    if not lines:
+        return []
+    return [
+        "## Repeats that were copies",
+        "",
+        "These results were recorded before repeats on LIBERO's scenes ran distinct init states: every repeat of an "
+        "instance started from the instance's own init state, and the episode seed moves nothing but fixtures, so "
+        "repeat r re-ran repeat 0's episode. Each instance counts once (its repeat 0); re-run the evaluation with "
+        "this version for repeats that are distinct LIBERO episodes.",
+        "",
+        *lines,
+        "",
+    ]
+
+
 def stack_section(sources: list[dict[str, Any]]) -> list[str]:
     """Per results file: the conformance verdict of each run with its measured drift and stack; then what differs
     between the stacks the files ran on (their numbers compare only as far as their stacks do)."""

@@ -27,6 +27,7 @@ from pathlib import Path
 from roboview.core.workers import WorkerPool
 from roboview.eval.running.policy_server import PolicyServer
 from roboview.eval.running.rollout import EpisodeResult, EvalWorker, WorkerSpec, WorkItem, lost_row
+from roboview.tasks import load_task
 
 log = logging.getLogger(__name__)
 
@@ -106,8 +107,11 @@ def _after_death(
 
 
 def chunks(spec: WorkerSpec, items: Iterable[WorkItem]) -> list[tuple[WorkItem, ...]]:
-    """What one worker call runs: one episode, or with K envs per worker 2K (slots refill as episodes end)."""
-    items = list(items)
+    """What one worker call runs: one episode, or with K envs per worker 2K (slots refill as episodes end). One
+    world's episodes are queued together (`Task.world_of`: a LIBERO task's model is compiled once per worker, not
+    once per episode); within a world, in the run's order."""
+    task = load_task(spec.task)
+    items = sorted(items, key=lambda work: task.world_of(work.item.instance))
     size = 1 if spec.envs_per_worker == 1 else 2 * spec.envs_per_worker
     return [tuple(items[i : i + size]) for i in range(0, len(items), size)]
 

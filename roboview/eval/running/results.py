@@ -36,6 +36,7 @@ import pyarrow.parquet as pq
 from roboview.core.folders import folder_problem
 from roboview.eval.running import provenance
 from roboview.eval.running.row import INFRA_ERROR, STATUS  # noqa: F401  (re-exported: readers of results)
+from roboview.variation.repetition import UNIT_COLUMN
 
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
@@ -188,9 +189,24 @@ def infra_mask(episodes: pd.DataFrame) -> pd.Series:
     return (episodes[STATUS] == INFRA_ERROR).fillna(False).astype(bool)
 
 
+def copies_mask(episodes: pd.DataFrame) -> pd.Series:
+    """True for the repeats (beyond repeat 0) that copy repeat 0's episode: rows of a world whose repeats must advance
+    a context factor (LIBERO's init state) recorded without `episode_unit`, i.e. by the seed-only design, where every
+    repeat of an instance started from the same init state (roboview.variation.repetition)."""
+    from roboview.tasks import load_task
+
+    mask = pd.Series(False, index=episodes.index)
+    if "task" not in episodes or "repeat" not in episodes:
+        return mask
+    advancing = [t for t in episodes["task"].dropna().unique() if load_task(str(t)).repeat_factor]
+    unrecorded = episodes[UNIT_COLUMN].isna() if UNIT_COLUMN in episodes else True
+    return mask | (episodes["task"].isin(advancing) & unrecorded & (episodes["repeat"] > 0))
+
+
 def counted(episodes: pd.DataFrame) -> pd.DataFrame:
-    """The rows every rate and test reads: all but those infrastructure ended."""
-    mask = infra_mask(episodes)
+    """The rows every rate and test reads: all but those infrastructure ended, and the independent unit only (a
+    seed-only repeat of a LIBERO episode is a copy of repeat 0: `copies_mask`)."""
+    mask = infra_mask(episodes) | copies_mask(episodes)
     return episodes if not mask.any() else episodes[~mask]
 
 

@@ -257,7 +257,7 @@ class EvalWorker:
 
     def _start(self, slot: int, index: int, work: WorkItem) -> _Running:
         env = self.envs[slot]
-        instance, record = work.item.instance, work.item.record
+        instance, record = work.item.episode(work.repeat), work.item.record
         seed = episode_seed(record["context_id"], work.repeat)
         start = time.perf_counter()
         ep = _Running(
@@ -336,6 +336,7 @@ class EvalWorker:
             duration_s=time.perf_counter() - ep.start,
             policy=self.spec.policy.name or self.batch.name,
             failure_reason=reason,
+            unit=ep.work.item.repetition.unit(ep.work.item.instance, ep.work.repeat),
             isolation=ep.isolation,
             status=INFRA_ERROR if ep.infra else STATUS_OK,
             extra=self.batch.episode_record(
@@ -373,5 +374,6 @@ def lost_row(work: WorkItem, reason: str, policy: str | None) -> dict:
         duration_s=0.0,
         policy=policy,
         failure_reason=reason,
+        unit=work.item.repetition.unit(work.item.instance, work.repeat),
         status=INFRA_ERROR,
     ).as_dict()

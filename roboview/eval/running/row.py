@@ -15,6 +15,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from roboview.variation.repetition import UNIT_COLUMN
+
 STATUS = "status"
 STATUS_OK = "ok"
 INFRA_ERROR = "infra_error"
@@ -32,6 +34,9 @@ class EpisodeRow:
     duration_s: float | None
     policy: str | None
     failure_reason: str = ""
+    # What the repeat varied besides the seed ("init_state=12" on LIBERO's scenes; roboview.variation.repetition),
+    # "" where the seed is the episode's whole randomness (then no column is written).
+    unit: str = ""
     isolation: Any = None
     status: str = STATUS_OK
     # The conformance verdict of the stack the episode ran on; None: the evaluator adds it when it stores the row.
@@ -58,6 +63,8 @@ class EpisodeRow:
             "isolation": self.isolation,
             STATUS: self.status,
         }
+        if self.unit:
+            row[UNIT_COLUMN] = self.unit
         if self.conformance is not None:
             row["conformance"] = self.conformance
         return row | {k: v for k, v in self.extra.items() if k not in row}

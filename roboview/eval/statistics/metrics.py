@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from roboview.eval.running import isolation
-from roboview.eval.running.results import counted, infra_mask
+from roboview.eval.running.results import copies_mask, counted, infra_mask
 from roboview.eval.statistics import ranking
 from roboview.eval.statistics import significance as stats
 from roboview.eval.statistics.compare import (
@@ -381,23 +381,24 @@ def check_episodes(
         )
 
 
-def _counted_episodes(episodes: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
-    """The episodes that count, and split → episodes infrastructure ended (left out)."""
+def _counted_episodes(episodes: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int], dict[str, int]]:
+    """The episodes that count, split → episodes infrastructure ended and split → seed-only copies (left out)."""
     infra = episodes.loc[infra_mask(episodes), "split"].astype(str).value_counts()
+    copies = episodes.loc[copies_mask(episodes), "split"].astype(str).value_counts()
     kept = counted(episodes)
     if kept.empty:
         raise EpisodesError(
             f"all {len(episodes)} episode(s) ended by infrastructure (status infra_error), not by "
             "the policy: nothing to measure; rerun the evaluation command to run them again"
         )
-    return kept, {str(split): int(n) for split, n in infra.items()}
+    return kept, {str(s): int(n) for s, n in infra.items()}, {str(s): int(n) for s, n in copies.items()}
 
 
 def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:
     """metrics.json layout (docs/formats.md, "Metrics") for the episodes of one policy (episodes infrastructure
     ended are left out, and counted per split in `n_infra_errors`)."""
     check_episodes(episodes)
-    episodes, infra = _counted_episodes(episodes)
+    episodes, infra, copies = _counted_episodes(episodes)
     policies = episodes["policy"].unique()
     if len(policies) != 1:
         raise ValueError(
@@ -415,6 +416,8 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
         extra = {
             "isolation": certificate[str(split)],
             "n_infra_errors": infra.get(str(split), 0),
+            # Results of the seed-only design on LIBERO's scenes: repeats that copied repeat 0, left out.
+            **({"n_seed_only_copies": copies[str(split)]} if str(split) in copies else {}),
             **control_arm(baseline, rows),
         }
         if n_factors == 1:
@@ -445,7 +448,7 @@ def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
     """One policy: `compute_metrics`. Several: {"epsilon", "resampling", "policies": {name: …}}. Episodes that
     infrastructure ended are left out of every number (and counted)."""
     check_episodes(episodes)
-    kept, _ = _counted_episodes(episodes)
+    kept, _, _ = _counted_episodes(episodes)
     names = sorted(map(str, kept["policy"].unique()))
     if len(names) == 1:
         return compute_metrics(episodes, cfg)

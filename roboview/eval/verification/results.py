@@ -83,7 +83,8 @@ def read_table(results: Path):
 def check_rows(rows: list[dict], bench) -> list[Check]:
     """Instances, seeds and duplicates of the rows against the benchmark's records."""
     records = {i.record["instance_id"]: i.record for items in bench.splits.values() for i in items}
-    return [check_instances(rows, records), check_seeds(rows, records), check_duplicates(rows)]
+    checks = [check_instances(rows, records), check_seeds(rows, records), check_duplicates(rows)]
+    return checks + [check_repeats(rows, bench)]
 
 
 def check_instances(rows: list[dict], records: dict[str, dict]) -> Check:
@@ -127,6 +128,44 @@ def check_seeds(rows: list[dict], records: dict[str, dict]) -> Check:
         f"{len(bad)} rows with another seed: {listed(bad)}"
         if bad
         else "every episode seed is its (context, repeat)'s common-random-number seed",
+    )
+
+
+def check_repeats(rows: list[dict], bench) -> Check:
+    """Repeats are distinct episodes: on a world whose repeats advance a context factor (LIBERO's init state), every
+    row records the value its repeat ran (`episode_unit`), the one the benchmark's rule gives. A folder of the
+    seed-only design (repeats from the instance's own init state: copies) fails."""
+    from roboview.variation.repetition import UNIT_COLUMN
+
+    items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
+    copies, wrong = [], []
+    for r in rows:
+        item = items.get(r["instance_id"])
+        if item is None or not item.repetition.factor:
+            continue
+        expected = item.repetition.unit(item.instance, r["repeat"])
+        if r.get(UNIT_COLUMN) is None and r["repeat"] > 0:
+            copies.append(f"{r['instance_id']} repeat {r['repeat']}")
+        elif r.get(UNIT_COLUMN) is not None and r[UNIT_COLUMN] != expected:
+            wrong.append(f"{r['instance_id']} repeat {r['repeat']} ({r[UNIT_COLUMN]}, expected {expected})")
+    problems = [
+        f"{len(copies)} repeats are copies of their instance's repeat 0 (recorded without {UNIT_COLUMN}: every "
+        f"repeat started from the instance's own init state; reports count each instance once; re-run for "
+        f"distinct episodes): {listed(copies)}"
+        if copies
+        else "",
+        f"{len(wrong)} rows ran another {UNIT_COLUMN} than their repeat's: {listed(wrong)}" if wrong else "",
+    ]
+    rules = {i.repetition.describe() for i in items.values() if i.repetition.factor}
+    return Check(
+        "repeats",
+        not copies and not wrong,
+        "; ".join(filter(None, problems))
+        or (
+            "every repeat a distinct episode: " + "; ".join(sorted(rules))
+            if rules
+            else "the seed makes each repeat"
+        ),
     )
 
 

@@ -90,6 +90,7 @@ def convert(
                     duration_s=None,
                     policy=policy_name,
                     failure_reason="" if success else NO_REASON,
+                    unit=item.repetition.unit(item.instance, repeat),
                 ).as_dict()
             )
     store.close()

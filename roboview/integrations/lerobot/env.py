@@ -109,7 +109,7 @@ class RoboViewEvalEnv(gym.Env):
             self.index = index % len(self.episodes)
         item, repeat = self.episodes[self.index]
         obs, info = self.env.reset(
-            seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.instance}
+            seed=episode_seed(item.record["context_id"], repeat), options={"instance": item.episode(repeat)}
         )
         return self._convert(obs), info | {"episode_index": self.index}
 

@@ -197,6 +197,7 @@ class RoboViewBenchmark(StepBenchmark):
                 "context_id": item.record["context_id"],
                 "repeat": repeat,
                 "episode_seed": episode_seed(item.record["context_id"], repeat),
+                "episode_unit": item.repetition.unit(item.instance, repeat),
                 "value": item.record["value"],
                 "benchmark_version": self.version,
                 "item": item,
@@ -241,7 +242,8 @@ class RoboViewBenchmark(StepBenchmark):
             )
         item = task["item"]
         self._env = self._env_for(item.instance.task)
-        obs, self._info = self._env.reset(seed=task["episode_seed"], options={"instance": item.instance})
+        episode = item.episode(task["repeat"])
+        obs, self._info = self._env.reset(seed=task["episode_seed"], options={"instance": episode})
         self._isolation = isolation.record(self._env, task["episode_seed"])
         self._error, self._success = "", False
         return obs

@@ -71,6 +71,7 @@ def episode_row(episode: dict, record: dict, policy: str, verdict: str, isolatio
         repeat=int(episode["repeat"]),
         # The seed the episode was reset with (roboview-verify checks it is its (context, repeat)'s).
         episode_seed=int(episode["episode_seed"]),
+        unit=str(episode.get("episode_unit") or ""),
         duration_s=episode.get("elapsed_sec"),
         policy=policy,
     )
