@@ -126,8 +126,9 @@ def _replay_note(board: Board) -> str:
         )
     return (
         f"<p class=note><b>Replayed here</b>: {html.escape(board.replay['guarantee'])} "
-        f"({board.replay['seconds']:.0f} s for every bundle's checks and replay on "
-        f"{html.escape(board.replay.get('stack') or 'this machine')}). Only bundles whose replay passed are ranked; "
+        f"(checking and replaying the {len(board.entries) + len(board.claims) + len(board.rejected)} bundle(s) took "
+        f"{board.replay['seconds']:.0f} s on {html.escape(board.replay.get('stack') or 'this machine')}). Only "
+        "bundles whose replay passed are ranked; "
         "those whose episodes could not be re-run here are listed apart as claims, and a bundle whose replay "
         "disagrees with its rows is rejected.</p>"
     )
