@@ -165,7 +165,7 @@ def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
             if args.world == "raw":
                 world.set_cameras(mode == "images")
             barrier.wait(timeout=args.timeout)
-            resets, steps, pixel_means = [], [], []
+            resets, steps, pixel_means, pixel_stds = [], [], [], []
             for episode in range(args.episodes):
                 t0 = time.perf_counter()
                 obs = world.reset(seed=1000 * index + episode)
@@ -182,6 +182,11 @@ def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
                 steps.append((t2 - t1) / args.steps)
                 if mode == "images":
                     pixel_means.append([float(f.mean()) for f in frames])
+                    pixel_stds.append([float(f.std()) for f in frames])
+                    if index == 0 and args.save_frames:
+                        out["frames"] = [
+                            np.array(f) for f in frames
+                        ]  # the last step's two frames, raw orientation
                     if "gl" not in out:
                         out["gl"] = gl_renderer()
                         out["image_shapes"] = [list(f.shape) for f in frames]
@@ -190,6 +195,7 @@ def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
                 "step_s": steps,
                 "end": time.time(),
                 "pixel_means": pixel_means,
+                "pixel_stds": pixel_stds,
             }
         if "gl" not in out:
             world.render("agentview")
@@ -266,6 +272,11 @@ def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, fl
             row[f"episodes_per_hour_{length}_steps_per_process"] = 3600 / (reset_s + length * step_s)
         if mode == "images":
             row["pixel_mean_last_frame"] = per[0]["pixel_means"][-1]
+            row["pixel_std_last_frame"] = per[0]["pixel_stds"][-1]
+            # Two cameras see different scenes: (near-)equal means or uniform frames mean a GL mix-up drew neither.
+            row["frames_suspect"] = any(
+                abs(means[0] - means[1]) < 0.05 for p in per for means in p["pixel_means"]
+            ) or any(std < 5.0 for p in per for stds in p["pixel_stds"] for std in stds)
         modes[mode] = row
     if "images" in modes and "state" in modes:
         modes["images_over_state_episodes_per_hour_280"] = (
@@ -330,6 +341,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         choices=("roboview", "raw"),
         default="roboview",
         help="roboview: RoboView's LiberoWorld (lazy frames); raw: LIBERO's OffScreenRenderEnv (eager frames)",
+    )
+    parser.add_argument(
+        "--save_frames", action="store_true", help="write process 0's last two frames beside the JSON (.png)"
     )
     parser.add_argument("--modes", default=",".join(MODES), help="comma-separated subset of images,state")
     parser.add_argument("--output", default="outputs/bench/libero_render_rate.json")
@@ -400,6 +414,19 @@ def main(argv: list[str] | None = None) -> dict:
                 f"{row['episodes_per_hour_104_steps']:.0f} ep/h @104, {row['episodes_per_hour_280_steps']:.0f} ep/h @280, "
                 f"measured {row[f'episodes_per_hour_measured_{args.steps}_steps']:.0f} ep/h @{args.steps}"
             )
+    if summary["modes"].get("images", {}).get("frames_suspect"):
+        print(
+            "WARNING: images-mode frames look wrong (both cameras alike, or uniform): check the PNG",
+            file=sys.stderr,
+        )
+    frames = next((r["frames"] for r in reports if "frames" in r), None)
+    if frames is not None:
+        import cv2
+        import numpy as np
+
+        picture = np.concatenate([f[::-1, ::-1] for f in frames], axis=1)  # upright, as LeRobot shows them
+        cv2.imwrite(str(path.with_suffix(".png")), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+        print(f"wrote {path.with_suffix('.png')} (process 0's last frames: agentview | eye-in-hand)")
     print(f"wrote {path}")
     return summary
 
