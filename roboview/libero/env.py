@@ -278,6 +278,9 @@ class LiberoWorld:
         previous = egl.eglGetCurrentContext() if egl is not None else None
         entry = _address(ctx.gl_ctx)
         ctx.gl_ctx.make_current()
+        # No reference may outlive a hard reset in the block: the old context must be freed then, while current,
+        # not later in the new one (freeing deletes GL objects by id in whatever context is current).
+        del ctx
         try:
             yield
         finally:  # a hard reset in the block built a new context: neither it nor the freed one is "previous"

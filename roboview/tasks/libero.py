@@ -38,6 +38,7 @@ harness's state convention builds its state (vla-eval's LIBERO benchmark). Image
 
 from __future__ import annotations
 
+import os
 from types import SimpleNamespace
 from typing import Any
 
@@ -79,6 +80,9 @@ NOT_APPLICABLE = ("distractors", "object_size")
 STATE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper", "gripper")
 ACTION_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper")
 LIBERO_MAX_STEPS = 520  # the longest suite's (libero_10): the gymnasium registration's cap
+# `ROBOVIEW_LIBERO_HARD_RESET=1`: compile LIBERO's model on every reset, as LeRobot's LiberoEnv does (the reference
+# the in-place reset is checked against; builds and benchmarks compare the two).
+HARD_RESET_ENV = "ROBOVIEW_LIBERO_HARD_RESET"
 
 LIBERO_TASK = register_factor(
     Factor(
@@ -206,7 +210,8 @@ class LiberoTaskEnv(gym.Env):
             if current is not None:
                 current.close()
             # One compiled model per task: later resets restore it in place (bit-identical to a hard reset).
-            self.libero_world = LiberoWorld(suite, task_id, image_size=self.image_size, hard_reset=False)
+            hard = os.environ.get(HARD_RESET_ENV, "") == "1"
+            self.libero_world = LiberoWorld(suite, task_id, image_size=self.image_size, hard_reset=hard)
         return self.libero_world
 
     def _observation(self, raw) -> LazyObservation:
