@@ -1,14 +1,17 @@
 """LIBERO episodes per hour with both cameras rendered every step, against the same episodes with no image read.
 
     python -m benchmarks.libero_render_rate --suite=libero_object --task=0 --episodes=3 --steps=104 \
-        --output=outputs/bench/libero_render_rate.json [--processes=8] [--modes=images,state]
+        --output=outputs/bench/libero_render_rate.json [--processes=8] [--modes=images,state,images_soft,state_soft]
+        [--world=roboview|raw] [--save_frames]
 
 P processes (spawned) each build one `roboview.libero.env.LiberoWorld` (LeRobot's exact LIBERO env: cameras
 `agentview` + `robot0_eye_in_hand` at 256², control_freq 20, hard_reset, OSC_POSE delta) and, per mode, run
 `--episodes` episodes of `--steps` steps of a fixed seeded random action stream:
 
 - `images`: both cameras are read every step (what a policy that looks every step costs: LeRobot's LiberoEnv);
-- `state`: no image is read, so RoboView's lazy observation renders nothing (physics, control and the reset alone).
+- `state`: no image is read, so RoboView's lazy observation renders nothing (physics, control and the reset alone);
+- `images_soft`, `state_soft` (`--world=roboview` only): the same with `hard_reset=False`, RoboView's default for the
+  `libero` task: one compiled model per task, reset in place (bit-identical frames), instead of LeRobot's new model.
 
 All processes start each mode together (a barrier after the world is built and one untimed warm-up episode). Per
 mode it writes the steps/s and the seconds per reset (mean over processes; LeRobot's reset with its 10 settle steps, in
@@ -39,7 +42,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # P single-threaded simulators, not P × cores threads
 
-MODES = ("images", "state")
+MODES = ("images", "state", "images_soft", "state_soft")  # *_soft: LiberoWorld with hard_reset=False
 CAMERA_KEYS = ("agentview_image", "robot0_eye_in_hand_image")
 EPISODE_LENGTHS = (104, 280)  # a short success, and libero_object's full LeRobot budget
 
@@ -162,25 +165,28 @@ def worker(index: int, args: argparse.Namespace, barrier, results) -> None:
                 [obs[key] for key in CAMERA_KEYS]
         out["warmup_s"] = time.perf_counter() - start
         for mode in args.modes:
+            images = mode.startswith("images")
             if args.world == "raw":
-                world.set_cameras(mode == "images")
+                world.set_cameras(images)
+            else:  # LeRobot's hard reset (a new model each episode), or RoboView's in-place one
+                world.hard_reset = not mode.endswith("_soft")
             barrier.wait(timeout=args.timeout)
             resets, steps, pixel_means, pixel_stds = [], [], [], []
             for episode in range(args.episodes):
                 t0 = time.perf_counter()
                 obs = world.reset(seed=1000 * index + episode)
-                if mode == "images":
+                if images:
                     for key in CAMERA_KEYS:
                         obs[key]
                 t1 = time.perf_counter()
                 for action in actions:
                     obs, *_ = world.step(action)
-                    if mode == "images":
+                    if images:
                         frames = [obs[key] for key in CAMERA_KEYS]
                 t2 = time.perf_counter()
                 resets.append(t1 - t0)
                 steps.append((t2 - t1) / args.steps)
-                if mode == "images":
+                if images:
                     pixel_means.append([float(f.mean()) for f in frames])
                     pixel_stds.append([float(f.std()) for f in frames])
                     if index == 0 and args.save_frames:
@@ -270,7 +276,7 @@ def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, fl
         for length in EPISODE_LENGTHS:
             row[f"episodes_per_hour_{length}_steps"] = len(reports) * 3600 / (reset_s + length * step_s)
             row[f"episodes_per_hour_{length}_steps_per_process"] = 3600 / (reset_s + length * step_s)
-        if mode == "images":
+        if mode.startswith("images"):
             row["pixel_mean_last_frame"] = per[0]["pixel_means"][-1]
             row["pixel_std_last_frame"] = per[0]["pixel_stds"][-1]
             # Two cameras see different scenes: (near-)equal means or uniform frames mean a GL mix-up drew neither.
@@ -278,10 +284,12 @@ def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, fl
                 abs(means[0] - means[1]) < 0.05 for p in per for means in p["pixel_means"]
             ) or any(std < 5.0 for p in per for stds in p["pixel_stds"] for std in stds)
         modes[mode] = row
-    if "images" in modes and "state" in modes:
-        modes["images_over_state_episodes_per_hour_280"] = (
-            modes["images"]["episodes_per_hour_280_steps"] / modes["state"]["episodes_per_hour_280_steps"]
-        )
+    for suffix in ("", "_soft"):
+        if f"images{suffix}" in modes and f"state{suffix}" in modes:
+            modes[f"images_over_state{suffix}_episodes_per_hour_280"] = (
+                modes[f"images{suffix}"]["episodes_per_hour_280_steps"]
+                / modes[f"state{suffix}"]["episodes_per_hour_280_steps"]
+            )
     return {
         "world": args.world,
         "suite": args.suite,
@@ -345,7 +353,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--save_frames", action="store_true", help="write process 0's last two frames beside the JSON (.png)"
     )
-    parser.add_argument("--modes", default=",".join(MODES), help="comma-separated subset of images,state")
+    parser.add_argument(
+        "--modes", default="images,state", help="comma-separated, of images,state,images_soft,state_soft"
+    )
     parser.add_argument("--output", default="outputs/bench/libero_render_rate.json")
     parser.add_argument(
         "--warmup", type=int, default=1, help="untimed warm-up episodes (a reset + 5 steps) per process"
@@ -355,6 +365,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     args.modes = tuple(m for m in args.modes.split(",") if m)
     if not args.modes or any(m not in MODES for m in args.modes):
         parser.error(f"--modes {args.modes!r}; allowed: {', '.join(MODES)}")
+    if args.world == "raw" and any(m.endswith("_soft") for m in args.modes):
+        parser.error("the *_soft modes need --world=roboview (LIBERO's own env always resets hard)")
     if min(args.episodes, args.steps, args.processes) < 1:
         parser.error("--episodes, --steps and --processes must be ≥ 1")
     return args
@@ -414,7 +426,7 @@ def main(argv: list[str] | None = None) -> dict:
                 f"{row['episodes_per_hour_104_steps']:.0f} ep/h @104, {row['episodes_per_hour_280_steps']:.0f} ep/h @280, "
                 f"measured {row[f'episodes_per_hour_measured_{args.steps}_steps']:.0f} ep/h @{args.steps}"
             )
-    if summary["modes"].get("images", {}).get("frames_suspect"):
+    if any(isinstance(r, dict) and r.get("frames_suspect") for r in summary["modes"].values()):
         print(
             "WARNING: images-mode frames look wrong (both cameras alike, or uniform): check the PNG",
             file=sys.stderr,
