@@ -15,7 +15,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from roboview.eval.reporting.leaderboard import Board, Claim, Entry, Rejected, labels_for, write_board
+from roboview.eval.reporting.leaderboard import Board, Claim, Entry, Rejected, labels_for
+from roboview.eval.reporting.leaderboard_page import write_board
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
 from roboview.sim.stack import summary
 

@@ -15,7 +15,6 @@ every policy shares its letter there.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -236,17 +235,6 @@ def annotate(board: Board) -> None:
                         replay_note=e.replay_note,
                         table=e.table,
                     )
-
-
-def write_board(board: Board, output_dir: Path) -> tuple[Path, Path]:
-    from roboview.eval.reporting.leaderboard_page import render_board
-
-    annotate(board)
-    output_dir.mkdir(parents=True, exist_ok=True)
-    json_path, html_path = output_dir / BOARD_JSON, output_dir / BOARD_HTML
-    json_path.write_text(json.dumps(board.to_json(), indent=2, default=float) + "\n")
-    html_path.write_text(render_board(board))
-    return json_path, html_path
 
 
 def labels_for(policies: Sequence[str], sources: Sequence[str]) -> list[str]:

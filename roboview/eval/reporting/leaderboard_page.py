@@ -1,4 +1,4 @@
-"""The leaderboard's page: one static leaderboard.html rendered from the `Board` (the numbers are leaderboard.json's).
+"""The board written: leaderboard.json (every number) and one static leaderboard.html rendered from the same `Board`.
 
 Its title says whether the board re-ran the bundles' episodes; the ranked tables hold only bundles whose replay
 passed; the claims (verified, not re-run here) and the rejected bundles follow in tables of their own, never ranked.
@@ -7,10 +7,22 @@ passed; the claims (verified, not re-run here) and the rejected bundles follow i
 from __future__ import annotations
 
 import html
+import json
+from pathlib import Path
 from typing import Any
 
 from roboview.eval.reporting.format import pct, pct_ci, split_title
-from roboview.eval.reporting.leaderboard import Board, Entry
+from roboview.eval.reporting.leaderboard import BOARD_HTML, BOARD_JSON, Board, Entry, annotate
+
+
+def write_board(board: Board, output_dir: Path) -> tuple[Path, Path]:
+    annotate(board)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    json_path, html_path = output_dir / BOARD_JSON, output_dir / BOARD_HTML
+    json_path.write_text(json.dumps(board.to_json(), indent=2, default=float) + "\n")
+    html_path.write_text(render_board(board))
+    return json_path, html_path
+
 
 _CSS = """
 body { font: 15px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto; max-width: 1100px;
