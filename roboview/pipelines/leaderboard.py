@@ -63,7 +63,7 @@ class LeaderboardConfig:
     # rows with probability ≥ 95 % (--replay.detect, --replay.confidence); --replay=N fixes N, --replay=0 re-runs
     # none (the page then says so in its title). Only bundles whose replay passed are ranked; one whose episodes
     # cannot be re-run here is a claim, listed apart; one whose replay disagrees is rejected.
-    replay: BoardReplayConfig = field(default_factory=lambda: BoardReplayConfig())
+    replay: BoardReplayConfig = field(default_factory=BoardReplayConfig)
 
     def __post_init__(self) -> None:
         if not self.sources:
@@ -104,7 +104,8 @@ def _summary(cfg: LeaderboardConfig, board: Board) -> None:
         rank = "ref" if row["rank"] is None else f"{row['rank']:>2}."
         print(f"  {rank:>3} {row['policy']:<30} SR {100 * row['value']:6.2f}  group {row['group']}")
     for c in board.claims:
-        print(f"  claim (not ranked): {c.label} SR {100 * c.sr:6.2f}: {c.replay_note}")
+        sr = "—" if c.sr is None else f"{100 * c.sr:6.2f}"
+        print(f"  claim (not ranked): {c.label} SR {sr}: {c.replay_note}")
     for r in board.rejected:
         print(f"  rejected: {r.source}: {r.reason}")
     replayed = (
