@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -40,10 +40,21 @@ class AdaptiveBenchConfig:
     sims: int = 1000
     # A results folder of an adaptive evaluation: compare that run with fixed-n instead of simulating.
     results: str = ""
+    # Shapes simulated, as VALUESxCONTEXTSxMAX_REPEATS (e.g. 21x40x5: LIBERO's camera_pose over its 40 tasks, init
+    # states 0–4); empty: the paper's shapes and a small one.
+    designs: list[str] = field(default_factory=list)
+    # True success rate of every simulated context.
+    sr: float = 0.7
 
     def __post_init__(self) -> None:
         if self.sims < 10:
             raise ValueError(f"--sims={self.sims} must be ≥ 10")
+        for shape in self.designs:
+            parts = shape.split("x")
+            if len(parts) != 3 or not all(p.isdigit() and int(p) > 0 for p in parts):
+                raise ValueError(
+                    f"--designs entry {shape!r} invalid; allowed: VALUESxCONTEXTSxMAX_REPEATS, e.g. 21x40x5"
+                )
         if self.results and read_record(Path(self.results)) is None:
             raise ValueError(
                 f"--results={self.results} holds no adaptive.json: run roboview.pipelines.evaluate with "
@@ -101,12 +112,12 @@ def real_run(results: Path) -> dict:
 
 
 def fixed_reference(
-    n_values: int, n_contexts: int, power: float, max_repeats: int
+    n_values: int, n_contexts: int, power: float, max_repeats: int, sr: float = 0.7
 ) -> tuple[list[float], float]:
     """Simulated power of the fixed design at 1 … max_repeats + 4 repeats against τ = 0.6 (`fixed_power`: the same
     statistic, critical value from simulated null splits), and the repeats that reach `power`, interpolated
     between whole repeats (rounding up would flatter the adaptive design)."""
-    curve = [fixed_power(n_values, n_contexts, 0.7, 0.6, n, 0.05) for n in range(1, max_repeats + 5)]
+    curve = [fixed_power(n_values, n_contexts, sr, 0.6, n, 0.05) for n in range(1, max_repeats + 5)]
     if power > curve[-1]:
         return curve, float(len(curve))
     return curve, float(np.interp(power, np.maximum.accumulate(curve), np.arange(1, len(curve) + 1)))
@@ -119,14 +130,16 @@ def run(cfg: AdaptiveBenchConfig) -> dict:
         Path(cfg.output).write_text(json.dumps(out, indent=2))
         return out
     results = []
-    for n_values, n_contexts, max_repeats in DESIGNS:
+    designs = [tuple(map(int, shape.split("x"))) for shape in cfg.designs] or DESIGNS
+    for n_values, n_contexts, max_repeats in designs:
         design = Design(alpha=0.05, tau=0.6, power=0.8, max_repeats=max_repeats)
         start = time.perf_counter()
         rows = {
-            tau: simulate(n_values, n_contexts, 0.7, tau, design, cfg.sims, seed=7) for tau in (0.0, 0.3, 0.6)
+            tau: simulate(n_values, n_contexts, cfg.sr, tau, design, cfg.sims, seed=7)
+            for tau in (0.0, 0.3, 0.6)
         }
         power = rows[0.6]["rejection_rate"]
-        curve, fixed = fixed_reference(n_values, n_contexts, power, max_repeats)
+        curve, fixed = fixed_reference(n_values, n_contexts, power, max_repeats, cfg.sr)
         fixed_episodes = fixed * n_values * n_contexts
         results.append(
             {
@@ -151,7 +164,7 @@ def run(cfg: AdaptiveBenchConfig) -> dict:
             + "/".join(f"{results[-1]['saving'][str(t)]:.0%}" for t in (0.0, 0.3, 0.6)),
             flush=True,
         )
-    out = {"sims": cfg.sims, "alpha": 0.05, "tau_design": 0.6, "sr": 0.7, "designs": results}
+    out = {"sims": cfg.sims, "alpha": 0.05, "tau_design": 0.6, "sr": cfg.sr, "designs": results}
     Path(cfg.output).parent.mkdir(parents=True, exist_ok=True)
     Path(cfg.output).write_text(json.dumps(out, indent=2))
     return out

@@ -99,6 +99,19 @@ def test_two_nodes_share_the_work_and_give_the_local_rows(tiny_benchmark, refere
         assert record["address"] == cluster.address and record["lost_actors"] == 0
         assert len(record["nodes"]) == 2 and sum(record["nodes"].values()) == len(reference)
         assert min(record["nodes"].values()) >= 2, record  # both nodes ran episodes
+        # The build on the same cluster: its nodes render the instances, and the manifest is the local build's.
+        build = [
+            sys.executable,
+            "-m",
+            "roboview.pipelines.build_benchmark",
+            "--preset=tiny",
+            "--image_size=64",
+        ]
+        build += [f"--ray_address={cluster.address}", "--num_workers=2", f"--output_dir={tmp_path / 'built'}"]
+        proc = subprocess.run(build, env=cluster.env, cwd=ROOT, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        version = json.loads((tmp_path / "built" / "benchmark.json").read_text())["benchmark_version"]
+        assert version == json.loads((tiny_benchmark / "benchmark.json").read_text())["benchmark_version"]
     finally:
         cluster.close()
 

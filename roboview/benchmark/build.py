@@ -11,6 +11,8 @@ from __future__ import annotations
 import csv
 import shutil
 import time
+from collections.abc import Iterator
+from contextlib import closing, contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,8 @@ class BuildSpec:
     # (client class, endpoint) of the stage-1b VLM screen, built in each worker; None: no screen. The endpoint's
     # `model` and `base_url` are recorded in the manifest.
     screen: tuple[Any, Any] | None = None
+    # A Ray cluster (HEAD:PORT) whose nodes render the instances (roboview.benchmark.build_ray); None: local workers.
+    ray_address: str | None = None
 
 
 @dataclass(frozen=True)
@@ -126,6 +130,19 @@ def world_batches(instances: list, num_workers: int, most: int = 64) -> list[lis
     return [group[i : i + size] for group in groups.values() for i in range(0, len(group), size)]
 
 
+@contextmanager
+def _renderers(spec: BuildSpec, args: tuple, work) -> Iterator[Iterator[list[dict]]]:
+    """The rendered batches of `work`, in order: on the Ray cluster `spec.ray_address`, else local processes."""
+    if spec.ray_address:
+        from roboview.benchmark.build_ray import imap_ray
+
+        with closing(imap_ray(spec.ray_address, spec.num_workers, args, work)) as batches:
+            yield batches
+        return
+    with WorkerPool(spec.num_workers, InstanceRenderer, args, method="records") as pool:
+        yield pool.imap(work, lookahead=2 * spec.num_workers)
+
+
 def render_all(spec: BuildSpec, instances: list) -> list[dict]:
     """Every instance's record (cameras, fairness, preview), in suite order: the worker pool renders one world's
     instances per call (`world_batches`), so a world is built once per batch, not once per instance."""
@@ -134,10 +151,10 @@ def render_all(spec: BuildSpec, instances: list) -> list[dict]:
     batches = world_batches(instances, spec.num_workers)
     records: list[dict | None] = [None] * len(instances)
     passed = done = 0
+    work = ([instances[i] for i in batch] for batch in batches)
     try:
-        with WorkerPool(spec.num_workers, InstanceRenderer, args, method="records") as pool:
-            work = ([instances[i] for i in batch] for batch in batches)
-            for batch, rendered in zip(batches, pool.imap(work, lookahead=2 * spec.num_workers)):
+        with _renderers(spec, args, work) as rendered_batches:
+            for batch, rendered in zip(batches, rendered_batches):
                 for i, record in zip(batch, rendered):
                     records[i] = record
                     passed += record["fairness"]["passed"]

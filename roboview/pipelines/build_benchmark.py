@@ -45,8 +45,10 @@ class BuildConfig:
     factorial_colors: list[str] | None = None
     # Add one full Cartesian-product split over these factors (e.g. [color,shape]).
     cartesian: list[str] | None = None
-    # Worker processes (spawned; one scene and renderer each).
+    # Worker processes (spawned; one scene and renderer each), or with --ray_address renderer actors on the cluster.
     num_workers: int = 2
+    # A Ray cluster (HEAD:PORT, started with `ray start --head`) whose nodes render the instances; empty: this machine.
+    ray_address: str = ""
     # Side of the rendered camera images the gate measures and previews come from (pixels).
     image_size: int = 224
     # Stage-2 decisions CSV (instance_id, verdict, reviewer, note) from reviewing the contact sheet.
@@ -107,6 +109,7 @@ def run(cfg: BuildConfig) -> BuildResult:
         cfg.num_workers,
         Path(cfg.decisions) if cfg.decisions else None,
         screen,
+        cfg.ray_address or None,
     )
     result = build(spec, Path(cfg.output_dir))
     _print_summary(result.manifest)
