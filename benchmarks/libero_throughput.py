@@ -6,7 +6,9 @@
 Why: a LIBERO episode's hard reset compiles a new MuJoCo model (3–4 s here), more than the scripted expert's whole
 rollout; RoboView's LIBERO env compiles one model per task and restores it in place between episodes
 (bit-identical: tests/test_libero_task.py, tests/test_libero_world.py). This runs the same commands both ways in
-one sitting, `soft` (the default) and `hard` (`ROBOVIEW_LIBERO_HARD_RESET=1`, LeRobot's path), and writes:
+one sitting, `soft` (the default) and `hard` (`ROBOVIEW_LIBERO_HARD_RESET=1`, LeRobot's path), and, for a path
+`git:REV`, RoboView's code at that git revision (a detached worktree of this checkout, run with this interpreter:
+`--paths=[soft,hard,git:9eea313~1]` adds the release before one model per task), and writes:
 
 - build: `roboview-build-benchmark` of `--build_preset` (or, with `--tasks=N`, the `libero` preset's every value on
   the first N tasks of libero_object and libero_spatial, init state 0): instances/hour, and whether both paths
@@ -46,7 +48,8 @@ class LiberoThroughputConfig:
     num_workers: int = 1
     # Image side the benchmarks are built at (LeRobot's LiberoEnv renders 256).
     image_size: int = 256
-    # Paths to run, in this order: soft (one model per task, reset in place) and/or hard (LeRobot's hard reset).
+    # Paths to run, in this order: soft (one model per task, reset in place), hard (LeRobot's hard reset), and
+    # git:REV (the code at git revision REV, e.g. git:9eea313~1).
     paths: list[str] = field(default_factory=lambda: ["soft", "hard"])
     # JSON file the results are written to.
     output: str = "outputs/bench/libero_throughput.json"
@@ -66,16 +69,32 @@ run(BuildConfig(output_dir=out, preset="libero_subset", image_size=size, num_wor
 """
 
 
-def _run(cmd: list[str], path: str) -> float:
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _checkout(path: str, root: Path) -> Path | None:
+    """The worktree a `git:REV` path runs from (made once under `root`), None for this checkout's code."""
+    if not path.startswith("git:"):
+        return None
+    tree = root / f"tree_{path[4:].replace('/', '_').replace('~', '_')}"
+    if not tree.exists():
+        add = ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), path[4:]]
+        subprocess.run(add, check=True, capture_output=True, text=True)
+    return tree
+
+
+def _run(cmd: list[str], path: str, tree: Path | None = None) -> float:
     env = os.environ | {HARD_RESET_ENV: "1" if path == "hard" else "0"}
+    if tree is not None:  # its roboview ahead of the editable install (cwd and PYTHONPATH)
+        env["PYTHONPATH"] = str(tree)
     start = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=tree)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd[:3])} … failed ({path}):\n{proc.stderr[-3000:]}")
     return time.perf_counter() - start
 
 
-def _build(cfg: LiberoThroughputConfig, out: Path, path: str) -> dict:
+def _build(cfg: LiberoThroughputConfig, out: Path, path: str, tree: Path | None) -> dict:
     bin_dir = Path(sys.executable).parent
     if cfg.tasks:
         tasks = ",".join(TASK_SUBSET[: cfg.tasks])
@@ -96,7 +115,7 @@ def _build(cfg: LiberoThroughputConfig, out: Path, path: str) -> dict:
             f"--num_workers={cfg.num_workers}",
             f"--output_dir={out}",
         ]
-    seconds = _run(cmd, path)
+    seconds = _run(cmd, path, tree)
     manifest = json.loads((out / "benchmark.json").read_text())
     n = manifest["candidates"]
     return {
@@ -107,7 +126,7 @@ def _build(cfg: LiberoThroughputConfig, out: Path, path: str) -> dict:
     }
 
 
-def _evaluate(cfg: LiberoThroughputConfig, bench: Path, out: Path, path: str) -> dict:
+def _evaluate(cfg: LiberoThroughputConfig, bench: Path, out: Path, path: str, tree: Path | None) -> dict:
     cmd = [
         str(Path(sys.executable).parent / "roboview-evaluate"),
         f"--benchmark.path={bench}",
@@ -117,7 +136,7 @@ def _evaluate(cfg: LiberoThroughputConfig, bench: Path, out: Path, path: str) ->
         f"--eval.num_workers={cfg.num_workers}",
         f"--output_dir={out}",
     ]
-    seconds = _run(cmd, path)
+    seconds = _run(cmd, path, tree)
     rows = pd.read_parquet(out / "episodes.parquet")
     loop = float(rows["duration_s"].sum()) / cfg.num_workers
     return {
@@ -145,10 +164,13 @@ def run(cfg: LiberoThroughputConfig) -> dict:
             ],
             "soft",
         )
-        for path in cfg.paths:
-            results["build"][path] = _build(cfg, root / f"build_{path}", path)
-            results["evaluate"][path] = _evaluate(cfg, eval_bench, root / f"eval_{path}", path)
+        for i, path in enumerate(cfg.paths):
+            tree = _checkout(path, root)
+            results["build"][path] = _build(cfg, root / f"build_{i}", path, tree)
+            results["evaluate"][path] = _evaluate(cfg, eval_bench, root / f"eval_{i}", path, tree)
             print(path, json.dumps({"build": results["build"][path], "evaluate": results["evaluate"][path]}))
+        for tree in root.glob("tree_*"):
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
     if {"soft", "hard"} <= set(cfg.paths):
         b, e = results["build"], results["evaluate"]
         results["same_benchmark"] = b["soft"]["benchmark_version"] == b["hard"]["benchmark_version"]
@@ -163,6 +185,17 @@ def run(cfg: LiberoThroughputConfig) -> dict:
                 e["soft"]["episodes_per_hour_command"] / e["hard"]["episodes_per_hour_command"], 2
             ),
         }
+    for path in cfg.paths:
+        if path.startswith("git:") and "soft" in cfg.paths:
+            b, e = results["build"], results["evaluate"]
+            results.setdefault("speedup_over", {})[path] = {
+                "build": round(b["soft"]["instances_per_hour"] / b[path]["instances_per_hour"], 2),
+                "evaluate_loop": round(
+                    e["soft"]["episodes_per_hour_per_worker_loop"]
+                    / e[path]["episodes_per_hour_per_worker_loop"],
+                    2,
+                ),
+            }
     out = Path(cfg.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2))
