@@ -3,10 +3,18 @@ a two-node Ray cluster with the same cores in total (each node a separate raylet
 
     python -m benchmarks.cluster --output=outputs/bench/cluster.json [--checkpoint=CKPT] [--benchmark.path=DIR]
 
+LIBERO's scenes, the scripted expert from 3 init states an instance, and the benchmark built on each layout too:
+
+    python -m benchmarks.cluster --benchmark.path=outputs/libero/tiny --split= --episodes=4 --n_repeats=3 \
+        --policy_type=expert --policy_control=ee_delta --build_preset=libero_tiny --build_image_size=256 \
+        --output=outputs/bench/cluster_libero.json
+
 Writes episodes/hour per layout, each Ray layout's rate over the local backend's (`over_local`), where the
-episodes ran (episodes per node) and whether the rows equal the local backend's. The policy: `--checkpoint`
-(default: the reference ACT, `outputs/train_act96/checkpoints/last/pretrained_model`), else the scripted
-`expert` when it is absent. `LocalCluster` is also what the multi-node tests start.
+episodes ran (episodes per node) and whether the rows equal the local backend's; with `--build_preset`, that
+preset's build on each layout (`roboview-build-benchmark`, `--ray_address` on the clusters): seconds and whether
+its benchmark version is the local build's. The policy: `--policy_type`, else `--checkpoint` (default: the
+reference ACT, `outputs/train_act96/checkpoints/last/pretrained_model`), else the scripted `expert` when it is
+absent. `LocalCluster` is also what the multi-node tests start.
 """
 
 from __future__ import annotations
@@ -143,10 +151,18 @@ class ClusterBenchConfig:
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # LeRobot checkpoint to evaluate (default: the reference ACT when present, else the scripted expert).
     checkpoint: str = ""
-    # Split evaluated per layout.
+    # Split evaluated per layout ("": every split).
     split: str = "color"
-    # Number of the split's instances evaluated (one repeat each) per layout.
+    # Number of the split's instances evaluated per layout (--eval.limit).
     episodes: int = 48
+    # Repeats of each instance (on LIBERO's scenes: distinct init states).
+    n_repeats: int = 1
+    # A policy type instead of the checkpoint (e.g. expert), and its control (e.g. ee_delta on LIBERO).
+    policy_type: str = ""
+    policy_control: str = ""
+    # A preset also built on each layout (its benchmark version compared with the local build's); "": none.
+    build_preset: str = ""
+    build_image_size: int = 64
     # Cores in total, in every layout.
     cores: int = 2
 
@@ -163,9 +179,9 @@ def _evaluate(
         "-m",
         "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
-        f"--benchmark.splits={cfg.split}",
+        *([f"--benchmark.splits={cfg.split}"] if cfg.split else []),
         f"--eval.limit={cfg.episodes}",
-        "--eval.n_repeats=1",
+        f"--eval.n_repeats={cfg.n_repeats}",
         f"--eval.num_workers={cfg.cores}",
         *policy,
         *extra,
@@ -176,6 +192,26 @@ def _evaluate(
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
     return time.perf_counter() - start
+
+
+def _build(cfg: ClusterBenchConfig, out: Path, env: dict, extra: list[str]) -> dict:
+    cmd = [
+        sys.executable,
+        "-m",
+        "roboview.pipelines.build_benchmark",
+        f"--preset={cfg.build_preset}",
+        f"--image_size={cfg.build_image_size}",
+        f"--num_workers={cfg.cores}",
+        *extra,
+        f"--output_dir={out}",
+    ]
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
+    seconds = time.perf_counter() - start
+    version = json.loads((out / "benchmark.json").read_text())["benchmark_version"]
+    return {"seconds": round(seconds, 1), "benchmark_version": version}
 
 
 def run(cfg: ClusterBenchConfig) -> dict:
@@ -197,10 +233,15 @@ def run(cfg: ClusterBenchConfig) -> dict:
         if checkpoint
         else ["--policy.type=expert", "--eval.image_size=96"]
     )
+    if cfg.policy_type:
+        policy = [f"--policy.type={cfg.policy_type}"]
+        policy += [f"--policy.control={cfg.policy_control}"] if cfg.policy_control else []
     layouts: dict[str, dict] = {}
     base_env = os.environ | {"PYTHONPATH": str(ROOT)}
     seconds = _evaluate(cfg, bench, policy, scratch / "local", base_env, [])
     layouts["local"] = {"seconds": round(seconds, 1)}
+    if cfg.build_preset:
+        layouts["local"]["build"] = _build(cfg, scratch / "local_build", base_env, [])
     for name, workers, cpus in (("ray_1_node", 0, cfg.cores), (f"ray_{cfg.cores}_nodes", cfg.cores - 1, 1)):
         with LocalCluster(workers=workers, cpus=cpus, scratch=scratch) as cluster:
             seconds = _evaluate(
@@ -211,8 +252,16 @@ def run(cfg: ClusterBenchConfig) -> dict:
                 cluster.env,
                 ["--eval.backend=ray", f"--eval.ray_address={cluster.address}"],
             )
+            built = (
+                _build(cfg, scratch / f"{name}_build", cluster.env, [f"--ray_address={cluster.address}"])
+                if cfg.build_preset
+                else None
+            )
         record = json.loads((scratch / name / "provenance.json").read_text())[-1]["ray"]
         layouts[name] = {"seconds": round(seconds, 1), "episodes_per_node": sorted(record["nodes"].values())}
+        if built:
+            local_version = layouts["local"]["build"]["benchmark_version"]
+            layouts[name]["build"] = built | {"same_version": built["benchmark_version"] == local_version}
 
     def table(name: str):
         return (
@@ -224,7 +273,8 @@ def run(cfg: ClusterBenchConfig) -> dict:
 
     reference = table("local")
     for name, layout in layouts.items():
-        layout["episodes_per_hour"] = round(3600 * cfg.episodes / layout["seconds"])
+        layout["episodes"] = len(table(name))
+        layout["episodes_per_hour"] = round(3600 * layout["episodes"] / layout["seconds"])
         layout["over_local"] = round(layouts["local"]["seconds"] / layout["seconds"], 3)
         layout["rows_equal_local"] = frames_equal(table(name), reference)
         print(
@@ -236,7 +286,8 @@ def run(cfg: ClusterBenchConfig) -> dict:
         "policy": checkpoint or "expert",
         "benchmark": bench,
         "split": cfg.split,
-        "episodes": cfg.episodes,
+        "episodes": len(reference),
+        "n_repeats": cfg.n_repeats,
         "cores": cfg.cores,
         "cpu": os.cpu_count(),
         "layouts": layouts,
