@@ -47,6 +47,21 @@ def test_a_repeat_runs_the_next_init_state_of_its_task():
     assert SEED_ONLY.instance(instance, 4) is instance and SEED_ONLY.unit(instance, 4) == ""
 
 
+def test_the_camera_preset_is_the_full_presets_camera_splits_and_takes_50_repeats():
+    camera = generate_suite(load_preset("libero_camera"))
+    full = [
+        i
+        for i in generate_suite(load_preset("libero"))
+        if i.split.startswith("libero_camera") or "dist" in i.split
+    ]
+    assert len(camera) == 1560 and {i.split for i in camera} == {i.split for i in full}
+    assert sorted(i.factors for i in camera) == sorted(i.factors for i in full)
+    assert len({i.get("libero_task") for i in camera}) == 40 and {i.get("init_state") for i in camera} == {
+        "0"
+    }
+    assert repetition_of("libero", _suite("libero_camera")) == Repetition("init_state", 1)
+
+
 def test_repeats_that_cannot_be_distinct_are_refused_in_one_line():
     one = [(_libero(), Repetition("init_state", 1), 50)]
     assert check_repeats(one) == {"libero": Repetition("init_state", 1)}  # init states 0–49: allowed
