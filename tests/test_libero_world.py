@@ -206,3 +206,20 @@ def test_bad_input_one_line_error(call, bad, allowed):
         call()
     message = str(info.value)
     assert bad in message and allowed in message and "\n" not in message
+
+
+def test_a_region_of_interest_stands_for_the_object_it_belongs_to():
+    """libero_goal's "open the middle drawer of the cabinet" names a region (`wooden_cabinet_1_middle_region`) as
+    its object of interest: the factors and the gate act on the cabinet; an object of interest stays itself."""
+    from types import SimpleNamespace
+
+    def world(interest: str) -> SimpleNamespace:
+        objects = {"wooden_cabinet_1": None, "wooden_cabinet_10": None, "akita_black_bowl_1": None}
+        return SimpleNamespace(
+            inner=SimpleNamespace(obj_of_interest=[interest], fixtures_dict=objects, objects_dict={})
+        )
+
+    assert F.target_object(world("wooden_cabinet_1_middle_region")) == "wooden_cabinet_1"
+    assert F.target_object(world("wooden_cabinet_10_top_region")) == "wooden_cabinet_10"
+    assert F.target_object(world("akita_black_bowl_1")) == "akita_black_bowl_1"
+    assert F.target_object(world("plate_1")) == "plate_1"  # unknown: named as is, object_geoms refuses it

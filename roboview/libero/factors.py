@@ -74,8 +74,13 @@ def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
 
 
 def target_object(world) -> str:
-    """The task's target object: LIBERO's `obj_of_interest[0]` (the object the instruction acts on)."""
-    return world.inner.obj_of_interest[0]
+    """The task's target object: LIBERO's `obj_of_interest[0]` (the object the instruction acts on). Where that is a
+    region of an object (libero_goal's "open the middle drawer of the cabinet": `wooden_cabinet_1_middle_region`,
+    named `<object>_<region>` as LIBERO names regions), the object the region belongs to."""
+    name = world.inner.obj_of_interest[0]
+    objects = {**world.inner.fixtures_dict, **world.inner.objects_dict}
+    owners = [o for o in objects if name.startswith(o + "_")]
+    return name if name in objects or not owners else max(owners, key=len)
 
 
 def object_geoms(world, name: str) -> list[int]:
