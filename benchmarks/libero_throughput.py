@@ -11,8 +11,9 @@ one sitting, `soft` (the default) and `hard` (`ROBOVIEW_LIBERO_HARD_RESET=1`, Le
 `--paths=[soft,hard,git:9eea313~1]` adds the release before one model per task), and writes:
 
 - build: `roboview-build-benchmark` of `--build_preset` (or, with `--tasks=N`, the `libero` preset's every value on
-  the first N tasks of libero_object and libero_spatial, init state 0): instances/hour, and whether both paths
-  built the same benchmark version (same suite hash, same gate records);
+  the first N tasks of libero_object and libero_spatial, init state 0, the gate's pass rate reported but not
+  enforced): instances/hour, the gate's pass rate, and whether both paths built the same benchmark version (same
+  suite hash, same gate records);
 - evaluate: `roboview-evaluate` of the privileged expert on `--eval_preset` with `--n_repeats` (distinct init
   states): whole-command seconds, episodes/hour of the whole command and of the episode loop alone (per worker).
 """
@@ -65,7 +66,8 @@ from roboview.tasks.presets import PRESETS, register_preset
 tasks, out, size, workers = sys.argv[1].split(","), sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 register_preset(replace(PRESETS["libero"], preset="libero_subset",
     value_subsets=(("init_state", ("0",)), ("libero_task", tuple(tasks)))))
-run(BuildConfig(output_dir=out, preset="libero_subset", image_size=size, num_workers=workers))
+# The gate's verdicts are reported, not enforced: the full preset's color split does not pass it on every task.
+run(BuildConfig(output_dir=out, preset="libero_subset", image_size=size, num_workers=workers, min_pass_rate=0.01))
 """
 
 
@@ -123,6 +125,7 @@ def _build(cfg: LiberoThroughputConfig, out: Path, path: str, tree: Path | None)
         "seconds": round(seconds, 1),
         "instances_per_hour": round(3600 * n / seconds),
         "benchmark_version": manifest["benchmark_version"],
+        "gate_pass_rate": round(manifest["gate_pass_rate"], 4),
     }
 
 
