@@ -145,3 +145,18 @@ def test_the_libero_presets():
     assert {i.split for i in tiny} == {"libero_color", "libero_camera_pose", "libero_lighting"}
     full = generate_suite(load_preset("libero"))
     assert len(full) == 7880 and len({i.get("libero_task") for i in full}) == 40
+
+
+def test_the_conformance_reference_rolls_out_only_what_the_expert_scripts():
+    """A benchmark holding libero_goal or libero_10 tasks (no scripted expert there) still gets its conformance
+    reference: those instances' images are stored, the physics rollouts come from the tasks the expert scripts."""
+    from roboview.tasks.libero import LiberoTaskExpert
+
+    suites = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+    scripted = {f"{s}/0": LiberoTaskExpert.scripts(instance(libero_task=f"{s}/0")) for s in suites}
+    assert scripted == {
+        "libero_spatial/0": True,
+        "libero_object/0": True,
+        "libero_goal/0": False,
+        "libero_10/0": False,
+    }

@@ -181,10 +181,13 @@ def write_reference(
     envs = _Envs(image_size)
     entries, physics = [], {}
     try:
-        for i, row in enumerate(sample(by_split)):
+        for row in sample(by_split):
             instance = instance_from_record(row)
-            steps = ROLLOUT_STEPS if i < PHYSICS_SAMPLE else 0
-            images, state = observe(*envs(instance.task), instance, steps)
+            env, expert = envs(instance.task)
+            # The first PHYSICS_SAMPLE instances the task's expert scripts (LIBERO's: not libero_goal, libero_10).
+            scripted = getattr(expert, "scripts", lambda _: True)(instance)
+            steps = ROLLOUT_STEPS if scripted and len(physics) < PHYSICS_SAMPLE else 0
+            images, state = observe(env, expert, instance, steps)
             (folder / f"{row['instance_id']}.png").write_bytes(_png(images))
             entries.append({k: v for k, v in row.items() if k not in ("fairness", "preview")})
             if state is not None:

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import os
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -51,6 +51,9 @@ from roboview.sim.cameras import CameraPose, mat_to_quat
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
 from roboview.variation.factors import Factor, register_factor
+
+if TYPE_CHECKING:
+    from roboview.variation.instances import TaskInstance
 
 TASK = "libero"
 WORLD = "libero"
@@ -370,6 +373,13 @@ class LiberoTaskExpert:
     def __init__(self, env: LiberoTaskEnv) -> None:
         self.env = env
         self._expert = None
+
+    @staticmethod
+    def scripts(instance: TaskInstance) -> bool:
+        """Whether the expert scripts `instance`'s LIBERO task (its suite: libero_object or libero_spatial)."""
+        from roboview.libero.expert import EXPERT_SUITES
+
+        return str(instance.get("libero_task")).split("/")[0] in EXPERT_SUITES
 
     def reset(self) -> None:
         from roboview.libero.expert import LiberoExpert
