@@ -157,11 +157,13 @@ class ClusterBenchConfig:
     episodes: int = 48
     # Repeats of each instance (on LIBERO's scenes: distinct init states).
     n_repeats: int = 1
-    # A policy type instead of the checkpoint (e.g. expert), and its control (e.g. ee_delta on LIBERO).
+    # A policy type instead of the checkpoint (e.g. expert); "": the checkpoint, else the expert.
     policy_type: str = ""
+    # That policy's control (e.g. ee_delta on LIBERO's scenes); "": its default.
     policy_control: str = ""
     # A preset also built on each layout (its benchmark version compared with the local build's); "": none.
     build_preset: str = ""
+    # Image side that preset is built at (pixels).
     build_image_size: int = 64
     # Cores in total, in every layout.
     cores: int = 2

@@ -338,12 +338,14 @@ def summarize(args: argparse.Namespace, reports: list[dict], walls: dict[str, fl
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--suite", default="libero_object")
-    parser.add_argument("--task", type=int, default=0)
-    parser.add_argument("--init_state", "--init-state", type=int, default=0)
+    parser.add_argument("--suite", default="libero_object", help="LIBERO suite of the task")
+    parser.add_argument("--task", type=int, default=0, help="task index in the suite")
+    parser.add_argument(
+        "--init_state", "--init-state", type=int, default=0, help="LIBERO init state of every episode"
+    )
     parser.add_argument("--episodes", type=int, default=2, help="episodes per process and mode")
     parser.add_argument("--steps", type=int, default=104, help="control steps per episode")
-    parser.add_argument("--processes", type=int, default=1)
+    parser.add_argument("--processes", type=int, default=1, help="spawned processes, one world each")
     parser.add_argument(
         "--world",
         choices=("roboview", "raw"),
@@ -356,7 +358,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--modes", default="images,state", help="comma-separated, of images,state,images_soft,state_soft"
     )
-    parser.add_argument("--output", default="outputs/bench/libero_render_rate.json")
+    parser.add_argument("--output", default="outputs/bench/libero_render_rate.json", help="JSON file written")
     parser.add_argument(
         "--warmup", type=int, default=1, help="untimed warm-up episodes (a reset + 5 steps) per process"
     )

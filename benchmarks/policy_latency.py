@@ -201,7 +201,13 @@ def parse_batch_sizes(text: str) -> list[int]:
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N")
-    parser.add_argument("--batch_sizes", "--batch-sizes", type=parse_batch_sizes, default=[1, 8, 16])
+    parser.add_argument(
+        "--batch_sizes",
+        "--batch-sizes",
+        type=parse_batch_sizes,
+        default=[1, 8, 16],
+        help="batch sizes timed, comma-separated or [1,8,16]",
+    )
     parser.add_argument(
         "--image_size", "--image-size", type=int, default=256, help="square camera side (pixels)"
     )
@@ -212,8 +218,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--threads", type=int, default=None, help="torch.set_num_threads (default: torch's own)"
     )
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--import_mode", choices=("act_only", "package"), default="act_only")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the untrained weights and the inputs")
+    parser.add_argument(
+        "--import_mode",
+        choices=("act_only", "package"),
+        default="act_only",
+        help="act_only: LeRobot's ACT modules alone (no dataset stack); package: LeRobot as a whole",
+    )
     parser.add_argument("--output", default=None, help="default: outputs/bench/policy_latency_<device>.json")
     args = parser.parse_args(argv)
     if min(args.calls, args.warmup + 1, args.image_size) < 1:

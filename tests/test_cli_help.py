@@ -34,6 +34,7 @@ HARNESSES = (
     "gpu",
     "libero_expert",
     "libero_render",
+    "libero_throughput",
     "libero_vs_lerobot_eval",
     "paired_compare",
     "render_rate",
@@ -42,6 +43,9 @@ HARNESSES = (
     "throughput",
     "verify_rate",
 )
+# Harnesses that run where RoboView's dependencies are absent (a GPU machine given only the simulator or only torch):
+# plain argparse, so only their --help is checked.
+STANDALONE = ("libero_render_rate", "policy_latency")
 
 
 @functools.cache
@@ -155,9 +159,17 @@ def test_every_pipeline_module_is_covered():
     modules = {p.stem for p in (ROOT / "roboview" / "pipelines").glob("*.py") if not p.stem.startswith("_")}
     assert modules == set(ENTRY_POINTS)
     harnesses = {p.stem for p in (ROOT / "benchmarks").glob("*.py") if not p.stem.startswith("_")}
-    assert harnesses == set(HARNESSES)
+    assert harnesses == set(HARNESSES) | set(STANDALONE)
     # Each parses with the one command-line helper (its --help then lists every flag, checked above).
     assert all(_config_class(f"benchmarks.{name}") is not None for name in HARNESSES)
+
+
+@pytest.mark.parametrize("name", STANDALONE)
+def test_standalone_harnesses_explain_their_flags(name):
+    proc = help_run(f"benchmarks.{name}")
+    assert proc.returncode == 0 and "usage:" in proc.stdout, proc.stderr[-1500:]
+    flags = [flag for flag, _ in help_flags(proc.stdout)]
+    assert "--output" in flags and all(text for _, text in help_flags(proc.stdout)), proc.stdout
 
 
 def test_lists_are_written_comma_separated_everywhere():

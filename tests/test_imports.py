@@ -256,6 +256,7 @@ FLOORS = (
         "roboview.core.cli_flags",
         "roboview.core.cli_help",
         "roboview.core.workers",
+        "roboview.core.ray_cluster",
     ),
     ("roboview.sim",),
     ("roboview.variation",),

@@ -1,4 +1,4 @@
-"""Repeats that are distinct episodes (roboview.variation.repetition): on LIBERO's scenes repeat r runs another init
+"""Repeats that are distinct episodes (roboview.tasks.repetition): on LIBERO's scenes repeat r runs another init
 state, the same for every value of a (context, repeat); a run that cannot give distinct episodes is refused in one
 line; verify flags a folder of copies and the statistics count each of them once. The end-to-end part also checks
 that the build's in-place path (one compiled model per LIBERO task) gives the suite and gate records of LeRobot's
@@ -12,8 +12,8 @@ import pytest
 from roboview.eval.running.results import copies_mask, counted
 from roboview.tasks import load_preset
 from roboview.tasks.libero import baseline_libero_instance
+from roboview.tasks.repetition import SEED_ONLY, UNIT_COLUMN, Repetition, check_repeats, repetition_of
 from roboview.variation.instances import TaskInstance, generate_suite
-from roboview.variation.repetition import SEED_ONLY, UNIT_COLUMN, Repetition, check_repeats, repetition_of
 
 
 def _suite(preset: str) -> dict:

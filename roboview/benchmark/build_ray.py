@@ -21,9 +21,9 @@ def imap_ray(
     import ray
 
     from roboview.benchmark.render import InstanceRenderer
-    from roboview.eval.running.backends import _connect
+    from roboview.core.ray_cluster import connect
 
-    _connect(address, num_workers)
+    connect(address, num_workers, "--ray_address")
     actor_cls = ray.remote(num_cpus=1)(InstanceRenderer).options(scheduling_strategy="SPREAD")
     actors = [actor_cls.remote(*args) for _ in range(num_workers)]
     # Ray runs an actor's calls in the order they were submitted: round-robin, at most two in flight per actor.

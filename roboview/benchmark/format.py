@@ -34,9 +34,9 @@ import pyarrow.parquet as pq
 from roboview.benchmark.protocols import Protocol, declared
 from roboview.core.files import files_sha256
 from roboview.core.folders import folder_problem
+from roboview.tasks.repetition import SEED_ONLY, Repetition, repetition_of
 from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
 from roboview.variation.instances import TaskInstance, canonical_json
-from roboview.variation.repetition import SEED_ONLY, Repetition, repetition_of
 
 MANIFEST = "benchmark.json"
 CHECKSUMS = "checksums.json"
@@ -281,7 +281,7 @@ def split_counts(records: list[dict], accepted: list[bool], rejected_by: list[st
 class BenchmarkItem:
     instance: TaskInstance
     record: dict  # the row's columns but fairness and preview: they travel into every episode row
-    # What repeat r of the instance runs (roboview.variation.repetition): the seed alone, or LIBERO's next init state.
+    # What repeat r of the instance runs (roboview.tasks.repetition): the seed alone, or LIBERO's next init state.
     repetition: Repetition = SEED_ONLY
 
     def episode(self, repeat: int) -> TaskInstance:

@@ -24,7 +24,7 @@ from roboview.eval.running.rollout import WorkerSpec, WorkItem
 from roboview.policies.base import PolicyConfig
 from roboview.policies.fit import fit_policy
 from roboview.tasks import DEFAULT_TASK, load_task
-from roboview.variation.repetition import Repetition, check_repeats
+from roboview.tasks.repetition import Repetition, check_repeats
 
 log = logging.getLogger(__name__)
 

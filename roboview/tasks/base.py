@@ -54,7 +54,7 @@ class Task:
     # reset, and an evaluation without --eval.max_steps records none.
     steps_per_context: bool = False
     # What the episode seed randomizes in this task's scenes ("": nothing, so a repeat is a copy unless
-    # `repeat_factor` makes it another episode). roboview.variation.repetition reads both.
+    # `repeat_factor` makes it another episode). roboview.tasks.repetition reads both.
     seed_randomizes: str = "the object's start: up to 1 cm of position jitter and ±20° of heading"
     # The context factor a repeat advances where the seed is not the episode's randomness (LIBERO's `init_state`).
     repeat_factor: str = ""

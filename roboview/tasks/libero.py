@@ -11,7 +11,7 @@ at its baseline is the LIBERO episode every other harness runs.
 
 **Randomizations.** None beyond LIBERO's: the episode seed seeds LIBERO before every reset (fixture placement
 repeats for every value of a (context, repeat)); objects start at the init state. A repeat therefore runs another
-init state (`repeat_factor`; roboview.variation.repetition): LIBERO's unit of randomness, as in its own harnesses.
+init state (`repeat_factor`; roboview.tasks.repetition): LIBERO's unit of randomness, as in its own harnesses.
 
 **Visual factors** (what each changes; `roboview.libero.factors` says how), every baseline being LIBERO's scene
 unchanged:

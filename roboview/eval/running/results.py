@@ -36,7 +36,7 @@ import pyarrow.parquet as pq
 from roboview.core.folders import folder_problem
 from roboview.eval.running import provenance
 from roboview.eval.running.row import INFRA_ERROR, STATUS  # noqa: F401  (re-exported: readers of results)
-from roboview.variation.repetition import UNIT_COLUMN
+from roboview.tasks.repetition import UNIT_COLUMN
 
 JOURNAL = "episodes.jsonl"
 PARQUET = "episodes.parquet"
@@ -192,7 +192,7 @@ def infra_mask(episodes: pd.DataFrame) -> pd.Series:
 def copies_mask(episodes: pd.DataFrame) -> pd.Series:
     """True for the repeats (beyond repeat 0) that copy repeat 0's episode: rows of a world whose repeats must advance
     a context factor (LIBERO's init state) recorded without `episode_unit`, i.e. by the seed-only design, where every
-    repeat of an instance started from the same init state (roboview.variation.repetition)."""
+    repeat of an instance started from the same init state (roboview.tasks.repetition)."""
     from roboview.tasks import load_task
 
     mask = pd.Series(False, index=episodes.index)

@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from roboview.variation.repetition import UNIT_COLUMN
+from roboview.tasks.repetition import UNIT_COLUMN
 
 STATUS = "status"
 STATUS_OK = "ok"
@@ -34,7 +34,7 @@ class EpisodeRow:
     duration_s: float | None
     policy: str | None
     failure_reason: str = ""
-    # What the repeat varied besides the seed ("init_state=12" on LIBERO's scenes; roboview.variation.repetition),
+    # What the repeat varied besides the seed ("init_state=12" on LIBERO's scenes; roboview.tasks.repetition),
     # "" where the seed is the episode's whole randomness (then no column is written).
     unit: str = ""
     isolation: Any = None

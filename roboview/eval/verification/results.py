@@ -135,7 +135,7 @@ def check_repeats(rows: list[dict], bench) -> Check:
     """Repeats are distinct episodes: on a world whose repeats advance a context factor (LIBERO's init state), every
     row records the value its repeat ran (`episode_unit`), the one the benchmark's rule gives. A folder of the
     seed-only design (repeats from the instance's own init state: copies) fails."""
-    from roboview.variation.repetition import UNIT_COLUMN
+    from roboview.tasks.repetition import UNIT_COLUMN
 
     items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
     copies, wrong = [], []
