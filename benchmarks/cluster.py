@@ -189,6 +189,11 @@ def _evaluate(
         *extra,
         f"--output_dir={out}",
     ]
+    return _timed(cmd, env)
+
+
+def _timed(cmd: list[str], env: dict) -> float:
+    """Seconds `cmd` ran, from the checkout's root; RuntimeError with its output's tail if it failed."""
     start = time.perf_counter()
     proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -207,11 +212,7 @@ def _build(cfg: ClusterBenchConfig, out: Path, env: dict, extra: list[str]) -> d
         *extra,
         f"--output_dir={out}",
     ]
-    start = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
-    seconds = time.perf_counter() - start
+    seconds = _timed(cmd, env)
     version = json.loads((out / "benchmark.json").read_text())["benchmark_version"]
     return {"seconds": round(seconds, 1), "benchmark_version": version}
 
