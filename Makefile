@@ -21,7 +21,7 @@ BOARD_DIR ?= outputs/board
 BOARD_PAGE ?= docs/results/board
 BOARD_VLM_PORT ?= 8765
 
-.PHONY: install install-libero sysdeps demo test test-fast lint format bench board clean-demo
+.PHONY: install install-libero install-metaworld sysdeps demo test test-fast lint format bench board clean-demo
 
 install: sysdeps $(STAMP)
 
@@ -35,6 +35,16 @@ $(LIBERO_STAMP): $(STAMP) roboview/libero/bootstrap.py
 	$(PY) -m $$($(PY) -c 'from roboview.libero.bootstrap import PIP_INSTALL; print(PIP_INSTALL)') -q
 	$(PY) -m roboview.libero >/dev/null
 	@touch $(LIBERO_STAMP)
+
+# Meta-World's scenes (docs/metaworld.md): metaworld 3.0.0 as LeRobot's `metaworld` extra pins it (a 40 MB wheel with
+# its assets and scripted policies; everything it needs is already installed). The one declaration of the package
+# is roboview.metaworld.env.PIP_INSTALL.
+METAWORLD_STAMP := $(VENV)/.metaworld-installed
+install-metaworld: install $(METAWORLD_STAMP)
+
+$(METAWORLD_STAMP): $(STAMP) roboview/metaworld/env.py
+	$(PY) -m $$($(PY) -c 'from roboview.metaworld.env import PIP_INSTALL; print(PIP_INSTALL)') -q
+	@touch $(METAWORLD_STAMP)
 
 # System packages: ffmpeg (LeRobot's video decoding needs it), Mesa EGL for off-screen rendering and
 # Chromium (the tests load report.html in it, headless).
@@ -101,10 +111,10 @@ demo: install
 # one test file per process at a time) with its 30 slowest tests listed at the end; test-fast: the tests that take
 # seconds (statistics, formats, factor registry, imports), no rendering, training or servers.
 TEST_WORKERS ?= 2
-test: install install-libero lint
+test: install install-libero install-metaworld lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
-test-fast: install install-libero lint
+test-fast: install install-libero install-metaworld lint
 	$(PY) -m pytest -q -m "not slow" --durations=10
 
 lint: install

@@ -48,8 +48,8 @@ def _rate(env, steps: int, read) -> float:
 
 
 def run(cfg: LiberoRenderConfig) -> dict:
+    from roboview.libero.task import CAMERAS, baseline_libero_instance
     from roboview.tasks import make_env
-    from roboview.tasks.libero import CAMERAS, baseline_libero_instance
 
     env = make_env("libero", cameras=("agentview", "wrist"), image_size=cfg.image_size)
     try:

@@ -32,7 +32,7 @@ from pathlib import Path
 import pandas as pd
 
 from roboview.core.cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
-from roboview.tasks.libero import HARD_RESET_ENV
+from roboview.libero.task import HARD_RESET_ENV
 
 
 @dataclass

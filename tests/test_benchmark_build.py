@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 import yaml
 
-from roboview.benchmark.fairness import FairnessThresholds
 from roboview.benchmark.render import InstanceRenderer
 from roboview.pipelines.build_benchmark import BuildConfig, run
 from roboview.pipelines.publish import PublishConfig, plan
 from roboview.sim.cameras import WORKSPACE_CENTER, quat_to_mat
 from roboview.tasks import load_preset
+from roboview.tasks.fairness import FairnessThresholds
 from roboview.variation.factors import parse_dist_scale, parse_euler
 from roboview.variation.instances import generate_suite
 

@@ -8,13 +8,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from roboview.benchmark.fairness import (
+from roboview.tasks import ScriptedExpert, load_preset, make_env
+from roboview.tasks.env import IMAGE_KEY
+from roboview.tasks.fairness import (
     CameraFairness,
     FairnessThresholds,
     violations,
 )
-from roboview.tasks import ScriptedExpert, load_preset, make_env
-from roboview.tasks.env import IMAGE_KEY
 from roboview.variation.factors import FACTORS, baselines
 from roboview.variation.factors.distractors import BODIES
 from roboview.variation.instances import TaskInstance, episode_seed, generate_suite

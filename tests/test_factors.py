@@ -31,7 +31,8 @@ def test_factor_names_and_kinds():
     )
     assert context_factors() == ("initial_position", "shape", "instruction")
     assert factor_names() == visual_factors() + context_factors()
-    assert set(FACTORS) == set(factor_names()) | set(context_factors("push")) | set(context_factors("libero"))
+    worlds = set(context_factors("libero")) | set(context_factors("metaworld"))
+    assert set(FACTORS) == set(factor_names()) | set(context_factors("push")) | worlds
     assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 8 + ["context"] * 3
     assert {n: len(load_factor(n).values) for n in visual_factors()[4:]} == {
         "lighting": 9,

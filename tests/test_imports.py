@@ -241,7 +241,9 @@ def test_importing_the_package_registers_the_gym_ids():
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-800:]
-    assert proc.stdout.strip() == "['RoboView/Libero-v0', 'RoboView/PickPlace-v0', 'RoboView/Push-v0']"
+    assert proc.stdout.strip() == (
+        "['RoboView/Libero-v0', 'RoboView/MetaWorld-v0', 'RoboView/PickPlace-v0', 'RoboView/Push-v0']"
+    )
 
 
 # The floors, lowest first: a module imports only from its own floor or those below it.
@@ -260,7 +262,7 @@ FLOORS = (
     ),
     ("roboview.sim",),
     ("roboview.variation",),
-    ("roboview.tasks", "roboview.libero"),
+    ("roboview.tasks", "roboview.libero", "roboview.metaworld"),
     ("roboview.benchmark", "roboview.demos"),
     ("roboview.policies",),
     ("roboview.eval.running",),
@@ -270,6 +272,41 @@ FLOORS = (
     ("roboview.integrations",),
     ("roboview.pipelines", "benchmarks"),
 )
+
+
+def wing_imports(graph: dict[str, set[str]], wings: list[str]) -> list[str]:
+    """Edges into a world's wing from outside it: only the task registry (which names the wing's task module) and
+    the wing's own throughput studies (`benchmarks.<world>_*`) may cross."""
+
+    def inside(module: str, wing: str) -> bool:
+        return module == wing or module.startswith(wing + ".")
+
+    return sorted(
+        f"{module} → {target}"
+        for module, targets in graph.items()
+        for target in targets
+        for wing in wings
+        if inside(target, wing)
+        and not inside(module, wing)
+        and module != "roboview.tasks"
+        and not module.startswith(f"benchmarks.{wing.rpartition('.')[2]}_")
+    )
+
+
+def test_nothing_outside_a_world_imports_its_wing():
+    from roboview.tasks.world import WORLDS
+
+    wings = [w.wing for w in WORLDS.values() if w.wing]
+    assert "roboview.libero" in wings
+    found = wing_imports(import_graph(), wings)
+    assert not found, (
+        "imports into a world's wing from outside it (read the World's facts instead): " + "; ".join(found)
+    )
+    # The policy clients once imported LIBERO's task module for its render size and camera names.
+    assert wing_imports({"roboview.policies.openpi": {"roboview.libero.task"}}, wings) == [
+        "roboview.policies.openpi → roboview.libero.task"
+    ]
+    assert wing_imports({"benchmarks.libero_throughput": {"roboview.libero.task"}}, wings) == []
 
 
 def floor_of(module: str) -> int:

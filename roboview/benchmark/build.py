@@ -23,7 +23,6 @@ from roboview.benchmark import conformance
 from roboview.benchmark import format as bio
 from roboview.benchmark.card import fairness_stats, write_card
 from roboview.benchmark.contact_sheet import context_text, write_contact_sheet
-from roboview.benchmark.fairness import FairnessThresholds
 from roboview.benchmark.protocols import protocols_json
 from roboview.benchmark.render import InstanceRenderer
 from roboview.benchmark.review import Decision, adjudicate, read_decisions
@@ -32,6 +31,7 @@ from roboview.benchmark.screen import write_decisions as write_screen_decisions
 from roboview.core.folders import folder_problem
 from roboview.core.workers import WorkerPool
 from roboview.tasks import DEFAULT_TASK, load_task
+from roboview.tasks.fairness import FairnessThresholds
 from roboview.variation.instances import SuiteConfig, generate_suite
 
 OFFENDERS_FILE = "fairness_report.csv"

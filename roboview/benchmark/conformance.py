@@ -36,11 +36,11 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
-from roboview.benchmark.fairness import WORLD_CAMERAS
 from roboview.benchmark.format import CONFORMANCE as FOLDER
 from roboview.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
 from roboview.core import files
 from roboview.core.files import files_sha256
+from roboview.tasks.world import load_world
 from roboview.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -50,7 +50,7 @@ SAMPLE_SIZE = 24  # instances whose reset images are compared
 PHYSICS_SAMPLE = 12  # of those, instances whose expert rollout is compared
 ROLLOUT_STEPS = 40  # control steps: approach, grasp and lift (the object is in the air by step 30)
 STORED_SIDE = 112  # stored images are box-downsampled by an integer factor to at most this side
-CAMERAS = ("front", "left_top", "wrist")  # RoboView's scene; another world's: WORLD_CAMERAS
+
 VERDICTS = ("identical", "equivalent", "different")
 
 
@@ -128,7 +128,9 @@ def observe(env, expert, instance, steps: int = 0) -> tuple[list[np.ndarray], di
     from roboview.tasks.env import IMAGE_KEY
 
     obs, _ = env.reset(seed=instance.seed, options={"instance": instance})
-    images = [downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in WORLD_CAMERAS[env.world]]
+    images = [
+        downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in load_world(env.world).observed_cameras
+    ]
     if not steps:
         return images, None
     expert.reset()
@@ -149,14 +151,14 @@ class _Envs:
     def __init__(self, image_size: int) -> None:
         self.image_size, self.envs, self.experts = image_size, {}, {}
         self.stack: dict | None = None  # the stack, described from the first env before any instance
-        self.cameras: tuple[str, ...] = CAMERAS  # the observed cameras of the benchmark's world
+        self.cameras: tuple[str, ...] = ()  # the observed cameras of the benchmark's world (its first env's)
 
     def __call__(self, task: str):
         from roboview.sim import stack
         from roboview.tasks import load_task, make_env
 
         if task not in self.envs:
-            self.cameras = WORLD_CAMERAS[load_task(task).env_class().world]
+            self.cameras = load_world(load_task(task).env_class().world).observed_cameras
             self.envs[task] = make_env(task, cameras=self.cameras, image_size=self.image_size, lazy=True)
             self.experts[task] = load_task(task).make_expert(self.envs[task])
             if self.stack is None:
@@ -185,7 +187,7 @@ def write_reference(
             instance = instance_from_record(row)
             env, expert = envs(instance.task)
             # The first PHYSICS_SAMPLE instances the task's expert scripts (LIBERO's: not libero_goal, libero_10).
-            scripted = getattr(expert, "scripts", lambda _: True)(instance)
+            scripted = expert.scripts(instance)
             steps = ROLLOUT_STEPS if scripted and len(physics) < PHYSICS_SAMPLE else 0
             images, state = observe(env, expert, instance, steps)
             (folder / f"{row['instance_id']}.png").write_bytes(_png(images))

@@ -12,11 +12,11 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from roboview.benchmark.fairness import PROBES, WORLD_CAMERAS, FairnessThresholds
 from roboview.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_image
-from roboview.sim.cameras import ALL_CAMERAS
 from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import IMAGE_KEY
+from roboview.tasks.fairness import FairnessThresholds
+from roboview.tasks.world import load_world
 from roboview.variation.instances import TaskInstance
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
@@ -53,9 +53,9 @@ class InstanceRenderer:
 
     def _use(self, task: str) -> None:
         if task not in self.envs:
-            world = load_task(task).env_class().world
-            self.envs[task] = make_env(task, cameras=WORLD_CAMERAS[world], image_size=self.image_size)
-            self.probes[task] = PROBES[world](self.envs[task])
+            world = load_world(load_task(task).env_class().world)
+            self.envs[task] = make_env(task, cameras=world.observed_cameras, image_size=self.image_size)
+            self.probes[task] = world.make_probe(self.envs[task])
         self.env, self.probe = self.envs[task], self.probes[task]
 
     def record(self, instance: TaskInstance) -> dict:
@@ -70,7 +70,7 @@ class InstanceRenderer:
         fairness |= {"vlm_answer": vlm.get("answer", ""), "vlm_analysis": vlm.get("analysis", "")}
         return {
             **instance.to_record(),
-            "cameras": [self.env.scene.camera_pose(cam).to_record() for cam in self._recorded_cameras()],
+            "cameras": [self.env.camera_pose(cam).to_record() for cam in self._recorded_cameras()],
             "fairness": fairness,
             "preview": {"bytes": preview_png([rgb[c] for c in cameras]), "path": None},
         }
@@ -80,8 +80,8 @@ class InstanceRenderer:
         return [self.record(instance) for instance in instances]
 
     def _recorded_cameras(self) -> tuple[str, ...]:
-        """Every camera of RoboView's scene (the observed ones and `right_top`); LIBERO's two."""
-        return ALL_CAMERAS if self.env.world == "roboview" else self.probe.cameras
+        """The cameras whose calibration the world records (RoboView's scene: all four; LIBERO's: its two)."""
+        return load_world(self.env.world).recorded_cameras
 
     def close(self) -> None:
         for env in self.envs.values():

@@ -22,7 +22,8 @@ import pandas as pd
 from roboview.core.folders import folder_problem
 from roboview.demos.recorder import DemoEpisode
 from roboview.tasks import load_task
-from roboview.tasks.env import EE_STATE_NAMES, IMAGE_KEY, STATE_KEY, STATE_NAMES, action_names
+from roboview.tasks.env import STATE_KEY, action_names, state_names
+from roboview.tasks.world import camera_of_feature, feature_key, load_world
 from roboview.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -59,11 +60,6 @@ class CollectionSignature:
     contexts: tuple[tuple[str, tuple[str, ...]], ...] = ()  # the context values drawn from (empty: all)
 
 
-def state_names(control: str) -> tuple[str, ...]:
-    """The names of a collection's `observation.state` entries: the joints, or the EE state for an EE control."""
-    return STATE_NAMES if control == "joint" else EE_STATE_NAMES
-
-
 def demo_features(
     cameras: tuple[str, ...], image_size: int, control: str = "joint", task: str = DEFAULT_TASK
 ) -> dict[str, dict]:
@@ -71,7 +67,7 @@ def demo_features(
     them (RoboView's scene: docs/benchmark.md, "The task and its interfaces", docs/control.md; LIBERO's: the
     `{"motors": [...]}` names of LeRobot-format LIBERO datasets, docs/libero.md)."""
     features = {
-        IMAGE_KEY.format(cam): {
+        feature_key(cam): {
             "dtype": "video",
             "shape": (image_size, image_size, 3),
             "names": ["height", "width", "channels"],
@@ -161,6 +157,12 @@ def _append_only_files(root: Path) -> list[str]:
 CARD = "README.md"
 
 
+def _names(info: dict, key: str) -> list[str]:
+    """A feature's entry names as info.json lists them (a list, or LeRobot-format `{"motors": [...]}`)."""
+    names = info["features"][key]["names"]
+    return list(next(iter(names.values())) if isinstance(names, dict) else names)
+
+
 def write_card(root: Path, repo_id: str, task: str, provenance_rows: int, control: str = "joint") -> Path:
     """The dataset card (README.md), LeRobot's own template (`create_lerobot_dataset_card`, what its push writes)
     filled with what RoboView knows: how the demos were made and what they do not vary."""
@@ -168,18 +170,18 @@ def write_card(root: Path, repo_id: str, task: str, provenance_rows: int, contro
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
     info = json.loads((root / "meta" / "info.json").read_text())
-    cameras = [
-        k.removeprefix(IMAGE_KEY.format("")) for k in info["features"] if k.startswith(IMAGE_KEY.format(""))
-    ]
+    cameras = [c for c in map(camera_of_feature, info["features"]) if c]
+    world = load_world(load_task(task).env_class().world)
     description = (
-        f"Scripted expert demonstrations of the RoboView `{task}` task (Franka Panda + Robotiq 2F-85 in MuJoCo), "
-        f"collected with context-only randomization: object position, shape and instruction vary; every visual "
+        f"Scripted expert demonstrations of the RoboView `{task}` task ({world.title}), collected with "
+        f"context-only randomization: its context factors ({', '.join(load_task(task).context_factors())}) and the "
+        f"episode seed vary; every visual "
         f"factor (object color, cameras, lighting, table) stays at its baseline, so a policy trained here can be "
         f"measured for visual bias on the RoboView-Bias benchmark.\n\n"
         f"- Episodes: {info['total_episodes']} ({info['total_frames']} frames at {info['fps']} fps)\n"
-        f"- Cameras: {', '.join(cameras)} ({info['features'][IMAGE_KEY.format(cameras[0])]['shape'][0]} px square)\n"
-        f"- Control: `{control}`; `observation.state`: {', '.join(state_names(control))}; `action`: "
-        f"{', '.join(action_names(control))}\n"
+        f"- Cameras: {', '.join(cameras)} ({info['features'][feature_key(cameras[0])]['shape'][0]} px square)\n"
+        f"- Control: `{control}`; `observation.state`: {', '.join(_names(info, STATE_KEY))}; `action`: "
+        f"{', '.join(_names(info, 'action'))}\n"
         f"- Per-episode provenance (instance, context, seed): `{PROVENANCE_FILE.as_posix()}` "
         f"({provenance_rows} rows)"
     )
@@ -230,10 +232,7 @@ def read_provenance(root: str | Path) -> tuple[pd.DataFrame, list[str]]:
             f"{PROGRESS_FILE} missing)"
         )
     Progress.load(root)  # checks the format version
-    prefix = IMAGE_KEY.format("")
-    cameras = [
-        k[len(prefix) :] for k in json.loads(info_path.read_text())["features"] if k.startswith(prefix)
-    ]
+    cameras = [c for c in map(camera_of_feature, json.loads(info_path.read_text())["features"]) if c]
     return pd.read_parquet(root / PROVENANCE_FILE), cameras
 
 
@@ -264,7 +263,7 @@ def add_episode(dataset, episode: DemoEpisode) -> None:  # dataset: lerobot LeRo
     """Append one successful expert episode through lerobot's add_frame / save_episode."""
     task = episode.instruction
     for t in range(episode.steps):
-        frame = {IMAGE_KEY.format(cam): frames[t] for cam, frames in episode.images.items()}
+        frame = {feature_key(cam): frames[t] for cam, frames in episode.images.items()}
         frame[STATE_KEY] = episode.states[t]
         frame["action"] = episode.actions[t]
         frame["task"] = task

@@ -14,6 +14,7 @@ import numpy as np
 
 from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
+from roboview.tasks.world import load_world
 from roboview.variation.factors import FACTORS, context_factors
 from roboview.variation.instances import TaskInstance, seed_from_text
 from roboview.variation.randomization import Randomization, sample_randomization
@@ -106,6 +107,7 @@ class DemoCollector:
             task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps, control=control
         )
         self.expert = load_task(task).make_expert(self.env)  # its actions are in the env's control
+        self.episode_visuals = load_world(self.env.world).episode_visuals
         # The state recorded with each action: the one the control's policies read (LIBERO-style for EE).
         self.state_key = STATE_KEY if control == "joint" else EE_STATE_KEY
 
@@ -113,8 +115,9 @@ class DemoCollector:
         start = time.perf_counter()
         ep_seed = attempt_seed(self.seed, attempt)
         instance = training_instance(np.random.default_rng(ep_seed), self.task, self.contexts)
-        # RoboView's scene records the colors and camera poses its frames show; another world's are its own.
-        visuals = sample_randomization(ep_seed, self.randomize) if self.env.world == "roboview" else None
+        # A world that draws per-episode visuals records the colors and camera poses its frames show; another
+        # world's are its own.
+        visuals = sample_randomization(ep_seed, self.randomize) if self.episode_visuals else None
         options = {"instance": instance}
         if self.randomize:  # context-only collections reset exactly as before
             options |= {"object_rgb": visuals.object_rgb, "cameras": visuals.cameras}

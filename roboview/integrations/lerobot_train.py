@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 TRAINER = (sys.executable, "-m", "lerobot.scripts.lerobot_train")
-IMAGE_PREFIX = "observation.images."
 
 
 @dataclass(frozen=True)
@@ -54,10 +53,10 @@ def last_checkpoint(output_dir: Path) -> Path | None:
 
 def dataset_cameras(root: str | Path) -> dict[str, list[int]]:
     """camera → (H, W, 3) of every image feature of the LeRobot dataset at `root`."""
+    from roboview.tasks.world import camera_of_feature
+
     features = json.loads((Path(root) / "meta" / "info.json").read_text())["features"]
-    return {
-        k.removeprefix(IMAGE_PREFIX): v["shape"] for k, v in features.items() if k.startswith(IMAGE_PREFIX)
-    }
+    return {camera_of_feature(k): v["shape"] for k, v in features.items() if camera_of_feature(k)}
 
 
 def eval_flags(dataset_root: str, periodic: PeriodicEval) -> list[str]:

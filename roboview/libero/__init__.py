@@ -9,6 +9,9 @@
 Nothing here imports LIBERO, robosuite or torch at import time; they load when a world or suite is first used.
 """
 
+# The task registry first: a module of this wing imported on its own (`import roboview.libero.task`) then finds
+# every task and preset registered, its own included, instead of a registry half built around it.
+import roboview.tasks  # noqa: E402, F401
 from roboview.libero.bootstrap import PIP_INSTALL, LiberoMissing, ensure_libero
 from roboview.libero.env import LiberoWorld, lerobot_state, lerobot_view
 from roboview.libero.suites import SUITES, LiberoTask, get_task, init_state, max_steps, tasks

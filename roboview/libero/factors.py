@@ -30,16 +30,23 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from roboview.variation.model_edits import (
+    ORBIT_AZIMUTHS_DEG,
+    ORBIT_ELEVATIONS_DEG,
+    look_at,
+    orbit_eye,
+    pulled_back,
+    rotation,
+    texture_pixels,
+    turned,
+)
+
 AGENTVIEW = "agentview"
 WRIST = "robot0_eye_in_hand"
 VISUAL_GROUP = 1  # robosuite renders geom group 1 (visual meshes) only
 _MODEL_FIELDS = ("geom_rgba", "mat_rgba", "mat_texid", "cam_pos", "cam_quat", "cam_fovy") + tuple(
     f"light_{f}" for f in ("diffuse", "ambient", "specular", "dir", "pos")
 )
-ORBIT_ELEVATIONS_DEG = (35.0, 50.0, 65.0)  # one ring per elevation above the workspace center
-ORBIT_AZIMUTHS_DEG = tuple(np.linspace(-72.0, 72.0, 7))  # about agentview's own azimuth
-DIST_STEP_M = 0.05
-TEXTURE_PATTERNS = ("checker", "stripes", "noise", "gray")
 
 
 # ---- snapshot / restore (soft resets keep the edited model) --------------------------------------------------
@@ -128,20 +135,6 @@ def _set_agentview(world, pos: np.ndarray, rot: np.ndarray) -> None:
     model.cam_pos[cam], model.cam_quat[cam] = pos, quat
 
 
-def _rotation(quat: np.ndarray) -> np.ndarray:
-    mat = np.zeros(9)
-    mujoco.mju_quat2Mat(mat, quat)
-    return mat.reshape(3, 3)  # columns: camera right, up, backward
-
-
-def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Camera rotation (columns right, up, backward) at `eye` looking at `target`, world +z up in the image."""
-    backward = (eye - target) / np.linalg.norm(eye - target)
-    right = np.cross([0.0, 0.0, 1.0], backward)
-    right /= np.linalg.norm(right)
-    return np.column_stack([right, np.cross(backward, right), backward])
-
-
 def _tex_slice(model: mujoco.MjModel, tex: int) -> slice:
     start = model.tex_adr[tex]
     return slice(start, start + model.tex_width[tex] * model.tex_height[tex] * model.tex_nchannel[tex])
@@ -197,13 +190,7 @@ class OrbitalPose:
     def apply(self, world) -> None:
         center = workspace_center(world)
         pos, _ = camera_pose(world)
-        offset = pos - center
-        distance = np.linalg.norm(offset)
-        azimuth = np.arctan2(offset[1], offset[0]) + np.deg2rad(ORBIT_AZIMUTHS_DEG[self.k])
-        elevation = np.deg2rad(ORBIT_ELEVATIONS_DEG[self.ring])
-        eye = center + distance * np.array(
-            [np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)]
-        )
+        eye = orbit_eye(center, pos, self.ring, self.k)
         _set_agentview(world, eye, look_at(eye, center))
 
 
@@ -216,10 +203,7 @@ class CameraEuler:
 
     def apply(self, world) -> None:
         pos, quat = camera_pose(world)
-        yaw, pitch = np.deg2rad(self.yaw_deg), np.deg2rad(self.pitch_deg)
-        r_yaw = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
-        r_pitch = np.array([[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]])
-        _set_agentview(world, pos, _rotation(quat) @ r_yaw @ r_pitch)
+        _set_agentview(world, pos, turned(rotation(quat), self.yaw_deg, self.pitch_deg))
 
 
 @dataclass(frozen=True)
@@ -230,8 +214,8 @@ class PullBack:
 
     def apply(self, world) -> None:
         pos, quat = camera_pose(world)
-        rot = _rotation(quat)
-        _set_agentview(world, pos + DIST_STEP_M * self.k * rot[:, 2], rot)
+        rot = rotation(quat)
+        _set_agentview(world, pulled_back(pos, rot, self.k), rot)
 
 
 @dataclass(frozen=True)
@@ -262,59 +246,6 @@ def support_texture(world) -> int:
     if tex < 0:
         raise RuntimeError("no textured support surface found below the workspace center")
     return int(tex)
-
-
-def texture_pixels(pattern: str, height: int, width: int, channels: int) -> np.ndarray:
-    """A procedural (height, width, channels) uint8 texture; deterministic (fixed seed for `noise`). `pattern` is
-    one of TEXTURE_PATTERNS or a value of RoboView's `table_texture` factor (its colors and pattern, drawn here)."""
-    from roboview.variation.factors.table_texture import TEXTURES
-
-    if pattern in TEXTURES:
-        return _named_texture(pattern, height, width, channels)
-    y, x = np.mgrid[0:height, 0:width]
-    cells = max(height, width) // 16 or 1
-    if pattern == "checker":
-        gray = np.where((x // cells + y // cells) % 2, 200, 60)
-    elif pattern == "stripes":
-        gray = np.where((x // cells) % 2, 220, 90)
-    elif pattern == "noise":
-        gray = np.random.default_rng(0).integers(40, 220, (height, width))
-    elif pattern == "gray":
-        gray = np.full((height, width), 128)
-    else:
-        allowed = (*TEXTURE_PATTERNS, *TEXTURES)
-        raise ValueError(f"texture pattern {pattern!r} unknown; allowed: {', '.join(allowed)}")
-    return np.repeat(gray[..., None], channels, axis=2).astype(np.uint8)
-
-
-def _named_texture(name: str, height: int, width: int, channels: int) -> np.ndarray:
-    """RoboView's `table_texture` value `name` drawn as pixels: its builtin (checker, gradient, flat), its two
-    colors, its mark (edge lines, random speckle, crosses) and its repeat count over the texture."""
-    from roboview.variation.factors.table_texture import TEXTURES
-
-    builtin, mark, rgb1, rgb2, markrgb, random, repeat = TEXTURES[name]
-    y, x = np.mgrid[0:height, 0:width]
-    cell = max(1, max(height, width) // (2 * repeat))
-    c1, c2, cm = (np.asarray(c, float) for c in (rgb1, rgb2, markrgb))
-    if builtin == "checker":
-        rgb = np.where(((x // cell + y // cell) % 2)[..., None], c1, c2)
-    elif builtin == "gradient":
-        rgb = c1 + (c2 - c1) * (y / max(1, height - 1))[..., None]
-    else:
-        rgb = np.broadcast_to(c1, (height, width, 3)).copy()
-    if mark == "edge":
-        rgb[(x % cell < 2) | (y % cell < 2)] = cm
-    elif mark == "random":
-        rgb[np.random.default_rng(0).random((height, width)) < random] = cm
-    elif mark == "cross":
-        rgb[(np.abs(x % cell - cell // 2) < 2) & (np.abs(y % cell - cell // 2) < cell // 4)] = cm
-        rgb[(np.abs(y % cell - cell // 2) < 2) & (np.abs(x % cell - cell // 2) < cell // 4)] = cm
-    pixels = np.clip(np.round(rgb * 255), 0, 255).astype(np.uint8)
-    return (
-        pixels[..., :channels]
-        if channels <= 3
-        else np.concatenate([pixels, np.full((height, width, channels - 3), 255, np.uint8)], axis=2)
-    )
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from roboview.benchmark.build import BuildResult, BuildSpec, GateFailure, build
-from roboview.benchmark.fairness import FairnessThresholds
 from roboview.pipelines._cli import cli_main
 from roboview.policies.vlm.client import Endpoint, VLMClient
 from roboview.sim.cameras import IMAGE_SIZE_MIN, check_image_size
 from roboview.tasks import PRESETS, load_preset
+from roboview.tasks.fairness import FairnessThresholds
 from roboview.variation.instances import SuiteConfig, generate_suite
 
 # The perceptual-fairness gate judges visibility from object pixel counts: at 64² the smallest tiny-preset

@@ -23,6 +23,7 @@ from roboview.demos.recorder import parse_contexts
 from roboview.pipelines._cli import cli_main
 from roboview.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
 from roboview.tasks import DEFAULT_TASK, load_task
+from roboview.tasks.world import load_world
 from roboview.variation.randomization import validate_randomize
 
 VCODECS = ("libsvtav1", "h264", "hevc")
@@ -41,8 +42,9 @@ class DatasetConfig:
     root: str = "outputs/demos"
     # Number of successful episodes the dataset should hold when the run ends.
     num_episodes: int = 50
-    # Control and recording rate (Hz); must divide the 500 Hz physics rate.
-    fps: int = 10
+    # Control and recording rate (Hz); must divide the 500 Hz physics rate. 0: the world's own rate where it has one
+    # (Meta-World's 80 Hz), else 10.
+    fps: int = 0
     # Side of the square camera images (pixels).
     image_size: int = 224
     # Cameras recorded as videos (any of front, left_top, right_top, wrist; LIBERO's scenes: image, image2 — LeRobot's
@@ -62,17 +64,13 @@ class DatasetConfig:
     contexts: str = ""
     # Control the demos are recorded in: joint (observation.state = joints, action = 7 joint targets + gripper),
     # ee_delta or ee_abs (observation.state = the EE state, action = the 7-d EE action; docs/control.md).
-    control: str = "joint"
+    control: str = ""
 
     def __post_init__(self) -> None:
         if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):
             raise ValueError(f"--dataset.repo_id={self.repo_id!r} must look like ORG/NAME")
         if self.num_episodes <= 0:
             raise ValueError(f"--dataset.num_episodes={self.num_episodes} must be a positive count")
-        if self.fps <= 0 or 500 % self.fps:
-            raise ValueError(
-                f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)"
-            )
         check_image_size(
             self.image_size,
             "--dataset.image_size",
@@ -92,11 +90,23 @@ class DatasetConfig:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
         with flag_errors("--dataset.randomize"):
             self.randomize = list(validate_randomize(self.randomize))
-        if self.randomize and env_class.world != "roboview":
+        if self.randomize and not load_world(env_class.world).episode_visuals:
             raise ValueError(
                 f"--dataset.randomize={','.join(self.randomize)}: domain randomization draws RoboView's scene's "
                 f"colors and camera poses; --dataset.task={self.task} runs in the {env_class.world} world"
             )
+        world = load_world(env_class.world)
+        if world.fps and self.fps not in (0, world.fps):
+            raise ValueError(
+                f"--dataset.fps={self.fps}: the {world.name} world runs at {world.fps} Hz; drop the flag"
+            )
+        self.fps = self.fps or world.fps or 10
+        if not world.fps and (self.fps <= 0 or 500 % self.fps):
+            raise ValueError(
+                f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)"
+            )
+        # No control given: the world's only one (LIBERO's ee_delta), or joint where the world takes several.
+        self.control = self.control or load_world(env_class.world).default_control or "joint"
         if self.control not in env_class.controls:
             raise ValueError(
                 f"--dataset.control={self.control!r} is not a control of --dataset.task={self.task}; allowed: "

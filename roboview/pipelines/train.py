@@ -116,7 +116,9 @@ class TrainConfig:
                 f"--dataset.root={self.dataset.root!r} holds no LeRobot dataset (meta/info.json "
                 "missing); collect one with `roboview-collect`"
             )
-        cameras = [k for k in json.loads(info.read_text())["features"] if k.startswith("observation.images.")]
+        from roboview.tasks.world import camera_of_feature
+
+        cameras = [k for k in json.loads(info.read_text())["features"] if camera_of_feature(k)]
         if not cameras:
             raise ValueError(
                 f"--dataset.root={self.dataset.root} has no camera features; ACT needs at least one"

@@ -28,9 +28,10 @@ import numpy as np
 
 from roboview.policies.errors import TransientPolicyError  # noqa: F401  (part of the policy API)
 from roboview.sim.cameras import CameraPose
-from roboview.sim.control import CONTROLS, JointToEE, check_control
+from roboview.sim.control import JointToEE, check_control
 from roboview.sim.scene import Scene
 from roboview.tasks.env import EE_STATE_KEY, TaskEnv
+from roboview.tasks.world import all_controls
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ class Episode:
             env.instance.task,
             env.instruction,
             seed,
-            {c: env.scene.camera_pose(c) for c in env.cameras},
+            {c: env.camera_pose(c) for c in env.cameras},
             env.image_size,
         )
 
@@ -269,8 +270,8 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
 def control_field(config: PolicyConfig) -> None:
     """Check a config's `control` field (the `--policy.control` flag)."""
-    if config.control not in CONTROLS:
-        raise ValueError(f"unknown --policy.control={config.control!r}; allowed: {', '.join(CONTROLS)}")
+    if config.control not in all_controls():
+        raise ValueError(f"unknown --policy.control={config.control!r}; allowed: {', '.join(all_controls())}")
 
 
 @dataclass
@@ -300,18 +301,25 @@ class ServedConnection:
 
 @dataclass
 class ControlledConfig(PolicyConfig):
-    """A policy type whose control mode is chosen with `--policy.control` (default joint)."""
+    """A policy type whose control mode is chosen with `--policy.control` (default: the world's only control, else
+    joint)."""
 
     # Control mode the policy acts in: joint (7 joint targets + gripper), ee_delta or ee_abs (end effector:
-    # position + axis-angle + gripper, LIBERO convention; docs/control.md).
-    control: str = "joint"
+    # position + axis-angle + gripper, LIBERO convention; docs/control.md). Empty: the world's only control where
+    # it takes one (LIBERO's ee_delta), else joint.
+    control: str = ""
 
     def __post_init__(self) -> None:
-        control_field(self)
+        if self.control:
+            control_field(self)
         super().__post_init__()
 
+    def settle_control(self, controls: tuple[str, ...]) -> None:
+        if not self.control:
+            self.control = controls[0] if len(controls) == 1 else "joint"
+
     def env_control(self) -> str:
-        return self.control
+        return self.control or "joint"
 
 
 class JointPlanInEE:

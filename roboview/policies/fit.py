@@ -22,7 +22,9 @@ def fit_policy(policy: PolicyConfig, tasks: Sequence[str]) -> None:
     control = policy.env_control()
     for task, env in envs.items():
         if control not in env.controls:
-            hint = f" (pass --policy.control={env.controls[0]})" if hasattr(policy, "control") else ""
+            # A checkpoint acts in the control its action was trained in: another flag cannot fit it.
+            settable = hasattr(policy, "control") and not policy.checkpoint
+            hint = f" (pass --policy.control={env.controls[0]})" if settable else ""
             raise ValueError(
                 f"the {task!r} task's env takes control {', '.join(env.controls)}; {describe(policy)} acts in "
                 f"{control!r}{hint}"

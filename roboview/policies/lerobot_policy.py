@@ -30,8 +30,9 @@ from roboview.policies.checkpoints import CheckpointError, checkpoint_dir
 from roboview.policies.devices import resolve_device
 from roboview.sim.control import CONTROLS, EE_ACTION_NAMES, EE_CONTROLS
 from roboview.tasks import camera_names
-from roboview.tasks.env import ACTION_NAMES, EE_STATE_KEY, STATE_KEY, STATE_NAMES
-from roboview.tasks.libero import ACTION_NAMES as LIBERO_ACTION_NAMES
+from roboview.tasks.base import control_of_action_names, feature_dims
+from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
+from roboview.tasks.world import camera_of_feature
 
 log = logging.getLogger(__name__)
 
@@ -56,26 +57,30 @@ def load_config(path: str | None):
 
 
 def check_features(config) -> None:
-    """Every input the checkpoint wants must be one we render; its action must be our action."""
+    """Every input the checkpoint wants must be one some world renders; its state and action widths must be some
+    world's in some control (roboview.tasks.base.feature_dims)."""
     problems = []
     cameras = camera_names()
+    dims = feature_dims()
+    state_widths = sorted({s for _, s, _ in dims})
+    action_widths = sorted({a for _, _, a in dims})
     for key, feature in config.input_features.items():
-        if key.startswith("observation.images."):
-            cam = key.removeprefix("observation.images.")
+        cam = camera_of_feature(key)
+        if cam is not None:
             if cam not in cameras:
                 problems.append(f"camera {cam!r} (the envs' cameras: {', '.join(cameras)})")
         elif key == STATE_KEY:
-            if tuple(feature.shape) != (len(STATE_NAMES),):
-                problems.append(f"{key} shape {tuple(feature.shape)} (env gives ({len(STATE_NAMES)},))")
+            if tuple(feature.shape)[-1:] not in [(w,) for w in state_widths]:
+                problems.append(
+                    f"{key} shape {tuple(feature.shape)} (the envs' states: widths {state_widths})"
+                )
         else:
             problems.append(f"input {key!r} (env provides observation.images.<camera> and {STATE_KEY})")
     action = config.output_features.get("action")
-    if action is None or tuple(action.shape) not in ((len(ACTION_NAMES),), (EE_ACTION_DIMS,)):
+    if action is None or tuple(action.shape) not in [(w,) for w in action_widths]:
         shape = None if action is None else tuple(action.shape)
-        problems.append(
-            f"action shape {shape} (env expects ({len(ACTION_NAMES)},): 7 joint targets + gripper, or "
-            f"({EE_ACTION_DIMS},): end-effector pose + gripper)"
-        )
+        widths = ", ".join(f"({a},): {c}" for c, _, a in dims)
+        problems.append(f"action shape {shape} (the envs' actions: {widths})")
     if problems:
         raise CheckpointError("checkpoint does not match RoboView's envs: " + "; ".join(problems))
 
@@ -124,23 +129,23 @@ def refuse_control(path: str, given: str, found: str | None, fix: str) -> None:
 
 
 def checkpoint_control(path: str | None) -> str | None:
-    """The control a checkpoint acts in: joint for an 8-d action; for a 7-d one the EE control whose action
-    names its training dataset records (None when that dataset cannot be read here)."""
+    """The control a checkpoint acts in: the one whose action width it has, where only one control has it (joint:
+    8-d; Meta-World's xyz_delta: 4-d); for a 7-d one the EE control whose action names its training dataset records
+    (None when that dataset cannot be read here)."""
     root, config = load_config(path)
-    if tuple(config.output_features["action"].shape) == (len(ACTION_NAMES),):
-        return "joint"
+    width = tuple(config.output_features["action"].shape)[-1]
+    controls = list(dict.fromkeys(c for c, _, a in feature_dims() if a == width))
+    if len(controls) == 1:
+        return controls[0]
     names = dataset_action_names(root)
-    if names == list(LIBERO_ACTION_NAMES):  # LeRobot-format LIBERO datasets: OSC_POSE deltas
-        return "ee_delta"
-    return next((c for c in EE_CONTROLS if names == list(EE_ACTION_NAMES[c])), None)
+    # The world whose datasets name their actions so (LeRobot-format LIBERO datasets: OSC_POSE deltas, ee_delta).
+    return control_of_action_names(names) if names else None
 
 
 def checkpoint_image_size(path: str | None) -> int | None:
     """The side of the checkpoint's (square) input images; every camera must share it."""
     _, config = load_config(path)
-    shapes = {
-        k: tuple(f.shape) for k, f in config.input_features.items() if k.startswith("observation.images.")
-    }
+    shapes = {k: tuple(f.shape) for k, f in config.input_features.items() if camera_of_feature(k)}
     sides = {shape[-1] for shape in shapes.values()}
     if any(shape[-1] != shape[-2] for shape in shapes.values()) or len(sides) > 1:
         raise CheckpointError(
@@ -152,11 +157,7 @@ def checkpoint_image_size(path: str | None) -> int | None:
 
 def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
     _, config = load_config(path)
-    cams = tuple(
-        k.removeprefix("observation.images.")
-        for k in config.input_features
-        if k.startswith("observation.images.")
-    )
+    cams = tuple(c for c in map(camera_of_feature, config.input_features) if c)
     return cams or ("front",)
 
 
@@ -197,7 +198,10 @@ class LeRobotPolicy:
             pretrained_path=str(root),
             preprocessor_overrides={"device_processor": {"device": device}},
         )
-        self.image_keys = [k for k in config.input_features if k.startswith("observation.images.")]
+        # (checkpoint feature, env observation key) of every camera it reads.
+        self.image_keys = [
+            (k, IMAGE_KEY.format(camera_of_feature(k))) for k in config.input_features if camera_of_feature(k)
+        ]
         # An end-effector checkpoint was trained on the EE state as its observation.state.
         self.state_key = STATE_KEY if control == "joint" else EE_STATE_KEY
         # Chunked: the adapter pops the chunk itself (observations read once per chunk, slots batched).
@@ -229,8 +233,8 @@ class LeRobotPolicy:
             STATE_KEY: torch.from_numpy(np.stack([o[self.state_key] for o in observations])).float(),
             "task": tasks,
         }
-        for key in self.image_keys:
-            images = np.stack([o[key] for o in observations])
+        for key, observed in self.image_keys:
+            images = np.stack([o[observed] for o in observations])
             batch[key] = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
         self.reads += len(observations)
         return self.preprocessor(batch)

@@ -84,7 +84,7 @@ from roboview.policies.serving.openpi_wire import (
 )
 from roboview.tasks import camera_names
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
-from roboview.tasks.libero import LIBERO_RENDER_SIZE, LIBERO_SCENE_CAMERAS
+from roboview.tasks.world import native_render_size
 
 log = logging.getLogger(__name__)
 
@@ -436,8 +436,9 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
         """The side the env renders the cameras at (then resized to image_size when it differs)."""
         if self.render_size:
             return self.render_size
-        libero = any(c in LIBERO_SCENE_CAMERAS for c in self.camera_list)
-        return LIBERO_RENDER_SIZE if libero and self.obs_format == "libero" else self.image_size
+        # A world's own cameras in the openpi layout of that world render at its harnesses' side (LIBERO's 256).
+        native = native_render_size(self.camera_list) if self.obs_format == "libero" else 0
+        return native or self.image_size
 
     def input_image_size(self) -> int | None:
         return self.render_side

@@ -47,7 +47,7 @@ from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
 from roboview.sim.control import CONTROLS
 from roboview.tasks import camera_names
 from roboview.tasks.env import IMAGE_KEY
-from roboview.tasks.libero import LIBERO_RENDER_SIZE, LIBERO_SCENE_CAMERAS
+from roboview.tasks.world import native_render_size
 
 log = logging.getLogger(__name__)
 
@@ -413,8 +413,7 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
     def input_image_size(self) -> int | None:
         if self.image_size:
             return self.image_size
-        libero = any(cam in LIBERO_SCENE_CAMERAS for cam in self.observed_cameras())
-        return LIBERO_RENDER_SIZE if libero else DEFAULT_IMAGE_SIZE
+        return native_render_size(self.observed_cameras()) or DEFAULT_IMAGE_SIZE
 
     def options(self) -> dict[str, Any]:
         # The URL is where the policy lives, not what it is: a resume may point at a restarted server.

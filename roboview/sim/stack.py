@@ -101,7 +101,7 @@ def describe(env) -> dict[str, Any]:
             },
             "sha256": assets_hash(model),
         },
-        "scene": {"task": env.task, "sha256": hashlib.sha256(env.scene.spec.to_xml().encode()).hexdigest()},
+        "scene": {"task": env.task, "sha256": hashlib.sha256(env.scene_xml().encode()).hexdigest()},
         "physics": physics_options(model),
         "renderer": {
             **gl_strings(env),

@@ -35,7 +35,12 @@ from roboview.tasks.expert import ScriptedExpert
 from roboview.variation.factors import DEFAULT_TASK
 
 # Registry lines: imported in this order, the order of the tasks in a suite that names several.
-BUILTIN_MODULES = ("roboview.tasks.pick_place", "roboview.tasks.push", "roboview.tasks.libero")
+BUILTIN_MODULES = (
+    "roboview.tasks.pick_place",
+    "roboview.tasks.push",
+    "roboview.libero.task",
+    "roboview.metaworld.task",
+)
 # Third-party tasks: a package lists its task modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.tasks"
 for _module in BUILTIN_MODULES:

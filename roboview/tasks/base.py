@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from roboview.sim.motion import MotionPlanner
-from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS
+from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS, action_names, state_names
 from roboview.variation.factors import DEFAULT_TASK, context_factors
 
 if TYPE_CHECKING:
@@ -131,6 +131,34 @@ def camera_names() -> tuple[str, ...]:
     """Every camera name some registered task's env renders (a checkpoint that wants another is refused at once;
     whether the benchmark's own tasks render it is checked when the run is planned)."""
     return tuple(dict.fromkeys(c for task in TASKS.values() for c in task.env_class().camera_names))
+
+
+def feature_dims() -> list[tuple[str, int, int]]:
+    """(control, state width, action width) of every registered task's env in every control it takes: the
+    `observation.state` and `action` a LeRobot dataset of that env holds."""
+    out = []
+    for task in TASKS.values():
+        env_class = task.env_class()
+        for control in env_class.controls:
+            declared = env_class.feature_names(control)
+            if declared is None:
+                declared = (state_names(control), action_names(control))
+            widths = [len(next(iter(n.values())) if isinstance(n, dict) else n) for n in declared]
+            out.append((control, *widths))
+    return list(dict.fromkeys(out))
+
+
+def control_of_action_names(names: list[str]) -> str | None:
+    """The control whose action a dataset with these `action` names recorded, in whichever registered world names
+    its actions so (LeRobot-format LIBERO datasets: LIBERO's OSC_POSE deltas, `ee_delta`); None: no world's."""
+    for task in TASKS.values():
+        env_class = task.env_class()
+        for control in env_class.controls:
+            declared = env_class.feature_names(control)
+            action = action_names(control) if declared is None else declared[1]
+            if list(action["motors"] if isinstance(action, dict) else action) == list(names):
+                return control
+    return None
 
 
 def make_env(task: str = DEFAULT_TASK, **kwargs: Any) -> gym.Env:

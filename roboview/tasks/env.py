@@ -42,6 +42,7 @@ from roboview.sim.scene import (
     RenderQuality,
     Scene,
 )
+from roboview.tasks.world import World, WorldEnv, register_world
 from roboview.variation.factors import (
     DEFAULT_TASK,
     FACTORS,
@@ -75,6 +76,11 @@ UNSTABLE_REASON = "simulation unstable"
 RELEASED_GRIPPER = 0.25
 
 
+def state_names(control: str) -> tuple[str, ...]:
+    """The names of the `observation.state` entries a policy in `control` reads: the joints, or the EE state."""
+    return STATE_NAMES if check_control(control) == "joint" else EE_STATE_NAMES
+
+
 def action_names(control: str) -> tuple[str, ...]:
     """The names of a control mode's action entries (a dataset's `action` feature names)."""
     return ACTION_NAMES if check_control(control) == "joint" else EE_ACTION_NAMES[control]
@@ -103,6 +109,26 @@ def _observation_space(cameras: Sequence[str], image_size: int, depth: bool) -> 
     return gym.spaces.Dict(spaces)
 
 
+# RoboView's own world: the shared scene of `roboview.sim`, which the built-in tasks (pick_place, push) build on.
+WORLD = register_world(
+    World(
+        name="roboview",
+        title="RoboView's scene: Franka Panda + Robotiq 2F-85, one small object, four cameras",
+        cameras={c: c for c in ALL_CAMERAS},
+        # VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
+        observed_cameras=("front", "left_top", "wrist"),
+        judged_cameras=("front", "left_top", "wrist"),
+        recorded_cameras=ALL_CAMERAS,
+        wrist_cameras=("wrist",),
+        controls=CONTROLS,
+        probe="roboview.tasks.fairness:FairnessProbe",
+        episode_visuals=True,
+        instruction="the task's `instruction` context factor (paraphrases of one goal)",
+        success="the task's own test (`is_success`), after every step",
+    )
+)
+
+
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
     """Every factor at its baseline: the scene the expert demos are rendered in."""
     return TaskInstance(
@@ -110,7 +136,7 @@ def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
     )
 
 
-class TaskEnv(gym.Env):
+class TaskEnv(WorldEnv):
     """Franka Panda + Robotiq 2F-85 and one small object on a table, seen by four cameras; a task subclasses it.
 
     **Observations** (keys are the LeRobot dataset's feature keys): ``observation.images.<camera>``
@@ -440,6 +466,15 @@ class TaskEnv(gym.Env):
         """Privileged: the active object's linear speed (m/s)."""
         dof = self.scene.ids.shape_dof[self.shape]
         return float(np.linalg.norm(self.data.qvel[dof : dof + 3]))
+
+    def camera_ids(self) -> dict[str, int]:
+        return dict(self.scene.ids.cameras)
+
+    def camera_pose(self, name: str):
+        return self.scene.camera_pose(name)
+
+    def scene_xml(self) -> str:
+        return self.scene.spec.to_xml()
 
     def _observation(self) -> dict[str, np.ndarray]:
         renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}

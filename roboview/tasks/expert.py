@@ -8,9 +8,10 @@ from roboview.sim.control import EE_CONTROLS, JointToEE
 from roboview.sim.motion import MotionPlanner, yaw_of
 from roboview.sim.scene import SHAPES
 from roboview.tasks.env import TaskEnv
+from roboview.tasks.world import WorldExpert
 
 
-class ScriptedExpert:
+class ScriptedExpert(WorldExpert):
     """Privileged: reads the object's true pose and the target's, then follows the task's `plan`.
 
     It solves every context at baseline visuals, so a benchmark that biases it is broken. It plans joint
@@ -18,10 +19,8 @@ class ScriptedExpert:
     (`JointToEE`: the targets' forward kinematics for ee_abs, their difference from the EE state for ee_delta).
     """
 
-    name = "expert"
-
     def __init__(self, env: TaskEnv) -> None:
-        self.env = env
+        super().__init__(env)
         self.planner = MotionPlanner(env.model)
         self._to_ee = (
             JointToEE(env.model, env.control, self.planner.ik) if env.control in EE_CONTROLS else None

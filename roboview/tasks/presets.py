@@ -94,7 +94,7 @@ register_preset(
     )
 )
 
-# LIBERO's scenes (roboview.tasks.libero; docs/libero.md). Their factors: every visual factor but distractors and
+# LIBERO's scenes (roboview.libero.task; docs/libero.md). Their factors: every visual factor but distractors and
 # object_size. `libero_tiny`: one context (libero_object task 0, init state 0) and a few values: 4 instances,
 # for tests and `make demo-libero`. `libero`: the 40 tasks of the four suites (init state 0) × every value of the
 # six factors, 7,880 instances (a GPU-scale study; docs/libero.md says how to run a share of it). Its color split
@@ -153,3 +153,21 @@ register_preset(
 register_preset(
     replace(PRESETS["libero"], preset="libero_camera", splits=("camera_pose", "camera_euler", "dist_scale"))
 )
+
+# Meta-World's scenes (roboview.metaworld.task; docs/metaworld.md): the same six factors as LIBERO's. `metaworld_tiny`:
+# push-v3 and a few values, 4 instances, for tests and a first look. `metaworld`: the registered tasks × every value
+# of the six factors (repeats run further seeds: further object and goal positions).
+register_preset(
+    replace(
+        PRESETS["libero_tiny"],
+        preset="metaworld_tiny",
+        tasks=("metaworld",),
+        value_subsets=(
+            ("color", ("red", "blue")),
+            ("camera_pose", ("orbit_r1_3",)),
+            ("lighting", ("dim_left",)),
+            ("metaworld_task", ("push-v3",)),
+        ),
+    )
+)
+register_preset(replace(PRESETS["libero"], preset="metaworld", tasks=("metaworld",), value_subsets=()))

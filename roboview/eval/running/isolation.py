@@ -60,8 +60,8 @@ def components(env, seed: int) -> dict[str, str]:
         "seed": _digest(int(seed)),
         "context": _digest({k: v for k, v in instance.factors if k not in instance.varied}),
     }
-    for name in sorted(env.scene.ids.cameras):
-        pose = env.scene.camera_pose(name)
+    for name in sorted(env.camera_ids()):
+        pose = env.camera_pose(name)
         out[f"camera:{name}"] = _digest([*pose.pos, *pose.quat, pose.fovy])
     return out
 

@@ -16,7 +16,7 @@ from roboview.policies.base import Episode
 from roboview.sim.control import EE_ACTION_NAMES
 from roboview.tasks import camera_names
 from roboview.tasks.env import ACTION_NAMES, DEPTH_KEY, IMAGE_KEY, STATE_KEY, STATE_NAMES
-from roboview.tasks.libero import LIBERO_WRIST_CAMERAS
+from roboview.tasks.world import wrist_camera_names
 
 log = logging.getLogger(__name__)
 
@@ -29,8 +29,8 @@ ROBOVIEW_KEY = "roboview"
 EPISODE_KEY = "roboview/episode"
 WIRE_DIMS = len(ACTION_NAMES)  # 7 joints + gripper
 EE_WIRE_DIMS = len(EE_ACTION_NAMES["ee_delta"])  # end-effector pose (6) + gripper
-# The wrist cameras by name: RoboView's `wrist`, and LIBERO's (`wrist`, and `image2`, LeRobot's name of it).
-WRIST_CAMERAS = tuple(dict.fromkeys(("wrist", *LIBERO_WRIST_CAMERAS)))
+# The wrist cameras by name, every world's (RoboView's `wrist`; LIBERO's `wrist` and `image2`, LeRobot's name of it).
+WRIST_CAMERAS = wrist_camera_names()
 _SLICE = re.compile(r"^state\[(\d*):(\d*)\]$")
 
 

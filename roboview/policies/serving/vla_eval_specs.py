@@ -44,7 +44,7 @@ from vla_eval.specs import (
 
 from roboview.tasks import camera_names
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
-from roboview.tasks.libero import PROPRIO_KEY
+from roboview.tasks.world import proprio_of
 
 JOINT_TARGETS = DimSpec(
     "joints", 7, "joint_positions", description="absolute Panda joint position targets (rad)"
@@ -111,10 +111,10 @@ class Negotiated:
     def state(self, observation) -> np.ndarray:
         """The state sent: on LIBERO's scenes an EE state as vla-eval's LIBERO benchmark builds it, else the
         env's, float32."""
-        proprio = observation.get(PROPRIO_KEY) if self.state_key == EE_STATE_KEY else None
+        proprio = proprio_of(observation) if self.state_key == EE_STATE_KEY else None
         if proprio is None:
             return np.asarray(observation[self.state_key], np.float32)
-        return libero_state(np.asarray(proprio, np.float64), self.quat_no_antipodal)
+        return libero_state(proprio, self.quat_no_antipodal)
 
     def env_action(self, action: np.ndarray) -> np.ndarray:
         """The env action for one answered action; ValueError (the episode's failure) for a wrong width."""

@@ -138,7 +138,7 @@ class PullBack(_CameraApplier):
 
 
 # The cameras these factors move: what the isolation certificate lets differ across their values (RoboView's
-# `front` and `left_top`; in LIBERO's scenes, roboview.tasks.libero, `agentview`).
+# `front` and `left_top`; in LIBERO's scenes, roboview.libero.task, `agentview`).
 MOVED = (*(f"camera:{name}" for name in PERTURBED_CAMERAS), "camera:agentview")
 
 CAMERA_POSE = register_factor(

@@ -1,4 +1,4 @@
-"""The `libero` task: LIBERO's own scenes and tasks as RoboView contexts (``RoboView/Libero-v0``), so a policy
+"""The `libero` task and the `libero` world: LIBERO's own scenes and tasks as RoboView contexts (``RoboView/Libero-v0``), so a policy
 trained on LIBERO gets a factor-isolated visual-bias profile without fine-tuning (docs/libero.md).
 
 **Contexts.** A context is (suite task, init state): `libero_task` names one task of the four suites as
@@ -39,7 +39,6 @@ harness's state convention builds its state (vla-eval's LIBERO benchmark). Image
 from __future__ import annotations
 
 import os
-from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
@@ -50,6 +49,7 @@ from roboview.libero.suites import SUITES, max_steps
 from roboview.sim.cameras import CameraPose, mat_to_quat
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
+from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
 from roboview.variation.factors import Factor, register_factor
 
 if TYPE_CHECKING:
@@ -66,10 +66,7 @@ CAMERAS = {
     "image2": "robot0_eye_in_hand",
 }
 OBSERVED_CAMERAS = ("agentview", "wrist")
-# The scene camera and the wrist camera under all their names, and the side every LIBERO harness renders at
-# (LeRobot's LiberoEnv class, openpi's and vla-eval's LIBERO clients).
-LIBERO_SCENE_CAMERAS = tuple(name for name, camera in CAMERAS.items() if camera == "agentview")
-LIBERO_WRIST_CAMERAS = tuple(name for name, camera in CAMERAS.items() if camera == "robot0_eye_in_hand")
+# The side every LIBERO harness renders at (LeRobot's LiberoEnv class, openpi's and vla-eval's LIBERO clients).
 LIBERO_RENDER_SIZE = IMAGE_SIZE
 IMAGE_KEY = "observation.images.{}"
 STATE_KEY = "observation.state"
@@ -79,6 +76,29 @@ CONTROL = "ee_delta"
 N_INIT_STATES = 50
 # The factors LIBERO's scenes cannot take (an instance setting one away from its baseline is refused).
 NOT_APPLICABLE = ("distractors", "object_size")
+
+register_world(
+    World(
+        name=WORLD,
+        title="LIBERO's scenes and tasks (its four suites), built and reset as LeRobot's LiberoEnv",
+        cameras=CAMERAS,
+        observed_cameras=OBSERVED_CAMERAS,
+        # The wrist camera at t = 0 looks down past the gripper: measured and recorded, not judged.
+        judged_cameras=("agentview",),
+        recorded_cameras=OBSERVED_CAMERAS,
+        wrist_cameras=tuple(name for name, camera in CAMERAS.items() if camera == "robot0_eye_in_hand"),
+        controls=(CONTROL,),
+        probe="roboview.libero.probe:LiberoFairnessProbe",
+        render_size=IMAGE_SIZE,
+        proprio_key=PROPRIO_KEY,
+        instruction="LIBERO's own, one per task (its bddl file's language)",
+        success="LIBERO's goal predicate for the task (check_success), after every step",
+        requires="libero",
+        install="make install-libero",
+        wing="roboview.libero",
+        not_applicable=NOT_APPLICABLE,
+    )
+)
 # The `{"motors": [...]}` names LeRobot-format LIBERO datasets give the state and the action.
 STATE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper", "gripper")
 ACTION_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper")
@@ -118,7 +138,7 @@ def parse_libero_task(value: str) -> tuple[str, int]:
     return suite, int(task_id)
 
 
-class LiberoTaskEnv(gym.Env):
+class LiberoTaskEnv(WorldEnv):
     """The gym env of the `libero` task: one `LiberoWorld` at a time (rebuilt when the instance names another
     LIBERO task), the instance's visual factors applied through LIBERO's own appliers, RoboView's observation
     keys and the episode interface RoboView's evaluator, benchmark builder and isolation certificate read."""
@@ -177,7 +197,6 @@ class LiberoTaskEnv(gym.Env):
         self.instruction = ""
         self.steps, self.max_steps = 0, max_steps or LIBERO_MAX_STEPS
         self._observations = 0
-        self.scene = _LiberoScene(self)
         # The baseline task's world, built now: the stack is described, and the cameras calibrated, from it.
         self._world(*parse_libero_task(LIBERO_TASK.baseline))
 
@@ -273,6 +292,25 @@ class LiberoTaskEnv(gym.Env):
     def render(self):
         return self.render_camera("agentview")
 
+    def camera_ids(self) -> dict[str, int]:
+        return {name: self.model.camera(CAMERAS[name]).id for name in OBSERVED_CAMERAS}
+
+    def camera_pose(self, name: str) -> CameraPose:
+        """Read from LIBERO's compiled model."""
+        import mujoco
+
+        model, data = self.model, self.data
+        cam = model.camera(CAMERAS[name]).id
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_camlight(model, data)
+        quat = mat_to_quat(data.cam_xmat[cam].reshape(3, 3))
+        return CameraPose(
+            name, tuple(map(float, data.cam_xpos[cam])), tuple(map(float, quat)), float(model.cam_fovy[cam])
+        )
+
+    def scene_xml(self) -> str:
+        return self.libero_world.inner.model.get_xml()
+
     def render_camera(self, camera: str) -> np.ndarray:
         """`camera` rendered from the live state now, upright (as observations hand it)."""
         return np.ascontiguousarray(self.libero_world.render(CAMERAS[camera])[::-1, ::-1])
@@ -281,36 +319,6 @@ class LiberoTaskEnv(gym.Env):
         if self.libero_world is not None:
             self.libero_world.close()
             self.libero_world = None
-
-
-class _LiberoScene:
-    """The camera calibration RoboView records and certifies (`ids.cameras`, `camera_pose`), read from LIBERO's
-    compiled model, and the scene's MJCF (`spec.to_xml()`) the stack record hashes."""
-
-    def __init__(self, env: LiberoTaskEnv) -> None:
-        self.env = env
-
-    @property
-    def spec(self):
-        xml = self.env.libero_world.inner.model.get_xml()
-        return SimpleNamespace(to_xml=lambda: xml)
-
-    @property
-    def ids(self):
-        model = self.env.model
-        return SimpleNamespace(cameras={name: model.camera(CAMERAS[name]).id for name in OBSERVED_CAMERAS})
-
-    def camera_pose(self, name: str) -> CameraPose:
-        import mujoco
-
-        model, data = self.env.model, self.env.data
-        cam = model.camera(CAMERAS[name]).id
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_camlight(model, data)
-        quat = mat_to_quat(data.cam_xmat[cam].reshape(3, 3))
-        return CameraPose(
-            name, tuple(map(float, data.cam_xpos[cam])), tuple(map(float, quat)), float(model.cam_fovy[cam])
-        )
 
 
 def appliers(values: dict[str, str]) -> list:
@@ -343,13 +351,10 @@ def appliers(values: dict[str, str]) -> list:
     return out
 
 
-# RoboView's key-light directions, as LIBERO's lights' directions (world frame).
-LIGHT_DIRECTIONS = {"top": None, "left": (0.0, -0.8, -0.6), "front": (-0.8, 0.0, -0.6)}
-
-
 def lighting_applier(value: str):
     from roboview.libero.factors import Lighting
     from roboview.variation.factors.lighting import INTENSITIES
+    from roboview.variation.model_edits import LIGHT_DIRECTIONS
 
     intensity, direction = value.split("_")
     return Lighting(scale=INTENSITIES[intensity], direction=LIGHT_DIRECTIONS[direction])
@@ -366,12 +371,12 @@ def baseline_libero_instance(libero_task: str = LIBERO_TASK.baseline, init_state
     )
 
 
-class LiberoTaskExpert:
+class LiberoTaskExpert(WorldExpert):
     """The privileged scripted expert (`roboview.libero.expert.LiberoExpert`, from true poses through LIBERO's own
     OSC control) on the env's current world, rebuilt for every episode (the world changes with the task)."""
 
     def __init__(self, env: LiberoTaskEnv) -> None:
-        self.env = env
+        super().__init__(env)
         self._expert = None
 
     @staticmethod
@@ -395,10 +400,10 @@ register_task(
     Task(
         name=TASK,
         gym_id="RoboView/Libero-v0",
-        env="roboview.tasks.libero:LiberoTaskEnv",
+        env="roboview.libero.task:LiberoTaskEnv",
         success="LIBERO's own goal predicate for the task (check_success) holds",
         timeout_reason="LIBERO's goal not reached",
-        expert="roboview.tasks.libero:LiberoTaskExpert",
+        expert="roboview.libero.task:LiberoTaskExpert",
         small_contexts=(("libero_task", ("libero_object/0",)), ("init_state", ("0",))),
         max_episode_steps=LIBERO_MAX_STEPS,
         steps_per_context=True,

@@ -1,6 +1,10 @@
 """Perceptual-fairness gate, stage 1: measure, at t = 0 and from every observed camera, whether the
 object and the receiver box are clearly visible — instead of asking a VLM.
 
+This module holds the gate's thresholds, records and measures, shared by every world, and the probe of
+RoboView's own scene (`FairnessProbe`); another world's probe lives in its wing and is named by its `World.probe`
+(`roboview.tasks.world`).
+
 For each observed camera we render segmentation twice: the scene as is, and the scene with every
 geom but the target made invisible (alpha 0, material detached, restored right after — an
 in-place edit). Visible fraction = visible pixels / pixels the target covers unoccluded. The
@@ -16,14 +20,9 @@ import mujoco
 import numpy as np
 from scipy import ndimage
 
-from roboview.tasks.env import TaskEnv
+from roboview.tasks.world import WorldEnv, load_world
 from roboview.variation.colors import delta_e_2000, get_color, srgb_to_lab
 from roboview.variation.factors import FACTORS
-
-# Cameras a policy observes: VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
-OBSERVED_CAMERAS = ("front", "left_top", "wrist")
-# LIBERO's scenes (roboview.tasks.libero): the scene camera and the wrist camera.
-LIBERO_CAMERAS = ("agentview", "wrist")
 
 
 @dataclass(frozen=True)
@@ -85,14 +84,15 @@ class FairnessReport:
 class FairnessProbe:
     """Owns one segmentation renderer for an env; measures the env's current state."""
 
-    def __init__(self, env: TaskEnv, cameras: tuple[str, ...] = OBSERVED_CAMERAS) -> None:
+    def __init__(self, env: WorldEnv, cameras: tuple[str, ...] | None = None) -> None:
+        """`cameras`: those measured (default: the world's observed cameras)."""
         self.env = env
-        self.cameras = cameras
+        self.cameras = cameras or load_world(env.world).observed_cameras
         self._seg = env.new_renderer()
         self._seg.enable_segmentation_rendering()
 
     def _segment(self, camera: str) -> np.ndarray:
-        self._seg.update_scene(self.env.data, camera=self.env.scene.ids.cameras[camera])
+        self._seg.update_scene(self.env.data, camera=self.env.camera_ids()[camera])
         seg = self._seg.render()
         return np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
 
@@ -128,18 +128,18 @@ class FairnessProbe:
             obj_alone = self._segment_alone(cam, [obj]) == obj
             box_alone = np.isin(self._segment_alone(cam, box), box) if box else np.zeros_like(obj_alone)
             obj_mask, box_mask = seg == obj, np.isin(seg, box)
-            obj_lab = _mean_lab(rgb[cam], obj_mask)
-            table_lab = _mean_lab(rgb[cam], seg == ids.table_geom)
+            obj_lab = mean_lab(rgb[cam], obj_mask)
+            table_lab = mean_lab(rgb[cam], seg == ids.table_geom)
             result = CameraFairness(
                 camera=cam,
-                object_visible=_fraction(obj_mask, obj_alone),
+                object_visible=fraction(obj_mask, obj_alone),
                 object_pixels=int(obj_mask.sum()),
-                object_in_frame=_in_frame(obj_alone),
-                box_visible=_fraction(box_mask, box_alone) if box else 1.0,
+                object_in_frame=in_frame(obj_alone),
+                box_visible=fraction(box_mask, box_alone) if box else 1.0,
                 box_pixels=int(box_mask.sum()),
-                box_in_frame=_in_frame(box_alone) if box else True,
-                delta_e_nominal=_delta_e(obj_lab, nominal_lab),
-                delta_e_table=_delta_e(obj_lab, table_lab),
+                box_in_frame=in_frame(box_alone) if box else True,
+                delta_e_nominal=delta_e(obj_lab, nominal_lab),
+                delta_e_table=delta_e(obj_lab, table_lab),
             )
             results.append(result)
             min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
@@ -149,24 +149,24 @@ class FairnessProbe:
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
 
-def _fraction(visible: np.ndarray, alone: np.ndarray) -> float:
+def fraction(visible: np.ndarray, alone: np.ndarray) -> float:
     total = int(alone.sum())
     return float(min(visible.sum(), total) / total) if total else 0.0
 
 
-def _in_frame(mask: np.ndarray) -> bool:
+def in_frame(mask: np.ndarray) -> bool:
     if not mask.any():
         return False
     return not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
 
 
-def _mean_lab(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray | None:
+def mean_lab(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray | None:
     if not mask.any():
         return None
     return srgb_to_lab(rgb[mask].astype(np.float64).mean(0) / 255.0)
 
 
-def _delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
+def delta_e(a: np.ndarray | None, b: np.ndarray | None) -> float:
     return float(delta_e_2000(a, b)) if a is not None and b is not None else float("nan")
 
 
@@ -198,43 +198,55 @@ def violations(
     return out
 
 
-class LiberoFairnessProbe:
-    """The gate in LIBERO's scenes: the task's target object (LIBERO's `obj_of_interest[0]`) must be visible, whole
-    and distinct from what surrounds it in `agentview`; the wrist camera, which at t = 0 looks down past the
-    gripper, is measured and recorded but not judged. There is no second target (box) to find."""
+def ring(mask: np.ndarray, width: int = 4) -> np.ndarray:
+    """The pixels within `width` of `mask` (along a row or a column) but outside it: what the object is seen
+    against."""
+    cross = np.zeros((2 * width + 1, 2 * width + 1), bool)
+    cross[width, :] = cross[:, width] = True
+    return ndimage.binary_dilation(mask, structure=cross) & ~mask
 
-    cameras = LIBERO_CAMERAS
-    judged = ("agentview",)
+
+class ObjectProbe:
+    """The gate in a world whose task has one object to find (LIBERO's, Meta-World's): the object (`env.object_geoms()`)
+    must be visible, whole and distinct from what surrounds it in the world's judged cameras; the others (a wrist
+    camera that at t = 0 looks down past the gripper) are measured and recorded but not judged. There is no second
+    target (box) to find. A world's wing subclasses it with the geom groups its renderer draws."""
+
+    # The geom groups the world's renderer draws (robosuite: the visual geoms, group 1, not the collision geoms that
+    # coincide with them).
+    geom_groups: tuple[int, ...] = (0, 1, 2)
+    # Whether the observations hand the world's render turned 180° (LIBERO's, Meta-World's corner2: upright).
+    upright_flip: bool = True
 
     def __init__(self, env) -> None:
         self.env = env
+        world = load_world(env.world)
+        self.cameras, self.judged, self.names = world.observed_cameras, world.judged_cameras, world.cameras
         self._seg: mujoco.Renderer | None = None
 
     def _segment(self, camera: str, alone: list[int] | None = None) -> np.ndarray:
-        from roboview.libero.factors import VISUAL_GROUP
-        from roboview.tasks.libero import CAMERAS
-
         model, data = self.env.model, self.env.data
         if self._seg is None or self._seg.model is not model:  # a hard reset compiled a new model
             if self._seg is not None:
                 self._seg.close()
             self._seg = mujoco.Renderer(model, self.env.image_size, self.env.image_size)
             self._seg.enable_segmentation_rendering()
-            # What robosuite renders: the visual geoms (group 1), not the collision geoms that coincide with them.
             self._option = mujoco.MjvOption()
             self._option.geomgroup[:] = 0
-            self._option.geomgroup[VISUAL_GROUP] = 1
+            self._option.geomgroup[list(self.geom_groups)] = 1
         rgba = model.geom_rgba.copy()
         try:
             if alone is not None:
                 model.geom_rgba[:, 3] = 0.0
                 model.geom_rgba[alone, 3] = 1.0
-            self._seg.update_scene(data, camera=model.camera(CAMERAS[camera]).id, scene_option=self._option)
+            self._seg.update_scene(
+                data, camera=model.camera(self.names[camera]).id, scene_option=self._option
+            )
             seg = self._seg.render()
         finally:
             model.geom_rgba[:] = rgba
         ids = np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
-        return ids[::-1, ::-1]  # upright, as the observations
+        return ids[::-1, ::-1] if self.upright_flip else ids  # as the observations hand the image
 
     def measure(self, rgb: dict[str, np.ndarray], thresholds: FairnessThresholds) -> FairnessReport:
         geoms = list(self.env.object_geoms())
@@ -252,17 +264,17 @@ class LiberoFairnessProbe:
         for cam in self.cameras:
             obj_mask = np.isin(self._segment(cam), geoms)
             alone = np.isin(self._segment(cam, geoms), geoms)
-            obj_lab = _mean_lab(rgb[cam], obj_mask)
+            obj_lab = mean_lab(rgb[cam], obj_mask)
             result = CameraFairness(
                 camera=cam,
-                object_visible=_fraction(obj_mask, alone),
+                object_visible=fraction(obj_mask, alone),
                 object_pixels=int(obj_mask.sum()),
-                object_in_frame=_in_frame(alone),
+                object_in_frame=in_frame(alone),
                 box_visible=1.0,
                 box_pixels=0,
                 box_in_frame=True,
-                delta_e_nominal=_delta_e(obj_lab, nominal),
-                delta_e_table=_delta_e(obj_lab, _mean_lab(rgb[cam], _ring(obj_mask)))
+                delta_e_nominal=delta_e(obj_lab, nominal),
+                delta_e_table=delta_e(obj_lab, mean_lab(rgb[cam], ring(obj_mask)))
                 if recolored
                 else float("nan"),
             )
@@ -275,16 +287,3 @@ class LiberoFairnessProbe:
     def close(self) -> None:
         if self._seg is not None:
             self._seg.close()
-
-
-def _ring(mask: np.ndarray, width: int = 4) -> np.ndarray:
-    """The pixels within `width` of `mask` (along a row or a column) but outside it: what the object is seen
-    against."""
-    cross = np.zeros((2 * width + 1, 2 * width + 1), bool)
-    cross[width, :] = cross[:, width] = True
-    return ndimage.binary_dilation(mask, structure=cross) & ~mask
-
-
-# The gate of each world: its probe class and the cameras it renders.
-PROBES = {"roboview": FairnessProbe, "libero": LiberoFairnessProbe}
-WORLD_CAMERAS = {"roboview": OBSERVED_CAMERAS, "libero": LIBERO_CAMERAS}
