@@ -58,7 +58,7 @@ class LiberoVsLeRobotConfig:
             raise ValueError("--episodes, --num_workers and --batch_size must be ≥ 1")
 
 
-def _timed(cmd: list[str], env: dict, log: Path) -> float:
+def timed(cmd: list[str], env: dict, log: Path) -> float:
     start = time.perf_counter()
     with log.open("w") as out:
         proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
@@ -84,7 +84,7 @@ def run(cfg: LiberoVsLeRobotConfig) -> dict:
     for folder in (lerobot_dir, roboview_dir):
         if folder.exists():
             shutil.rmtree(folder)
-    lerobot_s = _timed(
+    lerobot_s = timed(
         [
             str(bin_dir / "lerobot-eval"),
             f"--policy.path={cfg.checkpoint}",
@@ -101,7 +101,7 @@ def run(cfg: LiberoVsLeRobotConfig) -> dict:
         env,
         out / "lerobot_eval.log",
     )
-    roboview_s = _timed(
+    roboview_s = timed(
         [
             str(bin_dir / "roboview-evaluate"),
             f"--benchmark.path={cfg.benchmark.path}",

@@ -23,8 +23,9 @@ from roboview.core.cli import cli_main  # first: it sets the headless GL default
 class MetaWorldExpertConfig:
     # Tasks to run (empty: every registered Meta-World task).
     tasks: list[str] = field(default_factory=list)
-    # Episodes per task: seeds first_seed … first_seed + seeds − 1 (lerobot-eval's seeds start at 1000).
+    # Episodes per task: seeds first_seed … first_seed + seeds − 1.
     seeds: int = 10
+    # The first episode's seed (lerobot-eval's episodes start at 1000).
     first_seed: int = 1000
     # JSON file the results are written to.
     output: str = "outputs/bench/metaworld_expert.json"

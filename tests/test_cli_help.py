@@ -36,6 +36,8 @@ HARNESSES = (
     "libero_render",
     "libero_throughput",
     "libero_vs_lerobot_eval",
+    "metaworld_expert",
+    "metaworld_vs_lerobot_eval",
     "paired_compare",
     "render_rate",
     "serving",

@@ -788,7 +788,7 @@ def test_the_plugin_env_resets_lerobot_seeds_into_the_splits_episodes(bench):
         load_benchmark(bench).splits
     )
     with pytest.raises(ValueError, match="allowed: front, left_top, right_top, wrist"):
-        RoboViewEnv(benchmark_path=str(bench), cameras="top")
+        RoboViewEnv(benchmark_path=str(bench), cameras="overhead")
     with pytest.raises(ValueError, match="colour"):
         RoboViewEnv(benchmark_path=str(bench), task="colour").splits()
 

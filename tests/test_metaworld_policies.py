@@ -55,6 +55,24 @@ def checkpoint(demos, tmp_path_factory) -> Path:
     return out / "checkpoints" / "last" / "pretrained_model"
 
 
+@pytest.fixture(scope="module")
+def benchmark(tmp_path_factory) -> Path:
+    """metaworld_tiny built at 64² (4 instances)."""
+    bench = tmp_path_factory.mktemp("metaworld_bench") / "bench"
+    build = [
+        sys.executable,
+        "-m",
+        "roboview.pipelines.build_benchmark",
+        "--preset=metaworld_tiny",
+        "--image_size=64",
+    ]
+    proc = subprocess.run(
+        [*build, f"--output_dir={bench}", "--num_workers=1"], capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return bench
+
+
 def test_demos_are_in_lerobots_metaworld_layout_and_replay_bit_for_bit(demos):
     import pandas as pd
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
@@ -96,7 +114,7 @@ def test_demos_are_in_lerobots_metaworld_layout_and_replay_bit_for_bit(demos):
         env.close()
 
 
-def test_a_metaworld_checkpoint_fits_metaworld_and_runs_in_process(checkpoint, tmp_path):
+def test_a_metaworld_checkpoint_fits_metaworld_and_runs_in_process(checkpoint, benchmark, tmp_path):
     config = policy_config("lerobot", path=str(checkpoint), device="cpu")
     # Its control from its action width (only Meta-World's control is 4-d), its camera LeRobot's `observation.image`.
     assert config.env_control() == "xyz_delta"
@@ -106,20 +124,12 @@ def test_a_metaworld_checkpoint_fits_metaworld_and_runs_in_process(checkpoint, t
     with pytest.raises(ValueError, match=wrong):
         fit_policy(config, ["pick_place"])
 
-    bench, out = tmp_path / "bench", tmp_path / "eval"
-    build = [sys.executable, "-m", "roboview.pipelines.build_benchmark", "--preset=metaworld_tiny"]
-    proc = subprocess.run(
-        [*build, "--image_size=64", f"--output_dir={bench}", "--num_workers=1"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = tmp_path / "eval"
     evaluate = [
         sys.executable,
         "-m",
         "roboview.pipelines.evaluate",
-        f"--benchmark.path={bench}",
+        f"--benchmark.path={benchmark}",
         "--policy.type=lerobot",
     ]
     evaluate += [
@@ -147,3 +157,98 @@ def test_a_checkpoint_that_is_not_metaworlds_is_refused_before_any_episode(tiny_
     config = policy_config("lerobot", path=str(tiny_checkpoint), device="cpu")
     with pytest.raises(ValueError, match="the 'metaworld' task's env takes control xyz_delta"):
         fit_policy(config, ["metaworld"])
+
+
+def _episode(policy, steps: int = 6):
+    """One push-v3 baseline episode of `policy` in an evaluation worker: its row and the hand's path."""
+    from roboview.benchmark.format import BenchmarkItem
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from roboview.metaworld.task import baseline_metaworld_instance
+
+    instance = baseline_metaworld_instance()
+    worker = EvalWorker(
+        WorkerSpec(policy, image_size=64, max_steps=steps, record_media=True, task="metaworld")
+    )
+    try:
+        result = worker.run(WorkItem(BenchmarkItem(instance, instance.to_record()), 0))
+    finally:
+        worker.close()
+    return result.row, result.ee_path
+
+
+def test_the_checkpoint_served_over_openpi_gives_the_in_process_episode(checkpoint):
+    """RoboView's policy server holding the checkpoint behind openpi's protocol, a custom layout naming Meta-World's
+    camera and its 4-d state: the served episode is the in-process one."""
+    from tests.test_openpi import free_port, start_server, stop
+
+    local_row, local_path = _episode(policy_config("lerobot", path=str(checkpoint), device="cpu"))
+    layout = "observation/image=camera:top,observation/state=state,prompt=instruction"
+    port = free_port()
+    server = start_server(
+        checkpoint, port, "--server=openpi", "--obs_format=custom", f"--key_map={layout}", "--task=metaworld"
+    )
+    try:
+        client = policy_config(
+            "openpi",
+            url=f"ws://127.0.0.1:{port}",
+            obs_format="custom",
+            key_map=layout,
+            cameras="top",
+            image_size=64,
+            render_size=64,
+        )
+        fit_policy(client, ["metaworld"])
+        assert client.env_control() == "xyz_delta"
+        served_row, served_path = _episode(client)
+    finally:
+        stop(server)
+    assert served_row["status"] == local_row["status"] == "ok"
+    for key in ("instance_id", "episode_seed", "success", "steps"):
+        assert served_row[key] == local_row[key], key
+    np.testing.assert_allclose(served_path, local_path, rtol=0, atol=1e-6)
+    assert len(local_path) == 6 and np.ptp(local_path, axis=0).max() > 1e-4  # the hand moved
+
+
+def test_the_checkpoint_behind_vla_evals_lerobot_server_gives_the_in_process_episode(checkpoint):
+    """vla-eval's own LeRobotModelServer holding the checkpoint, Meta-World's camera mapped onto its
+    `observation.image` feature: the served episode is the in-process one."""
+    from vla_eval.model_servers.lerobot import LeRobotModelServer
+
+    from tests.test_vla_eval_client import serving
+
+    local_row, local_path = _episode(policy_config("lerobot", path=str(checkpoint), device="cpu"))
+    model = LeRobotModelServer("act", str(checkpoint), device="cpu", image_keys={"top": "observation.image"})
+    with serving(model) as url:
+        client = policy_config("vla_eval", url=url, image_size=64, cameras="top", control="xyz_delta")
+        fit_policy(client, ["metaworld"])
+        served_row, served_path = _episode(client)
+    assert served_row["status"] == local_row["status"] == "ok"
+    for key in ("instance_id", "episode_seed", "success", "steps"):
+        assert served_row[key] == local_row[key], key
+    np.testing.assert_allclose(served_path, local_path, rtol=0, atol=1e-6)
+
+
+def test_lerobot_eval_runs_the_checkpoint_on_metaworld_through_the_plugin(checkpoint, benchmark, tmp_path):
+    """`lerobot-eval --env.type=roboview` on a Meta-World benchmark: its camera, image size and control read from the
+    checkpoint, the one image handed as LeRobot's own Meta-World env hands it (`observation.image`)."""
+    from roboview.integrations.lerobot import RoboViewEnv
+
+    config = RoboViewEnv(task="metaworld_color", benchmark_path=str(benchmark), cameras="top", image_size=64)
+    assert config.control == "xyz_delta" and config.features_map["pixels"] == "observation.image"
+    assert config.features["action"].shape == (4,) and config.features["agent_pos"].shape == (4,)
+    cmd = [
+        str(Path(sys.executable).parent / "lerobot-eval"),
+        f"--policy.path={checkpoint}",
+        "--policy.device=cpu",
+    ]
+    cmd += ["--env.type=roboview", f"--env.benchmark_path={benchmark}", "--env.task=metaworld_color"]
+    cmd += [
+        "--env.max_steps=6",
+        "--eval.n_episodes=2",
+        "--eval.batch_size=1",
+        f"--output_dir={tmp_path / 'le'}",
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout[-1500:] + proc.stderr[-1500:]
+    info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 2

@@ -29,6 +29,27 @@ PINNED = {  # preset: (instances, suite hash, SHA-256 over "instance_id context_
         "44685f3ba1b89e7c362efd3546e183f275582bb176729aa8afdcc907ad2c290c",
         "cac3b642b5a9c36781c0a132f274e79e5f50dc57ced388b9afea8247d9fc9889",
     ),
+    # Pinned before the world contract moved LIBERO into its wing and added Meta-World: unchanged by it.
+    "extended": (
+        5101,
+        "2ee4e0e49d7e82c83c547accd82d6669d2e56c0062c921ac30fdc66573995f7b",
+        "e65cabb610c2e7703f11656bec0e058f01a7f467bff57068da3ebd209ddfb9ba",
+    ),
+    "libero_tiny": (
+        4,
+        "b4f4d81cc1d180724e87d3350c8c076c5a93dea00c5d03cfe87291a7d957bfc3",
+        "53f130c955e6629199c433433144578d5024f803c48b04d5d7127f981ddebae4",
+    ),
+    "libero": (
+        7880,
+        "0601452e07f9b4a8f76c2f3ed10c004f12c1435ff5687a760010610ba191240e",
+        "276cd0e233c626e83f126669ce2c65c3d4b25e4675187d3c025b225cbde1ca98",
+    ),
+    "libero_camera": (
+        1560,
+        "8155ebf741d14331fda337f927ea89e403f0466e496acb8cf9f43fbf6e5ca674",
+        "c0c940e2fe4b7033ee58ef5b48cebadc05aed2ea0d56572695f837efc7473725",
+    ),
 }
 # The scene after reset for every 25th color instance and every camera / factorial instance (named
 # entities; the same state the pre-refactor code produced, pinned then as a6f28961…).

@@ -95,7 +95,7 @@ register_world(
         success="LIBERO's goal predicate for the task (check_success), after every step",
         requires="libero",
         install="make install-libero",
-        wing="roboview.libero",
+        wing=__package__,  # roboview.libero
         not_applicable=NOT_APPLICABLE,
     )
 )

@@ -105,7 +105,7 @@ register_world(
         success="Meta-World's info['success'], after every step",
         requires="metaworld",
         install="make install-metaworld",
-        wing="roboview.metaworld",
+        wing=__package__,  # roboview.metaworld
         not_applicable=NOT_APPLICABLE,
     )
 )

@@ -270,7 +270,7 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
 def control_field(config: PolicyConfig) -> None:
     """Check a config's `control` field (the `--policy.control` flag)."""
-    if config.control not in all_controls():
+    if config.control and config.control not in all_controls():  # empty: settled by the world (settle_control)
         raise ValueError(f"unknown --policy.control={config.control!r}; allowed: {', '.join(all_controls())}")
 
 
@@ -310,8 +310,7 @@ class ControlledConfig(PolicyConfig):
     control: str = ""
 
     def __post_init__(self) -> None:
-        if self.control:
-            control_field(self)
+        control_field(self)
         super().__post_init__()
 
     def settle_control(self, controls: tuple[str, ...]) -> None:

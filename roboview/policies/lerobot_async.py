@@ -381,6 +381,9 @@ class LeRobotAsyncConfig(ControlledConfig, ServedConnection):
 
         with flag_errors("--policy.path"):
             found = checkpoint_control(self.path)
+        if not self.control and found:  # no control given: the checkpoint's own
+            self.control = found
+            return
         fix = (
             f"pass --policy.control={found}"
             if found

@@ -72,11 +72,9 @@ from roboview.policies.serving.handshake import (
 )
 from roboview.policies.serving.openpi_wire import (
     ACTION_SPACES,
-    EE_WIRE_DIMS,
     EPISODE_KEY,
     GRIPPER_MODES,
     ROBOVIEW_KEY,
-    WIRE_DIMS,
     ProtocolError,
     WireFormat,
     episode_message,
@@ -198,7 +196,7 @@ class OpenPIPolicy:
         self.joint = config.env_control() == "joint"
         # What the model reads as its state and answers: joints, or (end-effector control) the EE state and pose.
         self.state_key = STATE_KEY if self.joint else EE_STATE_KEY
-        self.action_dims = WIRE_DIMS if self.joint else EE_WIRE_DIMS
+        self.action_dims = int(view.action_space.shape[0])  # the env's action: 8 joint, 7 EE, 4 Meta-World
         self.name = f"openpi:{config.obs_format}"
         self.failure_reason = ""
         self.queue: collections.deque = collections.deque()
@@ -362,7 +360,7 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
         ):
             if value not in allowed:
                 raise ValueError(f"unknown --policy.{name}={value!r}; allowed: {', '.join(allowed)}")
-        if self.control != "joint" and self.action_space != "joint_position":
+        if self.control not in ("", "joint") and self.action_space != "joint_position":
             raise ValueError(
                 f"--policy.action_space={self.action_space!r} is a joint action; with --policy.control="
                 f"{self.control} the server answers end-effector actions (leave --policy.action_space unset)"

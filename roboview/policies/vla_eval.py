@@ -40,11 +40,10 @@ from typing import Any
 import numpy as np
 
 from roboview.core.workers import worker_rank
-from roboview.policies.base import AgentView, Episode, PolicyConfig, ServedConnection
+from roboview.policies.base import AgentView, Episode, PolicyConfig, ServedConnection, control_field
 from roboview.policies.errors import InfraError, open_with_retries
 from roboview.policies.serving.handshake import WrongProtocol, is_openpi_metadata, openpi_server
 from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
-from roboview.sim.control import CONTROLS
 from roboview.tasks import camera_names
 from roboview.tasks.env import IMAGE_KEY
 from roboview.tasks.world import native_render_size
@@ -338,8 +337,7 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
                 f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(camera_names())}"
             )
         camera_map = _pairs(self.camera_map, "--policy.camera_map")
-        if self.control and self.control not in CONTROLS:
-            raise ValueError(f"unknown --policy.control={self.control!r}; allowed: {', '.join(CONTROLS)}")
+        control_field(self)
         if self.image_format not in IMAGE_FORMATS:
             raise ValueError(
                 f"unknown --policy.image_format={self.image_format!r}; allowed: {', '.join(IMAGE_FORMATS)}"

@@ -42,7 +42,7 @@ from roboview.sim.scene import (
     RenderQuality,
     Scene,
 )
-from roboview.tasks.world import World, WorldEnv, register_world
+from roboview.tasks.world import WorldEnv
 from roboview.variation.factors import (
     DEFAULT_TASK,
     FACTORS,
@@ -107,26 +107,6 @@ def _observation_space(cameras: Sequence[str], image_size: int, depth: bool) -> 
     spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
     spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(EE_STATE_NAMES),), np.float32)
     return gym.spaces.Dict(spaces)
-
-
-# RoboView's own world: the shared scene of `roboview.sim`, which the built-in tasks (pick_place, push) build on.
-WORLD = register_world(
-    World(
-        name="roboview",
-        title="RoboView's scene: Franka Panda + Robotiq 2F-85, one small object, four cameras",
-        cameras={c: c for c in ALL_CAMERAS},
-        # VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
-        observed_cameras=("front", "left_top", "wrist"),
-        judged_cameras=("front", "left_top", "wrist"),
-        recorded_cameras=ALL_CAMERAS,
-        wrist_cameras=("wrist",),
-        controls=CONTROLS,
-        probe="roboview.tasks.fairness:FairnessProbe",
-        episode_visuals=True,
-        instruction="the task's `instruction` context factor (paraphrases of one goal)",
-        success="the task's own test (`is_success`), after every step",
-    )
-)
 
 
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:

@@ -61,6 +61,24 @@ def checkpoint_features(path: str | None) -> tuple[int | None, int | None]:
     return checkpoint_image_size(path), (int(action.shape[0]) if action is not None else None)
 
 
+def episode_task(benchmark_path: str, split: str) -> str:
+    """The task of a split's episodes."""
+    from roboview.integrations.lerobot.env import episode_plan
+
+    return episode_plan(benchmark_path, split, 1, 0, 1)[1][0][0].instance.task
+
+
+def checkpoint_cameras(path: str | None) -> tuple[str, ...]:
+    """The cameras a local LeRobot checkpoint folder reads (its image features); () without one."""
+    if not path or not (Path(path) / "config.json").is_file():
+        return ()
+    from roboview.policies.lerobot_policy import load_config
+    from roboview.tasks.world import camera_of_feature
+
+    _, config = load_config(path)
+    return tuple(c for c in map(camera_of_feature, config.input_features) if c)
+
+
 @EnvConfig.register_subclass("roboview")
 @dataclass
 class RoboViewEnv(EnvConfig):
@@ -72,8 +90,9 @@ class RoboViewEnv(EnvConfig):
     fps: int = 10
     # Benchmark folder (roboview.pipelines.build_benchmark).
     benchmark_path: str = "outputs/benchmark"
-    # The checkpoint's cameras (comma-separated): what it was trained on (LIBERO's scenes: image,image2).
-    cameras: str = "left_top,wrist"
+    # The checkpoint's cameras (comma-separated): what it was trained on (LIBERO's scenes: image,image2; Meta-World's:
+    # top). Empty: read from the checkpoint lerobot-eval loads (--policy.path), else left_top,wrist.
+    cameras: str = ""
     # The checkpoint's square image side (pixels): what it was trained on. 0: read from the checkpoint lerobot-eval
     # loads (--policy.path, its config.json), else 96; a side that disagrees with the checkpoint's is refused.
     image_size: int = 0
@@ -87,8 +106,9 @@ class RoboViewEnv(EnvConfig):
     # Steps before an episode is cut (lerobot reads it as the env's _max_episode_steps).
     max_steps: int = 120
     # The checkpoint's control: joint (8-d action: 7 joint targets + gripper; agent_pos the joint state) or ee_delta /
-    # ee_abs (7-d LIBERO-convention action; agent_pos the end-effector state), as its dataset was collected.
-    control: str = "joint"
+    # ee_abs (7-d LIBERO-convention action; agent_pos the end-effector state), as its dataset was collected; Meta-World's
+    # xyz_delta (4-d). Empty: the benchmark's world's only control (LIBERO's ee_delta, Meta-World's), else joint.
+    control: str = ""
     # Must equal lerobot-eval's --seed (default 1000): episode i is the one reset with seed start_seed + i.
     start_seed: int = 1000
     # Run even when this machine renders or simulates the benchmark `different`ly from the machine that built it
@@ -101,6 +121,10 @@ class RoboViewEnv(EnvConfig):
         from roboview.sim.cameras import check_image_size
         from roboview.tasks import camera_names
 
+        if not self.cameras:
+            from lerobot.configs import parser
+
+            self.cameras = ",".join(checkpoint_cameras(parser.get_path_arg("policy"))) or "left_top,wrist"
         cams = self.camera_list
         unknown = [c for c in cams if c not in camera_names()]
         if unknown or not cams:
@@ -111,23 +135,35 @@ class RoboViewEnv(EnvConfig):
         for name in ("n_repeats", "max_steps", "fps"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"--env.{name}={getattr(self, name)} must be positive")
-        from roboview.sim.control import CONTROLS
+        from roboview.tasks.base import feature_dims
+        from roboview.tasks.world import all_controls, feature_key
 
-        if self.control not in CONTROLS:
-            raise ValueError(f"--env.control={self.control!r} unknown; allowed: {', '.join(CONTROLS)}")
-        self._fit_checkpoint()
-        check_image_size(self.image_size, "--env.image_size")
+        if self.control and self.control not in all_controls():
+            raise ValueError(f"--env.control={self.control!r} unknown; allowed: {', '.join(all_controls())}")
         if not self.split_names_given:
             raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
+        if not self.control:  # the benchmark's world's only control, else joint
+            from roboview.tasks import load_task
+            from roboview.tasks.world import load_world
+
+            task = episode_task(self.benchmark_path, self.splits()[0])
+            self.control = load_world(load_task(task).env_class().world).default_control or "joint"
+        self._fit_checkpoint()
+        check_image_size(self.image_size, "--env.image_size")
+        _, state_width, action_width = next(d for d in feature_dims() if d[0] == self.control)
         self.features = {
-            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(8,) if self.control == "joint" else (7,)),
-            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(8,)),
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(action_width,)),
+            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(state_width,)),
         }
         self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
-        for cam in cams:
-            self.features[f"pixels/{cam}"] = PolicyFeature(
-                type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3)
-            )
+        image = PolicyFeature(type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3))
+        from roboview.integrations.lerobot.env import single_image
+
+        if single_image(cams):  # a world's one camera under its own key (Meta-World's observation.image)
+            self.features["pixels"] = image
+            self.features_map["pixels"] = feature_key(cams[0])
+        for cam in cams if not single_image(cams) else ():
+            self.features[f"pixels/{cam}"] = image
             self.features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
 
     def _fit_checkpoint(self) -> None:
@@ -147,13 +183,15 @@ class RoboViewEnv(EnvConfig):
                 f"--env.image_size={self.image_size} but the checkpoint {path} was trained on {side}×{side} images; "
                 f"drop the flag (its size is used) or pass {side}"
             )
-        from roboview.policies.lerobot_policy import EE_ACTION_DIMS
-        from roboview.tasks.env import ACTION_NAMES
+        from roboview.tasks.base import feature_dims
 
-        takes = len(ACTION_NAMES) if self.control == "joint" else EE_ACTION_DIMS
+        takes = next(a for c, _, a in feature_dims() if c == self.control)
         if width and width != takes:
+            fits = list(dict.fromkeys(c for c, _, a in feature_dims() if a == width))
             fix = (
-                "--env.control=joint" if width == len(ACTION_NAMES) else "--env.control=ee_delta (or ee_abs)"
+                " (or ".join(f"--env.control={c}" for c in fits) + ")" * (len(fits) - 1)
+                if fits
+                else "another checkpoint"
             )
             raise ValueError(
                 f"--env.control={self.control} takes {takes}-d actions but the checkpoint {path} answers {width}: "

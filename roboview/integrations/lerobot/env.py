@@ -11,9 +11,16 @@ import numpy as np
 from roboview.benchmark.format import BenchmarkItem, load_benchmark, select_items
 from roboview.tasks import make_env
 from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
+from roboview.tasks.world import IMAGE_FEATURE, feature_key
 from roboview.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
+
+
+def single_image(cameras: tuple[str, ...]) -> bool:
+    """Whether `cameras` is one camera whose LeRobot feature is its world's own single-image key (Meta-World's `top`:
+    `observation.image`): lerobot then reads `pixels` as one array, not a dict of cameras."""
+    return len(cameras) == 1 and feature_key(cameras[0]) != IMAGE_FEATURE.format(cameras[0])
 
 
 def episode_plan(
@@ -77,8 +84,12 @@ class RoboViewEvalEnv(gym.Env):
         )
         self.action_space = self.env.action_space
         pixels = {c: self.env.observation_space[IMAGE_KEY.format(c)] for c in self.cameras}
+        # A world's one camera under its own feature key (Meta-World's observation.image): one array, as LeRobot's
+        # own env of that world hands it; else a dict of cameras.
+        self.single = single_image(self.cameras)
+        pixel_space = pixels[self.cameras[0]] if self.single else gym.spaces.Dict(pixels)
         self.observation_space = gym.spaces.Dict(
-            {"pixels": gym.spaces.Dict(pixels), "agent_pos": self.env.observation_space[self.state_key]}
+            {"pixels": pixel_space, "agent_pos": self.env.observation_space[self.state_key]}
         )
 
     @property
@@ -92,8 +103,9 @@ class RoboViewEvalEnv(gym.Env):
         return self.env.instruction
 
     def _convert(self, obs: dict) -> dict:
+        pixels = {c: obs[IMAGE_KEY.format(c)] for c in self.cameras}
         return {
-            "pixels": {c: obs[IMAGE_KEY.format(c)] for c in self.cameras},
+            "pixels": pixels[self.cameras[0]] if self.single else pixels,
             "agent_pos": obs[self.state_key],
         }
 

@@ -171,7 +171,8 @@ class PolicyService:
         self.forward_passes = 0
 
     def decode(self, request: dict) -> tuple[dict, str, dict | None]:
-        obs, instruction = self.format.decode(request, self.image_size, self.state_key)
+        width = self.view.observation_space[self.state_key].shape[0]
+        obs, instruction = self.format.decode(request, self.image_size, self.state_key, width)
         return obs, instruction, request.get(EPISODE_KEY)
 
     def predict(self, batch: dict[int, tuple[dict, str]]) -> dict[int, np.ndarray]:

@@ -75,11 +75,14 @@ class WireFormat:
             node[path[-1]] = _read(observation, src, instruction, state_key)
         return request
 
-    def decode(self, request: dict, image_size: int, state_key: str = STATE_KEY) -> tuple[dict, str]:
+    def decode(
+        self, request: dict, image_size: int, state_key: str = STATE_KEY, state_width: int = len(STATE_NAMES)
+    ) -> tuple[dict, str]:
         """(RoboView observation, instruction) from a request; a missing key or a wrong image size is named. The
-        state goes under `state_key` (the EE state's key for a policy acting in an end-effector control)."""
+        state (`state_width` entries: the env's) goes under `state_key` (the EE state's key for a policy acting in
+        an end-effector control)."""
         obs: dict[str, np.ndarray] = {}
-        state = np.full(len(STATE_NAMES), np.nan, np.float32)
+        state = np.full(state_width, np.nan, np.float32)
         instruction = ""
         for path, src in self.entries:
             node: Any = request
@@ -92,7 +95,7 @@ class WireFormat:
             if src == "instruction":
                 instruction = str(node)
             elif src.startswith("state"):
-                lo, hi = _state_range(src)
+                lo, hi = _state_range(src, state_width)
                 state[lo:hi] = np.asarray(node, np.float32).reshape(-1)
             else:
                 kind, cam = src.split(":", 1)
@@ -110,17 +113,17 @@ class WireFormat:
         if np.isnan(state).any():
             raise ValueError(
                 f"the {self.name} layout leaves state entries {np.flatnonzero(np.isnan(state)).tolist()} "
-                f"unset (RoboView's state is {len(STATE_NAMES)}: {', '.join(STATE_NAMES)})"
+                f"unset (the env's state has {state_width})"
             )
         obs[state_key] = state
         return obs, instruction
 
 
-def _state_range(src: str) -> tuple[int, int]:
+def _state_range(src: str, width: int) -> tuple[int, int]:
     if src == "state":
-        return 0, len(STATE_NAMES)
+        return 0, width
     match = _SLICE.match(src)
-    lo, hi = int(match.group(1) or 0), int(match.group(2) or len(STATE_NAMES))
+    lo, hi = int(match.group(1) or 0), int(match.group(2) or width)
     return lo, hi
 
 
@@ -128,8 +131,9 @@ def _read(observation: dict, src: str, instruction: str, state_key: str = STATE_
     if src == "instruction":
         return instruction
     if src.startswith("state"):
-        lo, hi = _state_range(src)
-        return np.asarray(observation[state_key], np.float32)[lo:hi].copy()
+        state = np.asarray(observation[state_key], np.float32)
+        lo, hi = _state_range(src, len(state))
+        return state[lo:hi].copy()
     kind, cam = src.split(":", 1)
     if kind == "depth":
         return np.ascontiguousarray(observation[DEPTH_KEY.format(cam)], np.float32)

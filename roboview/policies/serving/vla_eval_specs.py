@@ -55,13 +55,16 @@ ACTION_SPECS: dict[str, dict[str, DimSpec]] = {
     "joint": {"joints": JOINT_TARGETS, "gripper": GRIPPER_01},
     "ee_delta": {"position": POSITION_DELTA, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS},
     "ee_abs": {"position": POSITION_ABSOLUTE, "rotation": ROTATION_AA, "gripper": GRIPPER_CLOSE_POS},
+    # Meta-World's: hand position delta + gripper effort (+1 closes).
+    "xyz_delta": {"position": POSITION_DELTA, "gripper": GRIPPER_CLOSE_POS},
 }
 STATE_SPECS: dict[str, DimSpec] = {
     "joint": STATE_JOINT,
     "ee_delta": STATE_EEF_POS_AA_GRIP,
     "ee_abs": STATE_EEF_POS_AA_GRIP,
+    "xyz_delta": DimSpec("state", 4, "raw", description="Meta-World's agent_pos: hand position, gripper opening"),
 }
-# Action width of each control: 7 joint targets + closure; 3 position + 3 axis-angle + gripper.
+# Action width of each control: 7 joint targets + closure; 3 position + 3 axis-angle + gripper; 3 position + gripper.
 ACTION_DIMS = {control: sum(spec.dims for spec in specs.values()) for control, specs in ACTION_SPECS.items()}
 
 GRIPPERS = ("binary_close_positive", "binary_close_negative", "continuous_01", "binary_close_01", "raw")
