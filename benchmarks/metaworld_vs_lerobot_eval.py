@@ -51,7 +51,9 @@ class MetaWorldVsLeRobotConfig:
 
     def __post_init__(self) -> None:
         if not self.checkpoint or not (Path(self.checkpoint) / "config.json").is_file():
-            raise ValueError(f"--checkpoint={self.checkpoint!r} must be a folder holding a LeRobot config.json")
+            raise ValueError(
+                f"--checkpoint={self.checkpoint!r} must be a folder holding a LeRobot config.json"
+            )
         if min(self.episodes, self.num_workers, self.batch_size) < 1:
             raise ValueError("--episodes, --num_workers and --batch_size must be ≥ 1")
 
@@ -76,7 +78,11 @@ def run(cfg: MetaWorldVsLeRobotConfig) -> dict:
     lerobot_s = timed(lerobot_cmd, env, out / "lerobot_eval.log")
     roboview_cmd = [str(bin_dir / "roboview-evaluate"), f"--benchmark.path={cfg.benchmark.path}"]
     roboview_cmd += ["--benchmark.splits=metaworld_color", "--benchmark.values=red", "--policy.type=lerobot"]
-    roboview_cmd += [f"--policy.path={cfg.checkpoint}", "--policy.device=cpu", f"--eval.n_repeats={cfg.episodes}"]
+    roboview_cmd += [
+        f"--policy.path={cfg.checkpoint}",
+        "--policy.device=cpu",
+        f"--eval.n_repeats={cfg.episodes}",
+    ]
     roboview_cmd += [f"--eval.num_workers={cfg.num_workers}", f"--output_dir={roboview_dir}"]
     roboview_s = timed(roboview_cmd, env, out / "roboview.log")
     info = json.loads((lerobot_dir / "eval_info.json").read_text())

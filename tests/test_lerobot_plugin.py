@@ -156,7 +156,9 @@ def test_the_plugin_runs_an_end_effector_checkpoint_in_its_control(tiny_benchmar
 
     config = RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), image_size=64, control="ee_delta")
     assert config.features[ACTION].shape == (7,) and config.split_kwargs("color")["control"] == "ee_delta"
-    with pytest.raises(ValueError, match=r"--env.control='ee' unknown; allowed: joint, ee_delta, ee_abs, xyz_delta"):
+    with pytest.raises(
+        ValueError, match=r"--env.control='ee' unknown; allowed: joint, ee_delta, ee_abs, xyz_delta"
+    ):
         RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), control="ee")
     env = RoboViewEvalEnv(**config.split_kwargs("color"))
     try:

@@ -270,7 +270,9 @@ class PolicyConfig(draccus.ChoiceRegistry):
 
 def control_field(config: PolicyConfig) -> None:
     """Check a config's `control` field (the `--policy.control` flag)."""
-    if config.control and config.control not in all_controls():  # empty: settled by the world (settle_control)
+    if (
+        config.control and config.control not in all_controls()
+    ):  # empty: settled by the world (settle_control)
         raise ValueError(f"unknown --policy.control={config.control!r}; allowed: {', '.join(all_controls())}")
 
 

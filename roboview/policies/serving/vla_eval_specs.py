@@ -62,7 +62,9 @@ STATE_SPECS: dict[str, DimSpec] = {
     "joint": STATE_JOINT,
     "ee_delta": STATE_EEF_POS_AA_GRIP,
     "ee_abs": STATE_EEF_POS_AA_GRIP,
-    "xyz_delta": DimSpec("state", 4, "raw", description="Meta-World's agent_pos: hand position, gripper opening"),
+    "xyz_delta": DimSpec(
+        "state", 4, "raw", description="Meta-World's agent_pos: hand position, gripper opening"
+    ),
 }
 # Action width of each control: 7 joint targets + closure; 3 position + 3 axis-angle + gripper; 3 position + gripper.
 ACTION_DIMS = {control: sum(spec.dims for spec in specs.values()) for control, specs in ACTION_SPECS.items()}
