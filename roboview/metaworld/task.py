@@ -55,7 +55,9 @@ STATE_NAMES = ("x", "y", "z", "gripper")
 ACTION_NAMES = ("dx", "dy", "dz", "gripper")
 NOT_APPLICABLE = ("distractors", "object_size")
 # The registered tasks and the body of each one's object (what `color` re-skins and the fairness gate judges): the
-# tasks whose object is one body a policy must find, and which Meta-World's scripted policy solves at baseline.
+# tasks whose object is one body a policy must find, which Meta-World's scripted policy solves at baseline and which
+# corner2 shows (bin-picking-v3's puck sits in a bin that hides 62 % of it from corner2 at baseline: the gate
+# rejected 185 of its 197 instances).
 OBJECTS = {
     "push-v3": "obj",
     "pick-place-v3": "obj",
@@ -63,7 +65,6 @@ OBJECTS = {
     "sweep-v3": "obj",
     "sweep-into-v3": "obj",
     "hand-insert-v3": "obj",
-    "bin-picking-v3": "obj",
     "pick-out-of-hole-v3": "obj",
     "shelf-place-v3": "obj",
     "coffee-push-v3": "obj",
@@ -79,7 +80,6 @@ INSTRUCTIONS = {
     "sweep-v3": "Sweep a puck off the table",
     "sweep-into-v3": "Sweep a puck into a hole",
     "hand-insert-v3": "Insert the gripper into a hole",
-    "bin-picking-v3": "Grasp the puck from one bin and place it into another bin",
     "pick-out-of-hole-v3": "Pick up a puck from a hole",
     "shelf-place-v3": "Pick and place a puck onto a shelf",
     "coffee-push-v3": "Push a mug under a coffee machine",
