@@ -219,8 +219,10 @@ def test_the_checkpoint_behind_vla_evals_lerobot_server_gives_the_in_process_epi
     local_row, local_path = _episode(policy_config("lerobot", path=str(checkpoint), device="cpu"))
     model = LeRobotModelServer("act", str(checkpoint), device="cpu", image_keys={"top": "observation.image"})
     with serving(model) as url:
-        client = policy_config("vla_eval", url=url, image_size=64, cameras="top", control="xyz_delta")
+        # LeRobot's server leaves the control to the client (a `raw` action spec): the world's only one.
+        client = policy_config("vla_eval", url=url, image_size=64, cameras="top")
         fit_policy(client, ["metaworld"])
+        assert client.env_control() == "xyz_delta"
         served_row, served_path = _episode(client)
     assert served_row["status"] == local_row["status"] == "ok"
     for key in ("instance_id", "episode_seed", "success", "steps"):

@@ -371,7 +371,16 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
                 )
             agreed = mine
         self._agreed: Negotiated = agreed
+        self._camera_map = camera_map
         super().__post_init__()
+
+    def settle_control(self, controls: tuple[str, ...]) -> None:
+        """A server whose action spec leaves the control open (`raw`: LeRobot's server) and no --policy.control:
+        the world's only control (Meta-World's xyz_delta, LIBERO's ee_delta), renegotiated with it."""
+        if self.control or self._agreed.gripper != "raw" or len(controls) != 1:
+            return
+        hello = self._hello[self.url_list[0]]
+        self._agreed = negotiate(hello, self.camera_list, self._camera_map, controls[0])
 
     @property
     def url_list(self) -> list[str]:
