@@ -30,13 +30,16 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from roboview.variation.model_edits import (
+from roboview.variation.model_edits import (  # noqa: F401  (Lighting: LIBERO's lighting applier)
     ORBIT_AZIMUTHS_DEG,
     ORBIT_ELEVATIONS_DEG,
+    Lighting,
     look_at,
     orbit_eye,
     pulled_back,
     rotation,
+    subtree_geoms,
+    tex_slice,
     texture_pixels,
     turned,
 )
@@ -66,7 +69,7 @@ def restore_visuals(world, snap: dict[str, np.ndarray]) -> None:
         getattr(model, name)[:] = snap[name]
     con.mat_texid[:] = snap["con_mat_texid"]
     for tex in range(model.ntex):
-        sl = _tex_slice(model, tex)
+        sl = tex_slice(model, tex)
         if not np.array_equal(model.tex_data[sl], snap["tex_data"][sl]):
             model.tex_data[sl] = snap["tex_data"][sl]
             _upload(world, tex)
@@ -95,17 +98,8 @@ def object_geoms(world, name: str) -> list[int]:
     objects = {**world.inner.fixtures_dict, **world.inner.objects_dict}
     if name not in objects:
         raise ValueError(f"unknown object {name!r}; allowed: {', '.join(sorted(objects))}")
-    model = world.model
-    root = _id(model, mujoco.mjtObj.mjOBJ_BODY, objects[name].root_body)
-    bodies = {root}
-    for body in range(root + 1, model.nbody):  # bodies are stored depth-first: descendants follow the root
-        if model.body_parentid[body] in bodies:
-            bodies.add(body)
-    return [
-        g
-        for g in range(model.ngeom)
-        if model.geom_bodyid[g] in bodies and model.geom_group[g] == VISUAL_GROUP
-    ]
+    root = _id(world.model, mujoco.mjtObj.mjOBJ_BODY, objects[name].root_body)
+    return subtree_geoms(world.model, root, (VISUAL_GROUP,))
 
 
 def workspace_center(world) -> np.ndarray:
@@ -133,11 +127,6 @@ def _set_agentview(world, pos: np.ndarray, rot: np.ndarray) -> None:
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.asarray(rot, float).reshape(9))
     model.cam_pos[cam], model.cam_quat[cam] = pos, quat
-
-
-def _tex_slice(model: mujoco.MjModel, tex: int) -> slice:
-    start = model.tex_adr[tex]
-    return slice(start, start + model.tex_width[tex] * model.tex_height[tex] * model.tex_nchannel[tex])
 
 
 def _upload(world, tex: int) -> None:
@@ -218,21 +207,6 @@ class PullBack:
         _set_agentview(world, pulled_back(pos, rot, self.k), rot)
 
 
-@dataclass(frozen=True)
-class Lighting:
-    """Every light's diffuse × `scale`; with `direction`, every light points along it (normalised)."""
-
-    scale: float = 1.0
-    direction: tuple[float, float, float] | None = None
-
-    def apply(self, world) -> None:
-        model = world.model
-        model.light_diffuse[:] = np.clip(model.light_diffuse * self.scale, 0.0, None)
-        if self.direction is not None:
-            d = np.asarray(self.direction, float)
-            model.light_dir[:] = d / np.linalg.norm(d)
-
-
 def support_texture(world) -> int:
     """Texture of the static visual geom straight below workspace_center (table top, or floor)."""
     model, data = world.model, world.data
@@ -264,5 +238,5 @@ class TableTexture:
         model = world.model
         tex = support_texture(world)
         h, w, c = model.tex_height[tex], model.tex_width[tex], model.tex_nchannel[tex]
-        model.tex_data[_tex_slice(model, tex)] = texture_pixels(self.pattern, h, w, c).reshape(-1)
+        model.tex_data[tex_slice(model, tex)] = texture_pixels(self.pattern, h, w, c).reshape(-1)
         _upload(world, tex)

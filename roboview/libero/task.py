@@ -46,7 +46,7 @@ import numpy as np
 
 from roboview.libero.env import IMAGE_SIZE
 from roboview.libero.suites import SUITES, max_steps
-from roboview.sim.cameras import CameraPose, mat_to_quat
+from roboview.sim.cameras import CameraPose, camera_pose_of
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
@@ -297,16 +297,7 @@ class LiberoTaskEnv(WorldEnv):
 
     def camera_pose(self, name: str) -> CameraPose:
         """Read from LIBERO's compiled model."""
-        import mujoco
-
-        model, data = self.model, self.data
-        cam = model.camera(CAMERAS[name]).id
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_camlight(model, data)
-        quat = mat_to_quat(data.cam_xmat[cam].reshape(3, 3))
-        return CameraPose(
-            name, tuple(map(float, data.cam_xpos[cam])), tuple(map(float, quat)), float(model.cam_fovy[cam])
-        )
+        return camera_pose_of(self.model, self.data, self.model.camera(CAMERAS[name]).id, name)
 
     def scene_xml(self) -> str:
         return self.libero_world.inner.model.get_xml()
@@ -325,39 +316,18 @@ def appliers(values: dict[str, str]) -> list:
     """LIBERO's appliers for an instance's visual factor values (nothing for a value at its baseline)."""
     from roboview.libero import factors as lf
     from roboview.variation.colors import get_color
-    from roboview.variation.factors import FACTORS
     from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
+    from roboview.variation.model_edits import visual_appliers
 
-    changed = {k: v for k, v in values.items() if k in FACTORS and v != FACTORS[k].baseline}
-    refused = [k for k in changed if k in NOT_APPLICABLE]
-    if refused:
-        raise ValueError(
-            f"the LIBERO world cannot apply {', '.join(refused)}; its factors: color, camera_pose, camera_euler, "
-            "dist_scale, lighting, table_texture"
-        )
-    out: list = []
-    if "color" in changed:
-        out.append(lf.ObjectColor(tuple(get_color(changed["color"]).rgb), mode="skin"))
-    if "camera_pose" in changed:
-        out.append(lf.OrbitalPose(*parse_camera_pose(changed["camera_pose"])))
-    if "camera_euler" in changed:
-        out.append(lf.CameraEuler(*parse_euler(changed["camera_euler"])))
-    if "dist_scale" in changed:
-        out.append(lf.PullBack(parse_dist_scale(changed["dist_scale"])))
-    if "lighting" in changed:
-        out.append(lighting_applier(changed["lighting"]))
-    if "table_texture" in changed:
-        out.append(lf.TableTexture(changed["table_texture"]))
-    return out
-
-
-def lighting_applier(value: str):
-    from roboview.libero.factors import Lighting
-    from roboview.variation.factors.lighting import INTENSITIES
-    from roboview.variation.model_edits import LIGHT_DIRECTIONS
-
-    intensity, direction = value.split("_")
-    return Lighting(scale=INTENSITIES[intensity], direction=LIGHT_DIRECTIONS[direction])
+    make = {
+        "color": lambda v: lf.ObjectColor(tuple(get_color(v).rgb), mode="skin"),
+        "camera_pose": lambda v: lf.OrbitalPose(*parse_camera_pose(v)),
+        "camera_euler": lambda v: lf.CameraEuler(*parse_euler(v)),
+        "dist_scale": lambda v: lf.PullBack(parse_dist_scale(v)),
+        "lighting": lf.Lighting.of,
+        "table_texture": lf.TableTexture,
+    }
+    return visual_appliers(values, make, "LIBERO")
 
 
 def baseline_libero_instance(libero_task: str = LIBERO_TASK.baseline, init_state: str = "0"):

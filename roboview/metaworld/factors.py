@@ -20,7 +20,17 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from roboview.variation.model_edits import look_at, orbit_eye, pulled_back, rotation, texture_pixels, turned
+from roboview.variation.model_edits import (  # noqa: F401  (Lighting: Meta-World's lighting applier)
+    Lighting,
+    look_at,
+    orbit_eye,
+    pulled_back,
+    rotation,
+    subtree_geoms,
+    tex_slice,
+    texture_pixels,
+    turned,
+)
 
 VISIBLE_GROUPS = (0, 1, 2)  # what gymnasium's renderer draws by default (Meta-World's collision geoms: 3, 4)
 # The point every orbital pose looks at: the middle of the region Meta-World's objects and goals start in.
@@ -44,7 +54,7 @@ def restore_visuals(scene, snap: dict[str, np.ndarray]) -> None:
     for name in _MODEL_FIELDS:
         getattr(model, name)[:] = snap[name]
     tex = table_texture(model)
-    sl = _tex_slice(model, tex)
+    sl = tex_slice(model, tex)
     if not np.array_equal(model.tex_data[sl], snap["tex_data"][sl]):
         model.tex_data[sl] = snap["tex_data"][sl]
         _upload(scene, tex)
@@ -55,24 +65,11 @@ def object_geoms(model: mujoco.MjModel, body: str) -> list[int]:
     root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
     if root < 0:
         raise ValueError(f"no body named {body!r} in the Meta-World model")
-    bodies = {root}
-    for b in range(root + 1, model.nbody):  # bodies are stored depth-first: descendants follow the root
-        if model.body_parentid[b] in bodies:
-            bodies.add(b)
-    return [
-        g
-        for g in range(model.ngeom)
-        if model.geom_bodyid[g] in bodies and model.geom_group[g] in VISIBLE_GROUPS
-    ]
+    return subtree_geoms(model, root, VISIBLE_GROUPS)
 
 
 def table_texture(model: mujoco.MjModel) -> int:
     return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, TABLE_TEXTURE)
-
-
-def _tex_slice(model: mujoco.MjModel, tex: int) -> slice:
-    start = model.tex_adr[tex]
-    return slice(start, start + model.tex_width[tex] * model.tex_height[tex] * model.tex_nchannel[tex])
 
 
 def _upload(scene, tex: int) -> None:
@@ -143,21 +140,6 @@ class PullBack:
 
 
 @dataclass(frozen=True)
-class Lighting:
-    """Every light's diffuse × `scale`; with `direction`, every light points along it (normalised)."""
-
-    scale: float = 1.0
-    direction: tuple[float, float, float] | None = None
-
-    def apply(self, scene) -> None:
-        model = scene.model
-        model.light_diffuse[:] = np.clip(model.light_diffuse * self.scale, 0.0, None)
-        if self.direction is not None:
-            d = np.asarray(self.direction, float)
-            model.light_dir[:] = d / np.linalg.norm(d)
-
-
-@dataclass(frozen=True)
 class TableTexture:
     """The table top's texture replaced by RoboView's `table_texture` value `pattern`."""
 
@@ -170,5 +152,5 @@ class TableTexture:
         model = scene.model
         tex = table_texture(model)
         h, w, c = model.tex_height[tex], model.tex_width[tex], model.tex_nchannel[tex]
-        model.tex_data[_tex_slice(model, tex)] = texture_pixels(self.pattern, h, w, c).reshape(-1)
+        model.tex_data[tex_slice(model, tex)] = texture_pixels(self.pattern, h, w, c).reshape(-1)
         _upload(scene, tex)

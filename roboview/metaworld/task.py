@@ -25,13 +25,14 @@ effort (+1 closes). **Success**: Meta-World's `info["success"]`, after every ste
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 
 from roboview.metaworld.env import CAMERA, FPS, MAX_STEPS, NATIVE_SIZE
-from roboview.sim.cameras import CameraPose, mat_to_quat
+from roboview.sim.cameras import CameraPose, camera_pose_of
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
@@ -127,34 +128,18 @@ def appliers(values: dict[str, str], body: str) -> list:
     """Meta-World's appliers for an instance's visual factor values (nothing for a value at its baseline)."""
     from roboview.metaworld import factors as mf
     from roboview.variation.colors import get_color
-    from roboview.variation.factors import FACTORS
     from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
-    from roboview.variation.factors.lighting import INTENSITIES
-    from roboview.variation.model_edits import LIGHT_DIRECTIONS
-
-    def lighting(value: str):
-        intensity, direction = value.split("_")
-        return mf.Lighting(scale=INTENSITIES[intensity], direction=LIGHT_DIRECTIONS[direction])
+    from roboview.variation.model_edits import visual_appliers
 
     make = {
         "color": lambda v: mf.ObjectColor(tuple(get_color(v).rgb), body),
         "camera_pose": lambda v: mf.OrbitalPose(*parse_camera_pose(v)),
         "camera_euler": lambda v: mf.CameraEuler(*parse_euler(v)),
         "dist_scale": lambda v: mf.PullBack(parse_dist_scale(v)),
-        "lighting": lighting,
-        "table_texture": lambda v: mf.TableTexture(v),
+        "lighting": mf.Lighting.of,
+        "table_texture": mf.TableTexture,
     }
-    changed = {
-        k: v
-        for k, v in values.items()
-        if k in FACTORS and FACTORS[k].kind != "context" and v != FACTORS[k].baseline
-    }
-    refused = [k for k in changed if k not in make]
-    if refused:
-        raise ValueError(
-            f"the Meta-World world cannot apply {', '.join(refused)}; its factors: {', '.join(make)}"
-        )
-    return [make[k](changed[k]) for k in make if k in changed]
+    return visual_appliers(values, make, "Meta-World")
 
 
 def baseline_metaworld_instance(metaworld_task: str = METAWORLD_TASK.baseline) -> TaskInstance:
@@ -268,7 +253,8 @@ class MetaWorldTaskEnv(WorldEnv):
     def _observation(self, raw: np.ndarray) -> LazyObservation:
         state = np.asarray(raw[:4], np.float32)
         eager = {STATE_KEY: state, EE_STATE_KEY: state.copy(), RAW_STATE_KEY: np.asarray(raw, np.float64)}
-        lazy = {IMAGE_KEY.format(c): self.scene.render for c in self.cameras}
+        # corner2 and top are one view: rendered once per observation, whichever key is read first.
+        lazy = dict.fromkeys((IMAGE_KEY.format(c) for c in self.cameras), functools.cache(self.scene.render))
         self._observations += 1
         count = self._observations
         return LazyObservation(eager, lazy, lambda: self._observations == count)
@@ -311,16 +297,7 @@ class MetaWorldTaskEnv(WorldEnv):
         return {name: self.scene.camera_id for name in OBSERVED_CAMERAS}
 
     def camera_pose(self, name: str) -> CameraPose:
-        import mujoco
-
-        model, data = self.model, self.data
-        cam = self.scene.camera_id
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_camlight(model, data)
-        quat = mat_to_quat(data.cam_xmat[cam].reshape(3, 3))
-        return CameraPose(
-            name, tuple(map(float, data.cam_xpos[cam])), tuple(map(float, quat)), float(model.cam_fovy[cam])
-        )
+        return camera_pose_of(self.model, self.data, self.scene.camera_id, name)
 
     def scene_xml(self) -> str:
         """Meta-World's MJCF of the task, includes expanded (MuJoCo's `MjSpec`)."""

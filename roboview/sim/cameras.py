@@ -98,6 +98,19 @@ def mat_to_quat(mat: np.ndarray) -> np.ndarray:
     return q if q[0] >= 0 else -q
 
 
+def camera_pose_of(model, data, cam: int, name: str) -> CameraPose:
+    """Camera `cam` of a compiled model as `name`'s CameraPose now (frames refreshed from the live state): how the
+    worlds whose scenes RoboView does not build (LIBERO's, Meta-World's) record and certify their cameras."""
+    import mujoco
+
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_camlight(model, data)
+    quat = mat_to_quat(data.cam_xmat[cam].reshape(3, 3))
+    return CameraPose(
+        name, tuple(map(float, data.cam_xpos[cam])), tuple(map(float, quat)), float(model.cam_fovy[cam])
+    )
+
+
 def look_at(
     name: str, eye: np.ndarray, target: np.ndarray = WORKSPACE_CENTER, fovy: float = DEFAULT_FOVY_DEG
 ) -> CameraPose:

@@ -4,6 +4,8 @@ as texture pixels. Each world's wing applies them to its own model (its cameras,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import mujoco
 import numpy as np
 
@@ -108,3 +110,60 @@ def named_texture(name: str, height: int, width: int, channels: int) -> np.ndarr
         if channels <= 3
         else np.concatenate([pixels, np.full((height, width, channels - 3), 255, np.uint8)], axis=2)
     )
+
+
+def tex_slice(model: mujoco.MjModel, tex: int) -> slice:
+    """Texture `tex`'s pixels in `model.tex_data`."""
+    start = model.tex_adr[tex]
+    return slice(start, start + model.tex_width[tex] * model.tex_height[tex] * model.tex_nchannel[tex])
+
+
+def subtree_geoms(model: mujoco.MjModel, root: int, groups: tuple[int, ...]) -> list[int]:
+    """The geoms in `groups` of body `root` and every body below it."""
+    bodies = {root}
+    for body in range(root + 1, model.nbody):  # bodies are stored depth-first: descendants follow the root
+        if model.body_parentid[body] in bodies:
+            bodies.add(body)
+    return [g for g in range(model.ngeom) if model.geom_bodyid[g] in bodies and model.geom_group[g] in groups]
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Every light's diffuse × `scale`; with `direction`, every light points along it (normalised). Applies to any
+    object with a compiled `model`."""
+
+    scale: float = 1.0
+    direction: tuple[float, float, float] | None = None
+
+    @classmethod
+    def of(cls, value: str) -> Lighting:
+        """RoboView's `lighting` value (`dim_left`): its intensity as a diffuse scale, its key light's direction."""
+        from roboview.variation.factors.lighting import INTENSITIES
+
+        intensity, direction = value.split("_")
+        return cls(scale=INTENSITIES[intensity], direction=LIGHT_DIRECTIONS[direction])
+
+    def apply(self, world) -> None:
+        model = world.model
+        model.light_diffuse[:] = np.clip(model.light_diffuse * self.scale, 0.0, None)
+        if self.direction is not None:
+            d = np.asarray(self.direction, float)
+            model.light_dir[:] = d / np.linalg.norm(d)
+
+
+def visual_appliers(values: dict[str, str], make: dict, world: str) -> list:
+    """The appliers of an instance's visual factor values away from their baselines, in `make`'s order (`make`:
+    factor → value → applier, the factors the world can apply); a one-line ValueError naming a factor it cannot."""
+    from roboview.variation.factors import FACTORS
+
+    changed = {
+        k: v
+        for k, v in values.items()
+        if k in FACTORS and FACTORS[k].kind != "context" and v != FACTORS[k].baseline
+    }
+    refused = [k for k in changed if k not in make]
+    if refused:
+        raise ValueError(
+            f"the {world} world cannot apply {', '.join(refused)}; its factors: {', '.join(make)}"
+        )
+    return [make[k](changed[k]) for k in make if k in changed]
