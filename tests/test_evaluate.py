@@ -484,6 +484,48 @@ def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
             proc.kill()
 
 
+def test_a_worker_whose_parent_died_while_it_started_exits(tmp_path):
+    # A worker still importing its factory's module when its parent is killed must notice too: the parent's pid
+    # travels with it, so the worker does not take its adopter for its parent.
+    (tmp_path / "slow_factory.py").write_text("import time\ntime.sleep(3)\n\nclass Idle:\n    pass\n")
+    pids = tmp_path / "workers.pid"
+    parent = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import multiprocessing as mp, sys, time\n"
+            "from roboview.core.workers import WorkerPool\n"
+            "if __name__ == '__main__':\n"
+            "    import slow_factory\n"
+            "    pool = WorkerPool(1, slow_factory.Idle, method='__eq__')\n"
+            "    pool.submit(0)\n"
+            f"    open({str(pids)!r}, 'w').write(' '.join(str(p.pid) for p in mp.active_children()))\n"
+            "    time.sleep(60)\n",
+        ],
+        env=os.environ | {"PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])},
+        start_new_session=True,
+    )
+    workers: list[int] = []
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and not (pids.exists() and pids.read_text()):
+            time.sleep(0.1)
+        workers = [int(p) for p in pids.read_text().split()]
+        assert workers, "the pool never started"
+        parent.kill()  # the worker is still importing slow_factory
+        parent.wait()
+        deadline = time.time() + 30
+        while time.time() < deadline and any(_alive(w) for w in workers):
+            time.sleep(0.2)
+        assert not [w for w in workers if _alive(w)], "a worker orphaned while starting lingers"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
+
+
 class _Flaky:
     """Raises `errors` (one per call, None = answer) from select_action, then holds the arm still."""
 

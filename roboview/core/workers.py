@@ -55,9 +55,14 @@ def threads_per_worker(workers: int, requested: int = 0) -> int:
     return max(1, int(max(1.0, cores - busy) // workers))
 
 
-def exit_with_parent(poll_s: float = POLL_S) -> None:
-    """End this process (from a daemon thread) as soon as it is re-parented, i.e. its parent died."""
-    parent = os.getppid()
+def exit_with_parent(parent: int | None = None, poll_s: float = POLL_S) -> None:
+    """End this process (from a daemon thread) as soon as it is re-parented, i.e. its parent died.
+
+    `parent` is the pid the parent gave when it started this process. Read here instead, a parent killed while this
+    process was still importing would already be gone, and the watch would wait on its adopter forever."""
+    parent = os.getppid() if parent is None else parent
+    if os.getppid() != parent:
+        os._exit(1)  # the parent died before this process got this far
 
     def watch() -> None:
         while True:
@@ -68,11 +73,11 @@ def exit_with_parent(poll_s: float = POLL_S) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def _init(factory: Callable[..., Any], args: tuple, counter: Any) -> None:
+def _init(factory: Callable[..., Any], args: tuple, counter: Any, parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the workers
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked while the process started
     os.environ.setdefault("MUJOCO_GL", "egl")
-    exit_with_parent()
+    exit_with_parent(parent)
     with counter.get_lock():  # ranks in start order: 0 … num_workers-1
         set_worker_rank(counter.value)
         counter.value += 1
@@ -96,7 +101,10 @@ class WorkerPool:
         self.method = method
         ctx = mp.get_context("spawn")
         self._executor = ProcessPoolExecutor(
-            num_workers, mp_context=ctx, initializer=_init, initargs=(factory, args, ctx.Value("i", 0))
+            num_workers,
+            mp_context=ctx,
+            initializer=_init,
+            initargs=(factory, args, ctx.Value("i", 0), os.getpid()),
         )
 
     def submit(self, item: Any) -> Future:
