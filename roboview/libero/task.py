@@ -154,6 +154,9 @@ class LiberoTaskEnv(WorldEnv):
     controls = (CONTROL,)
     robot_type = "panda"  # LIBERO's Panda with its own gripper
     instruction_factor = ""
+    # The context factors naming an instance's LIBERO task and init state.
+    task_factor = "libero_task"
+    init_factor = "init_state"
 
     @classmethod
     def feature_names(cls, control: str) -> tuple[dict, dict]:
@@ -193,23 +196,36 @@ class LiberoTaskEnv(WorldEnv):
             {**{IMAGE_KEY.format(c): image for c in self.cameras}, STATE_KEY: state, EE_STATE_KEY: state}
         )
         self.libero_world = None
-        self.instance = baseline_libero_instance()
+        self.instance = self.baseline_instance()
         self.instruction = ""
         self.steps, self.max_steps = 0, max_steps or LIBERO_MAX_STEPS
         self._observations = 0
         # The baseline task's world, built now: the stack is described, and the cameras calibrated, from it.
-        self._world(*parse_libero_task(LIBERO_TASK.baseline))
+        self._world(*parse_libero_task(self.instance.get(self.task_factor)))
+
+    # ---- what a subclass (another task on LIBERO's scenes) may change -----------------------------------------
+    def baseline_instance(self):
+        """Every factor at its baseline: the task's baseline context."""
+        return baseline_libero_instance()
+
+    def appliers(self, values: dict[str, str]) -> list:
+        """The LIBERO appliers of an instance's visual factor values."""
+        return appliers(values)
+
+    def instruction_of(self, instance, world) -> str:
+        """What the policy is told: LIBERO's own instruction of the task."""
+        return world.task.language
 
     # ---- episodes -------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        instance = (options or {}).get("instance") or baseline_libero_instance()
-        if instance.task != TASK:
-            raise ValueError(f"instance of task {instance.task!r} given to the {TASK!r} env")
-        suite, task_id = parse_libero_task(instance.get("libero_task"))
+        instance = (options or {}).get("instance") or self.baseline_instance()
+        if instance.task != self.task:
+            raise ValueError(f"instance of task {instance.task!r} given to the {self.task!r} env")
+        suite, task_id = parse_libero_task(instance.get(self.task_factor))
         world = self._world(suite, task_id)
-        world.set_init_state(int(instance.get("init_state")))
-        world.set_factors(appliers(dict(instance.factors)))
-        self.instance, self.instruction = instance, world.task.language
+        world.set_init_state(int(instance.get(self.init_factor)))
+        world.set_factors(self.appliers(dict(instance.factors)))
+        self.instance, self.instruction = instance, self.instruction_of(instance, world)
         self.max_steps = self._max_steps_override or max_steps(suite)
         self.steps = 0
         raw = world.reset(seed=0 if seed is None else int(seed))
@@ -312,9 +328,10 @@ class LiberoTaskEnv(WorldEnv):
             self.libero_world = None
 
 
-def appliers(values: dict[str, str]) -> list:
+def appliers(values: dict[str, str], always_view: bool = False) -> list:
     """LIBERO's appliers for an instance's visual factor values (nothing for a value at its baseline)."""
     from roboview.libero import factors as lf
+    from roboview.libero.plus import SUB_FACTORS, LiberoPlusView, View
     from roboview.variation.colors import get_color
     from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
     from roboview.variation.model_edits import visual_appliers
@@ -327,7 +344,13 @@ def appliers(values: dict[str, str]) -> list:
         "lighting": lf.Lighting.of,
         "table_texture": lf.TableTexture,
     }
-    return visual_appliers(values, make, "LIBERO")
+    # LIBERO-plus's five camera sub-factors make one applier (its pose arithmetic takes all five), first: the other
+    # camera factors start from the pose it sets. `always_view`: also for the no-change view (LIBERO-plus's rounded
+    # pose); otherwise only when one of them is set.
+    view = View.of(values)
+    rest = {k: v for k, v in values.items() if k not in SUB_FACTORS}
+    out = visual_appliers(rest, make, "LIBERO")
+    return [LiberoPlusView(view), *out] if always_view or view.changes else out
 
 
 def baseline_libero_instance(libero_task: str = LIBERO_TASK.baseline, init_state: str = "0"):
@@ -353,8 +376,9 @@ class LiberoTaskExpert(WorldExpert):
     def scripts(instance: TaskInstance) -> bool:
         """Whether the expert scripts `instance`'s LIBERO task (its suite: libero_object or libero_spatial)."""
         from roboview.libero.expert import EXPERT_SUITES
+        from roboview.tasks.base import load_task
 
-        return str(instance.get("libero_task")).split("/")[0] in EXPERT_SUITES
+        return str(instance.get(load_task(instance.task).world_factor)).split("/")[0] in EXPERT_SUITES
 
     def reset(self) -> None:
         from roboview.libero.expert import LiberoExpert

@@ -61,6 +61,7 @@ BUILTIN_MODULES = (
     "roboview.tasks.pick_place",
     "roboview.tasks.push",
     "roboview.libero.task",
+    "roboview.libero.plus_task",
     "roboview.metaworld.task",
 )
 # Third-party tasks: a package lists its task modules under this entry-point group.

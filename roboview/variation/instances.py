@@ -256,6 +256,10 @@ class SuiteConfig:
     # Tasks (roboview.tasks): every split is built for each, over the task's own contexts.
     # Splits of a task other than pick_place are named "<task>_<split>" (push_color, ...).
     tasks: tuple[str, ...] = (DEFAULT_TASK,)
+    # "module:function" that lists the suite's instances itself (`function(cfg)`), for a suite that is not a product
+    # of factor values, e.g. LIBERO-plus's camera variants (roboview.libero.plus.camera_suite); its `splits` then
+    # name the splits it makes (without their task prefix).
+    generator: str = ""
 
     def __post_init__(self) -> None:
         # Config parsers may hand in lists; tuples keep the config frozen and hashable.
@@ -277,7 +281,7 @@ class SuiteConfig:
         object.__setattr__(self, "value_subsets", subsets)
         if self.union_mode not in UNION_MODES:
             raise ValueError(f"unknown union_mode {self.union_mode!r}; allowed: {UNION_MODES}")
-        for split in self.splits:
+        for split in () if self.generator else self.splits:
             if split not in known_splits():
                 raise ValueError(f"unknown split {split!r}; allowed: {', '.join(known_splits())}")
         if len(set(self.splits)) != len(self.splits):
@@ -343,7 +347,12 @@ def split_trees(cfg: SuiteConfig, task: str = DEFAULT_TASK) -> dict[str, tuple[t
 def generate_suite(cfg: SuiteConfig) -> list[TaskInstance]:
     """All task instances of a suite, task by task and split by split, in a fixed, deterministic order."""
     instances = []
-    for task in cfg.tasks:
+    if cfg.generator:
+        import importlib
+
+        module, _, function = cfg.generator.partition(":")
+        instances = list(getattr(importlib.import_module(module), function)(cfg))
+    for task in () if cfg.generator else cfg.tasks:
         for split, (varied, tree) in split_trees(cfg, task).items():
             for assignment in RecursiveVariantTaskManager(tree).generate():
                 subspace = assignment.pop(SUBSPACE_KEY)

@@ -47,6 +47,8 @@ BUILTIN_MODULES = (
     "roboview.variation.factors.table_texture",
     "roboview.variation.factors.distractors",
     "roboview.variation.factors.object_size",
+    # LIBERO-plus's camera sub-factors (the `liberoplus` task).
+    "roboview.variation.factors.view",
 )
 # Third-party factors: a package lists its factor modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.factors"

@@ -1,0 +1,130 @@
+"""The `liberoplus` task (``RoboView/LiberoPlus-v0``): LIBERO's scenes with agentview where LIBERO-plus puts it.
+
+The same scenes, tasks, init states, control, success and step budgets as the `libero` task (roboview.libero.task),
+with one difference: agentview always takes LIBERO-plus's pose arithmetic (roboview.libero.plus), also when no
+sub-factor is set. Its baseline is therefore LIBERO-plus's own no-change view, LIBERO's agentview pose rounded to 4
+decimals, which every camera variant is paired against.
+
+**Contexts**: `liberoplus_task` (one of the 40 tasks, `<suite>/<task id>`), `liberoplus_init_state` (LIBERO-plus runs
+init state 0; a repeat runs the next init state, as in the `libero` task) and `liberoplus_instruction`:
+
+- `libero` (default): the policy gets LIBERO's own instruction of the task, whatever the view. Only the camera
+  changes across the values of a block.
+- `liberoplus`: the instruction LIBERO-plus sends, built from the variant's file name ("… on the plate view 346 15 100
+  0 0 initstate 0"). Its numbers are comparable with LIBERO-plus's published ones, and the isolation certificate
+  names the instruction as a second change of every value.
+
+**Visual factors**: LIBERO-plus's five camera sub-factors (`view_*`, roboview.variation.factors.view) and the
+`libero` task's own (color, lighting…), applied the same way.
+"""
+
+from __future__ import annotations
+
+from roboview.libero.plus import SHORT, SUB_FACTORS, View, instruction_of, variant_name
+from roboview.libero.suites import SUITES
+from roboview.libero.task import (
+    LIBERO_MAX_STEPS,
+    N_INIT_STATES,
+    LiberoTaskEnv,
+    LiberoTaskExpert,
+    appliers,
+)
+from roboview.tasks.base import Task, register_task
+from roboview.variation.factors import Factor, register_factor
+
+TASK = "liberoplus"
+INSTRUCTION_MODES = ("libero", "liberoplus")
+
+LIBEROPLUS_TASK = register_factor(
+    Factor(
+        name="liberoplus_task",
+        kind="context",
+        task=TASK,
+        values=tuple(f"{suite}/{i}" for suite in SUITES for i in range(10)),
+        baseline="libero_spatial/0",
+        doc="One of LIBERO's 40 evaluation tasks, <suite>/<task id>, whose camera variants LIBERO-plus defines.",
+        title="LIBERO task",
+    )
+)
+LIBEROPLUS_INIT_STATE = register_factor(
+    Factor(
+        name="liberoplus_init_state",
+        kind="context",
+        task=TASK,
+        values=tuple(str(i) for i in range(N_INIT_STATES)),
+        baseline="0",
+        doc="Which of the task's 50 LIBERO init states the episode starts from (LIBERO-plus runs 0).",
+        title="Init state",
+    )
+)
+LIBEROPLUS_INSTRUCTION = register_factor(
+    Factor(
+        name="liberoplus_instruction",
+        kind="context",
+        task=TASK,
+        values=INSTRUCTION_MODES,
+        baseline="libero",
+        doc=(
+            "The instruction the policy gets: LIBERO's own (libero), or LIBERO-plus's, which names the view "
+            "(liberoplus: the instruction then changes with every value, and the isolation certificate says so)."
+        ),
+        title="Instruction",
+        alters=("instruction",),
+    )
+)
+
+
+class LiberoPlusTaskEnv(LiberoTaskEnv):
+    """The `liberoplus` task's env: the `libero` task's, agentview always at LIBERO-plus's pose."""
+
+    task = TASK
+    task_factor = "liberoplus_task"
+    init_factor = "liberoplus_init_state"
+
+    def baseline_instance(self):
+        return baseline_liberoplus_instance()
+
+    def appliers(self, values: dict[str, str]) -> list:
+        return appliers(values, always_view=True)
+
+    def instruction_of(self, instance, world) -> str:
+        if instance.get("liberoplus_instruction") == "libero":
+            return world.task.language
+        return instruction_of(variant_name(world.task.name, View.of(instance.factor_values)))
+
+
+def baseline_liberoplus_instance(task: str = LIBEROPLUS_TASK.baseline, init_state: str = "0"):
+    """Every visual factor at its baseline (LIBERO-plus's no-change view) on `task` from `init_state`."""
+    from roboview.variation.factors import baselines
+    from roboview.variation.instances import TaskInstance
+
+    values = baselines(TASK) | {"liberoplus_task": task, "liberoplus_init_state": init_state}
+    return TaskInstance(
+        split="baseline", varied=("view_azimuth",), factors=values, context_subspace="base", task=TASK
+    )
+
+
+def changes_of(values: dict[str, str]) -> str:
+    """The sub-factors a view changes, in words ("azimuth + elevation"; "none")."""
+    changed = View.of(values).changes
+    return " + ".join(SHORT[f] for f in changed) or "none"
+
+
+register_task(
+    Task(
+        name=TASK,
+        gym_id="RoboView/LiberoPlus-v0",
+        env="roboview.libero.plus_task:LiberoPlusTaskEnv",
+        success="LIBERO's own goal predicate for the task (check_success) holds",
+        timeout_reason="LIBERO's goal not reached",
+        expert="roboview.libero.task:LiberoTaskExpert",
+        small_contexts=(("liberoplus_task", ("libero_object/0",)), ("liberoplus_init_state", ("0",))),
+        max_episode_steps=LIBERO_MAX_STEPS,
+        steps_per_context=True,
+        seed_randomizes="fixture placement (cabinets, stoves…) in some scenes, nothing in others",
+        repeat_factor="liberoplus_init_state",
+        world_factor="liberoplus_task",
+    )
+)
+
+__all__ = ["SUB_FACTORS", "LiberoPlusTaskEnv", "LiberoTaskExpert", "baseline_liberoplus_instance"]
