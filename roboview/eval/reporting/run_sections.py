@@ -11,6 +11,7 @@ from typing import Any
 
 from roboview.eval.reporting.format import p_fmt, pct
 from roboview.eval.reporting.tables import markdown_table
+from roboview.eval.running import isolation
 
 
 def diagnostics_section(layouts: dict[str, dict]) -> list[str]:
@@ -113,13 +114,14 @@ def isolation_section(layouts: dict[str, dict]) -> list[str]:
             if cert is None:
                 continue
             if not cert["recorded"]:
-                rows.append([name, split, str(cert["blocks"]), "not recorded", "—"])
+                rows.append([name, split, "—", str(cert["blocks"]), "not recorded", "—"])
                 continue
             bad = cert["violations"]
             rows.append(
                 [
                     name,
                     split,
+                    isolation.label(cert),
                     str(cert["blocks"]),
                     f"{cert['verified']} / {cert['blocks']}",
                     "none" if not bad else f"{len(bad)} (left out of the tests)",
@@ -137,9 +139,11 @@ def isolation_section(layouts: dict[str, dict]) -> list[str]:
         "## Isolation certificate",
         "",
         "Every value of one (context, repeat) must share the instruction, the initial robot state and object pose, "
-        "the episode seed, every other factor's value and the calibration of the cameras the factor does not move.",
+        "the episode seed, every other factor's value and the calibration of the cameras the factor does not move. "
+        "*Changes* says what a split's values change: one factor (isolated), or more (a two-factor split, or an "
+        "instruction that names the value), whose effects it cannot tell apart.",
         "",
-        *markdown_table(["Policy", "Split", "Blocks", "Verified identical", "Violations"], rows),
+        *markdown_table(["Policy", "Split", "Changes", "Blocks", "Verified identical", "Violations"], rows),
         *violations,
         "",
     ]

@@ -19,6 +19,12 @@ same for every value, except what the split's varied factors declare they change
 the camera factors move `front` and `left_top`; `object_size` changes the object's height). A block that
 disagrees is a violation: the report lists it and the statistics leave it out, with a warning. Floats
 are hashed at 1e-9 resolution (physics and rendering are deterministic; this only absorbs printing).
+
+A context factor set away from its baseline may declare what then changes *with* the split's values
+(`liberoplus_instruction=liberoplus` tells the policy an instruction that names the view: `instruction`).
+The certificate lets it differ and names it. Each split's `changes` lists everything its values change
+(its varied factors, then such components). A split is `isolated` only when that is one factor: a
+two-factor split (LIBERO-plus's azimuth with elevation) or a changed instruction is labelled as such.
 """
 
 from __future__ import annotations
@@ -96,7 +102,8 @@ def verify(episodes: pd.DataFrame) -> dict[str, dict[str, Any]]:
             }
             continue
         varied = _varied(rows)
-        free = allowed_to_differ(varied)
+        riding = _riding(rows)
+        free = allowed_to_differ(varied) | set(riding)
         parsed = rows[COLUMN].map(json.loads)
         violations = []
         blocks = 0
@@ -121,8 +128,34 @@ def verify(episodes: pd.DataFrame) -> dict[str, dict[str, Any]]:
             "violations": violations,
             "varied": list(varied),
             "allowed_to_differ": sorted(free),
+            "changes": [*varied, *riding],
+            "isolated": len(varied) + len(riding) == 1,
         }
     return out
+
+
+def _riding(rows: pd.DataFrame) -> list[str]:
+    """Components that change with the values because a context factor of these rows is set away from its baseline
+    and declares them (`Factor.alters` of a context factor), in factor order."""
+    from roboview.variation.factors import FACTORS
+
+    out: list[str] = []
+    for factor in FACTORS.values():
+        if factor.kind != "context" or not factor.alters or factor.name not in rows:
+            continue
+        if (rows[factor.name].astype(str) != factor.baseline).any():
+            out += [c for c in factor.alters if c not in out]
+    return out
+
+
+def label(cert: dict[str, Any]) -> str:
+    """What a split's values change, in words: "isolated (view_azimuth)", "2 changes: view_azimuth + view_elevation"."""
+    changes = cert.get("changes") or []
+    if not changes:
+        return "not recorded"
+    if cert.get("isolated"):
+        return f"isolated ({changes[0]})"
+    return f"{len(changes)} changes: {' + '.join(changes)}"
 
 
 def _varied(rows: pd.DataFrame) -> tuple[str, ...]:

@@ -432,7 +432,7 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     for key in average:
         values = [s[key] for s in splits.values()]
         average[key] = float(np.mean(values)) if values and None not in values else None
-    return {
+    out = {
         "epsilon": cfg.epsilon,
         "policy": str(policies[0]),
         "resampling": _resampling(cfg),
@@ -442,6 +442,27 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
         "average": average,
         "n_infra_errors": sum(infra.values()),
     }
+    analyses = task_analyses(episodes)
+    if analyses:
+        out["analyses"] = analyses
+    return out
+
+
+def task_analyses(episodes: pd.DataFrame) -> dict[str, Any]:
+    """The analyses the episodes' tasks declare (`Task.analyses`), each under its KEY (those with nothing to say
+    are left out)."""
+    import importlib
+
+    from roboview.tasks import load_task
+
+    out: dict[str, Any] = {}
+    for task in episodes["task"].dropna().astype(str).unique() if "task" in episodes else ():
+        for name in load_task(task).analyses:
+            module = importlib.import_module(name)
+            result = module.compute(episodes[episodes["task"].astype(str) == task])
+            if result is not None:
+                out[module.KEY] = result
+    return out
 
 
 def compute_all_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) -> dict[str, Any]:

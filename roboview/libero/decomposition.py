@@ -1,0 +1,409 @@
+"""LIBERO-plus's camera number, taken apart: the `liberoplus` task's analysis in metrics.json and the report.
+
+From one policy's episodes of a `liberoplus_camera*` benchmark (the `liberoplus` task's rows):
+
+- **The camera number** two ways: as LIBERO-plus's README totals it (every variant episode weighted alike, so a
+  suite with more variants weighs more) and as vla-eval's results average it (each suite's rate over its own
+  variants, then the four suites' mean). Beside it, the no-change view's rate.
+- **Each kind of change against the no-change view**, paired by block (the same task, init state and seed):
+  azimuth alone, elevation alone, scale alone, rotation z alone, rotation y alone, and LIBERO-plus's two-change
+  kinds. Per block, the kind's mean success minus the no-change episode's; the effect is the mean over blocks,
+  its 95 % interval a bootstrap over blocks (scipy `bootstrap`, BCa), its p a sign-flip permutation test over
+  blocks (scipy `permutation_test`: exact up to 16 blocks, 100,000 random flips beyond). Blocks, not episodes,
+  are the independent units: one no-change episode pairs with every variant of its block.
+- **Interaction**: for each two-change variant whose single-change parts ran in its block, S(both) − S(first) −
+  S(second) + S(none) — 0 when the two costs add on the success scale, negative when together they cost more.
+  Averaged per block, tested and bounded as above.
+- **Dose–response** over azimuth magnitude (|azimuth| in degrees, the azimuth-only views with the no-change view at
+  0) and over scale (percent above 100): a logistic GLM (statsmodels) of success on magnitude with standard errors
+  clustered by task, the fitted success at 0, and the magnitude at which the fitted success falls to half of it,
+  with a delta-method 95 % interval (None where success does not fall with magnitude).
+- **Per variant**, where repeats ran (init states 0, 1, …): its rate with a Wilson interval, its paired difference
+  to the no-change view over the same init states and McNemar's exact test.
+
+Every number is validated against known truth by simulation (tests/test_liberoplus_statistics.py).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats as sps
+
+from roboview.libero.plus import LIBERO_PLUS_SPLITS, NO_CHANGE, SHORT, SUB_FACTORS, SUITES
+
+KEY = "liberoplus_camera"
+TITLE = "LIBERO-plus's camera dimension, taken apart"
+N_BOOT = 2000
+N_FLIPS = 100_000
+EXACT_BLOCKS = 16  # 2**16 sign flips: enumerated exactly
+SEED = 0
+KINDS = (
+    ("view_azimuth",),
+    ("view_elevation",),
+    ("view_scale",),
+    ("view_rotz",),
+    ("view_roty",),
+    ("view_azimuth", "view_elevation"),
+    ("view_rotz", "view_roty"),
+)
+
+
+def kind_name(kind: tuple[str, ...]) -> str:
+    return " + ".join(SHORT[f] for f in kind)
+
+
+def _views(rows: pd.DataFrame) -> pd.DataFrame:
+    """Rows with integer sub-factor columns and `kind` (what the view changes, "+"-joined factor names)."""
+    params = pd.DataFrame({f: rows[f].astype(int) for f in SUB_FACTORS}, index=rows.index)
+    changed = params.ne(pd.Series(NO_CHANGE, index=SUB_FACTORS))
+    kind = changed.apply(lambda r: "+".join(f for f in SUB_FACTORS if r[f]), axis=1)
+    return rows.assign(**{f: params[f] for f in SUB_FACTORS}, kind=kind, success=rows["success"].astype(int))
+
+
+def _rate(success: pd.Series) -> dict[str, Any]:
+    from roboview.eval.statistics.tables import wilson_ci95
+
+    k, n = int(success.sum()), int(len(success))
+    return {"sr": k / n if n else None, "ci95": wilson_ci95(k, n), "n": n}
+
+
+def _block_test(d: np.ndarray) -> dict[str, Any]:
+    """Mean of per-block differences `d`, its BCa bootstrap 95 % interval and a two-sided sign-flip p."""
+    n = len(d)
+    out: dict[str, Any] = {"effect": float(d.mean()) if n else None, "ci95": None, "p": None, "n_blocks": n}
+    if n < 2:
+        return out
+    rng = np.random.default_rng(SEED)
+    if np.all(d == d[0]):
+        out["ci95"] = [float(d[0]), float(d[0])]
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter(
+                "ignore"
+            )  # BCa's degenerate-sample warnings: the percentile ends still hold
+            ci = sps.bootstrap((d,), np.mean, n_resamples=N_BOOT, method="BCa", rng=rng).confidence_interval
+        out["ci95"] = [float(ci.low), float(ci.high)]
+    if not np.any(d):
+        out["p"] = 1.0
+        return out
+    flips = 2**n if n <= EXACT_BLOCKS else N_FLIPS
+    result = sps.permutation_test(
+        (d, -d),
+        _half_mean_difference,
+        permutation_type="samples",
+        vectorized=True,
+        n_resamples=flips,
+        alternative="two-sided",
+        rng=rng,
+    )
+    out["p"] = float(result.pvalue)
+    return out
+
+
+def _half_mean_difference(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.mean(x - y, axis=axis) / 2  # (d, −d) paired: a swap flips d's sign; unswapped, mean(d)
+
+
+def _blocks(rows: pd.DataFrame) -> pd.DataFrame:
+    """One row per block (context_id, repeat) with its no-change success, for blocks that ran the no-change view."""
+    base = rows[rows["kind"] == ""].drop_duplicates(["context_id", "repeat"])
+    return base.set_index(["context_id", "repeat"])["success"].rename("base")
+
+
+def kind_effects(rows: pd.DataFrame) -> dict[str, dict[str, Any]]:
+    """Each kind of change's paired effect against the no-change view (module docstring)."""
+    base = _blocks(rows)
+    out = {}
+    for kind in KINDS:
+        sub = rows[rows["kind"] == "+".join(kind)]
+        if sub.empty:
+            continue
+        mean = sub.groupby(["context_id", "repeat"])["success"].mean()
+        both = mean.index.intersection(base.index)
+        d = (mean.loc[both] - base.loc[both]).to_numpy(float)
+        out[kind_name(kind)] = {
+            "factors": list(kind),
+            **_rate(sub["success"]),
+            "n_variants": int(sub.drop_duplicates("instance_id").shape[0]),
+            **{f"{k}_effect" if k == "ci95" else k: v for k, v in _block_test(d).items()},
+        }
+    return out
+
+
+def interactions(rows: pd.DataFrame) -> dict[str, dict[str, Any]]:
+    """S(both) − S(first) − S(second) + S(none) per two-change variant whose parts ran in its block, per block mean."""
+    by = rows.set_index(["context_id", "repeat", *SUB_FACTORS])["success"]
+    by = by[~by.index.duplicated()]
+    base = _blocks(rows)
+    out = {}
+    for kind in KINDS:
+        if len(kind) != 2:
+            continue
+        sub = rows[rows["kind"] == "+".join(kind)]
+        per_block: dict[tuple, list[float]] = {}
+        matched: set[str] = set()
+        for r in sub.itertuples(index=False):
+            block = (r.context_id, r.repeat)
+            if block not in base.index:
+                continue
+            params = {f: getattr(r, f) for f in SUB_FACTORS}
+            parts = []
+            for f in kind:
+                alone = tuple(params[g] if g == f else b for g, b in zip(SUB_FACTORS, NO_CHANGE))
+                key = (*block, *alone)
+                if key in by.index:
+                    parts.append(by.loc[key])
+            if len(parts) == 2:
+                per_block.setdefault(block, []).append(r.success - parts[0] - parts[1] + base.loc[block])
+                matched.add(r.instance_id)
+        d = np.array([np.mean(v) for v in per_block.values()], float)
+        out[kind_name(kind)] = {
+            "factors": list(kind),
+            "n_variants": len(matched),
+            **{"interaction" if k == "effect" else k: v for k, v in _block_test(d).items()},
+        }
+    return out
+
+
+def _magnitude(rows: pd.DataFrame, factor: str) -> pd.Series:
+    if factor == "view_azimuth":
+        az = rows[factor]
+        return np.minimum(az, 360 - az).astype(float)
+    return (rows[factor] - 100).astype(float)
+
+
+def dose_response(rows: pd.DataFrame, factor: str) -> dict[str, Any] | None:
+    """Success against `factor`'s magnitude over its single-change views and the no-change view (module docstring)."""
+    import statsmodels.api as sm
+
+    sub = rows[rows["kind"].isin(["", factor])]
+    if sub["kind"].nunique() < 2:
+        return None
+    x = _magnitude(sub, factor).to_numpy()
+    y = sub["success"].to_numpy(float)
+    curve = [{"magnitude": float(m), **_rate(pd.Series(y[x == m]))} for m in np.unique(x)]
+    out: dict[str, Any] = {
+        "factor": factor,
+        "unit": "degrees" if factor == "view_azimuth" else "percent above 100",
+        "n": int(len(y)),
+        "curve": curve,
+        "sr_at_0": None,
+        "slope": None,
+        "half_magnitude": None,
+        "half_magnitude_ci95": None,
+    }
+    if y.min() == y.max():
+        return out  # all succeeded or all failed: no slope to fit
+    groups = pd.factorize(sub["context_id"])[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            fit = sm.GLM(y, sm.add_constant(x), family=sm.families.Binomial()).fit(
+                cov_type="cluster", cov_kwds={"groups": groups}
+            )
+        except (ValueError, np.linalg.LinAlgError):
+            return out
+    a, b = (float(v) for v in fit.params)
+    out["sr_at_0"] = float(1 / (1 + np.exp(-a)))
+    out["slope"] = b
+    out["slope_p"] = float(fit.pvalues[1]) if np.isfinite(fit.pvalues[1]) else None
+    if b >= 0 or not np.all(np.isfinite(fit.cov_params())):
+        return out
+
+    def half(theta: np.ndarray) -> float:
+        p0 = 1 / (1 + np.exp(-theta[0]))
+        return float((np.log(p0 / 2 / (1 - p0 / 2)) - theta[0]) / theta[1])
+
+    theta = np.array([a, b])
+    m50 = half(theta)
+    eps = 1e-6
+    grad = np.array([(half(theta + eps * e) - half(theta - eps * e)) / (2 * eps) for e in np.eye(2)])
+    se = float(np.sqrt(grad @ np.asarray(fit.cov_params()) @ grad))
+    out["half_magnitude"] = m50
+    out["half_magnitude_ci95"] = [m50 - 1.959964 * se, m50 + 1.959964 * se] if np.isfinite(se) else None
+    return out
+
+
+def per_variant(rows: pd.DataFrame) -> list[dict[str, Any]]:
+    """Each LIBERO-plus variant's rate and paired difference to the no-change view, where repeats ran."""
+    from roboview.eval.statistics.significance import paired_success_test
+
+    variants = rows[rows["split"].map(_is_liberoplus) & (rows["kind"] != "")]
+    if variants.empty or variants.groupby("instance_id").size().max() < 2:
+        return []
+    base = _blocks(rows)
+    out = []
+    for (task, value), sub in variants.groupby(["liberoplus_task", "value"], sort=False):
+        joined = sub.set_index(["context_id", "repeat"])["success"]
+        both = joined.index.intersection(base.index)
+        a, b = joined.loc[both].to_numpy(bool), base.loc[both].to_numpy(bool)
+        out.append(
+            {
+                "task": str(task),
+                "value": str(value),
+                "kind": kind_name(tuple(sub["kind"].iloc[0].split("+"))),
+                **_rate(sub["success"]),
+                "delta_control": float(a.mean() - b.mean()) if len(both) else None,
+                "p_control": paired_success_test(a, b) if len(both) else None,
+            }
+        )
+    return out
+
+
+def _is_liberoplus(split: str) -> bool:
+    return str(split).removeprefix("liberoplus_") in LIBERO_PLUS_SPLITS
+
+
+def camera_number(rows: pd.DataFrame) -> dict[str, Any]:
+    """The camera dimension's success rate as LIBERO-plus totals it and as vla-eval averages it."""
+    variants = rows[rows["split"].map(_is_liberoplus) & (rows["kind"] != "")]
+    suite = variants["liberoplus_task"].astype(str).str.split("/").str[0]
+    per_suite = {s: _rate(variants.loc[suite == s, "success"]) for s in SUITES if (suite == s).any()}
+    rates = [r["sr"] for r in per_suite.values()]
+    return {
+        "liberoplus": _rate(variants["success"]),
+        "vla_eval": float(np.mean(rates)) if rates else None,
+        "per_suite": per_suite,
+        "n_variants": int(variants.drop_duplicates("instance_id").shape[0]),
+        "no_change": _rate(rows[rows["kind"] == ""].drop_duplicates(["context_id", "repeat"])["success"]),
+    }
+
+
+def compute(episodes: pd.DataFrame) -> dict[str, Any] | None:
+    """The analysis of one policy's `liberoplus` episodes (certified, counted); None without any."""
+    rows = episodes[episodes["task"].astype(str) == "liberoplus"]
+    if rows.empty or any(f not in rows for f in SUB_FACTORS):
+        return None
+    rows = _views(rows)
+    instruction = sorted(rows["liberoplus_instruction"].astype(str).unique())
+    return {
+        "instruction": instruction,
+        "camera": camera_number(rows),
+        "kinds": kind_effects(rows),
+        "interactions": interactions(rows),
+        "dose_response": {
+            SHORT[f]: d for f in ("view_azimuth", "view_scale") if (d := dose_response(rows, f)) is not None
+        },
+        "per_variant": per_variant(rows),
+    }
+
+
+# ---- report -----------------------------------------------------------------------------------------------------
+def _pct(x: float | None) -> str:
+    return "—" if x is None else f"{100 * x:.1f}"
+
+
+def _ci(ci: list[float] | None, scale: float = 100) -> str:
+    return "—" if ci is None else f"[{scale * ci[0]:.1f}, {scale * ci[1]:.1f}]"
+
+
+def _p(p: float | None) -> str:
+    return "—" if p is None else (f"{p:.2g}" if p >= 0.001 else "< 0.001")
+
+
+def markdown(result: dict[str, Any], policy: str) -> list[str]:
+    """report.md's lines for one policy's analysis."""
+    from roboview.eval.reporting.tables import markdown_table
+
+    cam = result["camera"]
+    lp, base = cam["liberoplus"], cam["no_change"]
+    suites = ", ".join(f"{s} {_pct(r['sr'])} (n {r['n']})" for s, r in cam["per_suite"].items())
+    told = (
+        "LIBERO-plus's own (it names the view: every value also changes the instruction)"
+        if "liberoplus" in result["instruction"]
+        else "LIBERO's own, whatever the view (only the camera changes)"
+    )
+    lines = [
+        f"### {policy}",
+        "",
+        f"Camera success rate over LIBERO-plus's {cam['n_variants']:,} variants run: **{_pct(lp['sr'])}** "
+        f"{_ci(lp['ci95'])} as LIBERO-plus totals it ({lp['n']:,} episodes alike); {_pct(cam['vla_eval'])} as "
+        f"vla-eval averages it (the suites' mean: {suites}). The no-change view: {_pct(base['sr'])} "
+        f"{_ci(base['ci95'])} (n {base['n']}). Instruction: {told}.",
+        "",
+    ]
+    rows = [
+        [
+            name,
+            str(k["n_variants"]),
+            _pct(k["sr"]),
+            "—" if k["effect"] is None else f"{100 * k['effect']:+.1f}",
+            _ci(k["ci95_effect"]),
+            _p(k["p"]),
+            str(k["n_blocks"]),
+        ]
+        for name, k in result["kinds"].items()
+    ]
+    if rows:
+        lines += [
+            "Each kind of change against the no-change view, paired by block (task, init state, seed); effect in "
+            "points, 95 % bootstrap interval over blocks, sign-flip p over blocks:",
+            "",
+            *markdown_table(["Change", "Variants", "SR", "Effect", "95 % CI", "p", "Blocks"], rows),
+            "",
+        ]
+    inter = [
+        [
+            name,
+            str(i["n_variants"]),
+            "—" if i["interaction"] is None else f"{100 * i['interaction']:+.1f}",
+            _ci(i["ci95"]),
+            _p(i["p"]),
+        ]
+        for name, i in result["interactions"].items()
+        if i["n_variants"]
+    ]
+    if inter:
+        lines += [
+            "Interaction, S(both) − S(first) − S(second) + S(none): negative when the two changes together cost "
+            "more than each alone adds up to:",
+            "",
+            *markdown_table(
+                ["Two changes", "Variants with both parts", "Interaction", "95 % CI", "p"], inter
+            ),
+            "",
+        ]
+    for name, d in result["dose_response"].items():
+        half = d["half_magnitude"]
+        said = (
+            f"success falls to half its fitted no-change level ({_pct(d['sr_at_0'])}) at {half:.1f} {d['unit']} "
+            f"{_ci(d['half_magnitude_ci95'], 1)}"
+            if half is not None
+            else "no decline to half of the no-change level could be fitted"
+            + ("" if d["slope"] is None else f" (slope {d['slope']:+.3f} per unit)")
+        )
+        points = "; ".join(f"{c['magnitude']:g}: {_pct(c['sr'])} (n {c['n']})" for c in d["curve"][:12])
+        lines += [
+            f"Dose–response over {name} ({d['n']} episodes): {said}. Success by magnitude: {points}.",
+            "",
+        ]
+    worst = sorted(
+        (v for v in result["per_variant"] if v["delta_control"] is not None),
+        key=lambda v: v["delta_control"],
+    )[:10]
+    if worst:
+        lines += [
+            "Per variant over its repeats (the ten that cost most against the no-change view, McNemar's exact p):",
+            "",
+            *markdown_table(
+                ["Task", "View", "Change", "SR", "95 % CI", "Δ", "p"],
+                [
+                    [
+                        v["task"],
+                        v["value"],
+                        v["kind"],
+                        _pct(v["sr"]),
+                        _ci(v["ci95"]),
+                        f"{100 * v['delta_control']:+.1f}",
+                        _p(v["p_control"]),
+                    ]
+                    for v in worst
+                ],
+            ),
+            "",
+        ]
+    return lines
