@@ -25,6 +25,7 @@ FAST_MODULES = {
     "test_folders",
     "test_imports",
     "test_isolation",
+    "test_liberoplus_statistics",
     "test_lerobot_plugin",
     "test_metrics",
     "test_ranking",

@@ -58,10 +58,12 @@ def kind_name(kind: tuple[str, ...]) -> str:
 
 def _views(rows: pd.DataFrame) -> pd.DataFrame:
     """Rows with integer sub-factor columns and `kind` (what the view changes, "+"-joined factor names)."""
-    params = pd.DataFrame({f: rows[f].astype(int) for f in SUB_FACTORS}, index=rows.index)
-    changed = params.ne(pd.Series(NO_CHANGE, index=SUB_FACTORS))
-    kind = changed.apply(lambda r: "+".join(f for f in SUB_FACTORS if r[f]), axis=1)
-    return rows.assign(**{f: params[f] for f in SUB_FACTORS}, kind=kind, success=rows["success"].astype(int))
+    params = {f: rows[f].astype(int) for f in SUB_FACTORS}
+    kind = pd.Series("", index=rows.index)
+    for f, b in zip(SUB_FACTORS, NO_CHANGE):
+        kind = kind.where(params[f] == b, kind + "+" + f)
+    kind = kind.str.lstrip("+")
+    return rows.assign(**params, kind=kind, success=rows["success"].astype(int))
 
 
 def _rate(success: pd.Series) -> dict[str, Any]:

@@ -184,6 +184,19 @@ register_preset(
         value_subsets=(*LIBERO_PLUS.value_subsets, ("liberoplus_instruction", ("liberoplus",))),
     )
 )
+# One suite's share (what a checkpoint fine-tuned on that suite alone is run on, as LIBERO-plus and vla-eval run
+# one suite at a time): `liberoplus_camera_spatial`, `_object`, `_goal`, `_10`.
+for _suite in ("spatial", "object", "goal", "10"):
+    register_preset(
+        replace(
+            LIBERO_PLUS,
+            preset=f"liberoplus_camera_{_suite}",
+            value_subsets=(
+                *LIBERO_PLUS.value_subsets,
+                ("liberoplus_task", tuple(f"libero_{_suite}/{i}" for i in range(10))),
+            ),
+        )
+    )
 register_preset(
     replace(
         LIBERO_PLUS,
