@@ -409,3 +409,53 @@ def markdown(result: dict[str, Any], policy: str) -> list[str]:
             "",
         ]
     return lines
+
+
+FIGURE = "analysis_liberoplus_dose_response.png"
+
+
+def plot(results: dict[str, dict[str, Any]], output_dir) -> dict[str, str | None]:
+    """Success against azimuth magnitude and against scale, per policy: the rates with Wilson intervals, the fitted
+    logistic curve, and the half-magnitude with its interval (a shaded band)."""
+    from pathlib import Path
+
+    import matplotlib.pyplot as plt
+
+    panels = [
+        name for name in ("azimuth", "scale") if any(name in r["dose_response"] for r in results.values())
+    ]
+    if not panels:
+        return {FIGURE: "no single-change azimuth or scale views ran"}
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(5.5 * len(panels), 4), layout="constrained", squeeze=False
+    )
+    for ax, name in zip(axes[0], panels):
+        for i, (policy, result) in enumerate(results.items()):
+            d = result["dose_response"].get(name)
+            if d is None:
+                continue
+            x = np.array([c["magnitude"] for c in d["curve"]])
+            sr = np.array([c["sr"] for c in d["curve"]])
+            lo = np.array([c["ci95"][0] for c in d["curve"]])
+            hi = np.array([c["ci95"][1] for c in d["curve"]])
+            color = f"C{i}"
+            ax.errorbar(x, sr, yerr=[sr - lo, hi - sr], fmt="o", ms=3, capsize=2, color=color, label=policy)
+            if d["slope"] is not None:
+                a = np.log(d["sr_at_0"] / (1 - d["sr_at_0"]))
+                grid = np.linspace(0, x.max(), 100)
+                ax.plot(grid, 1 / (1 + np.exp(-(a + d["slope"] * grid))), color=color, lw=1)
+            if d["half_magnitude"] is not None:
+                ax.axvline(d["half_magnitude"], color=color, ls="--", lw=1)
+                if d["half_magnitude_ci95"] is not None:
+                    ax.axvspan(*d["half_magnitude_ci95"], color=color, alpha=0.12)
+        unit = "|azimuth| (degrees)" if name == "azimuth" else "scale − 100 (percent)"
+        ax.set(
+            xlabel=unit,
+            ylabel="success rate",
+            ylim=(-0.05, 1.05),
+            title=f"Success vs {name} (LIBERO-plus views)",
+        )
+        ax.legend(fontsize=8)
+    fig.savefig(Path(output_dir) / FIGURE, dpi=110)
+    plt.close(fig)
+    return {FIGURE: None}

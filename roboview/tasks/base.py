@@ -124,6 +124,16 @@ def register_task(task: Task) -> Task:
     return task
 
 
+def analysis_modules() -> dict[str, Any]:
+    """Every registered task's analysis modules (`Task.analyses`), by their KEY."""
+    out = {}
+    for task in TASKS.values():
+        for name in task.analyses:
+            module = importlib.import_module(name)
+            out[module.KEY] = module
+    return out
+
+
 def load_task(name: str = DEFAULT_TASK) -> Task:
     try:
         return TASKS[name]

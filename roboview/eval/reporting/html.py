@@ -57,6 +57,9 @@ def _figure_splits(plots: dict[str, str | None]) -> dict[str, list[str]]:
 
     found: dict[str, list[str]] = {}
     for name in drawn:
+        if name.startswith(ANALYSIS_FIGURE):  # a task analysis's figure: shown in its section
+            found.setdefault(ANALYSIS_FIGURE, []).append(name)
+            continue
         for base, (split, _, _) in PLOTS.items():
             if name == base or name.endswith(f"_{base}"):
                 task = name[: -len(base) - 1]
@@ -138,6 +141,7 @@ def _videos(metrics: dict[str, Any], layouts: dict[str, dict], split: str) -> li
     return ["<details><summary>Episode videos (✗ failed)</summary>", tables.to_html(table), "</details>"]
 
 
+ANALYSIS_FIGURE = "analysis_"  # the file-name prefix of a task analysis's figures
 # report.md's sections the page renders as they are, in this order, with their titles in the page's index.
 _MARKDOWN_TITLES = {
     "analyses": "Task analyses",
@@ -213,8 +217,12 @@ def _markdown_sections(
             body += "".join(
                 '<div class="figures">' + "".join(_image(out / f, f) for f in names) + "</div>"
                 for split, names in figures.items()
-                if split not in splits
+                if split not in splits and split != ANALYSIS_FIGURE
             )
+        if anchor == "analyses" and figures.get(ANALYSIS_FIGURE):
+            images = "".join(_image(out / f, f) for f in figures[ANALYSIS_FIGURE])
+            body += f'<div class="figures">{images}</div>'
+
         sections.append((anchor, title, body))
     return sections
 

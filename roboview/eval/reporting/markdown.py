@@ -75,17 +75,10 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
 
 def _analyses(layouts: dict[str, dict]) -> list[str]:
     """Each task analysis (metrics.json `analyses`, `Task.analyses`) in its own words, per policy."""
-    import importlib
+    from roboview.tasks.base import analysis_modules
 
-    from roboview.tasks import TASKS
-
-    modules = {}
-    for task in TASKS.values():
-        for name in task.analyses:
-            module = importlib.import_module(name)
-            modules[module.KEY] = module
     lines: list[str] = []
-    for key, module in modules.items():
+    for key, module in analysis_modules().items():
         ran = {
             name: layout["analyses"][key]
             for name, layout in layouts.items()

@@ -432,4 +432,11 @@ def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
             name = f"{prefix}forest_{split}.png"
             plot_forest(split)(view, output_dir / name)
             outcome[name] = None
+    # A task analysis draws its own figures (`analysis_<name>.png`), from every policy's result.
+    from roboview.tasks.base import analysis_modules
+
+    for key, module in analysis_modules().items():
+        ran = {p: layout["analyses"][key] for p, layout in layouts.items() if key in layout.get("analyses", {})}
+        if ran and hasattr(module, "plot"):
+            outcome |= module.plot(ran, output_dir)
     return outcome
