@@ -436,7 +436,9 @@ def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
     from roboview.tasks.base import analysis_modules
 
     for key, module in analysis_modules().items():
-        ran = {p: layout["analyses"][key] for p, layout in layouts.items() if key in layout.get("analyses", {})}
+        ran = {
+            p: layout["analyses"][key] for p, layout in layouts.items() if key in layout.get("analyses", {})
+        }
         if ran and hasattr(module, "plot"):
             outcome |= module.plot(ran, output_dir)
     return outcome
