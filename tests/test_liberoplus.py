@@ -175,6 +175,18 @@ def test_bad_input_is_refused_in_one_line(monkeypatch):
         ValueError, match=r"view_azimuth='31' moves LIBERO's agentview; RoboView's scene has none"
     ):
         applier.apply("31", np.random.default_rng(0))
+    # The scripted expert on tasks it does not script: refused before any episode, naming the presets it does.
+    from roboview.policies.fit import fit_policy
+    from roboview.policies.types import policy_config
+
+    goal = generate_suite(load_preset("liberoplus_camera_goal"))
+    with pytest.raises(
+        ValueError, match=r"does not script 10 of the chosen worlds \(liberoplus/libero_goal/0, "
+    ):
+        fit_policy(policy_config("expert"), ["liberoplus"], goal)
+    fit_policy(
+        policy_config("expert"), ["liberoplus"], generate_suite(load_preset("liberoplus_camera_object"))
+    )
     # The package missing: refused before any work, naming the install command.
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda n, *a: None if n == "liberoplus" else real(n, *a))

@@ -145,7 +145,7 @@ def plan(cfg: EvaluateConfig) -> Plan:
             for split, items in chosen.items()
         }
     tasks = list(dict.fromkeys(i.instance.task for items in bench.splits.values() for i in items))
-    fit_policy(policy, tasks)
+    fit_policy(policy, tasks, (i.instance for items in chosen.values() for i in items))
     repeats = {s: cfg.eval.max_repeats if s in adaptive else cfg.eval.repeats_for(s) for s in bench.splits}
     with flag_errors("--eval.max_repeats" if adaptive else "--eval.n_repeats"):
         rules = check_repeats([(i.instance, i.repetition, repeats[s]) for s in chosen for i in chosen[s]])

@@ -5,18 +5,30 @@ control every env shares — LIBERO's scenes take only `ee_delta`, so a LIBERO c
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 from roboview.policies.base import PolicyConfig
 from roboview.tasks import load_task
+from roboview.variation.instances import TaskInstance
 
 
-def fit_policy(policy: PolicyConfig, tasks: Sequence[str]) -> None:
+def fit_policy(policy: PolicyConfig, tasks: Sequence[str], instances: Iterable[TaskInstance] = ()) -> None:
     """Settle the policy's open control against `tasks`' envs, then check its control and cameras against each
-    env; a one-line ValueError naming the task, the policy's value and what the env allows."""
+    env; a one-line ValueError naming the task, the policy's value and what the env allows. The scripted expert must
+    also script every one of `instances` (LIBERO's scripts two of its four suites)."""
     envs = {task: load_task(task).env_class() for task in tasks}
     if not envs:
         return
+    if policy.type == "expert":
+        unscripted = sorted(
+            {load_task(i.task).world_of(i) for i in instances if not _expert(i.task).scripts(i)}
+        )
+        if unscripted:
+            raise ValueError(
+                f"the scripted expert does not script {len(unscripted)} of the chosen worlds "
+                f"({', '.join(unscripted[:4])}{' …' if len(unscripted) > 4 else ''}); evaluate a benchmark of the "
+                "ones it scripts (LIBERO: libero_object and libero_spatial, e.g. --preset=liberoplus_camera_object)"
+            )
     shared = [c for c in next(iter(envs.values())).controls if all(c in e.controls for e in envs.values())]
     policy.settle_control(tuple(shared))
     control = policy.env_control()
@@ -37,6 +49,12 @@ def fit_policy(policy: PolicyConfig, tasks: Sequence[str]) -> None:
                 f"{describe(policy)} observes camera(s) {', '.join(missing)}, which the {task!r} task's env does "
                 f"not render; its cameras: {', '.join(env.camera_names)}"
             )
+
+
+def _expert(task: str):
+    from roboview.tasks.base import resolve
+
+    return resolve(load_task(task).expert)
 
 
 def describe(policy: PolicyConfig) -> str:
