@@ -36,7 +36,7 @@ HARNESSES = (
     "libero_render",
     "libero_throughput",
     "libero_vs_lerobot_eval",
-    "liberoplus_poses",
+    "libero_plus_poses",
     "metaworld_expert",
     "metaworld_vs_lerobot_eval",
     "paired_compare",

@@ -28,13 +28,26 @@ def test_factor_names_and_kinds():
         "table_texture",
         "distractors",
         "object_size",
+        # LIBERO-plus's camera sub-factors (the `liberoplus` task; RoboView's scene refuses them).
+        "view_azimuth",
+        "view_elevation",
+        "view_scale",
+        "view_rotz",
+        "view_roty",
     )
     assert context_factors() == ("initial_position", "shape", "instruction")
     assert factor_names() == visual_factors() + context_factors()
-    worlds = set(context_factors("libero")) | set(context_factors("metaworld"))
+    worlds = {f for t in ("libero", "liberoplus", "metaworld") for f in context_factors(t)}
     assert set(FACTORS) == set(factor_names()) | set(context_factors("push")) | worlds
-    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 8 + ["context"] * 3
-    assert {n: len(load_factor(n).values) for n in visual_factors()[4:]} == {
+    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 13 + ["context"] * 3
+    assert {n: len(load_factor(n).values) for n in visual_factors()[8:]} == {
+        "view_azimuth": 150,
+        "view_elevation": 1,
+        "view_scale": 100,
+        "view_rotz": 10,
+        "view_roty": 10,
+    }
+    assert {n: len(load_factor(n).values) for n in visual_factors()[4:8]} == {
         "lighting": 9,
         "table_texture": 8,
         "distractors": 5,
@@ -52,12 +65,20 @@ def test_baselines():
         "table_texture": "plain",
         "distractors": "0",
         "object_size": "1.0",
+        "view_azimuth": "0",
+        "view_elevation": "0",
+        "view_scale": "100",
+        "view_rotz": "0",
+        "view_roty": "0",
         "initial_position": "center",
         "shape": "cube",
         "instruction": "put the small object into the yellow box",
     }
-    # Every baseline is one of its factor's values (camera_pose's "original" is the exception).
-    assert all(load_factor(n).baseline in load_factor(n).values for n in factor_names() if n != "camera_pose")
+    # Every baseline is one of its factor's values, except where no change is not a swept value: camera_pose's
+    # "original" (the unperturbed cameras) and LIBERO-plus's no-change view.
+    unswept = {"camera_pose", "view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"}
+    assert all(load_factor(n).baseline in load_factor(n).values for n in factor_names() if n not in unswept)
+    assert not any(load_factor(n).baseline in load_factor(n).values for n in unswept)
 
 
 def test_color_values():

@@ -242,7 +242,8 @@ def test_importing_the_package_registers_the_gym_ids():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-800:]
     assert proc.stdout.strip() == (
-        "['RoboView/Libero-v0', 'RoboView/MetaWorld-v0', 'RoboView/PickPlace-v0', 'RoboView/Push-v0']"
+        "['RoboView/Libero-v0', 'RoboView/LiberoPlus-v0', 'RoboView/MetaWorld-v0', 'RoboView/PickPlace-v0', "
+        "'RoboView/Push-v0']"
     )
 
 

@@ -47,7 +47,7 @@ def liberoplus_problems() -> dict:
 
 def liberoplus_pose(problem, view: plus.View) -> tuple[list, list]:
     """agentview's pose as LIBERO-plus's own `_setup_camera` sets it, with the parameters as its env passes them."""
-    recorder = plus._Recorder()
+    recorder = plus.PoseRecorder()
     this = SimpleNamespace(
         horizon_view=str(view.azimuth),
         vertical_view=str(view.elevation),

@@ -27,6 +27,7 @@ Every number is validated against known truth by simulation (tests/test_liberopl
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -67,10 +68,20 @@ def _views(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def _rate(success: pd.Series) -> dict[str, Any]:
-    from roboview.eval.statistics.tables import wilson_ci95
+    """The success rate with its Wilson 95 % interval (statsmodels)."""
+    from statsmodels.stats.proportion import proportion_confint
 
     k, n = int(success.sum()), int(len(success))
-    return {"sr": k / n if n else None, "ci95": wilson_ci95(k, n), "n": n}
+    ci = [float(x) for x in proportion_confint(k, n, alpha=0.05, method="wilson")] if n else None
+    return {"sr": k / n if n else None, "ci95": ci, "n": n}
+
+
+def _mcnemar_exact(a: np.ndarray, b: np.ndarray) -> float:
+    """McNemar's exact test on paired outcomes (statsmodels); 1.0 when no pair disagrees."""
+    from statsmodels.stats.contingency_tables import mcnemar
+
+    table = [[np.sum(a & b), np.sum(a & ~b)], [np.sum(~a & b), np.sum(~a & ~b)]]
+    return 1.0 if table[0][1] + table[1][0] == 0 else float(mcnemar(table, exact=True).pvalue)
 
 
 def _block_test(d: np.ndarray) -> dict[str, Any]:
@@ -232,7 +243,6 @@ def dose_response(rows: pd.DataFrame, factor: str) -> dict[str, Any] | None:
 
 def per_variant(rows: pd.DataFrame) -> list[dict[str, Any]]:
     """Each LIBERO-plus variant's rate and paired difference to the no-change view, where repeats ran."""
-    from roboview.eval.statistics.significance import paired_success_test
 
     variants = rows[rows["split"].map(_is_liberoplus) & (rows["kind"] != "")]
     if variants.empty or variants.groupby("instance_id").size().max() < 2:
@@ -250,7 +260,7 @@ def per_variant(rows: pd.DataFrame) -> list[dict[str, Any]]:
                 "kind": kind_name(tuple(sub["kind"].iloc[0].split("+"))),
                 **_rate(sub["success"]),
                 "delta_control": float(a.mean() - b.mean()) if len(both) else None,
-                "p_control": paired_success_test(a, b) if len(both) else None,
+                "p_control": _mcnemar_exact(a, b) if len(both) else None,
             }
         )
     return out
@@ -307,10 +317,23 @@ def _p(p: float | None) -> str:
     return "—" if p is None else (f"{p:.2g}" if p >= 0.001 else "< 0.001")
 
 
-def markdown(result: dict[str, Any], policy: str) -> list[str]:
-    """report.md's lines for one policy's analysis."""
-    from roboview.eval.reporting.tables import markdown_table
+def markdown(
+    result: dict[str, Any], policy: str, table: Callable[[list[str], list[list[str]]], list[str]]
+) -> list[str]:
+    """report.md's lines for one policy's analysis; `table(headers, rows)` writes a Markdown table (the report's)."""
+    return [
+        f"### {policy}",
+        "",
+        _camera_line(result),
+        "",
+        *_kinds_lines(result, table),
+        *_interaction_lines(result, table),
+        *_dose_lines(result),
+        *_variant_lines(result, table),
+    ]
 
+
+def _camera_line(result: dict[str, Any]) -> str:
     cam = result["camera"]
     lp, base = cam["liberoplus"], cam["no_change"]
     suites = ", ".join(f"{s} {_pct(r['sr'])} (n {r['n']})" for s, r in cam["per_suite"].items())
@@ -319,15 +342,15 @@ def markdown(result: dict[str, Any], policy: str) -> list[str]:
         if "liberoplus" in result["instruction"]
         else "LIBERO's own, whatever the view (only the camera changes)"
     )
-    lines = [
-        f"### {policy}",
-        "",
+    return (
         f"Camera success rate over LIBERO-plus's {cam['n_variants']:,} variants run: **{_pct(lp['sr'])}** "
         f"{_ci(lp['ci95'])} as LIBERO-plus totals it ({lp['n']:,} episodes alike); {_pct(cam['vla_eval'])} as "
         f"vla-eval averages it (the suites' mean: {suites}). The no-change view: {_pct(base['sr'])} "
-        f"{_ci(base['ci95'])} (n {base['n']}). Instruction: {told}.",
-        "",
-    ]
+        f"{_ci(base['ci95'])} (n {base['n']}). Instruction: {told}."
+    )
+
+
+def _kinds_lines(result: dict[str, Any], table) -> list[str]:
     rows = [
         [
             name,
@@ -340,15 +363,19 @@ def markdown(result: dict[str, Any], policy: str) -> list[str]:
         ]
         for name, k in result["kinds"].items()
     ]
-    if rows:
-        lines += [
-            "Each kind of change against the no-change view, paired by block (task, init state, seed); effect in "
-            "points, 95 % bootstrap interval over blocks, sign-flip p over blocks:",
-            "",
-            *markdown_table(["Change", "Variants", "SR", "Effect", "95 % CI", "p", "Blocks"], rows),
-            "",
-        ]
-    inter = [
+    if not rows:
+        return []
+    return [
+        "Each kind of change against the no-change view, paired by block (task, init state, seed); effect in "
+        "points, 95 % bootstrap interval over blocks, sign-flip p over blocks:",
+        "",
+        *table(["Change", "Variants", "SR", "Effect", "95 % CI", "p", "Blocks"], rows),
+        "",
+    ]
+
+
+def _interaction_lines(result: dict[str, Any], table) -> list[str]:
+    rows = [
         [
             name,
             str(i["n_variants"]),
@@ -359,16 +386,19 @@ def markdown(result: dict[str, Any], policy: str) -> list[str]:
         for name, i in result["interactions"].items()
         if i["n_variants"]
     ]
-    if inter:
-        lines += [
-            "Interaction, S(both) − S(first) − S(second) + S(none): negative when the two changes together cost "
-            "more than each alone adds up to:",
-            "",
-            *markdown_table(
-                ["Two changes", "Variants with both parts", "Interaction", "95 % CI", "p"], inter
-            ),
-            "",
-        ]
+    if not rows:
+        return []
+    return [
+        "Interaction, S(both) − S(first) − S(second) + S(none): negative when the two changes together cost "
+        "more than each alone adds up to:",
+        "",
+        *table(["Two changes", "Variants with both parts", "Interaction", "95 % CI", "p"], rows),
+        "",
+    ]
+
+
+def _dose_lines(result: dict[str, Any]) -> list[str]:
+    lines = []
     for name, d in result["dose_response"].items():
         half = d["half_magnitude"]
         said = (
@@ -383,32 +413,34 @@ def markdown(result: dict[str, Any], policy: str) -> list[str]:
             f"Dose–response over {name} ({d['n']} episodes): {said}. Success by magnitude: {points}.",
             "",
         ]
+    return lines
+
+
+def _variant_lines(result: dict[str, Any], table) -> list[str]:
     worst = sorted(
         (v for v in result["per_variant"] if v["delta_control"] is not None),
         key=lambda v: v["delta_control"],
     )[:10]
-    if worst:
-        lines += [
-            "Per variant over its repeats (the ten that cost most against the no-change view, McNemar's exact p):",
-            "",
-            *markdown_table(
-                ["Task", "View", "Change", "SR", "95 % CI", "Δ", "p"],
-                [
-                    [
-                        v["task"],
-                        v["value"],
-                        v["kind"],
-                        _pct(v["sr"]),
-                        _ci(v["ci95"]),
-                        f"{100 * v['delta_control']:+.1f}",
-                        _p(v["p_control"]),
-                    ]
-                    for v in worst
-                ],
-            ),
-            "",
+    if not worst:
+        return []
+    rows = [
+        [
+            v["task"],
+            v["value"],
+            v["kind"],
+            _pct(v["sr"]),
+            _ci(v["ci95"]),
+            f"{100 * v['delta_control']:+.1f}",
+            _p(v["p_control"]),
         ]
-    return lines
+        for v in worst
+    ]
+    return [
+        "Per variant over its repeats (the ten that cost most against the no-change view, McNemar's exact p):",
+        "",
+        *table(["Task", "View", "Change", "SR", "95 % CI", "Δ", "p"], rows),
+        "",
+    ]
 
 
 FIGURE = "analysis_liberoplus_dose_response.png"

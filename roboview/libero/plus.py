@@ -48,6 +48,7 @@ VERSION = "0.1.5"  # the version make install-libero installs (roboview.libero.b
 INSTALL = "make install-libero"
 TASK_MAP = "liberoplus/benchmark/libero_suite_task_map.py"  # under the installed `liberoplus` package
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+TASK = "liberoplus"  # the task its benchmark runs (roboview.libero.plus_task)
 PIVOT = np.array([0.0, 0.0, 0.8])
 DECIMALS = 4
 # The five sub-factors, in LIBERO-plus's order in a variant name, and their no-change values.
@@ -250,7 +251,7 @@ def _compiled(quat: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(spec.compile().cam_quat[0].tolist())
 
 
-class _Recorder:
+class PoseRecorder:
     """Stands in for a problem's arena in `_setup_camera`: keeps each camera's pose."""
 
     def __init__(self) -> None:
@@ -262,7 +263,7 @@ class _Recorder:
 
 def base_pose(problem: type) -> tuple[list[float], list[float]]:
     """A LIBERO problem class's hard-coded agentview (position, quaternion), from its own `_setup_camera`."""
-    recorder = _Recorder()
+    recorder = PoseRecorder()
     problem._setup_camera(None, recorder)
     return recorder.cameras["agentview"]
 
@@ -275,15 +276,12 @@ class LiberoPlusView:
     view: View
 
     def apply(self, world) -> None:
-        from roboview.libero.factors import AGENTVIEW, _id
+        from roboview.libero.factors import AGENTVIEW
 
         pos, quat = liberoplus_pose(*base_pose(type(world.inner)), self.view)
-        model = world.model
-        import mujoco
-
-        cam = _id(model, mujoco.mjtObj.mjOBJ_CAMERA, AGENTVIEW)
-        model.cam_pos[cam] = pos
-        model.cam_quat[cam] = compiled_quat(quat)
+        cam = world.model.camera(AGENTVIEW).id
+        world.model.cam_pos[cam] = pos
+        world.model.cam_quat[cam] = compiled_quat(quat)
 
 
 def variant_name(task_name: str, view: View, init_state: int = 0) -> str:
@@ -343,7 +341,6 @@ def camera_suite(cfg) -> list:
     preset, LIBERO-plus's camera variants, their single-change parts and the no-change view, split by what they
     change. `value_subsets` restricts the tasks (`liberoplus_task`), the init states, the instruction mode and the
     sub-factor values (a variant is kept when each value it changes is held)."""
-    from roboview.libero.plus_task import TASK
     from roboview.variation.factors import baselines, load_factor
     from roboview.variation.instances import TaskInstance, split_name
 

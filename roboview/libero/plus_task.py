@@ -20,7 +20,9 @@ init state 0; a repeat runs the next init state, as in the `libero` task) and `l
 
 from __future__ import annotations
 
-from roboview.libero.plus import SHORT, SUB_FACTORS, View, instruction_of, variant_name
+from dataclasses import replace
+
+from roboview.libero.plus import SHORT, SUB_FACTORS, TASK, View, instruction_of, variant_name
 from roboview.libero.suites import SUITES
 from roboview.libero.task import (
     LIBERO_MAX_STEPS,
@@ -30,9 +32,10 @@ from roboview.libero.task import (
     appliers,
 )
 from roboview.tasks.base import Task, register_task
+from roboview.tasks.presets import register_preset
 from roboview.variation.factors import Factor, register_factor
+from roboview.variation.instances import SuiteConfig
 
-TASK = "liberoplus"
 INSTRUCTION_MODES = ("libero", "liberoplus")
 
 LIBEROPLUS_TASK = register_factor(
@@ -125,6 +128,64 @@ register_task(
         repeat_factor="liberoplus_init_state",
         world_factor="liberoplus_task",
         analyses=("roboview.libero.decomposition",),
+    )
+)
+
+# LIBERO-plus's camera dimension (roboview.libero.plus; docs/liberoplus.md), on the `liberoplus` task: its 1,599
+# variants of the 40 tasks from init state 0, beside their single-change parts and a no-change view per task.
+# `liberoplus_camera_suffixed`: the same, the policy told LIBERO-plus's instruction (which names the view).
+# `liberoplus_camera_tiny`: one task (libero_object/2), one variant of each kind and its parts: 8 instances.
+LIBERO_PLUS = SuiteConfig(
+    preset="liberoplus_camera",
+    tasks=("liberoplus",),
+    union_mode="dedupe",
+    splits=(
+        "view_azimuth",
+        "view_scale",
+        "view_azimuth_x_view_elevation",
+        "view_rotz_x_view_roty",
+        "view_azimuth_parts",
+        "view_elevation",
+        "view_rotz",
+        "view_roty",
+    ),
+    factorial_colors=(),
+    value_subsets=(("liberoplus_init_state", ("0",)),),
+    generator="roboview.libero.plus:camera_suite",
+)
+register_preset(LIBERO_PLUS)
+register_preset(
+    replace(
+        LIBERO_PLUS,
+        preset="liberoplus_camera_suffixed",
+        value_subsets=(*LIBERO_PLUS.value_subsets, ("liberoplus_instruction", ("liberoplus",))),
+    )
+)
+# One suite's share (what a checkpoint fine-tuned on that suite alone is run on, as LIBERO-plus and vla-eval run
+# one suite at a time): `liberoplus_camera_spatial`, `_object`, `_goal`, `_10`.
+for _suite in ("spatial", "object", "goal", "10"):
+    register_preset(
+        replace(
+            LIBERO_PLUS,
+            preset=f"liberoplus_camera_{_suite}",
+            value_subsets=(
+                *LIBERO_PLUS.value_subsets,
+                ("liberoplus_task", tuple(f"libero_{_suite}/{i}" for i in range(10))),
+            ),
+        )
+    )
+register_preset(
+    replace(
+        LIBERO_PLUS,
+        preset="liberoplus_camera_tiny",
+        value_subsets=(
+            *LIBERO_PLUS.value_subsets,
+            ("liberoplus_task", ("libero_object/2",)),
+            ("view_azimuth", ("31",)),
+            ("view_scale", ("125",)),
+            ("view_rotz", ("6",)),
+            ("view_roty", ("2",)),
+        ),
     )
 )
 

@@ -61,8 +61,9 @@ BUILTIN_MODULES = (
     "roboview.tasks.pick_place",
     "roboview.tasks.push",
     "roboview.libero.task",
-    "roboview.libero.plus_task",
     "roboview.metaworld.task",
+    # Last: it registers its presets beside the others (roboview.tasks.presets, which names every task above).
+    "roboview.libero.plus_task",
 )
 # Third-party tasks: a package lists its task modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.tasks"

@@ -87,7 +87,7 @@ def _analyses(layouts: dict[str, dict]) -> list[str]:
         if ran:
             lines += [f"## {module.TITLE}", ""]
             for name, result in ran.items():
-                lines += module.markdown(result, name)
+                lines += module.markdown(result, name, markdown_table)
     return lines
 
 

@@ -29,6 +29,7 @@ from roboview.eval.running import isolation
 from roboview.eval.running.results import copies_mask, counted, infra_mask
 from roboview.eval.statistics import ranking
 from roboview.eval.statistics import significance as stats
+from roboview.eval.statistics.analyses import task_analyses
 from roboview.eval.statistics.compare import (
     all_baseline,
     baseline_retest,
@@ -445,23 +446,6 @@ def compute_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()
     analyses = task_analyses(episodes)
     if analyses:
         out["analyses"] = analyses
-    return out
-
-
-def task_analyses(episodes: pd.DataFrame) -> dict[str, Any]:
-    """The analyses the episodes' tasks declare (`Task.analyses`), each under its KEY (those with nothing to say
-    are left out)."""
-    import importlib
-
-    from roboview.tasks import load_task
-
-    out: dict[str, Any] = {}
-    for task in episodes["task"].dropna().astype(str).unique() if "task" in episodes else ():
-        for name in load_task(task).analyses:
-            module = importlib.import_module(name)
-            result = module.compute(episodes[episodes["task"].astype(str) == task])
-            if result is not None:
-                out[module.KEY] = result
     return out
 
 

@@ -1,8 +1,8 @@
 """LIBERO-plus's camera poses on another numerical stack: its own `_setup_camera` arithmetic run by another Python
 (LIBERO-plus pins numpy < 2; RoboView runs numpy 2 and a newer scipy), compared with RoboView's poses here.
 
-    python -m benchmarks.liberoplus_poses --python=/path/to/venv/bin/python
-        [--output=outputs/bench/liberoplus_poses.json]
+    python -m benchmarks.libero_plus_poses --python=/path/to/venv/bin/python
+        [--output=outputs/bench/libero_plus_poses.json]
 
 Why: the tests prove RoboView's arithmetic equals LIBERO-plus's code on RoboView's stack, for all 1,599 variants. A
 LIBERO-plus install computes the same poses with its own numpy and scipy; this measures whether they agree there.
@@ -58,7 +58,7 @@ class PosesConfig:
     # The other Python (numpy and scipy installed), e.g. a venv with LIBERO-plus's numpy < 2.
     python: str = ""
     # JSON file the comparison is written to.
-    output: str = "outputs/bench/liberoplus_poses.json"
+    output: str = "outputs/bench/libero_plus_poses.json"
 
     def __post_init__(self) -> None:
         if not self.python:
