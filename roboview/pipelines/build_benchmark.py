@@ -30,7 +30,15 @@ GATE_IMAGE_MIN = 4 * IMAGE_SIZE_MIN
 def presets_help() -> str:
     """Every registered suite preset with its instance count, as --help lists them (read from the registry, so the
     list cannot go stale)."""
-    return ", ".join(f"{name} ({len(generate_suite(suite)):,})" for name, suite in PRESETS.items()) + "."
+    return ", ".join(f"{name} ({_count(suite)})" for name, suite in PRESETS.items()) + "."
+
+
+def _count(suite: SuiteConfig) -> str:
+    """A preset's instance count; a preset its world's packages must generate says how to install them instead."""
+    try:
+        return f"{len(generate_suite(suite)):,}"
+    except ImportError as e:  # LiberoMissing / LiberoPlusMissing: the message names the install command
+        return "needs " + str(e).rpartition("install it with: ")[2]
 
 
 @dataclass
