@@ -471,7 +471,8 @@ def plot(results: dict[str, dict[str, Any]], output_dir) -> dict[str, str | None
             lo = np.array([c["ci95"][0] for c in d["curve"]])
             hi = np.array([c["ci95"][1] for c in d["curve"]])
             color = f"C{i}"
-            ax.errorbar(x, sr, yerr=[sr - lo, hi - sr], fmt="o", ms=3, capsize=2, color=color, label=policy)
+            err = np.clip([sr - lo, hi - sr], 0, None)  # Wilson's ends can cross the rate by a rounding error
+            ax.errorbar(x, sr, yerr=err, fmt="o", ms=3, capsize=2, color=color, label=policy)
             if d["slope"] is not None:
                 a = np.log(d["sr_at_0"] / (1 - d["sr_at_0"]))
                 grid = np.linspace(0, x.max(), 100)
