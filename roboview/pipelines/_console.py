@@ -22,6 +22,7 @@ MODULES = (
     "roboview.pipelines.export_dataset",
     "roboview.pipelines.leaderboard",
     "roboview.pipelines.merge",
+    "roboview.pipelines.pair",
     "roboview.pipelines.plan",
     "roboview.pipelines.probe_grounding",
     "roboview.pipelines.publish",

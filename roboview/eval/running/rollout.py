@@ -92,10 +92,12 @@ class WorkItem:
 @dataclass
 class EpisodeResult:
     row: dict
-    # Only with record_media: camera -> list of JPEG bytes; (T, 3) end-effector / object positions.
+    # Only with record_media: camera -> list of JPEG bytes; (T, 3) end-effector / object positions; (T, A) the actions
+    # the policy took (T − 1 of them when the episode ended on its last observation).
     frames: dict[str, list[bytes]] | None = None
     ee_path: np.ndarray | None = None
     object_path: np.ndarray | None = None
+    actions: np.ndarray | None = None
     # Only for a work item with video: camera -> (T, H, W, 3) uint8, the frames the policy was shown.
     video: dict[str, np.ndarray] | None = None
 
@@ -137,6 +139,7 @@ class _Running:
     video: dict[str, list[np.ndarray]]
     ee: list = field(default_factory=list)
     obj: list = field(default_factory=list)
+    acts: list = field(default_factory=list)
     success: bool = False
     info: dict = field(default_factory=dict)
     error: str = ""
@@ -313,6 +316,8 @@ class EvalWorker:
                 f"(the env takes {env.action_space.shape[0]} finite values)"
             )
             return
+        if self.spec.record_media:
+            ep.acts.append(action)
         ep.obs, _, ep.success, _, ep.info = env.step(action)
 
     def _finish(self, slot: int, ep: _Running) -> EpisodeResult:
@@ -346,6 +351,7 @@ class EvalWorker:
         result = EpisodeResult(row)
         if self.spec.record_media:
             result.frames, result.ee_path, result.object_path = ep.frames, np.array(ep.ee), np.array(ep.obj)
+            result.actions = np.array(ep.acts)
         if ep.video and not ep.infra and not (self.spec.videos_of_failures_only and ep.success):
             try:
                 for cam in ep.video:  # and the last observation: how the episode ended

@@ -1,0 +1,276 @@
+"""A bias found, seen: an episode and its twin under another value of its factor, replayed side by side.
+
+An episode is a function of (instance, repeat): its context, its seed and the policy run.json records. Its twin is
+the same (context, repeat) with one factor set otherwise: by default the control arm (the context's all-baseline
+instance: every visual factor at its baseline, the same seed), or the instance of the same split whose value is
+named. `replay_pair` re-runs both here with the recorded policy, keeps every camera the policy saw, its actions and
+the end effector's path, and finds where they part: the first step whose actions differ by more than a tolerance (the
+largest absolute difference of any action dimension). Before that step the two episodes saw different pictures and
+did the same thing; from it on they act differently.
+
+A replay stands for the recorded episode only when it reproduces it. Each replayed side is compared with its row
+(success, steps, failure reason). A mismatch is said plainly, with what the folder records about why it can happen:
+a policy that is not reproducible from the episode seed (a served model sampling its actions; `reproducible` on its
+config), or rows whose stack conformance was `different` from the benchmark's (another renderer or simulator).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REPLAYED = ("success", "steps", "failure_reason")
+TOLERANCE = 1e-6
+
+
+@dataclass
+class Side:
+    """One episode of a pair: its instance record, the row the folder records (None when it ran no such episode),
+    and its replay."""
+
+    label: str
+    record: dict
+    row: dict | None
+    replayed: dict = field(default_factory=dict)
+    frames: dict[str, list[bytes]] = field(default_factory=dict)
+    actions: np.ndarray | None = None
+    ee_path: np.ndarray | None = None
+
+    def mismatch(self) -> list[str]:
+        """How the replay differs from the recorded row ([] when it matches, or when no row is recorded)."""
+        if self.row is None:
+            return []
+        return [
+            f"{k} {self.row.get(k)!r} → {self.replayed.get(k)!r}"
+            for k in REPLAYED
+            if (self.row.get(k) or None) != (self.replayed.get(k) or None)
+        ]
+
+
+@dataclass
+class Pair:
+    value: Side
+    other: Side
+    repeat: int
+    parting: int | None
+    parting_gap: float
+    tolerance: float
+    faithful: bool
+    why: list[str]
+
+
+def parting_step(a: np.ndarray, b: np.ndarray, tolerance: float = TOLERANCE) -> tuple[int | None, float]:
+    """The first step whose actions differ by more than `tolerance` (largest absolute difference of a dimension),
+    and that difference; when none does over the shorter episode, the step one of them ended at if their lengths
+    differ (None, 0 when they are the same episode)."""
+    n = min(len(a), len(b))
+    gaps = np.abs(np.asarray(a[:n], float) - np.asarray(b[:n], float)).max(axis=1) if n else np.zeros(0)
+    over = np.flatnonzero(gaps > tolerance)
+    if len(over):
+        return int(over[0]), float(gaps[over[0]])
+    return (n, 0.0) if len(a) != len(b) else (None, 0.0)
+
+
+def twin_of(item, items: dict[str, Any], against: str = ""):
+    """The benchmark item `item`'s episode is paired with: the context's all-baseline instance (the control arm;
+    from `item`'s split if it holds one, else any split) or, with `against`, the instance of `item`'s split and
+    context whose value is `against`. ValueError, one line, naming what exists when there is none."""
+    from roboview.variation.factors import baselines, visual_factors
+
+    context, split = item.record["context_id"], item.record["split"]
+    same = [i for i in items.values() if i.record["context_id"] == context]
+    if against:
+        found = [i for i in same if i.record["split"] == split and i.record["value"] == against]
+        if not found:
+            values = sorted({i.record["value"] for i in same if i.record["split"] == split})
+            raise ValueError(
+                f"split {split} holds no value {against!r} in context {context}; its values there: {', '.join(values)}"
+            )
+        return found[0]
+    base = baselines(item.instance.task)
+    control = [i for i in same if all(i.instance.get(f) == base[f] for f in visual_factors())]
+    if not control:
+        raise ValueError(
+            f"the benchmark holds no all-baseline instance of context {context} (its control arm); "
+            "name a value of the split with --against"
+        )
+    control.sort(key=lambda i: i.record["split"] != split)  # the split's own control first
+    return control[0]
+
+
+def discordant(
+    rows: list[dict], bench, split: str, value: str, against: str = "", limit: int = 3
+) -> list[tuple]:
+    """The (instance_id, repeat) episodes of `value` in `split` whose outcome differs from their twin's (the control
+    arm, or `against`), failures of the value first: the pairs that carry a difference. ValueError naming the split's
+    values when `value` is not one of them."""
+    items = {i.record["instance_id"]: i for its in bench.splits.values() for i in its}
+    mine = [
+        r
+        for r in rows
+        if r["split"] == split and str(r["value"]) == value and r.get("status") != "infra_error"
+    ]
+    if not mine:
+        values = sorted({str(r["value"]) for r in rows if r["split"] == split})
+        if not values:
+            splits = sorted({r["split"] for r in rows})
+            raise ValueError(f"the results hold no split {split!r}; their splits: {', '.join(splits)}")
+        raise ValueError(
+            f"split {split} holds no value {value!r} in these results; its values: {', '.join(values)}"
+        )
+    outcome = {(r["instance_id"], int(r["repeat"])): bool(r["success"]) for r in rows}
+    found = []
+    for r in mine:
+        twin = twin_of(items[r["instance_id"]], items, against)
+        other = outcome.get((twin.record["instance_id"], int(r["repeat"])))
+        if other is not None and other != bool(r["success"]):
+            found.append((r["instance_id"], int(r["repeat"]), bool(r["success"])))
+    found.sort(key=lambda f: (f[2], f[1], f[0]))  # the value's failures (its twin succeeded) first
+    return [(i, rep) for i, rep, _ in found[:limit]]
+
+
+def replay_pair(
+    results: str | Path,
+    instance_id: str,
+    repeat: int = 0,
+    against: str = "",
+    benchmark: str | Path | None = None,
+    tolerance: float = TOLERANCE,
+    replayer=None,
+) -> Pair:
+    """Re-run episode (`instance_id`, `repeat`) of a results folder and its twin here, with the recorded policy."""
+    from roboview.benchmark.format import load_benchmark
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from roboview.eval.verification.replay import Replayer
+    from roboview.eval.verification.results import benchmark_path, read_table
+
+    table, run = read_table(Path(results))
+    rows = table.to_pylist()
+    bench = load_benchmark(benchmark_path(results, benchmark))
+    items = {i.record["instance_id"]: i for its in bench.splits.values() for i in its}
+    if instance_id not in items:
+        raise ValueError(f"instance {instance_id!r} is not in benchmark {bench.version}")
+    item = items[instance_id]
+    twin = twin_of(item, items, against)
+    recorded = {(r["instance_id"], int(r["repeat"])): r for r in rows}
+    replayer = replayer or Replayer()
+    policy = replayer.policy(run)
+    spec = WorkerSpec(
+        policy,
+        run.get("image_size", 224),
+        run.get("max_steps", 120),
+        record_media=True,
+        task=item.instance.task,
+    )
+    worker = EvalWorker(spec)
+    sides = []
+    try:
+        for it in (item, twin):
+            result = worker.run(WorkItem(it, repeat))
+            sides.append(
+                Side(
+                    f"{it.record['factor']}={it.record['value']}",
+                    it.record,
+                    recorded.get((it.record["instance_id"], repeat)),
+                    result.row,
+                    result.frames or {},
+                    np.asarray(result.actions) if result.actions is not None else None,
+                    result.ee_path,
+                )
+            )
+    finally:
+        worker.close()
+    a, b = sides
+    parting, gap = parting_step(a.actions, b.actions, tolerance)
+    why = [
+        f"{s.label}: the replay ended differently from its row ({', '.join(s.mismatch())})"
+        for s in sides
+        if s.mismatch()
+    ]
+    faithful = not why
+    if not getattr(policy, "reproducible", True):
+        why.append(
+            f"{run['policy']} is not reproducible from the episode seed (its config declares reproducible = False: "
+            "a served or sampled model draws from its own randomness), so a replay may differ from the recorded run"
+        )
+    stacks = {s.row.get("conformance") for s in sides if s.row}
+    if "different" in stacks:
+        why.append(
+            "the recorded episodes ran on a stack whose conformance with the benchmark was `different` (their rows' "
+            "conformance column): another renderer or simulator may give other episodes"
+        )
+    return Pair(a, b, repeat, parting, gap, tolerance, faithful, why)
+
+
+def record(pair: Pair, path: str | Path) -> Path:
+    """One Rerun recording of both episodes side by side: each camera the policy saw, its actions, the end effector's
+    path, the outcome, and the step where the actions part. Opens in the viewer laid out in two columns."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sides = {"value": pair.value, "other": pair.other}
+    cameras = sorted(pair.value.frames)
+
+    def column(key: str, side: Side):
+        views = [
+            rrb.Spatial2DView(origin=f"pair/{key}/camera/{c}", name=f"{side.label}: {c}") for c in cameras
+        ]
+        return rrb.Vertical(
+            *views, rrb.TimeSeriesView(origin=f"pair/{key}/action", name=f"{side.label}: action")
+        )
+
+    blueprint = rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(*(column(k, s) for k, s in sides.items())),
+            rrb.Horizontal(rrb.Spatial3DView(origin="pair/paths"), rrb.TextLogView(origin="pair/events")),
+        )
+    )
+    rec = rr.RecordingStream("roboview_pair")
+    rec.save(str(path), default_blueprint=blueprint)
+    colors = {"value": [230, 80, 60], "other": [40, 120, 255]}
+    for key, side in sides.items():
+        facts = "\n".join(
+            f"{k}: {side.record[k]}" for k in ("instance_id", "split", "factor", "value", "context_id")
+        )
+        rec.log(f"pair/{key}/instance", rr.TextDocument(f"{facts}\nrepeat: {pair.repeat}"), static=True)
+        steps = 0 if side.actions is None else len(side.actions)
+        for step in range(len(side.ee_path) if side.ee_path is not None else 0):
+            rec.set_time("step", sequence=step)
+            for cam in cameras:
+                if step < len(side.frames.get(cam, [])):
+                    rec.log(
+                        f"pair/{key}/camera/{cam}",
+                        rr.EncodedImage(contents=side.frames[cam][step], media_type="image/jpeg"),
+                    )
+            if step < steps:
+                rec.log(f"pair/{key}/action", rr.Scalars(np.asarray(side.actions[step], float)))
+            rec.log(
+                f"pair/paths/{key}/ee",
+                rr.Points3D(side.ee_path[step : step + 1], radii=0.01, colors=colors[key]),
+            )
+        if side.ee_path is not None and len(side.ee_path):
+            rec.log(
+                f"pair/paths/{key}/ee_path", rr.LineStrips3D([side.ee_path], colors=colors[key]), static=True
+            )
+        rec.set_time("step", sequence=max(steps - 1, 0))
+        ended = (
+            "success" if side.replayed.get("success") else f"failure: {side.replayed.get('failure_reason')}"
+        )
+        rec.log(
+            "pair/events",
+            rr.TextLog(f"{side.label}: {ended}", level="INFO" if side.replayed.get("success") else "WARN"),
+        )
+    if pair.parting is not None:
+        rec.set_time("step", sequence=pair.parting)
+        rec.log(
+            "pair/events",
+            rr.TextLog(f"actions part at step {pair.parting} (|Δ| {pair.parting_gap:.3g})", level="WARN"),
+        )
+    rec.flush()
+    rr.disconnect(recording=rec)
+    return path
