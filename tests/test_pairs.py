@@ -134,3 +134,61 @@ def test_discordant_pairs_and_bad_input_in_one_line(results, tiny_benchmark):
             PairConfig(**bad)
         assert "\n" not in str(info.value)
     assert json.loads((results / "run.json").read_text())["policy"] == TYPE
+
+
+def test_the_report_draws_a_strip_for_a_planted_bias_and_none_for_a_null_split(
+    tiny_benchmark, results, tmp_path
+):
+    from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.pipelines.evaluate import run as evaluate
+    from roboview.pipelines.report import ReportConfig
+    from roboview.pipelines.report import run as report
+    from roboview.policies.types import policy_config
+
+    # The vision agent loses gold objects against the yellow box (a planted bias): 9 pairs, every one discordant.
+    vision = tmp_path / "vision"
+    evaluate(
+        EvaluateConfig(
+            BenchmarkConfig(str(tiny_benchmark), splits="color", values="red,gold"),
+            policy_config("vision"),
+            EvalConfig(n_repeats=3, num_workers=1),
+            str(vision),
+        )
+    )
+    out = report(
+        ReportConfig(results=str(vision), output_dir=str(tmp_path / "report"), plots=False)
+    ).output_dir
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["splits"]["color"]["per_value"]["gold"]["p_control"] < 0.05
+    [strip] = metrics["strips"]["drawn"]
+    assert (strip["split"], strip["value"], strip["against"], strip["faithful"]) == (
+        "color",
+        "gold",
+        "red",
+        True,
+    )
+    assert strip["command"] == (
+        f"roboview-pair --results={vision} --instance={strip['instance_id']} --repeat={strip['repeat']}"
+    )
+    from PIL import Image
+
+    image = np.asarray(Image.open(out / strip["file"]))
+    assert image.shape[0] > 300 and image.shape[1] > 400 and image.std() > 20  # two rows of frames, not blank
+    text = (out / "report.md").read_text()
+    assert "## Where they part" in text and f"]({strip['file']})" in text and strip["command"] in text
+    html = (out / "report.html").read_text()
+    assert "Where they part" in html and f'src="{strip["file"]}"' not in html  # carried inline
+    # A null split draws none: the parting policy's red and blue end alike.
+    null = report(
+        ReportConfig(results=str(results), output_dir=str(tmp_path / "null"), plots=False)
+    ).output_dir
+    assert "strips" not in json.loads((null / "metrics.json").read_text())
+    assert "Where they part" not in (null / "report.md").read_text()
+    from tests.browser import chromium_binary, load_page
+
+    if chromium_binary() is None:
+        pytest.skip("no chromium on PATH (make sysdeps installs Debian's chromium package)")
+    page = load_page(out / "report.html")
+    assert page.errors == []
+    [shown] = [i for i in page.images if i["alt"] == "color = gold against red"]
+    assert shown["natural_width"] == image.shape[1] and shown["width"] > 200

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from roboview.eval.reporting.report import HTML_FILE, REPORT_FILE, ReportResult, load_results, write_report
-from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
+from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig, compute_all_metrics
 from roboview.pipelines._cli import cli_main, result_entries
 
 
@@ -32,8 +32,13 @@ class ReportConfig:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     # Draw the PNG plots (false: metrics.json and report.md only).
     plots: bool = True
+    # For each value that differs from its control arm (p < 0.05), replay this many of its discordant pairs here
+    # (the recorded policy, the benchmark its provenance names) and show each as a strip of frames; 0: none.
+    strips: int = 1
 
     def __post_init__(self) -> None:
+        if self.strips < 0:
+            raise ValueError(f"--strips={self.strips} must be 0 or more")
         if not self.result_paths:
             raise ValueError(
                 "--results is required: the episodes.parquet file(s) of roboview.pipelines.evaluate"
@@ -51,7 +56,18 @@ class ReportConfig:
 
 def run(cfg: ReportConfig) -> ReportResult:
     episodes, sources = load_results(cfg.result_paths, [name for name, _ in cfg.result_entries])
-    return write_report(episodes, cfg.output_dir, cfg.metrics, sources=sources, plots=cfg.plots)
+    metrics = compute_all_metrics(episodes, cfg.metrics)
+    if cfg.strips:
+        from roboview.eval.verification.pairs import make_strips
+
+        out = Path(cfg.output_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        strips = make_strips(metrics, sources, out, cfg.strips)
+        if strips["drawn"] or strips["skipped"]:
+            metrics["strips"] = strips
+    return write_report(
+        episodes, cfg.output_dir, cfg.metrics, sources=sources, plots=cfg.plots, metrics=metrics
+    )
 
 
 def _summary(cfg: ReportConfig, result: ReportResult) -> None:

@@ -11,6 +11,7 @@ adaptive sampling, the isolation certificate, provenance) are report.md's own, r
 from __future__ import annotations
 
 import base64
+import re
 from pathlib import Path
 from typing import Any
 
@@ -145,6 +146,7 @@ ANALYSIS_FIGURE = "analysis_"  # the file-name prefix of a task analysis's figur
 # report.md's sections the page renders as they are, in this order, with their titles in the page's index.
 _MARKDOWN_TITLES = {
     "analyses": "Task analyses",
+    "strips": "Where they part",
     "infra": "Episodes ended by infrastructure",
     "copies": "Repeats that were copies",
     "interactions": "Interactions",
@@ -219,6 +221,10 @@ def _markdown_sections(
                 for split, names in figures.items()
                 if split not in splits and split != ANALYSIS_FIGURE
             )
+        if anchor == "strips":  # report.md links the strips; the page carries them
+            for name in sorted(set(re.findall(r'src="(strip_\d+\.png)"', body))):
+                data = base64.b64encode((out / name).read_bytes()).decode("ascii")
+                body = body.replace(f'src="{name}"', f'src="data:image/png;base64,{data}"')
         if anchor == "analyses" and figures.get(ANALYSIS_FIGURE):
             images = "".join(_image(out / f, f) for f in figures[ANALYSIS_FIGURE])
             body += f'<div class="figures">{images}</div>'

@@ -59,6 +59,7 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
         "directions": _directions(layouts),
         "interactions": _table2(layouts),
         "analyses": _analyses(layouts),
+        "strips": _strips(metrics.get("strips")),
         "comparisons": _comparisons(metrics),
         "rankings": _rankings(metrics),
         "context": _context_factors(layouts),
@@ -71,6 +72,39 @@ def markdown_sections(metrics: dict[str, Any]) -> dict[str, list[str]]:
         "stack": run_sections.stack_section(metrics.get("sources", [])),
         "provenance": run_sections.provenance_section(metrics.get("sources", [])),
     }
+
+
+def _strips(strips: dict[str, Any] | None) -> list[str]:
+    """The discordant pairs of each value that differs from its control arm, replayed and drawn (metrics.json
+    `strips`, written by roboview-report)."""
+    if not strips or not (strips["drawn"] or strips["skipped"]):
+        return []
+    lines = [
+        "## Where they part",
+        "",
+        "For each value that differs from its control arm (McNemar p < 0.05), its strongest discordant pair replayed "
+        "with the recorded policy: the policy's camera at the first step, where the two episodes' actions part, and "
+        "at the end; the control arm above, the value below.",
+        "",
+    ]
+    for s in strips["drawn"]:
+        parting = "never part" if s["parting"] is None else f"part at step {s['parting']}"
+        faithful = (
+            ""
+            if s["faithful"]
+            else " The replay did not reproduce its recorded rows: it shows a replay here."
+        )
+        lines += [
+            f"**{s['policy']}, {s['split']} = {s['value']}** against {s['against']}: episode {s['instance_id']} "
+            f"repeat {s['repeat']}, camera {s['camera']}; their actions {parting}.{faithful}",
+            "",
+            f"![{s['split']} = {s['value']} against {s['against']}]({s['file']})",
+            "",
+            f"Replay it side by side in Rerun: `{s['command']}`",
+            "",
+        ]
+    lines += [f"- not drawn: {reason}" for reason in strips["skipped"]]
+    return lines + [""]
 
 
 def _analyses(layouts: dict[str, dict]) -> list[str]:

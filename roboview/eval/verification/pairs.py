@@ -274,3 +274,109 @@ def record(pair: Pair, path: str | Path) -> Path:
     rec.flush()
     rr.disconnect(recording=rec)
     return path
+
+
+# ---- strips: the report's picture of a pair ---------------------------------------------------------------------
+STRIP_SIDE = 160  # pixels a frame is drawn at in a strip
+
+
+def strip_steps(pair: Pair) -> list[tuple[str, int, int]]:
+    """The strip's columns: (title, step of the twin, step of the value's episode): the first step, the parting step
+    (when they part), and each episode's end."""
+    ends = (len(pair.other.ee_path) - 1, len(pair.value.ee_path) - 1)
+    columns = [("step 0", 0, 0)]
+    if pair.parting is not None and 0 < pair.parting < min(ends):
+        columns.append((f"step {pair.parting}: actions part", pair.parting, pair.parting))
+    columns.append((f"end (steps {ends[0]} / {ends[1]})", *ends))
+    return columns
+
+
+def strip_image(pair: Pair, camera: str):
+    """Frames of `camera` at the strip's steps (strip_steps): the twin above, the value's episode below, each row
+    labelled with its value and outcome."""
+    import io
+
+    from PIL import Image, ImageDraw
+
+    columns = strip_steps(pair)
+    label_w, head_h = 150, 18
+    image = Image.new("RGB", (label_w + STRIP_SIDE * len(columns), head_h + 2 * STRIP_SIDE), "white")
+    draw = ImageDraw.Draw(image)
+    for c, (title, _, _) in enumerate(columns):
+        draw.text((label_w + c * STRIP_SIDE + 4, 3), title, fill="black")
+    for r, side in enumerate((pair.other, pair.value)):
+        y = head_h + r * STRIP_SIDE
+        won = bool(side.replayed.get("success"))
+        draw.text((4, y + 4), side.label, fill="black")
+        draw.text((4, y + 20), "success" if won else "failure:", fill="darkgreen" if won else "darkred")
+        if not won:  # its reason, wrapped to the label column
+            reason = str(side.replayed.get("failure_reason") or "")
+            for i in range(0, min(len(reason), 66), 22):
+                draw.text((4, y + 36 + 14 * (i // 22)), reason[i : i + 22], fill="darkred")
+        frames = side.frames[camera]
+        for c, column in enumerate(columns):
+            step = min(column[1 + r], len(frames) - 1)
+            frame = Image.open(io.BytesIO(frames[step])).convert("RGB").resize((STRIP_SIDE, STRIP_SIDE))
+            image.paste(frame, (label_w + c * STRIP_SIDE, y))
+    return image
+
+
+def make_strips(metrics: dict, sources: list[dict], out: Path, per_value: int = 1) -> dict[str, Any]:
+    """For each value that differs from its control arm (p_control < 0.05), its `per_value` strongest discordant
+    pairs replayed and drawn as strips (`strip_<n>.png` in `out`): metrics.json's `strips` {"drawn": [...],
+    "skipped": [...]}, each drawn strip with its policy, split, value, episode, parting step, faithfulness and the
+    command that replays it; a value whose pairs cannot be replayed here is skipped with the reason."""
+    from roboview.benchmark.format import load_benchmark
+    from roboview.eval.statistics.metrics import policy_layouts
+    from roboview.eval.verification.replay import Replayer
+    from roboview.eval.verification.results import benchmark_path, read_table
+
+    drawn: list[dict] = []
+    skipped: list[str] = []
+    folders = {p: Path(s["path"]).parent for s in sources for p in s.get("policies", [])}
+    replayer = Replayer()
+    try:
+        for policy, layout in policy_layouts(metrics).items():
+            wanted = [
+                (split, value)
+                for split, m in layout.get("splits", {}).items()
+                for value, v in m.get("per_value", {}).items()
+                if v.get("p_control") is not None and v["p_control"] < 0.05
+            ]
+            if not wanted:
+                continue
+            folder = folders.get(policy)
+            try:
+                table, _ = read_table(folder)
+                rows = table.to_pylist()
+                bench = load_benchmark(benchmark_path(folder))
+            except Exception as exc:  # any reason the episodes cannot be replayed here is the strip's answer
+                skipped.append(f"{policy}: {type(exc).__name__}: {exc}")
+                continue
+            for split, value in wanted:
+                try:
+                    for instance, repeat in discordant(rows, bench, split, value, "", per_value):
+                        pair = replay_pair(folder, instance, repeat, "", bench.path, replayer=replayer)
+                        camera = next(iter(pair.value.frames))
+                        name = f"strip_{len(drawn) + 1}.png"
+                        strip_image(pair, camera).save(out / name)
+                        drawn.append(
+                            {
+                                "policy": policy,
+                                "split": split,
+                                "value": value,
+                                "against": pair.other.record["value"],
+                                "instance_id": instance,
+                                "repeat": repeat,
+                                "camera": camera,
+                                "parting": pair.parting,
+                                "faithful": pair.faithful,
+                                "file": name,
+                                "command": f"roboview-pair --results={folder} --instance={instance} --repeat={repeat}",
+                            }
+                        )
+                except Exception as exc:  # a policy that cannot be rebuilt or reached here
+                    skipped.append(f"{policy} {split}={value}: {type(exc).__name__}: {exc}")
+    finally:
+        replayer.close()
+    return {"drawn": drawn, "skipped": skipped}
