@@ -76,6 +76,12 @@ def _summary(cfg: ReportConfig, result: ReportResult) -> None:
         f"[report] {result.output_dir / REPORT_FILE} and {HTML_FILE}: {len(result.plots) - len(skipped)} plot(s) written"
         + (f", skipped {', '.join(skipped)}" if skipped else "")
     )
+    strips = result.metrics.get("strips")
+    if strips:
+        print(
+            f"[report] {len(strips['drawn'])} strip(s) of where a biased value's episodes part"
+            + (f"; not drawn: {'; '.join(strips['skipped'])}" if strips["skipped"] else "")
+        )
 
 
 def main(args: list[str] | None = None) -> ReportResult:
