@@ -298,3 +298,55 @@ def test_inspect_robots_refuses_another_schema_version_and_names_missing_metadat
         "--map.value=metadata.perturbation",
     )["splits"]["camera"]  # fmt: skip
     assert successes(split) == {"front": 15, "side": 15, "top": 0} and split["n_episodes"] == 54
+
+
+# gauntlet-robotics 0.5.1 and xevals 0.1.0 runs, each written by the tool's own writer (tests/fixtures/*/gen_*).
+GAUNTLET = ROOT / "tests" / "fixtures" / "gauntlet"
+XEVALS = ROOT / "tests" / "fixtures" / "xevals"
+
+
+def test_gauntlet_episodes_are_audited_with_their_axes_as_the_factor(tmp_path):
+    metrics = audit(GAUNTLET, tmp_path, "--format=gauntlet")
+    split = metrics["splits"]["object_swap"]
+    episodes = json.loads((GAUNTLET / "episodes.json").read_text())
+    planted = {}
+    for e in episodes:
+        value = f"object_swap={e['perturbation_config']['object_swap']:g}"
+        planted[value] = planted.get(value, 0) + int(e["success"])
+    assert successes(split) == planted == {"object_swap=0": 1, "object_swap=1": 0, "object_swap=2": 0}
+    assert split["n_episodes"] == 12 and metrics["policy"] == "scripted"
+    text = (tmp_path / "report.md").read_text()
+    assert "gauntlet-robotics 0.5.1 episodes episodes.json (12 episodes)" in text
+
+
+def test_xevals_cells_are_audited_with_the_clean_cell_as_each_perturbations_baseline(tmp_path):
+    metrics = audit(XEVALS / "run.json", tmp_path, "--format=xevals")
+    split = metrics["splits"]["visual/color_shift"]
+    assert successes(split) == {"0": 4, "0.4": 2, "0.8": 0} and split["n_episodes"] == 12
+    # xevals calls a difference significant when 95 % intervals do not overlap; 12 episodes do not separate these.
+    assert split["p_value"] > 0.05 and metrics["policy"] == "CallablePolicy"
+
+
+def test_malformed_gauntlet_and_xevals_files_get_one_line(tmp_path, capsys):
+    report = tmp_path / "report.json"
+    report.write_text(json.dumps({"summary": {}}))
+    episodes = json.loads((GAUNTLET / "episodes.json").read_text())
+    lacking = tmp_path / "lacking.json"
+    lacking.write_text(json.dumps([{k: v for k, v in e.items() if k != "success"} for e in episodes]))
+    run = json.loads((XEVALS / "run.json").read_text())
+    newer = tmp_path / "newer.json"
+    newer.write_text(json.dumps(run | {"schema": 2}))
+    for path, fmt, message in (
+        (
+            report,
+            "gauntlet",
+            "is a JSON object (gauntlet's report.json is one); expected gauntlet's episodes.json",
+        ),
+        (lacking, "gauntlet", "episode 0 lacks success;"),
+        (newer, "xevals", "xevals run schema 2 is not supported; this reader knows schema 1"),
+        (GAUNTLET / "episodes.json", "xevals", "is JSON but no xevals run (no schema, suite and cells)"),
+    ):
+        with pytest.raises(SystemExit):
+            audit(path, tmp_path / "out", f"--format={fmt}")
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1, err

@@ -3,7 +3,7 @@
     roboview-audit --results=rollouts.csv --map.factor=category --map.value=variant \\
         --map.context=base_task --map.success=success [--map.repeat=trial] [--map.policy=model] \\
         --output_dir=outputs/audit
-    roboview-audit --format=vla_eval|inspect_robots --results=FILE_OR_DIR --output_dir=outputs/audit
+    roboview-audit --format=vla_eval|inspect_robots|gauntlet|xevals --results=FILE_OR_DIR --output_dir=outputs/audit
 
 Reads one row per episode (CSV, parquet or JSON lines) from another benchmark — LIBERO-plus, VLA-Arena,
 RoboTwin, your own logs — maps its columns onto RoboView's episode record and writes the same report.md
@@ -13,8 +13,10 @@ odds ratios with exact p- and q-values, and the power this design has against a 
 `--tau`. With several policies (`--map.policy`), the paired comparisons too.
 
 `--format` reads another harness's own files instead of a table: `vla_eval` (vla-eval's recording database or
-exported aggregate JSON; LIBERO-plus, LIBERO-Pro and RoboTwin results map without --map flags) or
-`inspect_robots` (Inspect Robots' JSON eval logs; the scenes' metadata keys factor, value and context). Any
+exported aggregate JSON; LIBERO-plus, LIBERO-Pro and RoboTwin results map without --map flags),
+`inspect_robots` (Inspect Robots' JSON eval logs; the scenes' metadata keys factor, value and context), `gauntlet`
+(gauntlet-robotics' episodes.json: its perturbation axes) or `xevals` (xevals' run.json: a cell's perturbation and
+severity). Any
 --map.* flag overrides the harness's default column; roboview.eval.running.harnesses says what each column holds.
 
 The mapping:
