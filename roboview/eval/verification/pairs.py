@@ -196,6 +196,14 @@ def replay_pair(
             f"{run['policy']} is not reproducible from the episode seed (its config declares reproducible = False: "
             "a served or sampled model draws from its own randomness), so a replay may differ from the recorded run"
         )
+    from roboview.benchmark import conformance
+
+    here = conformance.at_start(Path(bench.path), bench.version).verdict  # this machine (a cached verdict is reused)
+    if here == "different":
+        why.append(
+            "this machine renders or simulates the benchmark differently from the machine that built it (its "
+            "conformance check says `different`: roboview-verify --benchmark.path shows the figures)"
+        )
     stacks = {s.row.get("conformance") for s in sides if s.row}
     if "different" in stacks:
         why.append(
