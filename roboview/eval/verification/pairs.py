@@ -198,7 +198,9 @@ def replay_pair(
         )
     from roboview.benchmark import conformance
 
-    here = conformance.at_start(Path(bench.path), bench.version).verdict  # this machine (a cached verdict is reused)
+    here = conformance.at_start(
+        Path(bench.path), bench.version
+    ).verdict  # this machine (a cached verdict is reused)
     if here == "different":
         why.append(
             "this machine renders or simulates the benchmark differently from the machine that built it (its "
