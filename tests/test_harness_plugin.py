@@ -52,4 +52,7 @@ def test_a_harness_reader_from_another_package_is_audited(tmp_path):
          f"--output_dir={out}"],
         env=env, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
-    assert unknown.returncode != 0 and "known: vla_eval, inspect_robots, my_harness" in unknown.stderr
+    assert (
+        unknown.returncode != 0
+        and "known: vla_eval, inspect_robots, gauntlet, xevals, my_harness" in unknown.stderr
+    )

@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 
 from roboview.eval.verification.pairs import REPLAYED, discordant, parting_step, record, replay_pair
-from tests.parting_policy import TYPE, PartingConfig
 
 PART_AT = 6
+TYPE = "parting_for_tests"
 
 
 def test_the_parting_step_is_the_first_step_whose_actions_differ_beyond_the_tolerance():
@@ -30,20 +30,27 @@ def test_the_parting_step_is_the_first_step_whose_actions_differ_beyond_the_tole
 
 @pytest.fixture(scope="module")
 def results(tiny_benchmark, tmp_path_factory):
-    """The parting policy's red and blue episodes of the first context of the tiny benchmark's color split."""
+    """The parting policy's red and blue episodes of the first context of the tiny benchmark's color split. The
+    test policy type is registered for this module only (other modules' tests list the registered types)."""
     from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run
+    from roboview.policies.base import PolicyConfig
+    from tests.parting_policy import PartingConfig
 
     out = tmp_path_factory.mktemp("pairs") / "ev"
-    run(
-        EvaluateConfig(
-            BenchmarkConfig(str(tiny_benchmark), splits="color", values="red,blue"),
-            PartingConfig(part_at=PART_AT),
-            EvalConfig(n_repeats=1, num_workers=1, contexts=1, image_size=64),
-            str(out),
+    PolicyConfig._choice_registry[TYPE] = PartingConfig  # importing the module registered it once per process
+    try:
+        run(
+            EvaluateConfig(
+                BenchmarkConfig(str(tiny_benchmark), splits="color", values="red,blue"),
+                PartingConfig(part_at=PART_AT),
+                EvalConfig(n_repeats=1, num_workers=1, contexts=1, image_size=64),
+                str(out),
+            )
         )
-    )
-    return out
+        yield out
+    finally:
+        PolicyConfig._choice_registry.pop(TYPE, None)
 
 
 def test_a_replayed_pair_is_its_recorded_rows_and_parts_where_the_policy_does(results, tiny_benchmark):

@@ -143,32 +143,41 @@ def replay_pair(
 ) -> Pair:
     """Re-run episode (`instance_id`, `repeat`) of a results folder and its twin here, with the recorded policy."""
     from roboview.benchmark.format import load_benchmark
-    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
     from roboview.eval.verification.replay import Replayer
     from roboview.eval.verification.results import benchmark_path, read_table
 
     table, run = read_table(Path(results))
-    rows = table.to_pylist()
     bench = load_benchmark(benchmark_path(results, benchmark))
     items = {i.record["instance_id"]: i for its in bench.splits.values() for i in its}
     if instance_id not in items:
         raise ValueError(f"instance {instance_id!r} is not in benchmark {bench.version}")
     item = items[instance_id]
     twin = twin_of(item, items, against)
-    recorded = {(r["instance_id"], int(r["repeat"])): r for r in rows}
-    replayer = replayer or Replayer()
-    policy = replayer.policy(run)
+    recorded = {(r["instance_id"], int(r["repeat"])): r for r in table.to_pylist()}
+    policy = (replayer or Replayer()).policy(run)
+    a, b = _run_sides(policy, run, (item, twin), repeat, recorded)
+    parting, gap = parting_step(a.actions, b.actions, tolerance)
+    why = [
+        f"{s.label}: the replay ended differently from its row ({', '.join(s.mismatch())})"
+        for s in (a, b)
+        if s.mismatch()
+    ]
+    faithful = not why
+    return Pair(a, b, repeat, parting, gap, tolerance, faithful, why + _caveats(policy, run, bench, (a, b)))
+
+
+def _run_sides(policy, run: dict, items: tuple, repeat: int, recorded: dict) -> list[Side]:
+    """Each item's episode `repeat` re-run with `policy` (media and actions kept), beside its recorded row."""
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+
+    task = items[0].instance.task
     spec = WorkerSpec(
-        policy,
-        run.get("image_size", 224),
-        run.get("max_steps", 120),
-        record_media=True,
-        task=item.instance.task,
+        policy, run.get("image_size", 224), run.get("max_steps", 120), record_media=True, task=task
     )
     worker = EvalWorker(spec)
     sides = []
     try:
-        for it in (item, twin):
+        for it in items:
             result = worker.run(WorkItem(it, repeat))
             sides.append(
                 Side(
@@ -183,48 +192,37 @@ def replay_pair(
             )
     finally:
         worker.close()
-    a, b = sides
-    parting, gap = parting_step(a.actions, b.actions, tolerance)
-    why = [
-        f"{s.label}: the replay ended differently from its row ({', '.join(s.mismatch())})"
-        for s in sides
-        if s.mismatch()
-    ]
-    faithful = not why
+    return sides
+
+
+def _caveats(policy, run: dict, bench, sides) -> list[str]:
+    """What the folder and this machine say about why a replay may not stand for its row."""
+    from roboview.benchmark import conformance
+
+    out = []
     if not getattr(policy, "reproducible", True):
-        why.append(
+        out.append(
             f"{run['policy']} is not reproducible from the episode seed (its config declares reproducible = False: "
             "a served or sampled model draws from its own randomness), so a replay may differ from the recorded run"
         )
-    from roboview.benchmark import conformance
-
-    here = conformance.at_start(
-        Path(bench.path), bench.version
-    ).verdict  # this machine (a cached verdict is reused)
-    if here == "different":
-        why.append(
+    if (
+        conformance.at_start(Path(bench.path), bench.version).verdict == "different"
+    ):  # a cached verdict is reused
+        out.append(
             "this machine renders or simulates the benchmark differently from the machine that built it (its "
             "conformance check says `different`: roboview-verify --benchmark.path shows the figures)"
         )
-    stacks = {s.row.get("conformance") for s in sides if s.row}
-    if "different" in stacks:
-        why.append(
+    if "different" in {s.row.get("conformance") for s in sides if s.row}:
+        out.append(
             "the recorded episodes ran on a stack whose conformance with the benchmark was `different` (their rows' "
             "conformance column): another renderer or simulator may give other episodes"
         )
-    return Pair(a, b, repeat, parting, gap, tolerance, faithful, why)
+    return out
 
 
-def record(pair: Pair, path: str | Path) -> Path:
-    """One Rerun recording of both episodes side by side: each camera the policy saw, its actions, the end effector's
-    path, the outcome, and the step where the actions part. Opens in the viewer laid out in two columns."""
-    import rerun as rr
+def _blueprint(pair: Pair, cameras: list[str]):
+    """Two columns, the value's episode and its twin (each camera, then the actions), over the paths and events."""
     import rerun.blueprint as rrb
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    sides = {"value": pair.value, "other": pair.other}
-    cameras = sorted(pair.value.frames)
 
     def column(key: str, side: Side):
         views = [
@@ -234,56 +232,59 @@ def record(pair: Pair, path: str | Path) -> Path:
             *views, rrb.TimeSeriesView(origin=f"pair/{key}/action", name=f"{side.label}: action")
         )
 
-    blueprint = rrb.Blueprint(
+    return rrb.Blueprint(
         rrb.Vertical(
-            rrb.Horizontal(*(column(k, s) for k, s in sides.items())),
+            rrb.Horizontal(column("value", pair.value), column("other", pair.other)),
             rrb.Horizontal(rrb.Spatial3DView(origin="pair/paths"), rrb.TextLogView(origin="pair/events")),
         )
     )
+
+
+def record(pair: Pair, path: str | Path) -> Path:
+    """One Rerun recording of both episodes side by side: each camera the policy saw, its actions, the end effector's
+    path, the outcome, and the step where the actions part. Opens in the viewer laid out in two columns."""
+    import rerun as rr
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cameras = sorted(pair.value.frames)
     rec = rr.RecordingStream("roboview_pair")
-    rec.save(str(path), default_blueprint=blueprint)
-    colors = {"value": [230, 80, 60], "other": [40, 120, 255]}
-    for key, side in sides.items():
-        facts = "\n".join(
-            f"{k}: {side.record[k]}" for k in ("instance_id", "split", "factor", "value", "context_id")
-        )
-        rec.log(f"pair/{key}/instance", rr.TextDocument(f"{facts}\nrepeat: {pair.repeat}"), static=True)
-        steps = 0 if side.actions is None else len(side.actions)
-        for step in range(len(side.ee_path) if side.ee_path is not None else 0):
-            rec.set_time("step", sequence=step)
-            for cam in cameras:
-                if step < len(side.frames.get(cam, [])):
-                    rec.log(
-                        f"pair/{key}/camera/{cam}",
-                        rr.EncodedImage(contents=side.frames[cam][step], media_type="image/jpeg"),
-                    )
-            if step < steps:
-                rec.log(f"pair/{key}/action", rr.Scalars(np.asarray(side.actions[step], float)))
-            rec.log(
-                f"pair/paths/{key}/ee",
-                rr.Points3D(side.ee_path[step : step + 1], radii=0.01, colors=colors[key]),
-            )
-        if side.ee_path is not None and len(side.ee_path):
-            rec.log(
-                f"pair/paths/{key}/ee_path", rr.LineStrips3D([side.ee_path], colors=colors[key]), static=True
-            )
-        rec.set_time("step", sequence=max(steps - 1, 0))
-        ended = (
-            "success" if side.replayed.get("success") else f"failure: {side.replayed.get('failure_reason')}"
-        )
-        rec.log(
-            "pair/events",
-            rr.TextLog(f"{side.label}: {ended}", level="INFO" if side.replayed.get("success") else "WARN"),
-        )
+    rec.save(str(path), default_blueprint=_blueprint(pair, cameras))
+    for key, side in (("value", pair.value), ("other", pair.other)):
+        _log_side(rec, key, side, cameras, pair.repeat)
     if pair.parting is not None:
         rec.set_time("step", sequence=pair.parting)
-        rec.log(
-            "pair/events",
-            rr.TextLog(f"actions part at step {pair.parting} (|Δ| {pair.parting_gap:.3g})", level="WARN"),
-        )
+        note = f"actions part at step {pair.parting} (|Δ| {pair.parting_gap:.3g})"
+        rec.log("pair/events", rr.TextLog(note, level="WARN"))
     rec.flush()
     rr.disconnect(recording=rec)
     return path
+
+
+def _log_side(rec, key: str, side: Side, cameras: list[str], repeat: int) -> None:
+    import rerun as rr
+
+    color = [230, 80, 60] if key == "value" else [40, 120, 255]
+    facts = "\n".join(
+        f"{k}: {side.record[k]}" for k in ("instance_id", "split", "factor", "value", "context_id")
+    )
+    rec.log(f"pair/{key}/instance", rr.TextDocument(f"{facts}\nrepeat: {repeat}"), static=True)
+    steps = 0 if side.actions is None else len(side.actions)
+    for step in range(len(side.ee_path) if side.ee_path is not None else 0):
+        rec.set_time("step", sequence=step)
+        for cam in cameras:
+            if step < len(side.frames.get(cam, [])):
+                image = rr.EncodedImage(contents=side.frames[cam][step], media_type="image/jpeg")
+                rec.log(f"pair/{key}/camera/{cam}", image)
+        if step < steps:
+            rec.log(f"pair/{key}/action", rr.Scalars(np.asarray(side.actions[step], float)))
+        rec.log(f"pair/paths/{key}/ee", rr.Points3D(side.ee_path[step : step + 1], radii=0.01, colors=color))
+    if side.ee_path is not None and len(side.ee_path):
+        rec.log(f"pair/paths/{key}/ee_path", rr.LineStrips3D([side.ee_path], colors=color), static=True)
+    rec.set_time("step", sequence=max(steps - 1, 0))
+    won = bool(side.replayed.get("success"))
+    ended = "success" if won else f"failure: {side.replayed.get('failure_reason')}"
+    rec.log("pair/events", rr.TextLog(f"{side.label}: {ended}", level="INFO" if won else "WARN"))
 
 
 # ---- strips: the report's picture of a pair ---------------------------------------------------------------------
