@@ -261,8 +261,10 @@ class PoseRecorder:
         self.cameras[camera_name] = (list(pos), list(quat))
 
 
+@cache
 def base_pose(problem: type) -> tuple[list[float], list[float]]:
-    """A LIBERO problem class's hard-coded agentview (position, quaternion), from its own `_setup_camera`."""
+    """A LIBERO problem class's hard-coded agentview (position, quaternion), from its own `_setup_camera` (once per
+    class: every reset of a LIBERO-plus view starts from it)."""
     recorder = PoseRecorder()
     problem._setup_camera(None, recorder)
     return recorder.cameras["agentview"]
@@ -355,13 +357,9 @@ def camera_suite(cfg) -> list:
     rows: dict[str, list[tuple[str, View]]] = {split: [] for split in SPLITS}
     for task in tasks:
         own = by_task.get(task, [])
-        views = [View(), *own]
-        views += [p for v in own for p in v.parts() if p not in views and p not in own]
-        seen: set[View] = set()
-        for view in views:
-            if view not in seen:
-                seen.add(view)
-                rows[split_of(view, view in own)].append((task, view))
+        # The no-change view, the task's variants, then their parts it does not run; each view once, in that order.
+        for view in dict.fromkeys([View(), *own, *(p for v in own for p in v.parts())]):
+            rows[split_of(view, view in own)].append((task, view))
     out = []
     base = baselines(TASK)
     for split in SPLITS:

@@ -67,20 +67,15 @@ class PairConfig:
 
 
 def run(cfg: PairConfig) -> list[dict]:
-    from roboview.benchmark.format import load_benchmark
-    from roboview.eval.verification.pairs import discordant, record, replay_pair
+    from roboview.eval.verification.pairs import discordant, load, record, replay_pair
     from roboview.eval.verification.replay import Replayer
-    from roboview.eval.verification.results import benchmark_path, read_table
 
     results = Path(cfg.results)
-    root = benchmark_path(results, cfg.benchmark.path or None)
+    loaded = load(results, cfg.benchmark.path or None)  # the folder and its benchmark, read once
     if cfg.instance:
         episodes = [(cfg.instance, cfg.repeat)]
     else:
-        table, _ = read_table(results)
-        episodes = discordant(
-            table.to_pylist(), load_benchmark(root), cfg.split, cfg.value, cfg.against, cfg.pairs
-        )
+        episodes = discordant(loaded.rows, loaded.bench, cfg.split, cfg.value, cfg.against, cfg.pairs)
         if not episodes:
             twin = cfg.against or "the control arm"
             raise ValueError(
@@ -91,7 +86,15 @@ def run(cfg: PairConfig) -> list[dict]:
     done = []
     try:
         for instance, repeat in episodes:
-            pair = replay_pair(results, instance, repeat, cfg.against, root, cfg.tolerance, replayer)
+            pair = replay_pair(
+                results,
+                instance,
+                repeat,
+                cfg.against,
+                tolerance=cfg.tolerance,
+                replayer=replayer,
+                loaded=loaded,
+            )
             path = record(pair, out / f"{instance}_r{repeat}.rrd")
             done.append({"pair": pair, "recording": str(path)})
     finally:

@@ -132,6 +132,31 @@ def discordant(
     return [(i, rep) for i, rep, _ in found[:limit]]
 
 
+@dataclass
+class Loaded:
+    """A results folder read once for every pair replayed from it: its rows and run.json, its benchmark and the
+    benchmark's items, and this machine's conformance verdict on that benchmark."""
+
+    rows: list[dict]
+    run: dict
+    bench: Any
+    items: dict[str, Any]
+    here: str
+
+
+def load(results: str | Path, benchmark: str | Path | None = None) -> Loaded:
+    """Read a results folder and its benchmark (default: the one its provenance names) for replaying pairs."""
+    from roboview.benchmark import conformance
+    from roboview.benchmark.format import load_benchmark
+    from roboview.eval.verification.results import benchmark_path, read_table
+
+    table, run = read_table(Path(results))
+    bench = load_benchmark(benchmark_path(results, benchmark))
+    items = {i.record["instance_id"]: i for its in bench.splits.values() for i in its}
+    here = conformance.at_start(Path(bench.path), bench.version).verdict  # a cached verdict is reused
+    return Loaded(table.to_pylist(), run, bench, items, here)
+
+
 def replay_pair(
     results: str | Path,
     instance_id: str,
@@ -140,22 +165,31 @@ def replay_pair(
     benchmark: str | Path | None = None,
     tolerance: float = TOLERANCE,
     replayer=None,
+    loaded: Loaded | None = None,
 ) -> Pair:
-    """Re-run episode (`instance_id`, `repeat`) of a results folder and its twin here, with the recorded policy."""
-    from roboview.benchmark.format import load_benchmark
+    """Re-run episode (`instance_id`, `repeat`) of a results folder and its twin here, with the recorded policy
+    (`loaded`: the folder already read by `load`; `replayer`: workers kept across calls)."""
+    from roboview.eval.running.rollout import WorkItem
     from roboview.eval.verification.replay import Replayer
-    from roboview.eval.verification.results import benchmark_path, read_table
 
-    table, run = read_table(Path(results))
-    bench = load_benchmark(benchmark_path(results, benchmark))
-    items = {i.record["instance_id"]: i for its in bench.splits.values() for i in its}
-    if instance_id not in items:
-        raise ValueError(f"instance {instance_id!r} is not in benchmark {bench.version}")
-    item = items[instance_id]
-    twin = twin_of(item, items, against)
-    recorded = {(r["instance_id"], int(r["repeat"])): r for r in table.to_pylist()}
-    policy = (replayer or Replayer()).policy(run)
-    a, b = _run_sides(policy, run, (item, twin), repeat, recorded)
+    loaded = loaded or load(results, benchmark)
+    if instance_id not in loaded.items:
+        raise ValueError(f"instance {instance_id!r} is not in benchmark {loaded.bench.version}")
+    item = loaded.items[instance_id]
+    twin = twin_of(item, loaded.items, against)
+    recorded = {(r["instance_id"], int(r["repeat"])): r for r in loaded.rows}
+    own = replayer is None
+    replayer = replayer or Replayer()
+    try:
+        policy = replayer.policy(loaded.run)
+        worker = replayer.worker(loaded.run, policy, item.instance.task, record_media=True)
+        a, b = (
+            _side(worker.run(WorkItem(it, repeat)), it, recorded.get((it.record["instance_id"], repeat)))
+            for it in (item, twin)
+        )
+    finally:
+        if own:
+            replayer.close()
     parting, gap = parting_step(a.actions, b.actions, tolerance)
     why = [
         f"{s.label}: the replay ended differently from its row ({', '.join(s.mismatch())})"
@@ -163,51 +197,25 @@ def replay_pair(
         if s.mismatch()
     ]
     faithful = not why
-    return Pair(a, b, repeat, parting, gap, tolerance, faithful, why + _caveats(policy, run, bench, (a, b)))
+    return Pair(a, b, repeat, parting, gap, tolerance, faithful, why + _caveats(policy, loaded, (a, b)))
 
 
-def _run_sides(policy, run: dict, items: tuple, repeat: int, recorded: dict) -> list[Side]:
-    """Each item's episode `repeat` re-run with `policy` (media and actions kept), beside its recorded row."""
-    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
-
-    task = items[0].instance.task
-    spec = WorkerSpec(
-        policy, run.get("image_size", 224), run.get("max_steps", 120), record_media=True, task=task
-    )
-    worker = EvalWorker(spec)
-    sides = []
-    try:
-        for it in items:
-            result = worker.run(WorkItem(it, repeat))
-            sides.append(
-                Side(
-                    f"{it.record['factor']}={it.record['value']}",
-                    it.record,
-                    recorded.get((it.record["instance_id"], repeat)),
-                    result.row,
-                    result.frames or {},
-                    np.asarray(result.actions) if result.actions is not None else None,
-                    result.ee_path,
-                )
-            )
-    finally:
-        worker.close()
-    return sides
+def _side(result, item, row: dict | None) -> Side:
+    """A replayed episode (its row, frames, actions and path) beside its recorded row."""
+    actions = np.asarray(result.actions) if result.actions is not None else None
+    label = f"{item.record['factor']}={item.record['value']}"
+    return Side(label, item.record, row, result.row, result.frames or {}, actions, result.ee_path)
 
 
-def _caveats(policy, run: dict, bench, sides) -> list[str]:
+def _caveats(policy, loaded: Loaded, sides) -> list[str]:
     """What the folder and this machine say about why a replay may not stand for its row."""
-    from roboview.benchmark import conformance
-
     out = []
     if not getattr(policy, "reproducible", True):
         out.append(
-            f"{run['policy']} is not reproducible from the episode seed (its config declares reproducible = False: "
-            "a served or sampled model draws from its own randomness), so a replay may differ from the recorded run"
+            f"{loaded.run['policy']} is not reproducible from the episode seed (its config declares reproducible = "
+            "False: a served or sampled model draws from its own randomness), so a replay may differ from the recorded run"
         )
-    if (
-        conformance.at_start(Path(bench.path), bench.version).verdict == "different"
-    ):  # a cached verdict is reused
+    if loaded.here == "different":
         out.append(
             "this machine renders or simulates the benchmark differently from the machine that built it (its "
             "conformance check says `different`: roboview-verify --benchmark.path shows the figures)"
@@ -337,10 +345,8 @@ def make_strips(metrics: dict, sources: list[dict], out: Path, per_value: int = 
     pairs replayed and drawn as strips (`strip_<n>.png` in `out`): metrics.json's `strips` {"drawn": [...],
     "skipped": [...]}, each drawn strip with its policy, split, value, episode, parting step, faithfulness and the
     command that replays it; a value whose pairs cannot be replayed here is skipped with the reason."""
-    from roboview.benchmark.format import load_benchmark
     from roboview.eval.statistics.metrics import policy_layouts
     from roboview.eval.verification.replay import Replayer
-    from roboview.eval.verification.results import benchmark_path, read_table
 
     drawn: list[dict] = []
     skipped: list[str] = []
@@ -358,16 +364,16 @@ def make_strips(metrics: dict, sources: list[dict], out: Path, per_value: int = 
                 continue
             folder = folders.get(policy)
             try:
-                table, _ = read_table(folder)
-                rows = table.to_pylist()
-                bench = load_benchmark(benchmark_path(folder))
+                loaded = load(folder)
             except Exception as exc:  # any reason the episodes cannot be replayed here is the strip's answer
                 skipped.append(f"{policy}: {type(exc).__name__}: {exc}")
                 continue
             for split, value in wanted:
                 try:
-                    for instance, repeat in discordant(rows, bench, split, value, "", per_value):
-                        pair = replay_pair(folder, instance, repeat, "", bench.path, replayer=replayer)
+                    for instance, repeat in discordant(
+                        loaded.rows, loaded.bench, split, value, "", per_value
+                    ):
+                        pair = replay_pair(folder, instance, repeat, replayer=replayer, loaded=loaded)
                         camera = next(iter(pair.value.frames))
                         name = f"strip_{len(drawn) + 1}.png"
                         strip_image(pair, camera).save(out / name)

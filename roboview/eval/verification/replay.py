@@ -120,19 +120,28 @@ class Replayer:
             self._policies[key] = recorded_config(run)
         return self._policies[key]
 
+    def worker(self, run: dict, policy, task: str, record_media: bool = False):
+        """The worker that re-runs `task`'s episodes with the policy `run` records (built once, kept for every later
+        call that needs the same one; `record_media`: keeping frames, paths and actions, as a pair replay does)."""
+        from roboview.eval.running.rollout import EvalWorker, WorkerSpec
+
+        image_size, max_steps = run.get("image_size", 224), run.get("max_steps", 120)
+        key = (self._key(run), image_size, max_steps, task, record_media)
+        if key not in self._workers:
+            spec = WorkerSpec(policy, image_size, max_steps, record_media=record_media, task=task)
+            self._workers[key] = EvalWorker(spec)
+        return self._workers[key]
+
     def rerun(self, sample: list[dict], bench, run: dict, policy) -> list[str]:
         """Each sampled row's episode again; the rows whose outcome differs, described."""
-        from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+        from roboview.eval.running.rollout import WorkItem
 
         items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
-        image_size, max_steps = run.get("image_size", 224), run.get("max_steps", 120)
         differ = []
         for row in sample:
             item = items[row["instance_id"]]
-            key = (self._key(run), image_size, max_steps, item.instance.task)
-            if key not in self._workers:
-                self._workers[key] = EvalWorker(WorkerSpec(policy, image_size, max_steps, task=key[-1]))
-            again = self._workers[key].run(WorkItem(item, int(row["repeat"]))).row
+            worker = self.worker(run, policy, item.instance.task)
+            again = worker.run(WorkItem(item, int(row["repeat"]))).row
             changed = [
                 f"{k} {row.get(k)!r} → {again.get(k)!r}"
                 for k in REPLAYED
