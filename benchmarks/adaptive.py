@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from roboview.eval.running.results import PARQUET
 from roboview.eval.statistics.adaptive import Design, fixed_power, read_record, simulate
 from roboview.pipelines._cli import cli_main
 
@@ -66,7 +67,7 @@ def real_run(results: Path) -> dict:
     """Per split of an adaptive run: episodes spent and the stop, against fixed-n at the design's power and τ."""
     record = read_record(results)
     design = record["design"]
-    episodes = pd.read_parquet(results / "episodes.parquet")
+    episodes = pd.read_parquet(results / PARQUET)
     splits = {}
     for split, stop in record["splits"].items():
         rows = episodes[episodes["split"] == split]

@@ -33,6 +33,7 @@ from pathlib import Path
 import psutil
 
 from benchmarks.serving import free_port
+from roboview.eval.running.results import PARQUET
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
@@ -268,7 +269,7 @@ def run(cfg: ClusterBenchConfig) -> dict:
 
     def table(name: str):
         return (
-            pd.read_parquet(scratch / name / "episodes.parquet")
+            pd.read_parquet(scratch / name / PARQUET)
             .drop(columns=["duration_s"])
             .sort_values(["instance_id", "repeat"])
             .reset_index(drop=True)

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from benchmarks.cluster import frames_equal
 from benchmarks.serving import REFERENCE_CHECKPOINT, free_port, stop
+from roboview.eval.running.results import PARQUET
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 ROOT = Path(__file__).parents[1]
@@ -81,7 +82,7 @@ def _evaluate(cfg: GpuBenchConfig, bench: str, out: Path, flags: list[str]) -> d
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
     rows = (
-        pd.read_parquet(out / "episodes.parquet")
+        pd.read_parquet(out / PARQUET)
         .drop(columns=["duration_s"])
         .sort_values(["instance_id", "repeat"])
         .reset_index(drop=True)

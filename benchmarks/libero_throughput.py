@@ -32,6 +32,7 @@ from pathlib import Path
 import pandas as pd
 
 from roboview.core.cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
+from roboview.eval.running.results import PARQUET
 from roboview.libero.task import HARD_RESET_ENV
 
 
@@ -140,7 +141,7 @@ def _evaluate(cfg: LiberoThroughputConfig, bench: Path, out: Path, path: str, tr
         f"--output_dir={out}",
     ]
     seconds = _run(cmd, path, tree)
-    rows = pd.read_parquet(out / "episodes.parquet")
+    rows = pd.read_parquet(out / PARQUET)
     loop = float(rows["duration_s"].sum()) / cfg.num_workers
     return {
         "episodes": len(rows),

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from roboview.core.cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
+from roboview.eval.running.results import PARQUET
 
 
 @dataclass
@@ -120,7 +121,7 @@ def run(cfg: LiberoVsLeRobotConfig) -> dict:
     )
     info = json.loads((lerobot_dir / "eval_info.json").read_text())
     lerobot_success = [bool(x) for task in info["per_task"] for x in task["metrics"]["successes"]]
-    rows = pd.read_parquet(roboview_dir / "episodes.parquet")
+    rows = pd.read_parquet(roboview_dir / PARQUET)
     rows["init"] = rows["init_state"].astype(int)
     roboview_success = [bool(s) for s in rows.sort_values("init")["success"]]
     result = {

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from benchmarks.libero_vs_lerobot_eval import timed
 from roboview.core.cli import cli_main  # first: it sets the headless GL defaults before MuJoCo loads
+from roboview.eval.running.results import PARQUET
 
 
 @dataclass
@@ -87,7 +88,7 @@ def run(cfg: MetaWorldVsLeRobotConfig) -> dict:
     roboview_s = timed(roboview_cmd, env, out / "roboview.log")
     info = json.loads((lerobot_dir / "eval_info.json").read_text())
     lerobot_success = [bool(x) for task in info["per_task"] for x in task["metrics"]["successes"]]
-    rows = pd.read_parquet(roboview_dir / "episodes.parquet").sort_values("repeat")
+    rows = pd.read_parquet(roboview_dir / PARQUET).sort_values("repeat")
     result = {
         "checkpoint": cfg.checkpoint,
         "episodes": cfg.episodes,

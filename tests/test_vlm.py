@@ -389,7 +389,7 @@ def test_the_vlm_fairness_screen_is_reported_with_its_agreement_with_the_gate(tm
 
 
 def test_report_and_probe_read_the_agents_columns(standin, tiny_bench, tmp_path):
-    from roboview.eval.grounding_probe import neighbours
+    from roboview.eval.campaign.grounding_probe import neighbours
     from roboview.eval.running.agents import color_words, describe_agents, head_noun
     from roboview.pipelines.probe_grounding import BenchmarkPath, ProbeConfig
     from roboview.pipelines.probe_grounding import run as probe

@@ -185,7 +185,7 @@ def build(spec: BuildSpec, output_dir: Path) -> BuildResult:
     shutil.rmtree(output_dir, ignore_errors=True)
     tmp.rename(output_dir)
     sheet = output_dir / sheet.relative_to(tmp)
-    if manifest["status"] != "ok":
+    if manifest["status"] != bio.BUILT:
         raise GateFailure(
             f"only {judged.gate_pass_rate:.1%} of {len(records)} candidates pass the fairness gate "
             f"(need {spec.min_pass_rate:.0%}); offenders in {output_dir / OFFENDERS_FILE}, "
@@ -221,7 +221,7 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
     else:
         _write_offenders(tmp, judged.records)
     manifest = {
-        "status": "ok" if passed else "failed_gate",
+        "status": bio.BUILT if passed else bio.FAILED_GATE,
         "suite": suite_record(spec.suite),
         "image_size": spec.image_size,
         "thresholds": asdict(spec.fairness),

@@ -37,7 +37,7 @@ from PIL import Image
 from scipy import ndimage
 
 from roboview.benchmark.format import CONFORMANCE as FOLDER
-from roboview.benchmark.format import REFERENCE, BenchmarkError, instance_from_record
+from roboview.benchmark.format import REFERENCE, Benchmark, BenchmarkError, instance_from_record
 from roboview.core import files
 from roboview.core.files import files_sha256
 from roboview.tasks.world import load_world
@@ -424,14 +424,14 @@ def at_start(root: Path, version: str, cache_dir: Path | None = None) -> Report:
     return report
 
 
-def gate(root: Path, version: str, allow_drift: bool, flag: str) -> Report:
-    """`at_start`, logged; `different` raises ConformanceError (its message names `flag`, the switch that runs
-    anyway) unless `allow_drift`, in which case it warns that every row will be marked."""
-    from roboview.benchmark.format import read_manifest
+def gate(bench: Benchmark, allow_drift: bool, flag: str) -> Report:
+    """`at_start` on the loaded benchmark, logged; `different` raises ConformanceError (its message names `flag`,
+    the switch that runs anyway) unless `allow_drift`, in which case it warns that every row will be marked."""
     from roboview.sim import stack
 
-    report = at_start(root, version)
-    report.stack_differences = stack.differences(read_manifest(root).get("stack"), report.stack)
+    root = Path(bench.path)
+    report = at_start(root, bench.version)
+    report.stack_differences = stack.differences(bench.manifest.get("stack"), report.stack)
     log.info(
         "conformance with the benchmark's stack: %s (%s)%s",
         report.verdict,

@@ -39,6 +39,8 @@ from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, reco
 from roboview.variation.instances import TaskInstance, canonical_json
 
 MANIFEST = "benchmark.json"
+# benchmark.json's `status` of a build that passed its gate (a failed one says "failed_gate").
+BUILT, FAILED_GATE = "ok", "failed_gate"
 CHECKSUMS = "checksums.json"
 # The conformance reference (roboview.benchmark.conformance writes and checks it).
 CONFORMANCE = "conformance"
@@ -296,6 +298,8 @@ class Benchmark:
     splits: dict[str, list[BenchmarkItem]]
     # The protocols it can be evaluated under (roboview.benchmark.protocols), over all its splits.
     protocols: dict[str, Protocol] = field(default_factory=dict)
+    # benchmark.json as read and checked once (its stack, suite, content): checks that need it take it from here.
+    manifest: dict = field(default_factory=dict)
 
 
 def read_manifest(root: Path) -> dict:
@@ -311,7 +315,7 @@ def read_manifest(root: Path) -> dict:
             f"{', '.join(map(str, READABLE_FORMATS))} (episode seeds shared per context and repeat); "
             "rebuild it with `roboview-build-benchmark`"
         )
-    if manifest.get("status") != "ok":
+    if manifest.get("status") != BUILT:
         raise BenchmarkError(f"{root} is a failed build; rebuild it")
     expected = benchmark_version(
         manifest["suite"]["preset"],
@@ -392,7 +396,7 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
                 rules[instance.task] = repetition_of(instance.task, manifest.get("suite"))
             record = {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
             out[split].append(BenchmarkItem(instance, record, rules[instance.task]))
-    return Benchmark(root, manifest["benchmark_version"], out, declared(manifest, available))
+    return Benchmark(root, manifest["benchmark_version"], out, declared(manifest, available), manifest)
 
 
 def select_items(items: list[BenchmarkItem], contexts: int = 0, limit: int = 0) -> list[BenchmarkItem]:

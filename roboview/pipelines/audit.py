@@ -39,7 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from roboview.eval.audit import AuditSource, audit
+from roboview.eval.campaign.audit import AuditSource, audit
 from roboview.eval.reporting.report import METRICS_FILE, REPORT_FILE
 from roboview.eval.running.harnesses import harness_names, load
 from roboview.eval.running.harnesses.mapping import (

@@ -14,8 +14,8 @@ and by a rerun, its new row replacing the old.
 
 from __future__ import annotations
 
-from roboview.eval.config import BenchmarkConfig, EvalConfig, EvaluateConfig
-from roboview.eval.runner import EvaluateResult, Plan, plan, run
+from roboview.eval.campaign.config import BenchmarkConfig, EvalConfig, EvaluateConfig
+from roboview.eval.campaign.runner import EvaluateResult, Plan, plan, run
 from roboview.eval.running.backends import ClusterLost
 from roboview.eval.running.results import ResultsError
 from roboview.pipelines._cli import cli_main

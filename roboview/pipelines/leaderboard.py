@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from roboview.eval.board import Replay, build_board
+from roboview.eval.campaign.board import Replay, build_board
 from roboview.eval.reporting.leaderboard import BOARD_HTML, Board
 from roboview.eval.statistics.metrics import EpisodesError, MetricsConfig
 from roboview.pipelines._cli import BenchmarkPath, ReplayConfig, cli_main, replay_flag

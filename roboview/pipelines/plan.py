@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from roboview.eval.planning import SplitPlan, plan_splits, split_layouts
+from roboview.eval.campaign.power import SplitPlan, plan_splits, split_layouts
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 
 

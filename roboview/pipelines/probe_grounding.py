@@ -19,7 +19,7 @@ from pathlib import Path
 
 from roboview.benchmark.format import load_benchmark
 from roboview.core.cli_errors import flag_errors
-from roboview.eval.grounding_probe import ProbeSettings, colour_rows, probe, write_probe
+from roboview.eval.campaign.grounding_probe import ProbeSettings, colour_rows, probe, write_probe
 from roboview.eval.running.results import read_episodes
 from roboview.pipelines._cli import BenchmarkPath, cli_main
 

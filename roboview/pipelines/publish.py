@@ -24,7 +24,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from roboview.benchmark.format import MANIFEST, load_benchmark
+from roboview.benchmark.format import BUILT, MANIFEST, load_benchmark
 from roboview.core.cli_errors import flag_errors
 from roboview.integrations.publishing.benchmark import Release, release_plan, upload_release
 from roboview.integrations.publishing.hub import Plan, PublishError, folder_files
@@ -89,7 +89,7 @@ class PublishConfig:
                 f"--path={self.path} holds no built benchmark ({MANIFEST} missing); "
                 "run roboview.pipelines.build_benchmark first"
             )
-        if json.loads(manifest.read_text()).get("status") != "ok":
+        if json.loads(manifest.read_text()).get("status") != BUILT:
             raise ValueError(f"--path={self.path} is a failed build (fairness gate); fix and rebuild first")
         with flag_errors(
             "--path"

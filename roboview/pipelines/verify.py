@@ -88,18 +88,12 @@ def write_verify_json(results: Path, report: Report) -> None:
     verify.json its staging wrote; a read-only folder: skipped)."""
     import json
 
-    from roboview.eval.reporting.bundle import BUNDLE_FILE
+    from roboview.eval.reporting.bundle import BUNDLE_FILE, VERIFY_FILE
 
     if (results / BUNDLE_FILE).is_file():
         return
-    record = {
-        "passed": report.passed,
-        "checks": [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in report.checks],
-        **report.coverage,
-        "replay": report.replay,
-    }
     try:
-        (results / "verify.json").write_text(json.dumps(record, indent=2, default=str) + "\n")
+        (results / VERIFY_FILE).write_text(json.dumps(report.record(), indent=2, default=str) + "\n")
     except OSError:
         pass
 

@@ -301,6 +301,43 @@ class ServedConnection:
                 raise ValueError(f"--policy.{name}={getattr(self, name)} must be ≥ 0")
 
 
+class WebsocketServed(ServedConnection):
+    """A served policy reached over websockets (openpi, vla_eval): its config's `url` (comma-separated ws:// or wss://
+    addresses, one per worker in turn) and `cameras` (comma-separated camera names), read and checked here once."""
+
+    url: str
+    cameras: str
+
+    @property
+    def url_list(self) -> list[str]:
+        return [u.strip() for u in self.url.split(",") if u.strip()]
+
+    @property
+    def camera_list(self) -> tuple[str, ...]:
+        return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
+
+    def check_url_and_cameras(self, server: str) -> None:
+        """One-line errors for a missing url, an entry that is not ws:// or wss://, and an unknown or empty camera
+        list; `server` names the server the url is for ("the openpi server")."""
+        from roboview.tasks import camera_names
+
+        if not self.url_list:
+            raise ValueError(
+                f"--policy.url is required: ws://HOST:PORT of {server} (comma-separated for several)"
+            )
+        for url in self.url_list:
+            if not url.startswith(("ws://", "wss://")):
+                raise ValueError(
+                    f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)"
+                )
+        cameras = camera_names()
+        unknown = [c for c in self.camera_list if c not in cameras]
+        if unknown or not self.camera_list:
+            raise ValueError(
+                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(cameras)}"
+            )
+
+
 @dataclass
 class ControlledConfig(PolicyConfig):
     """A policy type whose control mode is chosen with `--policy.control` (default: the world's only control, else

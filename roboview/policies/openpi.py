@@ -59,7 +59,7 @@ from roboview.policies.base import (
     ControlledConfig,
     Episode,
     PolicyConfig,
-    ServedConnection,
+    WebsocketServed,
     control_field,
 )
 from roboview.policies.errors import InfraError, open_with_retries
@@ -80,7 +80,6 @@ from roboview.policies.serving.openpi_wire import (
     episode_message,
     wire_format,
 )
-from roboview.tasks import camera_names
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
 from roboview.tasks.world import native_render_size
 
@@ -307,7 +306,7 @@ class OpenPIPolicy:
 
 @PolicyConfig.register_subclass("openpi")
 @dataclass
-class OpenPIConfig(ControlledConfig, ServedConnection):
+class OpenPIConfig(ControlledConfig, WebsocketServed):
     """A policy behind openpi's websocket protocol (openpi's serve_policy.py, roboview.pipelines.serve_policy, …)."""
 
     # ws://HOST:PORT of the server; a comma-separated list spreads workers over several (worker i → entry i mod n).
@@ -345,15 +344,7 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
 
     def __post_init__(self) -> None:
         control_field(self)
-        if not self.url_list:
-            raise ValueError(
-                "--policy.url is required: ws://HOST:PORT of the openpi server (comma-separated for several)"
-            )
-        for url in self.url_list:
-            if not url.startswith(("ws://", "wss://")):
-                raise ValueError(
-                    f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)"
-                )
+        self.check_url_and_cameras("the openpi server")
         for name, value, allowed in (
             ("action_space", self.action_space, ACTION_SPACES),
             ("gripper", self.gripper, GRIPPER_MODES),
@@ -364,12 +355,6 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
             raise ValueError(
                 f"--policy.action_space={self.action_space!r} is a joint action; with --policy.control="
                 f"{self.control} the server answers end-effector actions (leave --policy.action_space unset)"
-            )
-        cameras = camera_names()
-        unknown = [c for c in self.camera_list if c not in cameras]
-        if unknown or not self.camera_list:
-            raise ValueError(
-                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(cameras)}"
             )
         self.check_connection()
         for name in ("image_size", "render_size"):
@@ -402,14 +387,6 @@ class OpenPIConfig(ControlledConfig, ServedConnection):
 
     def declares_outputs(self) -> bool:
         return False  # openpi's metadata is free-form: the action chunk's width shows at the first answer
-
-    @property
-    def url_list(self) -> list[str]:
-        return [u.strip() for u in self.url.split(",") if u.strip()]
-
-    @property
-    def camera_list(self) -> tuple[str, ...]:
-        return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
 
     @property
     def depth(self) -> bool:  # type: ignore[override]

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from roboview.core.workers import worker_rank
-from roboview.policies.base import AgentView, Episode, PolicyConfig, ServedConnection, control_field
+from roboview.policies.base import AgentView, Episode, PolicyConfig, WebsocketServed, control_field
 from roboview.policies.errors import InfraError, open_with_retries
 from roboview.policies.serving.handshake import WrongProtocol, is_openpi_metadata, openpi_server
 from roboview.policies.serving.vla_eval_specs import Negotiated, negotiate
@@ -295,7 +295,7 @@ def _pairs(text: str, flag: str) -> dict[str, str]:
 
 @PolicyConfig.register_subclass("vla_eval")
 @dataclass
-class VlaEvalConfig(PolicyConfig, ServedConnection):
+class VlaEvalConfig(PolicyConfig, WebsocketServed):
     """A policy behind a vla-eval model server (`vla_eval.model_servers`: LeRobot, π0, OpenVLA, GR00T, …)."""
 
     # ws://HOST:PORT of the server; a comma-separated list spreads workers over several (worker i → entry i mod n).
@@ -324,18 +324,7 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
     reproducible = False  # the episode seed does not reach the server's randomness
 
     def __post_init__(self) -> None:
-        if not self.url_list:
-            raise ValueError("--policy.url is required: ws://HOST:PORT of the vla-eval model server")
-        for url in self.url_list:
-            if not url.startswith(("ws://", "wss://")):
-                raise ValueError(
-                    f"--policy.url entry {url!r} must start with ws:// or wss:// (e.g. ws://127.0.0.1:8000)"
-                )
-        unknown = [c for c in self.camera_list if c not in camera_names()]
-        if unknown or not self.camera_list:
-            raise ValueError(
-                f"--policy.cameras={self.cameras!r}: unknown camera(s) {unknown}; allowed: {', '.join(camera_names())}"
-            )
+        self.check_url_and_cameras("the vla-eval model server")
         camera_map = _pairs(self.camera_map, "--policy.camera_map")
         control_field(self)
         if self.image_format not in IMAGE_FORMATS:
@@ -381,14 +370,6 @@ class VlaEvalConfig(PolicyConfig, ServedConnection):
             return
         hello = self._hello[self.url_list[0]]
         self._agreed = negotiate(hello, self.camera_list, self._camera_map, controls[0])
-
-    @property
-    def url_list(self) -> list[str]:
-        return [u.strip() for u in self.url.split(",") if u.strip()]
-
-    @property
-    def camera_list(self) -> tuple[str, ...]:
-        return tuple(c.strip() for c in self.cameras.split(",") if c.strip())
 
     @property
     def negotiated(self) -> Negotiated:

@@ -160,7 +160,7 @@ class TaskEnv(WorldEnv):
     # The cameras a privileged policy (which reads the simulator's state) is given; empty: the policy's own choice.
     observed_cameras: tuple[str, ...] = ()
     # Every camera the env renders by name and every control it takes: a policy's cameras and control are checked
-    # against these before any episode (roboview.eval.runner.plan).
+    # against these before any episode (roboview.eval.campaign.runner.plan).
     camera_names: tuple[str, ...] = ALL_CAMERAS
     controls: tuple[str, ...] = CONTROLS
     # The robot, as a LeRobot dataset of this env names it (`robot_type`).

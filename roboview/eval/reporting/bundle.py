@@ -24,6 +24,8 @@ from typing import Any
 
 import yaml
 
+from roboview.eval.running.results import PARQUET
+
 BUNDLE_FILE = "bundle.json"
 VERIFY_FILE = "verify.json"
 REPORT_DIR = "report"
@@ -118,7 +120,7 @@ def card(
         "license": "apache-2.0",
         "pretty_name": f"RoboView-Bias results: {policy}",
         "tags": ["roboview", "robotics", "evaluation", "visual-bias", "leaderboard"],
-        "configs": [{"config_name": "episodes", "data_files": "episodes.parquet"}],
+        "configs": [{"config_name": "episodes", "data_files": PARQUET}],
     }
     bench = identity["benchmark_repo_id"]
     bench_line = (

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from roboview.eval.running.results import infra_mask
 from roboview.eval.statistics.ranking import ALPHA, pooled_p_sr, rank_table
 from roboview.eval.statistics.tables import wilson_ci95
 
@@ -151,7 +152,7 @@ def rank_metrics(
     (infrastructure errors left out). Partial bundles are ranked per split only; `reference` policies are shown
     beside each ranking, never in it. Overall SR pools every counted episode of each complete bundle, one way for
     one policy or many."""
-    counted = episodes[episodes.get("status", pd.Series("ok", index=episodes.index)) != "infra_error"]
+    counted = episodes[~infra_mask(episodes)]
     splits: dict[str, dict[str, list]] = {}
     for split in sorted({s for layout in layouts.values() for s in layout["splits"]}):
         comps = {frozenset(c["policies"]): c for c in comparisons if c["split"] == split}

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from roboview.eval.running.row import ALLOWED, INFRA_ERROR, SCHEMA, STATUS
+from roboview.eval.running.row import ALLOWED, INFRA_ERROR, SCHEMA, STATUS, STATUS_OK
 from roboview.eval.verification.report import Check, listed
 
 _KINDS = {
@@ -62,7 +62,7 @@ def check_plausible(rows: list[dict], max_steps: int | None) -> Check:
         timeout = _TIMEOUT.search(reason)
         if r["success"] and reason:
             odd.append(f"{where}: a success with failure reason {reason!r}")
-        elif r["success"] and r.get(STATUS) == "ok" and steps is not None and steps < 1:
+        elif r["success"] and r.get(STATUS) == STATUS_OK and steps is not None and steps < 1:
             odd.append(f"{where}: a success in {steps} steps")
         elif timeout and steps is not None and steps < int(timeout.group(1)):
             odd.append(f"{where}: a timeout within {timeout.group(1)} steps after {steps}")

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from roboview.eval.running.results import is_counted
+
 REPLAYED = ("success", "steps", "failure_reason")
 TOLERANCE = 1e-6
 
@@ -108,11 +110,7 @@ def discordant(
     arm, or `against`), failures of the value first: the pairs that carry a difference. ValueError naming the split's
     values when `value` is not one of them."""
     items = {i.record["instance_id"]: i for its in bench.splits.values() for i in its}
-    mine = [
-        r
-        for r in rows
-        if r["split"] == split and str(r["value"]) == value and r.get("status") != "infra_error"
-    ]
+    mine = [r for r in rows if r["split"] == split and str(r["value"]) == value and is_counted(r)]
     if not mine:
         values = sorted({str(r["value"]) for r in rows if r["split"] == split})
         if not values:

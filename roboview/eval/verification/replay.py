@@ -16,6 +16,7 @@ import math
 import secrets
 import time
 
+from roboview.eval.running.results import is_counted
 from roboview.eval.verification.report import Check, listed
 
 REPLAYED = ("success", "steps", "failure_reason")  # what a replayed episode must reproduce
@@ -44,7 +45,7 @@ def guarantee(n: int, total: int, detect: float) -> str:
 def draw_sample(rows: list[dict], n: int, rng=None) -> list[dict]:
     """`n` of the counted rows (infrastructure errors are no results) drawn with `rng` (default: the system's
     randomness, which nothing in the folder predicts)."""
-    counted = [r for r in rows if r.get("status") != "infra_error"]
+    counted = [r for r in rows if is_counted(r)]
     rng = rng or secrets.SystemRandom()
     return counted if n >= len(counted) else rng.sample(counted, n)
 
@@ -57,7 +58,7 @@ def check_replay(
     reproduce its episodes; `error`: why the policy could not be rebuilt here). `replayer`: workers kept across
     calls (a board replaying many bundles); default: ones opened and closed here."""
     sample = draw_sample(rows, n)
-    total = sum(r.get("status") != "infra_error" for r in rows)
+    total = sum(map(is_counted, rows))
     record = {
         "n": len(sample),
         "detect": detect,

@@ -17,6 +17,7 @@ from roboview.benchmark.format import read_manifest
 from roboview.core.folders import folder_problem
 from roboview.eval.reporting.bundle import BUNDLE_FILE, manifest_problems
 from roboview.eval.running import provenance
+from roboview.eval.running.results import PARQUET
 from roboview.eval.running.row import INFRA_ERROR, STATUS
 from roboview.eval.statistics.adaptive import read_record
 from roboview.eval.verification.integrity import (
@@ -396,7 +397,7 @@ def _file_checks(results: Path, run: dict, bench) -> list[Check]:
                 else f"{len(problems)} file(s) differ from {BUNDLE_FILE}: {listed(problems)}",
             )
         )
-    recorded = read_version(results / "episodes.parquet")
+    recorded = read_version(results / PARQUET)
     same = recorded == bench.version == run.get("benchmark_version")
     checks.append(
         Check(

@@ -254,12 +254,11 @@ class RoboViewEnv(EnvConfig):
         """roboview.pipelines.evaluate's start-of-run check: `different` raises (unless --env.allow_drift=true) before any
         env is made; the verdict and drift are logged."""
         from roboview.benchmark import conformance
-        from roboview.benchmark.format import read_manifest
+        from roboview.benchmark.format import Benchmark, read_manifest
 
-        root = Path(self.benchmark_path)
-        return conformance.gate(
-            root, read_manifest(root)["benchmark_version"], self.allow_drift, "--env.allow_drift"
-        ).record()
+        manifest = read_manifest(Path(self.benchmark_path))  # the splits are loaded with the envs
+        bench = Benchmark(Path(self.benchmark_path), manifest["benchmark_version"], {}, manifest=manifest)
+        return conformance.gate(bench, self.allow_drift, "--env.allow_drift").record()
 
     def create_envs(
         self, n_envs: int, use_async_envs: bool = False

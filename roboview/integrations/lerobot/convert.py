@@ -18,7 +18,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from roboview.eval.running.results import EpisodeStore
+from roboview.eval.running.results import PARQUET, EpisodeStore
 from roboview.eval.running.row import EpisodeRow
 from roboview.integrations.lerobot import RoboViewEnv
 from roboview.integrations.lerobot.env import episode_plan
@@ -95,7 +95,7 @@ def convert(
             )
     store.close()
     add_control_arm(Path(eval_info), info, list(store.rows.values()))
-    return Path(output_dir) / "episodes.parquet"
+    return Path(output_dir) / PARQUET
 
 
 def add_control_arm(path: Path, info: dict, rows: list[dict]) -> None:

@@ -123,18 +123,11 @@ def _identity(policy: str, episodes: pd.DataFrame, repos: BundleRepos, bench_roo
 
 def _write_verify(staging: Path, verified: Report, entries: list[dict], identity: dict) -> list[dict]:
     """verify.json: every check (all passed), the runs' simulation stacks and the identity; the checks."""
-    checks = [{"name": c.name, "passed": c.passed, "detail": c.detail} for c in verified.checks]
-    if verified.replay is None:  # said, never implied: staging re-runs no episode
-        checks.append({"name": "replay", "passed": None, "detail": "not replayed when the bundle was staged"})
-    record = {
-        "checks": checks,
-        "passed": True,
-        "protocol": verified.coverage.get("protocol", ""),
-        "partial": verified.coverage.get("partial", True),
-        "covered_splits": verified.coverage.get("covered", []),
-        "replay": verified.replay,
-        "stacks": [e["conformance"] for e in entries if e.get("conformance")],
-    }
+    record = verified.record(
+        unreplayed="not replayed when the bundle was staged"
+    )  # staging re-runs no episode
+    record["stacks"] = [e["conformance"] for e in entries if e.get("conformance")]
+    checks = record["checks"]
     (staging / bundle.VERIFY_FILE).write_text(json.dumps(record | identity, indent=2, default=str) + "\n")
     return checks
 

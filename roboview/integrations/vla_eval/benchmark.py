@@ -163,6 +163,7 @@ class RoboViewBenchmark(StepBenchmark):
         bench = load_benchmark(benchmark_path, chosen)
         self.benchmark_path = str(Path(benchmark_path).resolve())
         self.version = bench.version
+        self.bench = bench
         self.n_repeats = n_repeats
         self.image_size, self.max_steps, self.control = image_size, max_steps, control
         self.send_images, self.send_state = send_images, send_state
@@ -184,9 +185,7 @@ class RoboViewBenchmark(StepBenchmark):
         from roboview.variation.instances import episode_seed
 
         if not self.conformance:
-            self.conformance = conformance.gate(
-                Path(self.benchmark_path), self.version, self.allow_drift, "params.allow_drift"
-            ).record()
+            self.conformance = conformance.gate(self.bench, self.allow_drift, "params.allow_drift").record()
 
         tasks = [
             {

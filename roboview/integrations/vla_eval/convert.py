@@ -28,7 +28,7 @@ from pathlib import Path
 
 from roboview.benchmark.format import load_benchmark
 from roboview.eval.running import provenance
-from roboview.eval.running.results import EpisodeStore
+from roboview.eval.running.results import PARQUET, EpisodeStore
 from roboview.eval.running.row import INFRA_ERROR, EpisodeRow
 from roboview.integrations.vla_eval.benchmark import RoboViewBenchmark
 
@@ -140,7 +140,7 @@ def convert(results: Path, benchmark_path: str, output_dir: Path, policy_name: s
     if local or not entries_out:
         entries_out.append(convert_entry(entries[0], bench.version, root, local, len(crashed)))
     provenance.write(Path(output_dir), entries_out)
-    return Path(output_dir) / "episodes.parquet"
+    return Path(output_dir) / PARQUET
 
 
 def rederive_isolation(crashed: list[dict], params: dict, root: str) -> tuple[dict, dict]:

@@ -1,6 +1,6 @@
 """The configuration of an evaluation: the benchmark and its selection (`--benchmark.*`), the run
 (`--eval.*`: repeats, protocol, workers, backend, adaptive design, shards, recordings) and the policy
-(`--policy.*`, one config class per type). `roboview-evaluate` parses it; `roboview.eval.runner` runs it."""
+(`--policy.*`, one config class per type). `roboview-evaluate` parses it; `roboview.eval.campaign.runner` runs it."""
 
 from __future__ import annotations
 
