@@ -5,13 +5,24 @@ One package, in rooms that each import only the rooms below them (docs/layout.md
     core/          CLI plumbing, the worker pool, folders, files, errors
     sim/           the simulated world every task shares
     variation/     the visual factors, colors, variant trees, benchmark instances
-    tasks/         one module per task (importing it registers the tasks and their gymnasium ids)
+    tasks/         one module per task (importing it registers the tasks and their gymnasium ids), the world contract
+    libero/        LIBERO's wing (its world, task, factors, expert; LIBERO-plus's camera variants), on the tasks' floor
+    metaworld/     Meta-World's wing (its world, task, factors), on the tasks' floor
     benchmark/     render, fairness gate, the frozen benchmark folder, conformance
     demos/         scripted-expert demos into LeRobot datasets
-    policies/      every policy type; serving/ holds the wire formats clients and servers share
+    policies/      every policy type; serving/ holds the wire formats clients and servers share; vlm/ the VLM agents
     eval/          running/, statistics/, reporting/, verification/, campaign/ (config, plan, runner, board, audit)
-    integrations/  lerobot (lerobot-eval / lerobot-train's `roboview` env) and vla_eval (RoboView inside vla-eval)
-    pipelines/     the verbs: `roboview-<verb>` console scripts, `python -m roboview.pipelines.<verb>`
+    integrations/  lerobot/ (lerobot-eval / lerobot-train's `roboview` env), vla_eval/ (RoboView inside vla-eval),
+                   publishing/ (the Hugging Face Hub)
+    pipelines/     the verbs, one `roboview-<verb>` console script each (`python -m roboview.pipelines.<verb>`):
+                   collect, export_dataset, train, coverage, build_benchmark, publish, evaluate, compare, merge,
+                   pair, verify, leaderboard, serve_policy, serve_vlm, report, audit, plan, probe_grounding
+
+Beside the package, not installed: benchmarks/, the throughput and statistics studies (docs/performance.md):
+throughput, render_rate, collect_rate, serving, cluster, gpu, policy_latency, torch_threads.sh, verify_rate,
+conformance_drift, adaptive, paired_compare, stats_calibration, cv_excess_interval, libero_throughput,
+libero_render, libero_render_rate, libero_expert, libero_vs_lerobot_eval, libero_plus_poses, metaworld_expert,
+metaworld_vs_lerobot_eval.
 
 Importing `roboview` itself loads nothing; `import roboview.tasks` registers `RoboView/PickPlace-v0` and the
 other tasks' gymnasium ids.

@@ -184,3 +184,105 @@ def test_readme_is_a_guide():
     headings = [line for line in lines if line.startswith("## ")]
     for expected in ("Install", "Quick start", "Evaluate your own policy", "Documentation"):
         assert any(expected in h for h in headings), f"README lacks a '{expected}' section"
+
+
+# What a page may run: `python -m MODULE` and the console scripts (`roboview-<verb>`, `.venv/bin/roboview-<verb>`).
+PYTHON_M = re.compile(r"python[0-9.]*\s+-m\s+([A-Za-z_][\w.]*)(<)?")
+CONSOLE = re.compile(r"(?<![\w./-])roboview-[a-z][a-z0-9-]*\b(?![./-])")
+RUN_FILE = re.compile(r"(?:^|\s)(?:bash|sh|python[0-9.]*)\s+((?:[\w-]+/)*[\w-]+\.(?:py|sh))\b")
+# Names of the form roboview-… on the pages that are not commands: the classic-CV stand-in's model id.
+NOT_COMMANDS = {"roboview-classic-cv-standin"}
+# The pages whose commands must run: every page but the changelog, which names what was renamed or removed.
+RUNNABLE = [page for page in PAGES if page.name != "CHANGELOG.md"]
+
+
+def unresolved_commands(text: str, where: str) -> list[str]:
+    """Every `python -m MODULE` of `text` whose module does not resolve in this interpreter (RoboView's own, the
+    studies in benchmarks/, and third-party ones alike), every `roboview-…` name that is no installed console
+    script, and every script file run with bash / python that does not exist in the repository."""
+    import importlib.metadata
+    import importlib.util
+
+    scripts = {e.name for e in importlib.metadata.entry_points(group="console_scripts")}
+    bad = []
+    for number, line in enumerate(text.splitlines(), 1):
+        for match in PYTHON_M.finditer(line):
+            module, template = match.group(1), match.group(2)
+            if template and module.endswith("."):  # `python -m roboview.pipelines.<verb>`
+                continue
+            try:
+                found = importlib.util.find_spec(module) is not None
+            except (ImportError, ValueError):
+                found = False
+            if not found:
+                bad.append(f"{where}:{number}: python -m {module}: no such module")
+        for name in CONSOLE.findall(line):
+            if name not in scripts and name not in NOT_COMMANDS:
+                bad.append(f"{where}:{number}: {name}: no such console script")
+        for path in RUN_FILE.findall(line):
+            if not (ROOT / path).is_file():
+                bad.append(f"{where}:{number}: {path}: no such file")
+    return bad
+
+
+def test_every_documented_command_resolves():
+    """Every module, console script and script file the README and docs/ (docs/results included) name exists."""
+    bad = [
+        line
+        for page in RUNNABLE
+        for line in unresolved_commands(page.read_text(), str(page.relative_to(ROOT)))
+    ]
+    assert not bad, "documented commands that do not run:\n" + "\n".join(bad)
+
+
+def test_the_command_resolver_fails_on_what_does_not_exist():
+    # Modules moved under roboview/ once left `python -m pipelines.*` lines behind; a removed verb, a wrong script.
+    text = (
+        "python -m pipelines.evaluate --benchmark.path=x\n"
+        ".venv/bin/python -m roboview.pipelines.evalute\n"
+        "roboview-eval --benchmark.path=x && roboview-build --preset=tiny\n"
+        "bash benchmarks/no_such_study.sh\n"
+        "python -m roboview.pipelines.evaluate; python -m benchmarks.throughput; roboview-verify --results=x\n"
+        "`python -m roboview.pipelines.<verb>`; model roboview-classic-cv-standin; outputs/roboview-demo\n"
+    )
+    assert unresolved_commands(text, "page.md") == [
+        "page.md:1: python -m pipelines.evaluate: no such module",
+        "page.md:2: python -m roboview.pipelines.evalute: no such module",
+        "page.md:3: roboview-eval: no such console script",
+        "page.md:3: roboview-build: no such console script",
+        "page.md:4: benchmarks/no_such_study.sh: no such file",
+    ]
+
+
+def _listed_in_layout() -> tuple[str, str]:
+    import roboview
+
+    return (ROOT / "docs" / "layout.md").read_text(), roboview.__doc__
+
+
+def test_layout_and_the_package_docstring_list_every_room_verb_and_study():
+    layout, docstring = _listed_in_layout()
+    rooms = sorted(
+        {
+            str(p.parent.relative_to(ROOT / "roboview"))
+            for p in (ROOT / "roboview").rglob("*.py")
+            if "__pycache__" not in p.parts and p.parent != ROOT / "roboview"
+        }
+    )
+    top = sorted({r.split("/")[0] for r in rooms})
+    assert {"core", "eval", "libero", "metaworld", "pipelines"} <= set(top)
+    missing = [f"{r}/" for r in rooms if f"{r.rpartition('/')[2]}/" not in layout]
+    missing += [f"roboview/__init__.py: {r}/" for r in top if f"{r}/" not in docstring]
+    eval_rooms = [r.partition("/")[2] for r in rooms if r.startswith("eval/") and r.count("/") == 1]
+    missing += [f"roboview/__init__.py: eval/{r}/" for r in eval_rooms if f"{r}/" not in docstring]
+    missing += [f"verb {v}" for v in VERBS if not re.search(rf"\b{v}\b", layout)]
+    missing += [f"roboview/__init__.py: verb {v}" for v in VERBS if not re.search(rf"\b{v}\b", docstring)]
+    studies = [p for p in sorted((ROOT / "benchmarks").iterdir()) if p.suffix in (".py", ".sh")]
+    for study in studies:
+        if study.name == "__init__.py":
+            continue
+        if study.name not in layout:
+            missing.append(f"benchmarks/{study.name}")
+        if (study.stem if study.suffix == ".py" else study.name) not in docstring:
+            missing.append(f"roboview/__init__.py: benchmarks/{study.name}")
+    assert not missing, "not listed in docs/layout.md or roboview/__init__.py: " + ", ".join(missing)

@@ -347,3 +347,15 @@ def test_no_module_imports_from_a_higher_floor():
         "roboview.sim.scene → roboview.variation.factors"
     ]
     assert upward_imports({"roboview.variation.factors.object_size": {"roboview.sim.scene"}}) == []
+
+
+def test_eval_has_named_rooms_only():
+    """eval/ holds rooms only, each on a floor of its own: no module sits loose beside them."""
+    eval_dir = ROOT / "roboview" / "eval"
+    loose = sorted(p.name for p in eval_dir.glob("*.py") if p.name != "__init__.py")
+    assert not loose, f"modules loose in roboview/eval/ (give them a room): {loose}"
+    rooms = sorted(p.name for p in eval_dir.iterdir() if p.is_dir() and any(p.glob("*.py")))
+    assert rooms == ["campaign", "reporting", "running", "statistics", "verification"]
+    floors = [level for level in FLOORS for prefix in level if prefix.startswith("roboview.eval.")]
+    assert [f"roboview.eval.{r}" in {p for level in floors for p in level} for r in rooms] == [True] * 5
+    assert floor_of("roboview.eval.campaign.runner") > floor_of("roboview.eval.verification.replay")
