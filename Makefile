@@ -115,7 +115,7 @@ test: install install-libero install-metaworld lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
 test-fast: install install-libero install-metaworld lint
-	$(PY) -m pytest -q -m "not slow" --durations=10
+	$(PY) -m pytest -q --tier=fast --durations=10
 
 lint: install
 	$(PY) -m ruff check .

@@ -13,35 +13,51 @@ from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
-# Test tiers. Slow: a test that uses a rendered environment, the built benchmark or a trained checkpoint, or lives
-# in a module that starts simulations, servers, clusters or a browser. `make test-fast` runs the rest.
-SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_demos", "tiny_checkpoint", "bench"}
-FAST_MODULES = {
-    "test_adaptive",
-    "test_audit",
-    "test_colors",
-    "test_context_stats",
-    "test_factors",
-    "test_folders",
-    "test_imports",
-    "test_isolation",
-    "test_liberoplus_statistics",
-    "test_lerobot_plugin",
-    "test_metrics",
-    "test_ranking",
-    "test_report",
-    "test_report_wording",
-    "test_statistics",
-    "test_stable_ids",
-    "test_svgf",
-}
+# Test tiers: every test module declares its tier, `pytestmark = pytest.mark.fast` (seconds: statistics, formats,
+# registries, imports, no rendering, training or servers) or `pytest.mark.slow` (renders, simulates, trains, starts
+# servers, clusters or a browser); a test may carry the other tier's marker to leave its module's tier. `make
+# test-fast` runs `--tier=fast` (the closest marker decides). A module that declares no tier, and a fast test that takes a slow fixture (one that
+# renders, builds or trains), stop the run at collection, naming the test and what to do.
+TIERS = ("fast", "slow")
+SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_demos", "tiny_checkpoint", "bench", "tiny_results"}
+
+
+def tier_of(item) -> str | None:
+    """The tier of a collected test: its closest `fast` or `slow` marker (the test's own, else its class's, else its
+    module's `pytestmark`); None when it has neither."""
+    return next((mark.name for mark in item.iter_markers() if mark.name in TIERS), None)
+
+
+def tier_problems(items) -> list[str]:
+    problems = []
+    for item in items:
+        tier = tier_of(item)
+        if tier is None:
+            problems.append(
+                f"{item.nodeid}: no tier; declare `pytestmark = pytest.mark.fast` (or slow) in its module"
+            )
+        elif tier == "fast" and SLOW_FIXTURES & set(item.fixturenames):
+            slow = ", ".join(sorted(SLOW_FIXTURES & set(item.fixturenames)))
+            problems.append(f"{item.nodeid}: marked fast but takes {slow}; mark it `@pytest.mark.slow`")
+    return problems
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--tier", choices=TIERS, help="run one tier only: fast (seconds each) or slow (tests/conftest.py)"
+    )
 
 
 def pytest_collection_modifyitems(config, items):
-    for item in items:
-        module = item.module.__name__.rpartition(".")[2]
-        if module not in FAST_MODULES or SLOW_FIXTURES & set(item.fixturenames):
-            item.add_marker(pytest.mark.slow)
+    problems = tier_problems(items)
+    if problems:
+        raise pytest.UsageError("tests outside the tiers:\n" + "\n".join(problems))
+    wanted = config.getoption("--tier")
+    if wanted:
+        other = [item for item in items if tier_of(item) != wanted]
+        if other:
+            config.hook.pytest_deselected(items=other)
+            items[:] = [item for item in items if tier_of(item) == wanted]
 
 
 @pytest.fixture(scope="session")

@@ -21,7 +21,7 @@ From one policy's episodes of a `liberoplus_camera*` benchmark (the `liberoplus`
 - **Per variant**, where repeats ran (init states 0, 1, …): its rate with a Wilson interval, its paired difference
   to the no-change view over the same init states and McNemar's exact test.
 
-Every number is validated against known truth by simulation (tests/test_liberoplus_statistics.py).
+Every number is validated against known truth by simulation (tests/libero/test_plus_decomposition.py).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ A *world* is a simulator with its own scenes, robot and cameras: RoboView's own 
 lives in its own *wing* (a package, or RoboView's `sim` + task modules); it registers one `World` (its facts) and
 its tasks, and its env subclasses `WorldEnv`. Everything outside the wing — the policy clients, the fairness gate,
 the builder, collect, the recorder, the renderer — reads the facts from `load_world(env.world)` or from the env,
-and never imports the wing (tests/test_imports.py enforces it). The recipe for a new world is docs/extending.md.
+and never imports the wing (tests/project/test_imports.py enforces it). The recipe for a new world is docs/extending.md.
 
     >>> load_world("roboview").observed_cameras
     ('front', 'left_top', 'wrist')

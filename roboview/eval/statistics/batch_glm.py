@@ -10,7 +10,7 @@ b_0 = 0). The context-only fit has a closed form (each context's success rate).
 Contexts with only successes or only failures carry no information about the value and are left out, as
 `factor_lrt` leaves them out: their cells get weight zero. A value that never fails (or never succeeds) sends
 its coefficient to ±∞ and fits its cells exactly: it adds nothing to the maximised log-likelihood and is left out
-of the fit; the statistic is the limit statsmodels' iterations approach. `tests/test_batch_glm.py` checks the statistic against `factor_lrt`'s.
+of the fit; the statistic is the limit statsmodels' iterations approach. `tests/eval/statistics/test_batch_glm.py` checks the statistic against `factor_lrt`'s.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ object, so "the small object" of every instruction stays unique) are compiled in
 parked off the table; value n places the first n on fixed slots chosen so that none overlaps any
 initial position of the object (with its jitter), the box, or the path the object is carried along,
 and none stands between the observed cameras and the object or the box at baseline (checked by the
-fairness gate and by `tests/test_extended_factors.py` over every context and seed of the suite).
+fairness gate and by `tests/variation/test_extended_factors.py` over every context and seed of the suite).
 Their colours come from a fixed palette, skipping any within ΔE2000 25 of the object's colour.
 """
 

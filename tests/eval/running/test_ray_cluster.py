@@ -1,0 +1,162 @@
+"""A real multi-node Ray cluster on this machine: `ray start --head` plus `ray start --address=…` worker nodes
+(separate raylets, each in its own process group so the test can end one as a lost machine would end).
+
+Rows on the cluster equal the local backend's; a worker node lost mid-run costs only its episodes in flight
+(re-run once on the surviving node, none duplicated or missing); a lost head stops the evaluator with a clear
+message and a fresh cluster resumes the same results folder.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from benchmarks.cluster import RAY, LocalCluster
+from tests.helpers.evaluation import evaluate, rows
+
+ROOT = Path(__file__).resolve().parents[3]
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not RAY.exists(), reason="Ray's `ray` command is not installed next to this Python"),
+]
+
+SPLITS, LIMIT, REPEATS = "color,camera_pose,camera_euler,dist_scale", 3, 2  # 24 episodes
+ARGS = [
+    "--policy.type=expert",
+    f"--benchmark.splits={SPLITS}",
+    f"--eval.limit={LIMIT}",
+    f"--eval.n_repeats={REPEATS}",
+    "--eval.image_size=64",
+    "--eval.num_workers=2",
+    "--eval.backend=ray",
+]
+
+
+class Cluster(LocalCluster):
+    """LocalCluster, skipping the test with the reason where Ray cannot start the nodes here."""
+
+    def __init__(self, tmp: Path, workers: int = 1) -> None:
+        try:
+            super().__init__(workers=workers, cpus=1, scratch=tmp)
+        except TimeoutError as exc:
+            pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="module")
+def reference(tiny_benchmark, tmp_path_factory) -> pd.DataFrame:
+    out = tmp_path_factory.mktemp("local")
+    evaluate(tiny_benchmark, out, splits=SPLITS, limit=LIMIT, repeats=REPEATS)
+    return rows(out)
+
+
+def _evaluate(bench: Path, out: Path, cluster: Cluster, **popen) -> subprocess.Popen:
+    cmd = [
+        sys.executable,
+        "-m",
+        "roboview.pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        *ARGS,
+        f"--eval.ray_address={cluster.address}",
+        f"--output_dir={out}",
+    ]
+    return subprocess.Popen(
+        cmd, env=cluster.env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen
+    )
+
+
+def _journal_rows(out: Path) -> int:
+    journal = out / "episodes.jsonl"
+    return len(journal.read_text().splitlines()) if journal.exists() else 0
+
+
+def _wait_rows(out: Path, n: int, proc: subprocess.Popen, timeout: float = 300) -> None:
+    deadline = time.time() + timeout
+    while _journal_rows(out) < n:
+        assert proc.poll() is None, proc.communicate()[0][-3000:]
+        assert time.time() < deadline, f"fewer than {n} episodes after {timeout} s"
+        time.sleep(0.2)
+
+
+def _ray_record(out: Path) -> dict:
+    entries = json.loads((out / "provenance.json").read_text())
+    return entries[-1]["ray"]
+
+
+def test_two_nodes_share_the_work_and_give_the_local_rows(tiny_benchmark, reference, tmp_path):
+    cluster = Cluster(tmp_path, workers=1)
+    try:
+        proc = _evaluate(tiny_benchmark, tmp_path / "ev", cluster)
+        output, _ = proc.communicate(timeout=600)
+        assert proc.returncode == 0, output[-3000:]
+        pd.testing.assert_frame_equal(rows(tmp_path / "ev"), reference)
+        record = _ray_record(tmp_path / "ev")
+        assert record["address"] == cluster.address and record["lost_actors"] == 0
+        assert len(record["nodes"]) == 2 and sum(record["nodes"].values()) == len(reference)
+        assert min(record["nodes"].values()) >= 2, record  # both nodes ran episodes
+        # The build on the same cluster: its nodes render the instances, and the manifest is the local build's.
+        build = [
+            sys.executable,
+            "-m",
+            "roboview.pipelines.build_benchmark",
+            "--preset=tiny",
+            "--image_size=64",
+        ]
+        build += [f"--ray_address={cluster.address}", "--num_workers=2", f"--output_dir={tmp_path / 'built'}"]
+        proc = subprocess.run(build, env=cluster.env, cwd=ROOT, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        version = json.loads((tmp_path / "built" / "benchmark.json").read_text())["benchmark_version"]
+        assert version == json.loads((tiny_benchmark / "benchmark.json").read_text())["benchmark_version"]
+    finally:
+        cluster.close()
+
+
+def test_a_lost_worker_node_costs_only_its_episodes_in_flight(tiny_benchmark, reference, tmp_path):
+    cluster = Cluster(tmp_path, workers=1)
+    out = tmp_path / "ev"
+    try:
+        proc = _evaluate(tiny_benchmark, out, cluster)
+        _wait_rows(out, 3, proc)
+        Cluster.kill(cluster.workers[0])
+        output, _ = proc.communicate(timeout=600)
+        assert proc.returncode == 0, output[-3000:]
+    finally:
+        cluster.close()
+    journal = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    keys = [(r["instance_id"], r["repeat"]) for r in journal]
+    assert len(keys) == len(set(keys)) == len(reference)  # nothing duplicated, nothing lost
+    pd.testing.assert_frame_equal(rows(out), reference)
+    record = _ray_record(out)
+    assert 1 <= record["lost_actors"] <= 2, record  # the episode(s) in flight on the lost node, re-run once
+
+
+def test_a_lost_head_stops_the_run_and_a_new_cluster_resumes_it(tiny_benchmark, reference, tmp_path):
+    out = tmp_path / "ev"
+    cluster = Cluster(tmp_path, workers=1)
+    try:
+        proc = _evaluate(tiny_benchmark, out, cluster)
+        _wait_rows(out, 3, proc)
+        Cluster.kill(cluster.head)
+        output, _ = proc.communicate(timeout=180)
+    finally:
+        cluster.close()
+    assert proc.returncode != 0
+    assert "stopped answering" in output and "rerun the same command" in output, output[-3000:]
+    written = _journal_rows(out)
+    assert 3 <= written < len(reference)
+    fresh = Cluster(tmp_path, workers=1)
+    try:
+        proc = _evaluate(tiny_benchmark, out, fresh)
+        output, _ = proc.communicate(timeout=600)
+        assert proc.returncode == 0, output[-3000:]
+    finally:
+        fresh.close()
+    assert f"({len(reference) - written} new" in output
+    pd.testing.assert_frame_equal(rows(out), reference)
+    shutil.rmtree(out, ignore_errors=True)
