@@ -6,8 +6,13 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("SVT_LOG", "1")
-# Caches a test run writes (the VLM answer cache) go to a folder of its own, never the user's ~/.cache.
-os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="roboview-test-cache-")
+# Caches a test run writes (the conformance verdicts, the VLM answer cache) go to a folder of its own, never the
+# user's ~/.cache: one per run, made by the process that starts it and inherited by its pytest-xdist workers, so a
+# benchmark's conformance verdict is measured once per run, not once per worker.
+os.environ["ROBOVIEW_TEST_CACHE"] = os.environ.get("ROBOVIEW_TEST_CACHE") or tempfile.mkdtemp(
+    prefix="roboview-test-cache-"
+)
+os.environ["XDG_CACHE_HOME"] = os.environ["ROBOVIEW_TEST_CACHE"]
 
 from pathlib import Path  # noqa: E402
 

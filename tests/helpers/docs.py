@@ -10,7 +10,6 @@ import re
 import shlex
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from roboview.pipelines._console import VERBS, script_name
@@ -19,14 +18,35 @@ from tests.helpers import ROOT
 
 @functools.cache
 def help_run(module: str) -> subprocess.CompletedProcess:
-    """`python -m module --help`, run once per module (the docs' flag check reads the same text)."""
-    return subprocess.run(
-        [sys.executable, "-m", module, "--help"],
-        capture_output=True,
-        text=True,
-        timeout=180,
-        cwd=ROOT,
-        env=os.environ | {"PYTHONPATH": str(ROOT)},
+    """`python -m module --help`, run once per module and in this process (runpy runs the module as `-m` does, at
+    80 columns as in a pipe): its exit code, stdout and stderr. The console scripts themselves run as processes in
+    tests/project/test_architecture.py."""
+    import contextlib
+    import io
+    import runpy
+    import traceback
+    import warnings
+
+    out, err, code = io.StringIO(), io.StringIO(), 0
+    argv, columns = sys.argv, os.environ.get("COLUMNS")
+    sys.argv, os.environ["COLUMNS"] = [module, "--help"], "80"
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a module imported before, run again as __main__
+            runpy.run_module(module, run_name="__main__", alter_sys=True)
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    except Exception:  # noqa: BLE001  (reported as the process would: a traceback and exit code 1)
+        code = 1
+        err.write(traceback.format_exc())
+    finally:
+        sys.argv = argv
+        if columns is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = columns
+    return subprocess.CompletedProcess(
+        [sys.executable, "-m", module, "--help"], code, out.getvalue(), err.getvalue()
     )
 
 
@@ -119,8 +139,6 @@ def documented_flag_problems() -> list[str]:
     (tests/core/test_cli_help.py asserts there are none, in the process that runs each --help once)."""
     commands = _all_commands()
     assert len(commands) > 30  # the pages document the tools
-    with ThreadPoolExecutor(4) as pool:  # --help once per module, in parallel
-        list(pool.map(help_text, sorted({c[3] for c in commands})))
     wrong = []
     for page, line, _command, module, args in commands:
         for arg in args:
