@@ -2,11 +2,12 @@
 
 Each worker process builds one heavy object once — a `DemoCollector`, an `InstanceRenderer`, an
 `EvalWorker`: an env with its renderer and maybe a policy — and then runs one of its methods on each
-item it is sent. Processes are spawned (EGL contexts do not survive `fork`) and end with their
-parent: a worker blocks on its task queue, and when the parent is killed with SIGKILL nobody closes
-that queue, so without `exit_with_parent` it would linger forever (≈ 640 MB each). Workers ignore Ctrl-C (they are
-started with SIGINT blocked, so one still starting prints no traceback): the parent takes it, ends them and says
-what was saved.
+item it is sent. Processes start from a fork server that imported the factory's module and the policy's
+libraries once (EGL contexts do not survive `fork`, and the server holds none: each worker makes its own),
+take the parent's environment of the moment, and end with their parent: a worker blocks on its task queue, and
+when the parent is killed with SIGKILL nobody closes that queue, so without `exit_with_parent` it would linger
+forever (≈ 640 MB each). Workers ignore Ctrl-C (they are started with SIGINT blocked, so one still starting prints
+no traceback): the parent takes it, ends them and says what was saved.
 
     with WorkerPool(2, InstanceRenderer, (224, thresholds), method="record") as pool:
         for record in pool.imap(instances):     # ordered, bounded look-ahead
@@ -55,27 +56,50 @@ def threads_per_worker(workers: int, requested: int = 0) -> int:
     return max(1, int(max(1.0, cores - busy) // workers))
 
 
-def exit_with_parent(parent: int | None = None, poll_s: float = POLL_S) -> None:
-    """End this process (from a daemon thread) as soon as it is re-parented, i.e. its parent died.
+def alive(pid: int) -> bool:
+    """Whether process `pid` is running (a zombie, dead but not yet reaped, is not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rpartition(")")[2].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc (macOS): the signal-0 probe
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            pass
+        return True
 
-    `parent` is the pid the parent gave when it started this process. Read here instead, a parent killed while this
-    process was still importing would already be gone, and the watch would wait on its adopter forever."""
+
+def exit_with_parent(parent: int | None = None, poll_s: float = POLL_S) -> None:
+    """End this process (from a daemon thread) as soon as the process that started it has died.
+
+    `parent` is the pid the parent gave when it started this process (its fork server's pid is this process's own
+    parent pid, so the parent is watched by pid). Read here instead, a parent killed while this process was still
+    importing would already be gone, and the watch would wait on its adopter forever."""
     parent = os.getppid() if parent is None else parent
-    if os.getppid() != parent:
+    if not alive(parent):
         os._exit(1)  # the parent died before this process got this far
 
     def watch() -> None:
         while True:
             time.sleep(poll_s)
-            if os.getppid() != parent:
+            if not alive(parent):
                 os._exit(1)  # no cleanup to run: the parent that wanted the results is gone
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def _init(factory: Callable[..., Any], args: tuple, counter: Any, parent: int) -> None:
+def _init(
+    factory: Callable[..., Any], args: tuple, counter: Any, parent: int, environ: dict[str, str]
+) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and ends the workers
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked while the process started
+    if os.environ != environ:  # the parent's environment now, not the fork server's when it started
+        os.environ.clear()
+        os.environ.update(environ)
     os.environ.setdefault("MUJOCO_GL", "egl")
     exit_with_parent(parent)
     with counter.get_lock():  # ranks in start order: 0 … num_workers-1
@@ -89,22 +113,40 @@ def _call(method: str, item: Any) -> Any:
     return getattr(_STATE, method)(item)
 
 
+def start_context(preload: tuple[str, ...]) -> Any:
+    """The context worker processes start from: a fork server (one per process, started by the first pool) that
+    has imported `preload` (the factory's module, the policy's libraries) once, so each worker is a fork of a process
+    that already imported them instead of a fresh interpreter importing them again. The server itself holds no
+    EGL context (it only imports), so every worker still makes its own. Where there is no fork server (not Linux or
+    macOS): spawned processes."""
+    if "forkserver" not in mp.get_all_start_methods():
+        return mp.get_context("spawn")
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(sorted(set(preload)))
+    return ctx
+
+
 class WorkerPool:
     """`num_workers` spawned processes, each holding `factory(*args)`; items go to its `method`."""
 
     def __init__(
-        self, num_workers: int, factory: Callable[..., Any], args: tuple = (), method: str = "run"
+        self,
+        num_workers: int,
+        factory: Callable[..., Any],
+        args: tuple = (),
+        method: str = "run",
+        preload: tuple[str, ...] = (),
     ) -> None:
         if num_workers < 1:
             raise ValueError(f"num_workers={num_workers} must be at least 1")
         self.num_workers = num_workers
         self.method = method
-        ctx = mp.get_context("spawn")
+        ctx = start_context((factory.__module__, *preload))
         self._executor = ProcessPoolExecutor(
             num_workers,
             mp_context=ctx,
             initializer=_init,
-            initargs=(factory, args, ctx.Value("i", 0), os.getpid()),
+            initargs=(factory, args, ctx.Value("i", 0), os.getpid(), dict(os.environ)),
         )
 
     def submit(self, item: Any) -> Future:

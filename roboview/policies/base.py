@@ -213,6 +213,11 @@ class PolicyConfig(draccus.ChoiceRegistry):
         """Weights the policy loads (recorded in run.json as policy_path); None for weightless policies."""
         return None
 
+    def worker_imports(self) -> tuple[str, ...]:
+        """Modules an evaluation worker imports to run this policy: imported once by the process the workers start
+        from (roboview.core.workers), not once per worker. Default: the module declaring the config."""
+        return (type(self).__module__,)
+
     def declares_outputs(self) -> bool:
         """Whether what the policy answers (action width, control) is known before it runs: from its checkpoint, its
         code or its server's handshake. False (a server whose protocol declares nothing of it): the evaluation runs

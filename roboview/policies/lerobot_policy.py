@@ -297,6 +297,9 @@ class LeRobotConfig(PolicyConfig):
     doc = "any LeRobot checkpoint (--policy.path=DIR)"
     row_name = "lerobot:*"  # lerobot:<the checkpoint's policy type>
 
+    def worker_imports(self) -> tuple[str, ...]:
+        return (*super().worker_imports(), "lerobot.policies")  # LeRobot's policies: seconds to import
+
     def __post_init__(self) -> None:
         with flag_errors("--policy.path"):
             load_config(self.path)  # missing or mismatched checkpoints fail before any rollout

@@ -128,6 +128,7 @@ def run_local(
             EvalWorker,
             (spec if server is None else replace(spec, server=server.handle),),
             method="run_batch",
+            preload=spec.policy.worker_imports(),
         )
         in_flight: dict = {}
         broken = False

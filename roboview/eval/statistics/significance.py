@@ -15,6 +15,7 @@ reference distribution from within-block permutations of value labels instead (a
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -323,6 +324,15 @@ def value_vs_rest(
     return ValueTest(odds, None if None in ci else ci, p)
 
 
+@functools.lru_cache(maxsize=4096)
+def hypergeom_pmf(n: int, k: int, kv: int) -> np.ndarray:
+    """P(x successes among a value's `kv` episodes | `k` of a stratum's `n` succeed), x = 0 … kv (scipy's
+    hypergeom): strata repeat their margins across values and splits, so each is computed once."""
+    pmf = stats.hypergeom.pmf(np.arange(kv + 1), n, k, kv)
+    pmf.flags.writeable = False
+    return pmf
+
+
 def exact_stratified_p(
     k_value: np.ndarray, n_value: np.ndarray, k_all: np.ndarray, n_all: np.ndarray
 ) -> float:
@@ -334,8 +344,7 @@ def exact_stratified_p(
     """
     dist = np.ones(1)
     for k, n, kv in zip(k_all.astype(int), n_all.astype(int), n_value.astype(int)):
-        support = np.arange(kv + 1)
-        dist = np.convolve(dist, stats.hypergeom.pmf(support, n, k, kv))
+        dist = np.convolve(dist, hypergeom_pmf(int(n), int(k), int(kv)))
     observed = dist[int(k_value.sum())]
     return float(min(1.0, dist[dist <= observed * (1 + 1e-7)].sum()))
 
