@@ -21,9 +21,10 @@ import pytest  # noqa: E402
 # Test tiers: every test module declares its tier, `pytestmark = pytest.mark.fast` (seconds: statistics, formats,
 # registries, imports, no rendering, training or servers) or `pytest.mark.slow` (renders, simulates, trains, starts
 # servers, clusters or a browser); a test may carry the other tier's marker to leave its module's tier. `make
-# test-fast` runs `--tier=fast` (the closest marker decides). A module that declares no tier, and a fast test that takes a slow fixture (one that
-# renders, builds or trains), stop the run at collection, naming the test and what to do.
+# test-fast` runs `--tier=fast` (the closest marker decides). A test in no tier, and a fast test that takes a slow
+# fixture (one that renders, builds or trains), fails, naming what to do.
 TIERS = ("fast", "slow")
+TIER_PROBLEM = pytest.StashKey[str]()
 SLOW_FIXTURES = {"env", "tiny_benchmark", "tiny_demos", "tiny_checkpoint", "bench", "tiny_results"}
 
 
@@ -54,15 +55,21 @@ def pytest_addoption(parser):
 
 
 def pytest_collection_modifyitems(config, items):
-    problems = tier_problems(items)
-    if problems:
-        raise pytest.UsageError("tests outside the tiers:\n" + "\n".join(problems))
+    for item, problem in zip(items, map(tier_problems, ([i] for i in items))):
+        if problem:  # fails at its setup, named, in every process of the run (pytest-xdist workers included)
+            item.stash[TIER_PROBLEM] = problem[0]
     wanted = config.getoption("--tier")
     if wanted:
         other = [item for item in items if tier_of(item) != wanted]
         if other:
             config.hook.pytest_deselected(items=other)
             items[:] = [item for item in items if tier_of(item) == wanted]
+
+
+def pytest_runtest_setup(item):
+    problem = item.stash.get(TIER_PROBLEM, None)
+    if problem:
+        pytest.fail(f"outside the tiers: {problem}", pytrace=False)
 
 
 @pytest.fixture(scope="session")

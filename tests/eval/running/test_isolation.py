@@ -37,6 +37,7 @@ def clean(tiny_benchmark) -> pd.DataFrame:
     return run_episodes(tiny_benchmark, ["color", "camera_pose"])
 
 
+@pytest.mark.slow
 def test_real_episodes_verify_and_camera_factors_may_move_only_their_cameras(clean):
     report = isolation.verify(clean)
     for split in ("color", "camera_pose"):
@@ -100,6 +101,7 @@ def test_an_instruction_that_depends_on_the_value_is_flagged_and_left_out(tiny_b
     assert "## Isolation certificate" in text and "instruction differ across" in text and "4 / 8" in text
 
 
+@pytest.mark.slow
 def test_results_without_a_certificate_are_reported_as_not_recorded(clean):
     old = clean.drop(columns=["isolation"])
     report = isolation.verify(old)
