@@ -34,18 +34,19 @@ def tier_of(item) -> str | None:
     return next((mark.name for mark in item.iter_markers() if mark.name in TIERS), None)
 
 
+def tier_problem(item) -> str | None:
+    """What puts a collected test outside the tiers: no tier, or a fast test taking a slow fixture; None when fine."""
+    tier = tier_of(item)
+    if tier is None:
+        return f"{item.nodeid}: no tier; declare `pytestmark = pytest.mark.fast` (or slow) in its module"
+    slow = SLOW_FIXTURES & set(item.fixturenames)
+    if tier == "fast" and slow:
+        return f"{item.nodeid}: marked fast but takes {', '.join(sorted(slow))}; mark it `@pytest.mark.slow`"
+    return None
+
+
 def tier_problems(items) -> list[str]:
-    problems = []
-    for item in items:
-        tier = tier_of(item)
-        if tier is None:
-            problems.append(
-                f"{item.nodeid}: no tier; declare `pytestmark = pytest.mark.fast` (or slow) in its module"
-            )
-        elif tier == "fast" and SLOW_FIXTURES & set(item.fixturenames):
-            slow = ", ".join(sorted(SLOW_FIXTURES & set(item.fixturenames)))
-            problems.append(f"{item.nodeid}: marked fast but takes {slow}; mark it `@pytest.mark.slow`")
-    return problems
+    return [problem for item in items if (problem := tier_problem(item))]
 
 
 def pytest_addoption(parser):
@@ -55,9 +56,11 @@ def pytest_addoption(parser):
 
 
 def pytest_collection_modifyitems(config, items):
-    for item, problem in zip(items, map(tier_problems, ([i] for i in items))):
-        if problem:  # fails at its setup, named, in every process of the run (pytest-xdist workers included)
-            item.stash[TIER_PROBLEM] = problem[0]
+    for item in items:
+        if problem := tier_problem(
+            item
+        ):  # fails at its setup, named, in every process of the run (xdist workers)
+            item.stash[TIER_PROBLEM] = problem
     wanted = config.getoption("--tier")
     if wanted:
         other = [item for item in items if tier_of(item) != wanted]

@@ -31,6 +31,7 @@ def evaluate(
     eager: bool = False,
     policy_server: bool = False,
 ):
+    """roboview.eval.campaign.runner.run of `policy` (a type name) over `splits` of `bench` into `out`."""
     cfg = EvaluateConfig(
         BenchmarkConfig(str(bench), splits),
         policy_config(policy, **({"path": path} if path else {})),

@@ -15,6 +15,7 @@ from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateCon
 from roboview.policies.base import AgentView, Episode, PolicyConfig
 from roboview.policies.errors import PolicyUnavailable
 from roboview.policies.types import policy_config
+from tests.helpers.evaluation import rows
 from tests.helpers.servers import LeRobotServer, free_port
 
 pytestmark = pytest.mark.slow
@@ -37,14 +38,6 @@ def evaluate(bench: Path, out: Path, policy: PolicyConfig):
         str(out),
     )
     return run(cfg)
-
-
-def rows(out: Path) -> pd.DataFrame:
-    return (
-        pd.read_parquet(out / "episodes.parquet")
-        .sort_values(["instance_id", "repeat"])
-        .reset_index(drop=True)
-    )
 
 
 def test_served_checkpoint_runs_the_in_process_episodes(tiny_benchmark, tiny_checkpoint, server, tmp_path):

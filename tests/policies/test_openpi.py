@@ -22,6 +22,7 @@ from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateCon
 from roboview.policies.base import Episode
 from roboview.policies.errors import PolicyUnavailable
 from roboview.policies.types import policy_config
+from tests.helpers.evaluation import rows
 from tests.helpers.servers import free_port, start_server, stop
 
 pytestmark = pytest.mark.slow
@@ -37,14 +38,6 @@ def evaluate(bench: Path, out: Path, policy, splits="color", limit=2, workers=2,
             EvalConfig(n_repeats=1, limit=limit, num_workers=workers, max_steps=max_steps, image_size=0),
             str(out),
         )
-    )
-
-
-def rows(out: Path) -> pd.DataFrame:
-    return (
-        pd.read_parquet(out / "episodes.parquet")
-        .sort_values(["instance_id", "repeat"])
-        .reset_index(drop=True)
     )
 
 

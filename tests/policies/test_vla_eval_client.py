@@ -35,6 +35,7 @@ from roboview.policies.errors import InfraError, PolicyUnavailable
 from roboview.policies.serving.vla_eval_specs import SpecMismatch
 from roboview.policies.types import policy_config
 from roboview.tasks.env import EE_STATE_KEY, STATE_KEY
+from tests.helpers.evaluation import rows
 from tests.helpers.servers import (
     POSE,
     fixed_server_class,
@@ -60,14 +61,6 @@ def evaluate(bench: Path, out: Path, policy, limit=2, max_steps=8):
         str(out),
     )
     return run(cfg)
-
-
-def rows(out: Path) -> pd.DataFrame:
-    return (
-        pd.read_parquet(out / "episodes.parquet")
-        .sort_values(["instance_id", "repeat"])
-        .reset_index(drop=True)
-    )
 
 
 def test_joint_server_negotiated_and_its_actions_reach_the_env(tiny_benchmark, tmp_path):
