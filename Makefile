@@ -116,7 +116,7 @@ test: install install-libero install-metaworld lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
 test-fast: install install-libero install-metaworld lint
-	$(PY) -m pytest -q --tier=fast --durations=10
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --tier=fast --durations=10
 
 lint: install
 	$(PY) -m ruff check .

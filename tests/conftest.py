@@ -75,6 +75,31 @@ def pytest_runtest_setup(item):
         pytest.fail(f"outside the tiers: {problem}", pytrace=False)
 
 
+def _preload_for_the_run() -> None:
+    """Worker pools fork from one fork server per process, which imports what the *first* pool names
+    (roboview.core.workers.start_context). A test process starts many pools — expert, renderer, collector and
+    checkpoint workers — so its fork server imports what all of them use: LeRobot's policies (seconds per process
+    here) once per test process, instead of once in each checkpoint worker of a pool that came after another."""
+    from roboview.core import workers
+
+    shared = (
+        "roboview.eval.running.rollout",
+        "roboview.benchmark.render",
+        "roboview.demos.collection",
+        "lerobot.policies",
+        "lerobot.policies.act.modeling_act",
+    )
+    start_context = workers.start_context
+
+    def start_with_the_runs_preload(preload: tuple[str, ...]):
+        return start_context((*preload, *shared))
+
+    workers.start_context = start_with_the_runs_preload
+
+
+_preload_for_the_run()
+
+
 @pytest.fixture(scope="session")
 def env():
     from roboview.tasks.pick_place import PickPlaceEnv

