@@ -58,18 +58,11 @@ def checkpoint(demos, tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def benchmark(tmp_path_factory) -> Path:
     """metaworld_tiny built at 64² (4 instances)."""
+    from roboview.pipelines.build_benchmark import BuildConfig
+    from roboview.pipelines.build_benchmark import run as build
+
     bench = tmp_path_factory.mktemp("metaworld_bench") / "bench"
-    build = [
-        sys.executable,
-        "-m",
-        "roboview.pipelines.build_benchmark",
-        "--preset=metaworld_tiny",
-        "--image_size=64",
-    ]
-    proc = subprocess.run(
-        [*build, f"--output_dir={bench}", "--num_workers=1"], capture_output=True, text=True, timeout=600
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    build(BuildConfig(output_dir=str(bench), preset="metaworld_tiny", image_size=64, num_workers=1))
     return bench
 
 
@@ -114,7 +107,7 @@ def test_demos_are_in_lerobots_metaworld_layout_and_replay_bit_for_bit(demos):
         env.close()
 
 
-def test_a_metaworld_checkpoint_fits_metaworld_and_runs_in_process(checkpoint, benchmark, tmp_path):
+def test_a_metaworld_checkpoint_fits_metaworld_and_runs_in_process(checkpoint, benchmark, tmp_path, capsys):
     config = policy_config("lerobot", path=str(checkpoint), device="cpu")
     # Its control from its action width (only Meta-World's control is 4-d), its camera LeRobot's `observation.image`.
     assert config.env_control() == "xyz_delta"
@@ -124,33 +117,28 @@ def test_a_metaworld_checkpoint_fits_metaworld_and_runs_in_process(checkpoint, b
     with pytest.raises(ValueError, match=wrong):
         fit_policy(config, ["pick_place"])
 
+    # roboview-evaluate and roboview-verify through their `main`, in this process (the command lines themselves are
+    # tested in tests/core): the checkpoint's workers fork from a server that imported LeRobot once.
+    from roboview.pipelines.evaluate import main as evaluate
+    from roboview.pipelines.verify import main as verify
+
     out = tmp_path / "eval"
-    evaluate = [
-        sys.executable,
-        "-m",
-        "roboview.pipelines.evaluate",
-        f"--benchmark.path={benchmark}",
-        "--policy.type=lerobot",
-    ]
-    evaluate += [
-        f"--policy.path={checkpoint}",
-        "--policy.device=cpu",
-        "--eval.n_repeats=1",
-        "--eval.max_steps=8",
-    ]
-    proc = subprocess.run([*evaluate, f"--output_dir={out}"], capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    evaluate(
+        [
+            f"--benchmark.path={benchmark}",
+            "--policy.type=lerobot",
+            f"--policy.path={checkpoint}",
+            "--policy.device=cpu",
+            "--eval.n_repeats=1",
+            "--eval.max_steps=8",
+            f"--output_dir={out}",
+        ]
+    )
     run = json.loads((out / "run.json").read_text())
     assert run["control"] == "xyz_delta"
-    proc = subprocess.run(
-        [sys.executable, "-m", "roboview.pipelines.verify", f"--results={out}"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0 and "PASS  isolation" in proc.stdout, (
-        proc.stdout[-2000:] + proc.stderr[-1000:]
-    )
+    capsys.readouterr()
+    report = verify([f"--results={out}"])
+    assert report.passed and "PASS  isolation" in capsys.readouterr().out
 
 
 def test_a_checkpoint_that_is_not_metaworlds_is_refused_before_any_episode(tiny_checkpoint):
