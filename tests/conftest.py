@@ -6,6 +6,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("SVT_LOG", "1")
+# Mesa's llvmpipe rasterizes in the rendering thread instead of handing tiles to threads of its own: a test run keeps
+# two pytest processes, their worker pools and servers rendering at once, and on a 2-core machine the hand-offs cost
+# more than they save (render-heavy test files: 187 s → 150 s). The frames are bit-identical for any thread count.
+os.environ.setdefault("LP_NUM_THREADS", "0")
 # Caches a test run writes (the conformance verdicts, the VLM answer cache) go to a folder of its own, never the
 # user's ~/.cache: one per run, made by the process that starts it and inherited by its pytest-xdist workers, so a
 # benchmark's conformance verdict is measured once per run, not once per worker.
