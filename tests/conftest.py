@@ -60,10 +60,9 @@ def pytest_addoption(parser):
 
 
 def pytest_collection_modifyitems(config, items):
+    # A test outside the tiers fails at its setup, named, in every process of the run (xdist workers included).
     for item in items:
-        if problem := tier_problem(
-            item
-        ):  # fails at its setup, named, in every process of the run (xdist workers)
+        if problem := tier_problem(item):
             item.stash[TIER_PROBLEM] = problem
     wanted = config.getoption("--tier")
     if wanted:
@@ -80,25 +79,18 @@ def pytest_runtest_setup(item):
 
 
 def _preload_for_the_run() -> None:
-    """Worker pools fork from one fork server per process, which imports what the *first* pool names
-    (roboview.core.workers.start_context). A test process starts many pools — expert, renderer, collector and
-    checkpoint workers — so its fork server imports what all of them use: LeRobot's policies (seconds per process
-    here) once per test process, instead of once in each checkpoint worker of a pool that came after another."""
+    """A test process starts many pools — expert, renderer, collector and checkpoint workers — so its fork server
+    imports what all of them use (roboview.core.workers.preload): LeRobot's policies (seconds per process here) once
+    per test process, instead of once in each checkpoint worker of a pool that came after another."""
     from roboview.core import workers
 
-    shared = (
+    workers.preload(
         "roboview.eval.running.rollout",
         "roboview.benchmark.render",
         "roboview.demos.collection",
         "lerobot.policies",
         "lerobot.policies.act.modeling_act",
     )
-    start_context = workers.start_context
-
-    def start_with_the_runs_preload(preload: tuple[str, ...]):
-        return start_context((*preload, *shared))
-
-    workers.start_context = start_with_the_runs_preload
 
 
 _preload_for_the_run()

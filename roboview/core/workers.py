@@ -113,6 +113,16 @@ def _call(method: str, item: Any) -> Any:
     return getattr(_STATE, method)(item)
 
 
+_PRELOAD: set[str] = set()
+
+
+def preload(*modules: str) -> None:
+    """Modules this process's fork server imports beside those its first pool names. The server starts with the first
+    pool and keeps that list, so a process that starts pools of several kinds (an expert pool, then a checkpoint
+    pool) names what all of them use before the first one; a server already running is left as it is."""
+    _PRELOAD.update(modules)
+
+
 def start_context(preload: tuple[str, ...]) -> Any:
     """The context worker processes start from: a fork server (one per process, started by the first pool) that
     has imported `preload` (the factory's module, the policy's libraries) once, so each worker is a fork of a process
@@ -122,7 +132,7 @@ def start_context(preload: tuple[str, ...]) -> Any:
     if "forkserver" not in mp.get_all_start_methods():
         return mp.get_context("spawn")
     ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(sorted(set(preload)))
+    ctx.set_forkserver_preload(sorted(set(preload) | _PRELOAD))
     return ctx
 
 

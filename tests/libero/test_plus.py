@@ -304,9 +304,8 @@ def test_build_evaluate_report_and_verify_the_tiny_preset(tmp_path):
         EvaluateConfig(
             BenchmarkConfig(str(bench)),
             policy_config("expert"),
-            EvalConfig(
-                n_repeats=2, num_workers=1, max_steps=30
-            ),  # the counts, not the successes, are checked
+            # 30 steps: the counts and the decomposition are checked, not the successes.
+            EvalConfig(n_repeats=2, num_workers=1, max_steps=30),
             str(out),
         )
     )

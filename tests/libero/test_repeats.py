@@ -6,8 +6,8 @@ path."""
 
 import json
 
-import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 import pytest
 
 from roboview.eval.running.results import copies_mask, counted
@@ -109,18 +109,9 @@ def test_seed_only_libero_repeats_count_once():
     assert not copies_mask(_rows("pick_place", unit=False)).any()  # the seed is RoboView's episode randomness
 
 
-def _plain(x):
-    """A record's value as plain Python (a row read back from parquet holds numpy arrays and scalars)."""
-    if isinstance(x, dict):
-        return {k: _plain(v) for k, v in x.items()}
-    if isinstance(x, list | tuple | np.ndarray):
-        return [_plain(v) for v in x]
-    return x.item() if isinstance(x, np.generic) else x
-
-
 def _gate_records(rows) -> dict[str, str]:
-    """Each instance's gate record and camera calibration, as canonical JSON."""
-    return {r["instance_id"]: json.dumps(_plain([r["fairness"], r["cameras"]]), sort_keys=True) for r in rows}
+    """Each instance's gate record and camera calibration, as JSON (rows as plain Python: dicts, lists, floats)."""
+    return {r["instance_id"]: json.dumps([r["fairness"], r["cameras"]], sort_keys=True) for r in rows}
 
 
 def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
@@ -142,17 +133,18 @@ def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
     from roboview.tasks.fairness import FairnessThresholds
 
     build(BuildConfig(output_dir=str(tmp_path / "soft"), preset="libero_tiny", image_size=128, num_workers=1))
-    built = pd.concat(
-        pd.read_parquet(p, columns=["instance_id", "fairness", "cameras"])
+    columns = ["instance_id", "fairness", "cameras"]
+    built = [
+        r
         for p in (tmp_path / "soft").glob("data/*.parquet")
-    )
+        for r in pq.read_table(p, columns=columns).to_pylist()
+    ]
     # The build's in-place path (one compiled model per LIBERO task, each later instance reset in place after the
     # earlier ones' edits) gave the gate records LeRobot's hard-reset path gives, bit for bit: here the hard path
     # renders every instance after the first (the first is a fresh compile on both paths), each its own model.
     suite = generate_suite(load_preset("libero_tiny"))
-    assert len(suite) == 4 and world_batches(suite, 1) == [
-        [0, 1, 2, 3]
-    ]  # one world: one batch, in this order
+    # One world: one batch, rendered in this order.
+    assert len(suite) == 4 and world_batches(suite, 1) == [[0, 1, 2, 3]]
     monkeypatch.setenv(HARD_RESET_ENV, "1")
     renderer = InstanceRenderer(128, FairnessThresholds(), task="libero")
     try:
@@ -160,7 +152,7 @@ def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
     finally:
         renderer.close()
     monkeypatch.setenv(HARD_RESET_ENV, "0")
-    soft = _gate_records(built.to_dict("records"))
+    soft = _gate_records(built)
     assert len(hard) == 3 and hard == {i: soft[i] for i in hard}
     bench, out = tmp_path / "soft", tmp_path / "eval"
 
