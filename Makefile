@@ -113,10 +113,10 @@ demo: install
 # training or servers.
 TEST_WORKERS ?= 2
 test: install install-libero install-metaworld lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=30
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
 
 test-fast: install install-libero install-metaworld lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --tier=fast --durations=10
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --tier=fast --durations=10
 
 lint: install
 	$(PY) -m ruff check .

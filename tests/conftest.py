@@ -70,56 +70,6 @@ def pytest_collection_modifyitems(config, items):
         if other:
             config.hook.pytest_deselected(items=other)
             items[:] = [item for item in items if tier_of(item) == wanted]
-    cache = getattr(config, "cache", None)  # None under -p no:cacheprovider
-    items[:] = longest_first(items, cache.get(DURATIONS_KEY, {}) if cache else {})
-
-
-# --- the order of the test files --------------------------------------------------------------------------------
-# pytest-xdist (`--dist loadfile --no-loadscope-reorder`) hands each process the next test file in collection order,
-# so the files go longest first: the long ones start at once, and the last minutes are short files filling both
-# processes rather than one long file keeping a single process busy. A file's length is its seconds in the last
-# whole run (pytest's cache, .pytest_cache), else an estimate: its tests' count, the slow tier before the fast.
-DURATIONS_KEY = "roboview/file_seconds"
-SLOW_TEST_ESTIMATE_S, FAST_TEST_ESTIMATE_S = 5.0, 0.2
-
-
-def _file(nodeid: str) -> str:
-    return nodeid.split("::", 1)[0]
-
-
-def longest_first(items: list, seconds: dict[str, float]) -> list:
-    """`items` regrouped by file, the longest file first; the tests of a file keep their order."""
-    files: dict[str, list] = {}
-    for item in items:
-        files.setdefault(_file(item.nodeid), []).append(item)
-
-    def length(name: str) -> float:
-        if name in seconds:
-            return seconds[name]
-        return sum(
-            SLOW_TEST_ESTIMATE_S if tier_of(i) == "slow" else FAST_TEST_ESTIMATE_S for i in files[name]
-        )
-
-    return [item for name in sorted(files, key=lambda n: (-length(n), n)) for item in files[name]]
-
-
-_RAN: dict[str, float] = {}
-
-
-def pytest_runtest_logreport(report):
-    # Summed in the process that writes the cache: pytest-xdist's controller, or the only process under -n 0.
-    if not os.environ.get("PYTEST_XDIST_WORKER"):
-        _RAN[_file(report.nodeid)] = _RAN.get(_file(report.nodeid), 0.0) + report.duration
-
-
-def pytest_sessionfinish(session, exitstatus):
-    config = session.config
-    cache = getattr(config, "cache", None)
-    whole = not (config.option.keyword or config.option.markexpr or config.getoption("--tier"))
-    whole = whole and not any("::" in a for a in config.args)
-    if cache is None or not _RAN or not whole or os.environ.get("PYTEST_XDIST_WORKER"):
-        return
-    cache.set(DURATIONS_KEY, cache.get(DURATIONS_KEY, {}) | {k: round(v, 1) for k, v in _RAN.items()})
 
 
 def pytest_runtest_setup(item):

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from tests.conftest import SLOW_FIXTURES, TIERS, longest_first, tier_of, tier_problems
+from tests.conftest import SLOW_FIXTURES, TIERS, tier_of, tier_problems
 from tests.helpers import ROOT
 
 pytestmark = pytest.mark.fast
@@ -81,20 +81,3 @@ def test_the_closest_marker_decides_and_tests_outside_the_tiers_are_named():
         "t.py::d: marked fast but takes env; mark it `@pytest.mark.slow`",
     ]
     assert {"env", "tiny_benchmark", "tiny_checkpoint"} <= SLOW_FIXTURES
-
-
-def test_files_go_longest_first_by_the_last_run_else_by_tier_and_count():
-    """The order pytest-xdist hands out the files: the seconds a file took in the last whole run when known, else
-    5 s per slow test and 0.2 s per fast one; a file's tests stay together and in their order."""
-    items = [
-        Item("a.py::1", ["fast"]),
-        Item("b.py::1", ["slow"]),
-        Item("a.py::2", ["fast"]),
-        Item("c.py::1", ["fast"]),
-        Item("d.py::1", ["slow"]),
-        Item("d.py::2", ["slow"]),
-    ]
-    order = [i.nodeid for i in longest_first(items, {})]
-    assert order == ["d.py::1", "d.py::2", "b.py::1", "a.py::1", "a.py::2", "c.py::1"]
-    measured = [i.nodeid for i in longest_first(items, {"c.py": 30.0, "a.py": 7.0})]
-    assert measured == ["c.py::1", "d.py::1", "d.py::2", "a.py::1", "a.py::2", "b.py::1"]
