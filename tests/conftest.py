@@ -79,9 +79,10 @@ def pytest_runtest_setup(item):
 
 
 def _preload_for_the_run() -> None:
-    """A test process starts many pools — expert, renderer, collector and checkpoint workers — so its fork server
-    imports what all of them use (roboview.core.workers.preload): LeRobot's policies (seconds per process here) once
-    per test process, instead of once in each checkpoint worker of a pool that came after another."""
+    """A test process starts many pools — expert, renderer, collector and checkpoint workers — and command-line runs
+    (tests/helpers/cli.py), all forks of its fork server, so that server imports what all of them use
+    (roboview.core.workers.preload): LeRobot's policies (seconds per process here) once per test process, instead of
+    once in each checkpoint worker, policy server and lerobot-eval run."""
     from roboview.core import workers
 
     workers.preload(
@@ -90,6 +91,9 @@ def _preload_for_the_run() -> None:
         "roboview.demos.collection",
         "lerobot.policies",
         "lerobot.policies.act.modeling_act",
+        "lerobot.scripts.lerobot_eval",
+        "roboview.pipelines.evaluate",
+        "roboview.pipelines.serve_policy",
     )
 
 

@@ -5,7 +5,6 @@ import hashlib
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import datasets
@@ -22,6 +21,7 @@ from roboview.tasks import load_preset
 from roboview.tasks.fairness import FairnessThresholds
 from roboview.variation.factors import parse_dist_scale, parse_euler
 from roboview.variation.instances import generate_suite
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -150,10 +150,7 @@ def test_human_decisions_move_instances_to_the_rejected_table(built, tmp_path):
 
 
 def _cli(module: str, *args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
-    env = os.environ | {"PYTHONPATH": str(ROOT)} | (env_extra or {})
-    return subprocess.run(
-        [sys.executable, "-m", module, *args], capture_output=True, text=True, timeout=300, env=env
-    )
+    return cli.run(module, *args, env=os.environ | (env_extra or {}), timeout=300)
 
 
 def _build_main(capsys, *args: str) -> subprocess.CompletedProcess:

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from roboview.pipelines._cli import cli_main, interrupted
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -20,14 +21,7 @@ ENV = os.environ | {"PYTHONPATH": str(ROOT)}
 
 
 def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", module, *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-        env=ENV,
-    )
+    return cli.run(module, *args, timeout=timeout)
 
 
 def terminal_signals() -> None:

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from roboview.pipelines.collect import CollectConfig, DatasetConfig, run
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -145,14 +146,7 @@ def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
 
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "roboview.pipelines.collect", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=cwd,
-        env=os.environ | {"PYTHONPATH": str(Path(__file__).resolve().parents[2])},
-    )
+    return cli.run("roboview.pipelines.collect", *args, cwd=cwd, timeout=120)
 
 
 def _main(capsys, *args: str) -> subprocess.CompletedProcess:

@@ -1,9 +1,6 @@
 """Coverage audit on a tiny dataset and the tiny benchmark: exact, nearby and never, and the CLI."""
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +9,7 @@ import pytest
 from roboview.demos.coverage import Radii, audit, load_training_visuals
 from roboview.pipelines.collect import CollectConfig, DatasetConfig
 from roboview.pipelines.collect import run as collect
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -102,20 +100,12 @@ def test_randomized_data_is_never_exact_and_nearby_grows_with_the_radius(bench, 
 
 def test_cli_writes_json_markdown_and_plot(bench, datasets, tmp_path):
     out = tmp_path / "cov"
-    env = os.environ | {"PYTHONPATH": str(ROOT)}
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.coverage",
-            f"--dataset.root={datasets['context']}",
-            f"--benchmark.path={bench}",
-            f"--output_dir={out}",
-        ],
-        capture_output=True,
-        text=True,
+    proc = cli.run(
+        "roboview.pipelines.coverage",
+        f"--dataset.root={datasets['context']}",
+        f"--benchmark.path={bench}",
+        f"--output_dir={out}",
         timeout=300,
-        env=env,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "[coverage] color: 1 exact, 0 nearby," in proc.stdout
@@ -123,17 +113,7 @@ def test_cli_writes_json_markdown_and_plot(bench, datasets, tmp_path):
     assert payload["summary"]["color"]["exact"] == 1 and payload["episodes"] == 3
     assert "| color | 1 | 0 |" in (out / "coverage.md").read_text()
     assert (out / "coverage.png").stat().st_size > 10_000
-    bad = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.coverage",
-            f"--dataset.root={tmp_path}",
-            f"--benchmark.path={bench}",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env=env,
+    bad = cli.run(
+        "roboview.pipelines.coverage", f"--dataset.root={tmp_path}", f"--benchmark.path={bench}", timeout=120
     )
     assert bad.returncode == 2 and "is not a roboview.pipelines.collect dataset" in bad.stderr

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.helpers import ROOT
+from tests.helpers import ROOT, cli
 
 
 def free_port() -> int:
@@ -25,23 +25,17 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def start_server(checkpoint: Path, port: int, *flags: str) -> subprocess.Popen:
-    """roboview.pipelines.serve_policy around a LeRobot checkpoint, in its own process; returns once /healthz
-    answers."""
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.serve_policy",
-            "--policy.type=lerobot",
-            f"--policy.path={checkpoint}",
-            f"--port={port}",
-            "--threads=1",
-            *flags,
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
+def start_server(checkpoint: Path, port: int, *flags: str) -> cli.Run | subprocess.Popen:
+    """roboview.pipelines.serve_policy around a LeRobot checkpoint, in its own process (a fork of the preloaded
+    server, tests/helpers/cli.py); returns once /healthz answers."""
+    proc = cli.start(
+        "roboview.pipelines.serve_policy",
+        "--policy.type=lerobot",
+        f"--policy.path={checkpoint}",
+        f"--port={port}",
+        "--threads=1",
+        *flags,
+        merge=True,
     )
     deadline = time.time() + 120
     while time.time() < deadline:
@@ -51,12 +45,12 @@ def start_server(checkpoint: Path, port: int, *flags: str) -> subprocess.Popen:
         except OSError:
             time.sleep(0.3)
         if proc.poll() is not None:
-            raise AssertionError(proc.stdout.read())
+            raise AssertionError(proc.communicate()[0])
     proc.kill()
     raise AssertionError("serve_policy did not come up within 120 s")
 
 
-def stop(proc: subprocess.Popen) -> str:
+def stop(proc: cli.Run | subprocess.Popen) -> str:
     """SIGTERM, then what the server printed."""
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=60)
@@ -73,6 +67,9 @@ class LeRobotServer:
         port = port or free_port()
         self.address = f"127.0.0.1:{port}"
         self.log = cwd / "server.log"
+        # A fresh interpreter, not a fork of the preloaded server (tests/helpers/cli.py): the tests that kill it
+        # mid-run expect the killed episode to be lost, and a fork answers again within the lerobot_async client's
+        # reconnects (8, from 0.25 s), which then carries the episode on with the new server.
         with self.log.open("a") as log:
             self.proc = subprocess.Popen(
                 [

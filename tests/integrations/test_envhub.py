@@ -1,12 +1,12 @@
 """RoboView as a LeRobot EnvHub env: lerobot's own hub loader runs roboview/integrations/lerobot/hub/env.py from a hub
 cache (offline, a local folder laid out as the hub cache is) and gets one vector env per split."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -69,20 +69,13 @@ def test_the_hub_env_says_what_it_needs(hub_cache, monkeypatch):
 
 
 def test_publish_dry_run_lists_the_envhub_repo(tiny_benchmark):
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.publish",
-            f"--path={tiny_benchmark}",
-            "--repo_id=org/roboview-bias",
-            "--env_repo_id=org/roboview-env",
-            "--dry_run=true",
-        ],
-        capture_output=True,
-        text=True,
+    proc = cli.run(
+        "roboview.pipelines.publish",
+        f"--path={tiny_benchmark}",
+        "--repo_id=org/roboview-bias",
+        "--env_repo_id=org/roboview-env",
+        "--dry_run=true",
         timeout=120,
-        cwd=ROOT,
     )
     assert proc.returncode == 0, proc.stderr
     assert f"{len(ENV_PY.read_text().encode()):,}  org/roboview-env/env.py" in proc.stdout

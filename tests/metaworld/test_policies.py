@@ -18,6 +18,7 @@ pytest.importorskip("metaworld", reason="Meta-World not installed (make install-
 
 from roboview.policies.fit import fit_policy  # noqa: E402
 from roboview.policies.types import policy_config  # noqa: E402
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 REPO = "t/metaworld_demos"
@@ -238,7 +239,9 @@ def test_lerobot_eval_runs_the_checkpoint_on_metaworld_through_the_plugin(checkp
         "--eval.batch_size=1",
         f"--output_dir={tmp_path / 'le'}",
     ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=tmp_path)
+    proc = cli.run(
+        "lerobot.scripts.lerobot_eval", *cmd[1:], cwd=tmp_path, timeout=900
+    )  # lerobot-eval's module
     assert proc.returncode == 0, proc.stdout[-1500:] + proc.stderr[-1500:]
     info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 2

@@ -18,6 +18,7 @@ from roboview.policies.types import policy_config
 from roboview.policies.vlm.client import Endpoint
 from roboview.policies.vlm.sgl import SGLConfig
 from roboview.sim.cameras import ALL_CAMERAS
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -59,7 +60,7 @@ def _train(demos: Path, out: Path, flags: list[str]) -> Path:
         f"--output_dir={out}",
         "--job_name=tiny_vla",
     ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=ENV)
+    proc = cli.run("lerobot.scripts.lerobot_train", *cmd[1:])  # the lerobot-train console script's module
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out / "checkpoints" / "last" / "pretrained_model"
 
@@ -188,7 +189,7 @@ def test_a_vla_checkpoint_evaluates_in_roboview_and_in_lerobot_eval(vla, tiny_be
         "--eval.batch_size=2",
         f"--output_dir={tmp_path / 'le'}",
     ]
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=ENV)
+    proc = cli.run("lerobot.scripts.lerobot_eval", *args[1:])  # the lerobot-eval console script's module
     if kind == "xvla":
         # lerobot-eval 0.6.1 gives every XVLA policy LIBERO's env processors, whatever the env
         # (lerobot/envs/factory.py:50-53); they reject RoboView's images. XVLA runs through roboview.pipelines.evaluate.

@@ -47,12 +47,13 @@ def _newton_direction(
     ga, gb = r.sum(axis=2), r.sum(axis=1)[:, 1:]
     wv = w.sum(axis=2) + RIDGE
     x = w[:, :, 1:]
-    schur = -np.einsum("bvi,bv,bvj->bij", x, 1 / wv, x, optimize=True)
+    xt = x.transpose(0, 2, 1)
+    schur = -(xt @ (x / wv[:, :, None]))
     idx = np.arange(x.shape[2])
     schur[:, idx, idx] += w.sum(axis=1)[:, 1:] + RIDGE
-    rhs = gb - np.einsum("bvi,bv->bi", x, ga / wv)
+    rhs = gb - (xt @ (ga / wv)[:, :, None])[..., 0]
     db = np.linalg.solve(schur, rhs[..., None])[..., 0] if x.shape[2] else np.zeros_like(gb)
-    da = (ga - np.einsum("bvi,bi->bv", x, db)) / wv
+    da = (ga - (x @ db[:, :, None])[..., 0]) / wv
     return (
         np.clip(da, -MAX_STEP, MAX_STEP),
         np.clip(db, -MAX_STEP, MAX_STEP),

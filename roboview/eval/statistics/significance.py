@@ -15,6 +15,7 @@ reference distribution from within-block permutations of value labels instead (a
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import warnings
 from collections.abc import Callable, Sequence
@@ -27,6 +28,7 @@ from scipy import stats
 from statsmodels.stats.contingency_tables import StratifiedTable, mcnemar
 from threadpoolctl import threadpool_limits
 
+from roboview.eval.statistics.batch_glm import value_lrt
 from roboview.eval.statistics.tables import SEQUENTIAL_H
 
 SPARSE_EXPECTED = 5.0  # Cochran: expected counts below this make χ² approximations doubtful
@@ -147,28 +149,41 @@ def factor_lrt(
     _, p_null, null_params = binomial_llf(k[keep], n[keep], reduced)
     if permuted_k is None or not is_sparse(n[keep], p_null):
         return LRT(observed, df, float(stats.chi2.sf(observed, df)), "asymptotic")
-    # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are
-    # the same for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit
-    # starts from them (value dummies at zero), which halves its iterations.
-    start = np.concatenate([null_params, np.zeros(df)])
+    kk, nk = k[keep], n[keep]
+    if len(np.unique(value_c * (strata_c.max() + 1) + strata_c)) == len(value_c):
+        # One cell per (value, stratum): the permuted tables share one layout, and their refits are a single
+        # batched Newton solve (`batch_glm.value_lrt`, checked against these fits). The observed statistic is
+        # compared with them as that solver computes it, so a permutation reproducing the table ties exactly;
+        # the statistic reported stays statsmodels'.
+        def refits(batch: np.ndarray) -> np.ndarray:
+            return value_lrt(batch[:, keep], nk, value_c, strata_c)
 
-    def refits(batch: np.ndarray) -> np.ndarray:
-        return np.array(
-            [
-                max(
-                    0.0,
-                    2.0
-                    * (
-                        binomial_llf(kp[keep], n[keep], full, start)[0]
-                        - binomial_llf(kp[keep], n[keep], reduced, null_params)[0]
-                    ),
-                )
-                for kp in batch
-            ]
-        )
+        reference = float(value_lrt(kk[None], nk, value_c, strata_c)[0])
+    else:
+        # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are the same
+        # for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit starts from them
+        # (value dummies at zero), which halves its iterations.
+        start = np.concatenate([null_params, np.zeros(df)])
 
+        def refits(batch: np.ndarray) -> np.ndarray:
+            return np.array(
+                [
+                    max(
+                        0.0,
+                        2.0
+                        * (
+                            binomial_llf(kp[keep], nk, full, start)[0]
+                            - binomial_llf(kp[keep], nk, reduced, null_params)[0]
+                        ),
+                    )
+                    for kp in batch
+                ]
+            )
+
+        reference = observed
     more_null = None if more is None else lambda size: refits(more(size))
-    return _permutation_lrt(observed, df, refits(permuted_k), more_null, max_draws, stretch_tail)
+    test = _permutation_lrt(reference, df, refits(permuted_k), more_null, max_draws, stretch_tail)
+    return dataclasses.replace(test, statistic=observed)
 
 
 def _permutation_lrt(

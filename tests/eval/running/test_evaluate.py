@@ -16,6 +16,7 @@ import pytest
 from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
 from roboview.policies.base import PolicyConfig
 from roboview.policies.types import policy_config
+from tests.helpers import cli
 from tests.helpers.evaluation import evaluate, rows
 
 pytestmark = pytest.mark.slow
@@ -200,13 +201,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     """roboview.pipelines.evaluate with `args` (the expert unless they name a --policy.type: there is no default)."""
     if not any(a.startswith("--policy.type=") for a in args):
         args = ("--policy.type=expert", *args)
-    return subprocess.run(
-        [sys.executable, "-m", "roboview.pipelines.evaluate", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=os.environ | {"PYTHONPATH": str(ROOT)},
-    )
+    return cli.run("roboview.pipelines.evaluate", *args, timeout=300)
 
 
 def _main(capsys, *args: str) -> subprocess.CompletedProcess:
@@ -709,9 +704,7 @@ def test_lerobot_eval_with_the_plugin_runs_the_same_episodes(bench, tiny_checkpo
         "--eval.batch_size=2",
         f"--output_dir={tmp_path / 'le'}",
     ]
-    proc = subprocess.run(
-        args, capture_output=True, text=True, timeout=600, env=os.environ | {"PYTHONPATH": str(ROOT)}
-    )
+    proc = cli.run("lerobot.scripts.lerobot_eval", *args[1:])  # the lerobot-eval console script's module
     assert proc.returncode == 0, proc.stderr[-3000:]
     info = json.loads((tmp_path / "le" / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 4 and set(info["per_group"]) == {"color", "dist_scale"}

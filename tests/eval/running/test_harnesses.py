@@ -2,10 +2,7 @@
 harness's own code with a planted bias, audited back to the planted counts."""
 
 import json
-import os
 import re
-import subprocess
-import sys
 import uuid
 from pathlib import Path
 
@@ -28,6 +25,7 @@ from vla_eval.results.collector import ResultCollector
 from vla_eval.results.export import export_db
 
 from roboview.pipelines.audit import main
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -140,10 +138,8 @@ def successes(split: dict) -> dict[str, int]:
 
 def test_vla_eval_run_folder_from_the_command_line(vla_eval_run, tmp_path):
     out, _ = vla_eval_run
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    command = [sys.executable, "-m", "roboview.pipelines.audit", "--format=vla_eval", f"--results={out}"]
-    done = subprocess.run(
-        [*command, f"--output_dir={tmp_path}", *FAST], cwd=ROOT, env=env, capture_output=True, text=True
+    done = cli.run(
+        "roboview.pipelines.audit", "--format=vla_eval", f"--results={out}", f"--output_dir={tmp_path}", *FAST
     )
     assert done.returncode == 0, done.stderr
     metrics = json.loads((tmp_path / "metrics.json").read_text())
@@ -249,16 +245,12 @@ def inspect_logs(tmp_path_factory):
 
 
 def test_inspect_robots_log_folder_from_the_command_line(inspect_logs, tmp_path):
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    command = [
-        sys.executable,
-        "-m",
+    done = cli.run(
         "roboview.pipelines.audit",
         "--format=inspect_robots",
         f"--results={inspect_logs}",
-    ]
-    done = subprocess.run(
-        [*command, f"--output_dir={tmp_path}", *FAST], cwd=ROOT, env=env, capture_output=True, text=True
+        f"--output_dir={tmp_path}",
+        *FAST,
     )
     assert done.returncode == 0, done.stderr
     splits = json.loads((tmp_path / "metrics.json").read_text())["splits"]

@@ -9,7 +9,6 @@ message and a fresh cluster resumes the same results folder.
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 import time
@@ -89,11 +88,11 @@ def _ray_record(out: Path) -> dict:
     return entries[-1]["ray"]
 
 
-def test_two_nodes_share_the_work_and_a_lost_worker_node_costs_only_its_episodes_in_flight(
+def test_two_nodes_share_the_work_a_lost_worker_node_costs_its_episodes_in_flight_and_a_lost_head_resumes(
     tiny_benchmark, reference, tmp_path
 ):
-    """One cluster, three runs: an evaluation both nodes share, a build its nodes render, then an evaluation whose
-    worker node is lost mid-run."""
+    """One cluster, four runs: an evaluation both nodes share, a build its nodes render, an evaluation whose worker
+    node is lost mid-run, then one whose head is lost mid-run, which a fresh cluster resumes."""
     cluster = Cluster(tmp_path, workers=1)
     try:
         proc = _evaluate(tiny_benchmark, tmp_path / "ev", cluster)
@@ -124,6 +123,12 @@ def test_two_nodes_share_the_work_and_a_lost_worker_node_costs_only_its_episodes
         Cluster.kill(cluster.workers[0])
         output, _ = proc.communicate(timeout=600)
         assert proc.returncode == 0, output[-3000:]
+        # Then the head lost once 3 episodes of another run are written: the evaluator stops and says so.
+        resumed = tmp_path / "head"
+        proc = _evaluate(tiny_benchmark, resumed, cluster)
+        _wait_rows(resumed, 3, proc)
+        Cluster.kill(cluster.head)
+        stopped, _ = proc.communicate(timeout=180)
     finally:
         cluster.close()
     journal = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
@@ -132,29 +137,17 @@ def test_two_nodes_share_the_work_and_a_lost_worker_node_costs_only_its_episodes
     pd.testing.assert_frame_equal(rows(out), reference)
     record = _ray_record(out)
     assert 1 <= record["lost_actors"] <= 2, record  # the episode(s) in flight on the lost node, re-run once
-
-
-def test_a_lost_head_stops_the_run_and_a_new_cluster_resumes_it(tiny_benchmark, reference, tmp_path):
-    out = tmp_path / "ev"
-    cluster = Cluster(tmp_path, workers=1)
-    try:
-        proc = _evaluate(tiny_benchmark, out, cluster)
-        _wait_rows(out, 3, proc)
-        Cluster.kill(cluster.head)
-        output, _ = proc.communicate(timeout=180)
-    finally:
-        cluster.close()
+    # A fresh cluster resumes the stopped run: only the episodes it had not written run.
     assert proc.returncode != 0
-    assert "stopped answering" in output and "rerun the same command" in output, output[-3000:]
-    written = _journal_rows(out)
+    assert "stopped answering" in stopped and "rerun the same command" in stopped, stopped[-3000:]
+    written = _journal_rows(resumed)
     assert 3 <= written < len(reference)
     fresh = Cluster(tmp_path, workers=1)
     try:
-        proc = _evaluate(tiny_benchmark, out, fresh)
+        proc = _evaluate(tiny_benchmark, resumed, fresh)
         output, _ = proc.communicate(timeout=600)
         assert proc.returncode == 0, output[-3000:]
     finally:
         fresh.close()
     assert f"({len(reference) - written} new" in output
-    pd.testing.assert_frame_equal(rows(out), reference)
-    shutil.rmtree(out, ignore_errors=True)
+    pd.testing.assert_frame_equal(rows(resumed), reference)

@@ -1,0 +1,170 @@
+"""Command-line runs for the tests, as `python -m MODULE ARGS` runs them, started as forks of a process that has
+already imported RoboView and LeRobot.
+
+A fresh interpreter spends seconds importing torch, LeRobot's policies and RoboView before a command does anything
+(10 CPU-seconds for `import lerobot.policies` on a 2-core machine). Here each run is a child of the test process's
+fork server (`roboview.core.workers`, preloaded by tests/conftest.py): a real process of its own, with its own
+argv, environment, working folder, stdout and stderr (files, read back when it ends), exit status and signals, that
+runs the module with `runpy` as `__main__` and its exit handlers before it exits.
+
+What a fork cannot change is what the preloaded modules read when they were imported. A run whose environment
+differs from the test run's in a variable read at import time (`IMPORT_TIME`), or that puts a folder on PYTHONPATH
+the fork server does not have, starts a fresh interpreter instead, so it sees exactly what it asked for.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import runpy
+import signal
+import subprocess
+import sys
+import tempfile
+import traceback
+from collections.abc import Mapping
+from pathlib import Path
+
+from roboview.core import workers
+from tests.helpers import ROOT
+
+# Variables that modules the fork server preloads read when imported (rendering backend, thread pools, Mesa's driver;
+# and every HF_* / HUGGINGFACE_* one: folders, endpoint, offline mode): a run that sets them differently gets a fresh
+# interpreter.
+IMPORT_TIME = (
+    "MUJOCO_GL",
+    "PYOPENGL_PLATFORM",
+    "GALLIUM_DRIVER",
+    "LIBGL_ALWAYS_SOFTWARE",
+    "LP_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "TORCH_HOME",
+)
+_RUN_ENV = dict(os.environ)  # the environment the test run (and so its fork server) started with
+
+
+def _child(module: str, argv: list[str], env: dict[str, str], cwd: str, out: str, err: str) -> None:
+    """In the forked child: the run's streams, environment, folder and argv, then the module as `__main__`."""
+    for fd, path in ((1, out), (2, err)):
+        handle = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        os.dup2(handle, fd)
+        os.close(handle)
+    os.environ.clear()
+    os.environ.update(env)
+    os.chdir(cwd)
+    # `python -m` puts the working folder first on the path, then PYTHONPATH's folders.
+    extra = [cwd, *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]
+    sys.path[:0] = [p for p in extra if p not in sys.path]
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    sys.argv = [module, *argv]
+    # As in a fresh `python -m`, the module itself is not imported yet (its imports are: that is the saving).
+    sys.modules.pop(module, None)
+    code: object = 0
+    try:
+        runpy.run_module(module, run_name="__main__", alter_sys=True)
+    except SystemExit as exc:
+        code = exc.code
+    except BaseException:  # as the interpreter does: the traceback on stderr, status 1
+        traceback.print_exc()
+        code = 1
+    try:
+        atexit._run_exitfuncs()
+    finally:
+        if code is not None and not isinstance(code, int):
+            print(code, file=sys.stderr)
+            code = 1
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code or 0)
+
+
+class Run:
+    """A started command (subprocess.Popen's interface, the part the tests use): pid, poll, wait, send_signal,
+    terminate, kill, communicate and returncode; its stdout and stderr are read when it has ended."""
+
+    def __init__(self, module: str, args: list[str], env: dict[str, str], cwd: Path, merge: bool) -> None:
+        self.args = [sys.executable, "-m", module, *args]
+        self._dir = tempfile.TemporaryDirectory(prefix="roboview-cli-")
+        self._out, self._err = Path(self._dir.name) / "stdout", Path(self._dir.name) / "stderr"
+        self._merge = merge
+        ctx = workers.start_context(())
+        err = self._out if merge else self._err
+        self._process = ctx.Process(
+            target=_child, args=(module, args, env, str(cwd), str(self._out), str(err))
+        )
+        self._process.start()
+        self.pid = self._process.pid
+
+    @property
+    def returncode(self) -> int | None:
+        return self._process.exitcode
+
+    def poll(self) -> int | None:
+        return self._process.exitcode
+
+    def wait(self, timeout: float | None = None) -> int:
+        self._process.join(timeout)
+        if self._process.exitcode is None:
+            raise subprocess.TimeoutExpired(self.args, timeout)
+        return self._process.exitcode
+
+    def send_signal(self, sig: int) -> None:
+        if self._process.exitcode is None:
+            os.kill(self.pid, sig)
+
+    def terminate(self) -> None:
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+    def output(self) -> tuple[str, str]:
+        read = lambda path: path.read_text(errors="replace") if path.exists() else ""  # noqa: E731
+        return read(self._out), "" if self._merge else read(self._err)
+
+    def communicate(self, timeout: float | None = None) -> tuple[str, str]:
+        self.wait(timeout)
+        return self.output()
+
+
+def _needs_fresh(env: Mapping[str, str]) -> bool:
+    names = {*IMPORT_TIME, *(n for n in {*env, *_RUN_ENV} if n.startswith(("HF_", "HUGGINGFACE_")))}
+    if any(env.get(name) != _RUN_ENV.get(name) for name in names):
+        return True
+    known = {str(ROOT), *sys.path}
+    return any(p not in known for p in filter(None, env.get("PYTHONPATH", "").split(os.pathsep)))
+
+
+def start(
+    module: str, *args: str, env: Mapping[str, str] | None = None, cwd: Path = ROOT, merge: bool = False
+) -> Run | subprocess.Popen:
+    """`python -m module args` started in `cwd` with `env` (default: this process's); `merge` sends stderr to
+    stdout. A fork of the preloaded server, or a fresh interpreter where `env` needs one (see the module's doc)."""
+    env = dict(os.environ if env is None else env)
+    if not _needs_fresh(env):
+        return Run(module, list(args), env, Path(cwd), merge)
+    command = [sys.executable, "-m", module, *args]
+    err = subprocess.STDOUT if merge else subprocess.PIPE
+    return subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=err, text=True)
+
+
+def run(
+    module: str,
+    *args: str,
+    env: Mapping[str, str] | None = None,
+    cwd: Path = ROOT,
+    merge: bool = False,
+    timeout: float = 600,
+) -> subprocess.CompletedProcess:
+    """`start(...)` to its end: its exit status, stdout and stderr (subprocess.run's result with
+    capture_output=True, text=True; subprocess.TimeoutExpired after killing it past `timeout`)."""
+    proc = start(module, *args, env=env, cwd=cwd, merge=merge)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        raise
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err or "")
