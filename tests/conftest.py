@@ -131,7 +131,7 @@ def shared_folder(tmp_path_factory, name: str, build) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_benchmark(tmp_path_factory):
-    """The `tiny` preset built once for every test that only reads a benchmark (57 instances, 64² previews)."""
+    """The `tiny` preset built once for every test that only reads a benchmark (57 instances, rendered at 64²)."""
     from roboview.pipelines.build_benchmark import BuildConfig
     from roboview.pipelines.build_benchmark import run as build
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
-from roboview.benchmark.render import InstanceRenderer
+from roboview.benchmark.render import PREVIEW_SIZE, InstanceRenderer
 from roboview.pipelines.build_benchmark import BuildConfig, run
 from roboview.pipelines.publish import PublishConfig, plan
 from roboview.sim.cameras import WORKSPACE_CENTER, quat_to_mat
@@ -37,11 +37,9 @@ def tree_digest(path: Path) -> str:
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("bench") / "tiny"
-    result = run(BuildConfig(output_dir=str(out), preset="tiny", image_size=128))
-    assert result.candidates == 57 and result.gate_pass_rate >= 0.95
-    return out
+def built(tiny_benchmark) -> Path:
+    """The run's shared `tiny` build (rendered at 64²): read, never written (the publish tests check its digest)."""
+    return tiny_benchmark
 
 
 def test_splits_load_back_with_datasets_and_counts_match(built):
@@ -53,7 +51,7 @@ def test_splits_load_back_with_datasets_and_counts_match(built):
     assert ids == [i.instance_id for i in generate_suite(load_preset("tiny"))]  # stable, suite order
     row = ds["color_x_camera_pose"][0]
     assert row["factor"] == "color|camera_pose" and row["value"] == f"{row['color']}|{row['camera_pose']}"
-    assert row["preview"].size == (3 * 128, 128)
+    assert row["preview"].size == (3 * PREVIEW_SIZE, PREVIEW_SIZE)  # whatever the build's render size
     card = (built / "README.md").read_text()
     assert card.startswith("---\nlicense: apache-2.0") and "split: camera_euler" in card
     assert "Suite hash" in card and "| color | 24 | 24 |" in card
@@ -72,7 +70,8 @@ def test_splits_load_back_with_datasets_and_counts_match(built):
 
 def test_building_twice_gives_the_same_bytes(built, tmp_path):
     again = tmp_path / "again"
-    run(BuildConfig(output_dir=str(again), preset="tiny", image_size=128))
+    result = run(BuildConfig(output_dir=str(again), preset="tiny", image_size=64))
+    assert result.candidates == 57 and result.gate_pass_rate >= 0.95
     for split in ("color", "camera_pose", "color_x_camera_pose"):
         assert (again / "data" / f"{split}.parquet").read_bytes() == (
             built / "data" / f"{split}.parquet"
@@ -141,7 +140,7 @@ def test_human_decisions_move_instances_to_the_rejected_table(built, tmp_path):
             ]
         )
     out = tmp_path / "reviewed"
-    run(BuildConfig(output_dir=str(out), preset="tiny", image_size=128, decisions=str(decisions)))
+    run(BuildConfig(output_dir=str(out), preset="tiny", image_size=64, decisions=str(decisions)))
     assert victim not in datasets.load_dataset(str(out), split="dist_scale")["instance_id"]
     rejected = datasets.load_dataset(str(out), "rejected", split="rejected")
     assert rejected["instance_id"] == [victim]

@@ -149,41 +149,56 @@ def factor_lrt(
     _, p_null, null_params = binomial_llf(k[keep], n[keep], reduced)
     if permuted_k is None or not is_sparse(n[keep], p_null):
         return LRT(observed, df, float(stats.chi2.sf(observed, df)), "asymptotic")
-    kk, nk = k[keep], n[keep]
-    if len(np.unique(value_c * (strata_c.max() + 1) + strata_c)) == len(value_c):
-        # One cell per (value, stratum): the permuted tables share one layout, and their refits are a single
-        # batched Newton solve (`batch_glm.value_lrt`, checked against these fits). The observed statistic is
-        # compared with them as that solver computes it, so a permutation reproducing the table ties exactly;
-        # the statistic reported stays statsmodels'.
-        def refits(batch: np.ndarray) -> np.ndarray:
-            return value_lrt(batch[:, keep], nk, value_c, strata_c)
-
-        reference = float(value_lrt(kk[None], nk, value_c, strata_c)[0])
-    else:
-        # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are the same
-        # for all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit starts from them
-        # (value dummies at zero), which halves its iterations.
-        start = np.concatenate([null_params, np.zeros(df)])
-
-        def refits(batch: np.ndarray) -> np.ndarray:
-            return np.array(
-                [
-                    max(
-                        0.0,
-                        2.0
-                        * (
-                            binomial_llf(kp[keep], nk, full, start)[0]
-                            - binomial_llf(kp[keep], nk, reduced, null_params)[0]
-                        ),
-                    )
-                    for kp in batch
-                ]
-            )
-
-        reference = observed
+    refits, reference = _null_refits(k, n, keep, value_c, strata_c, (full, reduced, null_params), observed)
     more_null = None if more is None else lambda size: refits(more(size))
     test = _permutation_lrt(reference, df, refits(permuted_k), more_null, max_draws, stretch_tail)
     return dataclasses.replace(test, statistic=observed)
+
+
+def _null_refits(
+    k: np.ndarray,
+    n: np.ndarray,
+    keep: np.ndarray,
+    value: np.ndarray,
+    strata: np.ndarray,
+    fits: tuple[np.ndarray, np.ndarray, np.ndarray],
+    observed: float,
+) -> tuple[Callable[[np.ndarray], np.ndarray], float]:
+    """(the LRT statistics of permuted tables (rows of successes over all cells), the observed statistic as they
+    are to be compared with it) for `factor_lrt`, whose informative cells `keep` carry codes `value` and `strata`;
+    `fits`: its full and reduced designs and the reduced fit's coefficients."""
+    nk = n[keep]
+    if len(np.unique(value * (strata.max() + 1) + strata)) == len(value):
+        # One cell per (value, stratum): the permuted tables share one layout, and their refits are a single
+        # batched Newton solve (`batch_glm.value_lrt`, checked against statsmodels' fits). The observed statistic
+        # is compared with them as that solver computes it, so a permutation reproducing the table ties exactly;
+        # the statistic reported stays statsmodels'.
+        def batched(batch: np.ndarray) -> np.ndarray:
+            return value_lrt(batch[:, keep], nk, value, strata)
+
+        return batched, float(batched(k[None])[0])
+    # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are the same for
+    # all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit starts from them (value
+    # dummies at zero), which halves its iterations.
+    full, reduced, null_params = fits
+    start = np.concatenate([null_params, np.zeros(full.shape[1] - reduced.shape[1])])
+
+    def one_by_one(batch: np.ndarray) -> np.ndarray:
+        return np.array(
+            [
+                max(
+                    0.0,
+                    2.0
+                    * (
+                        binomial_llf(kp[keep], nk, full, start)[0]
+                        - binomial_llf(kp[keep], nk, reduced, null_params)[0]
+                    ),
+                )
+                for kp in batch
+            ]
+        )
+
+    return one_by_one, observed
 
 
 def _permutation_lrt(

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -18,9 +17,9 @@ import pandas as pd
 import pytest
 
 from benchmarks.cluster import RAY, LocalCluster
+from tests.helpers import cli
 from tests.helpers.evaluation import evaluate, rows
 
-ROOT = Path(__file__).resolve().parents[3]
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not RAY.exists(), reason="Ray's `ray` command is not installed next to this Python"),
@@ -55,19 +54,15 @@ def reference(tiny_benchmark, tmp_path_factory) -> pd.DataFrame:
     return rows(out)
 
 
-def _evaluate(bench: Path, out: Path, cluster: Cluster, **popen) -> subprocess.Popen:
-    cmd = [
-        sys.executable,
-        "-m",
-        "roboview.pipelines.evaluate",
+def _evaluate(bench: Path, out: Path, cluster: Cluster) -> cli.Run | subprocess.Popen:
+    """roboview.pipelines.evaluate on the cluster, started (its output, stdout and stderr together, read at its end)."""
+    args = [
         f"--benchmark.path={bench}",
         *ARGS,
         f"--eval.ray_address={cluster.address}",
         f"--output_dir={out}",
     ]
-    return subprocess.Popen(
-        cmd, env=cluster.env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen
-    )
+    return cli.start("roboview.pipelines.evaluate", *args, env=cluster.env, merge=True)
 
 
 def _journal_rows(out: Path) -> int:
@@ -75,7 +70,7 @@ def _journal_rows(out: Path) -> int:
     return len(journal.read_text().splitlines()) if journal.exists() else 0
 
 
-def _wait_rows(out: Path, n: int, proc: subprocess.Popen, timeout: float = 300) -> None:
+def _wait_rows(out: Path, n: int, proc: cli.Run | subprocess.Popen, timeout: float = 300) -> None:
     deadline = time.time() + timeout
     while _journal_rows(out) < n:
         assert proc.poll() is None, proc.communicate()[0][-3000:]
@@ -104,15 +99,13 @@ def test_two_nodes_share_the_work_a_lost_worker_node_costs_its_episodes_in_fligh
         assert len(record["nodes"]) == 2 and sum(record["nodes"].values()) == len(reference)
         assert min(record["nodes"].values()) >= 2, record  # both nodes ran episodes
         # The build on the same cluster: its nodes render the instances, and the manifest is the local build's.
-        build = [
-            sys.executable,
-            "-m",
+        build = ["--preset=tiny", "--image_size=64", f"--ray_address={cluster.address}", "--num_workers=2"]
+        proc = cli.run(
             "roboview.pipelines.build_benchmark",
-            "--preset=tiny",
-            "--image_size=64",
-        ]
-        build += [f"--ray_address={cluster.address}", "--num_workers=2", f"--output_dir={tmp_path / 'built'}"]
-        proc = subprocess.run(build, env=cluster.env, cwd=ROOT, capture_output=True, text=True, timeout=600)
+            *build,
+            f"--output_dir={tmp_path / 'built'}",
+            env=cluster.env,
+        )
         assert proc.returncode == 0, proc.stderr[-3000:]
         version = json.loads((tmp_path / "built" / "benchmark.json").read_text())["benchmark_version"]
         assert version == json.loads((tiny_benchmark / "benchmark.json").read_text())["benchmark_version"]
