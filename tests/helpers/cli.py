@@ -15,6 +15,7 @@ the fork server does not have, starts a fresh interpreter instead, so it sees ex
 from __future__ import annotations
 
 import atexit
+import multiprocessing
 import os
 import runpy
 import signal
@@ -23,6 +24,7 @@ import sys
 import tempfile
 import traceback
 from collections.abc import Mapping
+from multiprocessing import process as mp_process
 from pathlib import Path
 
 from roboview.core import workers
@@ -58,6 +60,13 @@ def _child(module: str, argv: list[str], env: dict[str, str], cwd: str, out: str
     extra = [cwd, *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]
     sys.path[:0] = [p for p in extra if p not in sys.path]
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+    # A main process, as in a fresh interpreter: no parent process, and multiprocessing's default start method
+    # (fork on Linux; a fork server's child would otherwise default to the fork server, so a library's worker
+    # processes, e.g. lerobot-eval's vector envs, would each start from a fresh interpreter).
+    multiprocessing.current_process().name = "MainProcess"
+    mp_process._parent_process = None
+    multiprocessing.set_start_method(None, force=True)
     sys.argv = [module, *argv]
     # As in a fresh `python -m`, the module itself is not imported yet (its imports are: that is the saving).
     sys.modules.pop(module, None)
