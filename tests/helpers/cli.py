@@ -47,15 +47,7 @@ IMPORT_TIME = (
 _RUN_ENV = dict(os.environ)  # the environment the test run (and so its fork server) started with
 
 
-def _child(
-    module: str,
-    argv: list[str],
-    env: dict[str, str],
-    cwd: str,
-    out: str,
-    err: str,
-    sigint: tuple[bool, set[int]],
-) -> None:
+def _child(module: str, argv: list[str], env: dict[str, str], cwd: str, out: str, err: str) -> None:
     """In the forked child: the run's streams, environment, folder and argv, then the module as `__main__`."""
     for fd, path in ((1, out), (2, err)):
         handle = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
@@ -67,11 +59,7 @@ def _child(
     # `python -m` puts the working folder first on the path, then PYTHONPATH's folders.
     extra = [cwd, *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]
     sys.path[:0] = [p for p in extra if p not in sys.path]
-    # Ctrl-C as exec leaves it to a fresh interpreter started here: ignored if the caller ignores it, else Python's
-    # KeyboardInterrupt; the caller's blocked signals stay blocked.
-    ignored, blocked = sigint
-    signal.signal(signal.SIGINT, signal.SIG_IGN if ignored else signal.default_int_handler)
-    signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     # A main process, as in a fresh interpreter: no parent process, and multiprocessing's default start method
     # (fork on Linux; a fork server's child would otherwise default to the fork server, so a library's worker
@@ -102,12 +90,9 @@ def _child(
     finally:
         sys.stdout.flush()
         sys.stderr.flush()
-        if (
-            interrupted
-        ):  # as the interpreter ends on an uncaught Ctrl-C: by SIGINT itself, else with status 130
+        if interrupted:  # as the interpreter ends on an uncaught Ctrl-C: by SIGINT itself
             signal.signal(signal.SIGINT, signal.SIG_DFL)
             os.kill(os.getpid(), signal.SIGINT)
-            os._exit(128 + signal.SIGINT)
         os._exit(code or 0)
 
 
@@ -122,12 +107,8 @@ class Run:
         self._merge = merge
         ctx = workers.start_context(())
         err = self._out if merge else self._err
-        sigint = (
-            signal.getsignal(signal.SIGINT) == signal.SIG_IGN,
-            signal.pthread_sigmask(signal.SIG_BLOCK, []),
-        )
         self._process = ctx.Process(
-            target=_child, args=(module, args, env, str(cwd), str(self._out), str(err), sigint)
+            target=_child, args=(module, args, env, str(cwd), str(self._out), str(err))
         )
         self._process.start()
         self.pid = self._process.pid
