@@ -71,28 +71,21 @@ def _child(module: str, argv: list[str], env: dict[str, str], cwd: str, out: str
     # As in a fresh `python -m`, the module itself is not imported yet (its imports are: that is the saving).
     sys.modules.pop(module, None)
     code: object = 0
-    interrupted = False
     try:
         runpy.run_module(module, run_name="__main__", alter_sys=True)
     except SystemExit as exc:
         code = exc.code
-    except KeyboardInterrupt:
-        traceback.print_exc()
-        interrupted = True
     except BaseException:  # as the interpreter does: the traceback on stderr, status 1
         traceback.print_exc()
-        code = 1
-    if code is not None and not isinstance(code, int):  # sys.exit("message"): the message on stderr, status 1
-        print(code, file=sys.stderr)
         code = 1
     try:
         atexit._run_exitfuncs()
     finally:
+        if code is not None and not isinstance(code, int):
+            print(code, file=sys.stderr)
+            code = 1
         sys.stdout.flush()
         sys.stderr.flush()
-        if interrupted:  # as the interpreter ends on an uncaught Ctrl-C: by SIGINT itself
-            signal.signal(signal.SIGINT, signal.SIG_DFL)
-            os.kill(os.getpid(), signal.SIGINT)
         os._exit(code or 0)
 
 
