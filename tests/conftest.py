@@ -167,15 +167,11 @@ def tiny_demos(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def tiny_checkpoint(tmp_path_factory, tiny_benchmark, tiny_demos) -> Path:
     """A 2-step ACT checkpoint (left_top + wrist at 64²) trained by roboview.pipelines.train on `tiny_demos`."""
-    import subprocess
-    import sys
+    from tests.helpers import cli
 
     def make(root: Path) -> None:
         # The reference recipe (roboview.pipelines.train → lerobot-train), 2 steps; a third step resumes the run.
         args = [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.train",
             "--dataset.repo_id=t/demos",
             f"--dataset.root={tiny_demos}",
             f"--output_dir={root / 'train'}",
@@ -190,15 +186,13 @@ def tiny_checkpoint(tmp_path_factory, tiny_benchmark, tiny_demos) -> Path:
             "--eval_episodes=2",
             "--eval_freq=2",
         ]
-        proc = subprocess.run([*args, "--steps=2", *periodic], capture_output=True, text=True, timeout=600)
+        proc = cli.run("roboview.pipelines.train", *args, "--steps=2", *periodic, timeout=600)
         assert proc.returncode == 0, proc.stderr[-2000:]
         assert (
             "'task_group': 'color'" in proc.stdout + proc.stderr
             and "'n_episodes': 2" in proc.stdout + proc.stderr
         )
-        dry = subprocess.run(
-            [*args, "--steps=3", "--dry_run=true"], capture_output=True, text=True, timeout=120
-        )
+        dry = cli.run("roboview.pipelines.train", *args, "--steps=3", "--dry_run=true", timeout=120)
         assert (
             "--resume=true" in dry.stdout
             and "checkpoints/last/pretrained_model/train_config.json" in dry.stdout

@@ -19,6 +19,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import sys
 import threading
 import time
 from collections import deque
@@ -132,8 +133,17 @@ def start_context(preload: tuple[str, ...]) -> Any:
     if "forkserver" not in mp.get_all_start_methods():
         return mp.get_context("spawn")
     ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(sorted(set(preload) | _PRELOAD))
+    ctx.set_forkserver_preload([*main_module(), *sorted(set(preload) | _PRELOAD)])
     return ctx
+
+
+def main_module() -> list[str]:
+    """The running program's main module, as a fork server's preload names it: `__main__` (a script: the server
+    runs it once) and, for `python -m MODULE`, MODULE itself. Each worker of a fork server re-runs the main module
+    (multiprocessing's `__mp_main__`); imported by the server first, that costs the worker nothing. Unnamed, a
+    `-m` program's workers each import it and all it imports again (a policy's libraries: seconds of CPU each)."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    return ["__main__", *([spec.name] if spec is not None and spec.name else [])]
 
 
 class WorkerPool:

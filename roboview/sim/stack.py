@@ -71,15 +71,34 @@ def assets_hash(model: mujoco.MjModel) -> str:
     return digest.hexdigest()
 
 
+# What picks the OpenGL implementation a process renders with: read when its first context is made, so fixed for
+# the process's life once set.
+GL_SELECTORS = (
+    "MUJOCO_GL",
+    "PYOPENGL_PLATFORM",
+    "MUJOCO_EGL_DEVICE_ID",
+    "GALLIUM_DRIVER",
+    "LIBGL_ALWAYS_SOFTWARE",
+)
+_GL_STRINGS: dict[tuple[str | None, ...], dict[str, str]] = {}
+
+
 def gl_strings(env) -> dict[str, str]:
-    """The OpenGL vendor / renderer / version of the env's renderer (rendering once makes its context current)."""
+    """The OpenGL vendor / renderer / version of the env's renderer (rendering once makes its context current).
+
+    Read once per process and OpenGL selection (`GL_SELECTORS`): a later env of the same process renders through
+    the same implementation, and reading the strings costs a renderer (≈ 0.4 s here) that an env whose
+    conformance verdict is cached never needs otherwise. A failure to read them is not remembered."""
+    key = tuple(os.environ.get(name) for name in GL_SELECTORS)
+    if key in _GL_STRINGS:
+        return dict(_GL_STRINGS[key])
     env.render_camera(env.cameras[0])
     try:
         from OpenGL import GL
 
-        return {
-            key: (GL.glGetString(name) or b"").decode(errors="replace")
-            for key, name in (
+        strings = {
+            field: (GL.glGetString(name) or b"").decode(errors="replace")
+            for field, name in (
                 ("vendor", GL.GL_VENDOR),
                 ("renderer", GL.GL_RENDERER),
                 ("version", GL.GL_VERSION),
@@ -87,6 +106,8 @@ def gl_strings(env) -> dict[str, str]:
         }
     except Exception as exc:  # noqa: BLE001 — a renderer that cannot be named is recorded as such
         return {"vendor": "unknown", "renderer": f"unknown ({type(exc).__name__})", "version": "unknown"}
+    _GL_STRINGS[key] = strings
+    return dict(strings)
 
 
 def describe(env) -> dict[str, Any]:

@@ -22,6 +22,7 @@ from roboview.benchmark.format import BenchmarkItem
 from roboview.libero.task import baseline_libero_instance
 from roboview.policies.fit import fit_policy
 from roboview.policies.types import policy_config
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 REPO = "t/libero_demos"
@@ -54,21 +55,15 @@ def libero_demos(tmp_path_factory) -> Path:
 def libero_checkpoint(libero_demos, tmp_path_factory) -> Path:
     """A 2-step ACT trained on the LIBERO demos by roboview-train (LeRobot's trainer)."""
     out = tmp_path_factory.mktemp("libero_train") / "train"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.train",
-            f"--dataset.repo_id={REPO}",
-            f"--dataset.root={libero_demos}",
-            f"--output_dir={out}",
-            "--batch_size=2",
-            "--steps=2",
-            "--save_freq=2",
-            "--device=cpu",
-        ],
-        capture_output=True,
-        text=True,
+    proc = cli.run(
+        "roboview.pipelines.train",
+        f"--dataset.repo_id={REPO}",
+        f"--dataset.root={libero_demos}",
+        f"--output_dir={out}",
+        "--batch_size=2",
+        "--steps=2",
+        "--save_freq=2",
+        "--device=cpu",
         timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -7,7 +7,6 @@ checkpoint) and the results verify; a checkpoint that is not Meta-World's is ref
 """
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -43,15 +42,9 @@ def demos(tmp_path_factory) -> Path:
 def checkpoint(demos, tmp_path_factory) -> Path:
     """A 2-step ACT trained on the demos by roboview-train (LeRobot's trainer)."""
     out = tmp_path_factory.mktemp("metaworld_train") / "train"
-    cmd = [
-        sys.executable,
-        "-m",
-        "roboview.pipelines.train",
-        f"--dataset.repo_id={REPO}",
-        f"--dataset.root={demos}",
-    ]
-    cmd += [f"--output_dir={out}", "--batch_size=2", "--steps=2", "--save_freq=2", "--device=cpu"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    args = [f"--dataset.repo_id={REPO}", f"--dataset.root={demos}", f"--output_dir={out}"]
+    args += ["--batch_size=2", "--steps=2", "--save_freq=2", "--device=cpu"]
+    proc = cli.run("roboview.pipelines.train", *args, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return out / "checkpoints" / "last" / "pretrained_model"
 

@@ -177,27 +177,19 @@ def test_ee_delta_demos_read_back_with_lerobot_and_replay(ee_demos):
 def test_a_checkpoint_trained_on_ee_demos_acts_in_their_control(ee_demos, tmp_path):
     """roboview.pipelines.train (1 step) on the ee_delta demos: the `lerobot` type reads ee_delta from the checkpoint, the env
     is made in it, and the model's observation.state is the env's EE state (not the joint state)."""
-    import subprocess
-    import sys
-
     from roboview.policies.factory import make_policy
     from roboview.policies.types import policy_config
+    from tests.helpers import cli
 
     out = tmp_path / "train"
     args = [f"--dataset.repo_id={EE_REPO}", f"--dataset.root={ee_demos}", f"--output_dir={out}"]
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.train",
-            *args,
-            "--batch_size=2",
-            "--steps=1",
-            "--save_freq=1",
-            "--device=cpu",
-        ],
-        capture_output=True,
-        text=True,
+    proc = cli.run(
+        "roboview.pipelines.train",
+        *args,
+        "--batch_size=2",
+        "--steps=1",
+        "--save_freq=1",
+        "--device=cpu",
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -73,7 +73,8 @@ def test_letters_of_a_known_order():
 @pytest.fixture(scope="module")
 def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
     """expert, random and vision evaluated on one split of the tiny benchmark under its `quick` protocol (3
-    repeats): each a partial results folder, that split whole."""
+    repeats), each with a 60-step budget (the expert and vision finish within 54; random times out, and its
+    replays cost half the default 120): each a partial results folder, that split whole."""
     from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig
     from roboview.pipelines.evaluate import run as evaluate
     from roboview.policies.types import policy_config
@@ -85,7 +86,7 @@ def bundles(tmp_path_factory, tiny_benchmark) -> dict[str, Path]:
             EvaluateConfig(
                 BenchmarkConfig(str(tiny_benchmark), SPLIT),
                 policy_config(name),
-                EvalConfig(protocol="quick", num_workers=1, image_size=64),
+                EvalConfig(protocol="quick", num_workers=1, image_size=64, max_steps=60),
                 str(root / name),
             )
         )
@@ -527,14 +528,14 @@ def test_compare_decides_expert_against_random_in_one_round_and_leaves_equals_no
 
 def _forge(bundle: Path, to: Path, flips: int = 15, edit_run=None, table_policy: str | None = None) -> Path:
     """A copy whose first `flips` failures are successes, episodes.parquet and episodes.jsonl rewritten to match
-    (each a plausible success: no failure reason, 60 steps), run.json edited by `edit_run`, the table's own policy
+    (each a plausible success: no failure reason, 50 steps), run.json edited by `edit_run`, the table's own policy
     record set to `table_policy`."""
     shutil.copytree(bundle, to)
     table = pq.read_table(to / "episodes.parquet")
     rows, done = table.to_pylist(), 0
     for row in rows:
         if not row["success"] and done < flips:
-            row.update(success=True, failure_reason="", steps=60)
+            row.update(success=True, failure_reason="", steps=50)
             done += 1
     meta = dict(table.schema.metadata)
     if table_policy is not None:
@@ -652,7 +653,7 @@ def test_a_run_json_that_disagrees_with_its_rows_fails_verify(bundles, tmp_path,
     honest = {c.name: c for c in verify_results(bundles["random"]).checks}["record"]
     assert (
         honest.passed
-        and "policy random (random), control joint, image size 64, max steps 120" in honest.detail
+        and "policy random (random), control joint, image size 64, max steps 60" in honest.detail
     )
     served = _copy_with(bundles["vision"], tmp_path / "served", edit_run=_served_elsewhere)
     capsys.readouterr()
@@ -665,8 +666,8 @@ def test_a_run_json_that_disagrees_with_its_rows_fails_verify(bundles, tmp_path,
     # The step budget and the control, against the rows' timeouts and what provenance recorded.
     longer = _copy_with(bundles["random"], tmp_path / "longer", edit_run=lambda run: run | {"max_steps": 200})
     detail = _failed(longer)["record"]
-    assert "run.json's max steps is 200, a run in provenance.json ran with 120" in detail
-    assert "the rows time out within 120 steps" in detail
+    assert "run.json's max steps is 200, a run in provenance.json ran with 60" in detail
+    assert "the rows time out within 60 steps" in detail
     ee = _copy_with(bundles["random"], tmp_path / "ee", edit_run=lambda run: run | {"control": "ee_delta"})
     assert _failed(ee) == {
         "record": "run.json's control is ee_delta, a run in provenance.json ran with joint"
