@@ -32,6 +32,7 @@ HARNESSES = (
     "collect_rate",
     "conformance_drift",
     "cv_excess_interval",
+    "glm_refits",
     "gpu",
     "libero_expert",
     "libero_render",
