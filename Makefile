@@ -108,15 +108,15 @@ demo: install
 	@echo "Demo dataset:   $(DEMO_DIR)/dataset (load with LeRobotDataset('roboview/demo_pick_place', root='$(DEMO_DIR)/dataset'))"
 
 # Lint and format check first (ruff, pyproject.toml), then the whole suite on TEST_WORKERS processes (pytest-xdist,
-# one test file per process at a time) with its 30 slowest tests listed at the end; test-fast: the `fast` tier (each
-# test module declares its tier; tests/conftest.py): statistics, formats, registries, imports, no rendering,
-# training or servers.
+# one test file per process at a time, in the order of tests/conftest.py's `schedule`) with its 30 slowest tests
+# listed at the end; test-fast: the `fast` tier (each test module declares its tier; tests/conftest.py): statistics,
+# formats, registries, imports, no rendering, training or servers.
 TEST_WORKERS ?= 2
 test: install install-libero install-metaworld lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=30
 
 test-fast: install install-libero install-metaworld lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --tier=fast --durations=10
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --tier=fast --durations=10
 
 lint: install
 	$(PY) -m ruff check .

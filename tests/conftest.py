@@ -70,6 +70,24 @@ def pytest_collection_modifyitems(config, items):
         if other:
             config.hook.pytest_deselected(items=other)
             items[:] = [item for item in items if tier_of(item) == wanted]
+    items[:] = schedule(items)
+
+
+def schedule(items: list) -> list:
+    """The order pytest-xdist hands out test files in (`make test` passes `--no-loadscope-reorder`, so it keeps this
+    one): files with the most tests first, as pytest-xdist's own order, except that a file marked `schedule_first`
+    goes before them all. That marks a file of one long test (the Ray cluster's, 1.5 min): by its count it would come
+    last, and one process would run it alone while the other has finished. Handing out the longest files first
+    instead was slower: the multi-process ones, started together, oversubscribe two cores (docs/performance.md)."""
+    files: dict[str, list] = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::")[0], []).append(item)
+
+    def first(tests: list) -> bool:
+        return any(mark.name == "schedule_first" for mark in tests[0].iter_markers())
+
+    order = sorted(files.values(), key=lambda tests: (not first(tests), -len(tests)))
+    return [item for tests in order for item in tests]
 
 
 def pytest_runtest_setup(item):

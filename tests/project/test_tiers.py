@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from tests.conftest import SLOW_FIXTURES, TIERS, tier_of, tier_problems
+from tests.conftest import SLOW_FIXTURES, TIERS, schedule, tier_of, tier_problems
 from tests.helpers import ROOT
 
 pytestmark = pytest.mark.fast
@@ -81,3 +81,20 @@ def test_the_closest_marker_decides_and_tests_outside_the_tiers_are_named():
         "t.py::d: marked fast but takes env; mark it `@pytest.mark.slow`",
     ]
     assert {"env", "tiny_benchmark", "tiny_checkpoint"} <= SLOW_FIXTURES
+
+
+def test_files_are_handed_out_by_their_count_of_tests_with_schedule_first_files_before():
+    items = [
+        Item("a.py::x", ["fast"]),
+        Item("b.py::x", ["slow"]),
+        Item("b.py::y", ["slow"]),
+        Item("ray.py::x", ["slow", "schedule_first"]),
+        Item("c.py::x", ["fast"]),
+        Item("c.py::y", ["fast"]),
+        Item("c.py::z", ["fast"]),
+        Item("d.py::x", ["fast"]),
+    ]
+    order = [i.nodeid for i in schedule(items)]
+    # ray.py first; then by count (c 3, b 2); a and d tie at 1 and keep their collected order; a file stays whole.
+    assert order == ["ray.py::x", "c.py::x", "c.py::y", "c.py::z", "b.py::x", "b.py::y", "a.py::x", "d.py::x"]
+    assert schedule(list(reversed(items)))[0].nodeid == "ray.py::x"

@@ -22,6 +22,7 @@ from tests.helpers.evaluation import evaluate, rows
 
 pytestmark = [
     pytest.mark.slow,
+    pytest.mark.schedule_first,  # one test of 1.5 min: never the run's last file (tests/conftest.py, schedule)
     pytest.mark.skipif(not RAY.exists(), reason="Ray's `ray` command is not installed next to this Python"),
 ]
 
