@@ -16,12 +16,12 @@ of the fit; the statistic is the limit statsmodels' iterations approach. `tests/
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import expit, xlogy
+from scipy.special import xlogy
 
 ITERATIONS = 60  # Newton steps at most (a table typically needs 4–8)
 RIDGE = 1e-9  # keeps the Hessian of a drifting (separated) coefficient invertible
 MAX_STEP = 5.0  # per coefficient and step: a near-singular Hessian cannot throw a fit far off
-CHUNK = 4096  # tables per Newton solve
+CHUNK = 1024  # tables per Newton solve
 HALVINGS = 30  # step halvings at most per Newton step
 
 
@@ -31,9 +31,20 @@ def _own_rate_llf(k: np.ndarray, n: np.ndarray) -> np.ndarray:
     return (xlogy(k, p) + xlogy(n - k, 1 - p)).sum(axis=-1)
 
 
+def _softplus(eta: np.ndarray) -> np.ndarray:
+    """log(1 + e^η), stably (np.logaddexp(0, η)'s value, at a fifth of its cost here)."""
+    return np.maximum(eta, 0.0) + np.log1p(np.exp(-np.abs(eta)))
+
+
+def _expit(eta: np.ndarray) -> np.ndarray:
+    """1 / (1 + e^−η), stably (scipy.special.expit's value, at a third of its cost here)."""
+    e = np.exp(-np.abs(eta))
+    return np.where(eta >= 0, 1.0, e) / (1.0 + e)
+
+
 def _llf(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     eta = a[:, :, None] + b[:, None, :]
-    return (k * eta - n * np.logaddexp(0.0, eta)).sum(axis=(1, 2))
+    return np.einsum("tvc->t", k * eta - n * _softplus(eta))
 
 
 def _newton_direction(
@@ -41,16 +52,17 @@ def _newton_direction(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Newton's direction for the additive fit η = a_v + b_c (b_0 = 0) on grids (tables, values, contexts), and
     each table's largest score component (0 at its maximum)."""
-    mu = expit(a[:, :, None] + b[:, None, :])
+    mu = _expit(a[:, :, None] + b[:, None, :])
     w = n * mu * (1 - mu)
     r = k - n * mu
-    ga, gb = r.sum(axis=2), r.sum(axis=1)[:, 1:]
-    wv = w.sum(axis=2) + RIDGE
+    # Sums over one axis as einsum: numpy's reduce over a short axis is 4–5× slower here.
+    ga, gb = np.einsum("tvc->tv", r), np.einsum("tvc->tc", r)[:, 1:]
+    wv = np.einsum("tvc->tv", w) + RIDGE
     x = w[:, :, 1:]
     xt = x.transpose(0, 2, 1)
     schur = -(xt @ (x / wv[:, :, None]))
     idx = np.arange(x.shape[2])
-    schur[:, idx, idx] += w.sum(axis=1)[:, 1:] + RIDGE
+    schur[:, idx, idx] += np.einsum("tvc->tc", w)[:, 1:] + RIDGE
     rhs = gb - (xt @ (ga / wv)[:, :, None])[..., 0]
     db = np.linalg.solve(schur, rhs[..., None])[..., 0] if x.shape[2] else np.zeros_like(gb)
     da = (ga - (x @ db[:, :, None])[..., 0]) / wv
