@@ -269,33 +269,23 @@ class RoboViewEnv(EnvConfig):
         wrapper, as its LIBERO integration uses), so at most n_envs simulators are alive at a time."""
         from lerobot.envs.utils import _LazyAsyncVectorEnv
 
+        from roboview.core.workers import start_context
         from roboview.integrations.lerobot.env import RoboViewEvalEnv
 
         self.check_conformance()
+        if use_async_envs and n_envs > 1:
+            # LeRobot starts them from the process's fork server: the one RoboView's pools use, whose preload
+            # (start_context) names the running program's module and this env, so no worker imports LeRobot again.
+            start_context(("roboview.integrations.lerobot.env",))
 
         envs: dict[str, dict[int, gym.vector.VectorEnv]] = {}
         spaces: tuple = (None, None, None)  # probed from one env of the first split; every split shares them
         for split in self.splits():
             fns = [functools.partial(RoboViewEvalEnv, **self.split_kwargs(split)) for _ in range(n_envs)]
             if use_async_envs and n_envs > 1:
-                preload_the_main_module()
                 vec = _LazyAsyncVectorEnv(fns, *spaces)
                 spaces = (vec.observation_space, vec.action_space, vec.metadata)
             else:
                 vec = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP)
             envs[split] = {0: vec}
         return envs
-
-
-def preload_the_main_module() -> None:
-    """Have the fork server that starts the async envs' workers import the running tool's module once.
-
-    LeRobot starts them from a fork server, whose every worker re-runs the main module. Started as a module
-    (`python -m lerobot.scripts.lerobot_train`, as roboview.pipelines.train runs it), each worker would import
-    LeRobot and torch again (≈ 7 CPU-s here); named in the server's preload (roboview.core.workers.main_module),
-    with this env, the server imports them once for all. No effect once the server runs."""
-    import multiprocessing
-
-    from roboview.core.workers import main_module
-
-    multiprocessing.set_forkserver_preload([*main_module(), "roboview.integrations.lerobot.env"])
