@@ -11,11 +11,19 @@ Contexts with only successes or only failures carry no information about the val
 `factor_lrt` leaves them out: their cells get weight zero. A value that never fails (or never succeeds) sends
 its coefficient to ±∞ and fits its cells exactly: it adds nothing to the maximised log-likelihood and is left out
 of the fit; the statistic is the limit statsmodels' iterations approach. `tests/eval/statistics/test_batch_glm.py` checks the statistic against `factor_lrt`'s.
+
+`design_llf` is the same idea for any one design (the factorial split's A + B and A×B fits, each parametric-bootstrap
+table a row): iteratively reweighted least squares on all tables together, from statsmodels' start, on the columns
+that span the design (QR with pivoting: missing combinations make dummies dependent, and the fit depends only on
+their span).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+import scipy.linalg
 from scipy.special import xlogy
 
 ITERATIONS = 60  # Newton steps at most (a table typically needs 4–8)
@@ -87,20 +95,31 @@ def _fit(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarr
             break
         live, kl, nl, al, bl = live[moving], kl[moving], nl[moving], al[moving], bl[moving]
         da, db, now = da[moving], db[moving], current[live]
-        scale = np.ones(len(live))
-        for _ in range(HALVINGS):
-            trial = _llf(kl, nl, al + scale[:, None] * da, bl + scale[:, None] * np.pad(db, ((0, 0), (1, 0))))
-            worse = trial < now - 1e-12 * np.abs(now)
-            if not worse.any():
-                break
-            scale[worse] /= 2
-        else:  # a table still worse after every halving keeps its coefficients
-            scale[worse] = 0.0
-            trial = np.where(worse, now, trial)
+        scale, trial = _halved(now, _additive_at, kl, nl, al, bl, da, db)
         a[live] = al + scale[:, None] * da
         b[live, 1:] = bl[:, 1:] + scale[:, None] * db
         current[live] = trial
     return current
+
+
+def _additive_at(scale, k, n, a, b, da, db) -> np.ndarray:
+    return _llf(k, n, a + scale[:, None] * da, b + scale[:, None] * np.pad(db, ((0, 0), (1, 0))))
+
+
+def _halved(
+    now: np.ndarray, loglik: Callable[..., np.ndarray], *args: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-table step scales, halved until the log-likelihood `loglik(scale, *args)` does not fall below `now` (0
+    for a table still worse after HALVINGS: it keeps its coefficients), and the log-likelihoods there."""
+    scale = np.ones(len(now))
+    for _ in range(HALVINGS):
+        trial = loglik(scale, *args)
+        worse = trial < now - 1e-12 * np.abs(now)
+        if not worse.any():
+            return scale, trial
+        scale[worse] /= 2
+    scale[worse] = 0.0
+    return scale, np.where(worse, now, trial)
 
 
 def _grid_lrt(k: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -142,3 +161,74 @@ def value_lrt(k: np.ndarray, n: np.ndarray, value: np.ndarray, context: np.ndarr
         shape = (len(kg), n_values, n_contexts)
         out[lo : lo + CHUNK] = _grid_lrt(kg.reshape(shape), ng.reshape(shape))
     return out
+
+
+def spanning_columns(exog: np.ndarray) -> np.ndarray:
+    """The columns of `exog` that span its column space, in their order (scipy's QR with column pivoting)."""
+    _, r, pivot = scipy.linalg.qr(exog, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(r))
+    rank = int(np.sum(diag > diag[0] * max(exog.shape) * np.finfo(float).eps)) if len(diag) else 0
+    return exog[:, np.sort(pivot[:rank])]
+
+
+def design_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray) -> np.ndarray:
+    """Maximised log-likelihood of the binomial GLM (logit link) with design `exog` (cells × columns) for each row
+    of `k` (tables × cells; `n` episodes per cell, shape (cells,) or like `k`), without the Σ log C(n, k) term
+    (statsmodels' llf includes it; a likelihood ratio cancels it). A separated table's coefficients drift towards
+    ±∞ and its log-likelihood to its supremum, as statsmodels' iterations do."""
+    k = np.atleast_2d(np.asarray(k, float))
+    n = np.broadcast_to(np.asarray(n, float), k.shape)
+    x = spanning_columns(np.asarray(exog, float))
+    out = np.empty(len(k))
+    for lo in range(0, len(k), CHUNK):
+        out[lo : lo + CHUNK] = _irls(k[lo : lo + CHUNK], n[lo : lo + CHUNK], x)
+    return out
+
+
+def _design_direction(
+    k: np.ndarray, n: np.ndarray, x: np.ndarray, beta: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Newton's step for coefficients `beta` (tables × columns), at most MAX_STEP in any coefficient (scaled, so it
+    keeps its direction), and each table's largest score component."""
+    mu = _expit(beta @ x.T)
+    w = n * mu * (1 - mu)
+    score = (k - n * mu) @ x
+    hessian = (x.T[None] * w[:, None, :]) @ x
+    idx = np.arange(x.shape[1])
+    hessian[:, idx, idx] += RIDGE
+    step = np.linalg.solve(hessian, score[..., None])[..., 0]
+    step *= np.minimum(1.0, MAX_STEP / np.maximum(np.abs(step).max(axis=1), 1e-300))[:, None]
+    return step, np.abs(score).max(axis=1)
+
+
+def _design_loglik(k: np.ndarray, n: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    return np.einsum("tc->t", k * eta - n * _softplus(eta))
+
+
+def _design_at(scale, k, n, x, beta, step) -> np.ndarray:
+    return _design_loglik(k, n, (beta + scale[:, None] * step) @ x.T)
+
+
+def _irls(k: np.ndarray, n: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """`design_llf` for one chunk: statsmodels' start (the weighted least-squares fit of logit((k + ½) / (n + 1))),
+    then Newton steps, halved for a table until its log-likelihood does not fall; a table leaves once its score
+    vanishes."""
+    mu = (k + 0.5) / (n + 1)
+    xw = x.T[None] * (n * mu * (1 - mu))[:, None, :]
+    idx = np.arange(x.shape[1])
+    gram = xw @ x
+    gram[:, idx, idx] += RIDGE
+    beta = np.linalg.solve(gram, (xw @ np.log(mu / (1 - mu))[..., None]))[..., 0]
+    current = _design_loglik(k, n, beta @ x.T)
+    live = np.arange(len(k))
+    for _ in range(ITERATIONS):
+        kl, nl, bl = k[live], n[live], beta[live]
+        step, score = _design_direction(kl, nl, x, bl)
+        moving = score >= 1e-9
+        if not moving.any():
+            break
+        live, kl, nl, bl, step = live[moving], kl[moving], nl[moving], bl[moving], step[moving]
+        scale, trial = _halved(current[live], _design_at, kl, nl, x, bl, step)
+        beta[live] = bl + scale[:, None] * step
+        current[live] = trial
+    return current

@@ -28,7 +28,7 @@ from scipy import stats
 from statsmodels.stats.contingency_tables import StratifiedTable, mcnemar
 from threadpoolctl import threadpool_limits
 
-from roboview.eval.statistics.batch_glm import value_lrt
+from roboview.eval.statistics.batch_glm import design_llf, spanning_columns, value_lrt
 from roboview.eval.statistics.tables import SEQUENTIAL_H
 
 SPARSE_EXPECTED = 5.0  # Cochran: expected counts below this make χ² approximations doubtful
@@ -51,9 +51,7 @@ def interaction_codes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.unique(np.stack([a, b], axis=1), axis=0, return_inverse=True)[1].ravel()
 
 
-def binomial_llf(
-    k: np.ndarray, n: np.ndarray, exog: np.ndarray, start: np.ndarray | None = None
-) -> tuple[float, np.ndarray, np.ndarray]:
+def binomial_llf(k: np.ndarray, n: np.ndarray, exog: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Log-likelihood and fitted probabilities of a binomial GLM (logit link) of k successes in n.
 
     Separated data (a cell or level with every episode failing) sends coefficients to ±∞; the
@@ -61,9 +59,7 @@ def binomial_llf(
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # perfect-separation and convergence chatter, see above
-        result = sm.GLM(np.column_stack([k, n - k]), exog, family=sm.families.Binomial()).fit(
-            maxiter=100, start_params=start
-        )
+        result = sm.GLM(np.column_stack([k, n - k]), exog, family=sm.families.Binomial()).fit(maxiter=100)
         # llf and fitted values are lazy: computed here, inside the quiet block.
         return float(result.llf), np.asarray(result.fittedvalues), np.asarray(result.params)
 
@@ -146,10 +142,10 @@ def factor_lrt(
     if df == 0:
         return None
     observed = lrt_statistic(k[keep], n[keep], full, reduced)
-    _, p_null, null_params = binomial_llf(k[keep], n[keep], reduced)
+    _, p_null, _ = binomial_llf(k[keep], n[keep], reduced)
     if permuted_k is None or not is_sparse(n[keep], p_null):
         return LRT(observed, df, float(stats.chi2.sf(observed, df)), "asymptotic")
-    refits, reference = _null_refits(k, n, keep, value_c, strata_c, (full, reduced, null_params), observed)
+    refits, reference = _null_refits(k, n, keep, value_c, strata_c, (full, reduced))
     more_null = None if more is None else lambda size: refits(more(size))
     test = _permutation_lrt(reference, df, refits(permuted_k), more_null, max_draws, stretch_tail)
     return dataclasses.replace(test, statistic=observed)
@@ -161,12 +157,11 @@ def _null_refits(
     keep: np.ndarray,
     value: np.ndarray,
     strata: np.ndarray,
-    fits: tuple[np.ndarray, np.ndarray, np.ndarray],
-    observed: float,
+    fits: tuple[np.ndarray, np.ndarray],
 ) -> tuple[Callable[[np.ndarray], np.ndarray], float]:
     """(the LRT statistics of permuted tables (rows of successes over all cells), the observed statistic as they
     are to be compared with it) for `factor_lrt`, whose informative cells `keep` carry codes `value` and `strata`;
-    `fits`: its full and reduced designs and the reduced fit's coefficients."""
+    `fits`: its full and reduced designs."""
     nk = n[keep]
     if len(np.unique(value * (strata.max() + 1) + strata)) == len(value):
         # One cell per (value, stratum): the permuted tables share one layout, and their refits are a single
@@ -177,28 +172,16 @@ def _null_refits(
             return value_lrt(batch[:, keep], nk, value, strata)
 
         return batched, float(batched(k[None])[0])
-    # Within-block permutations keep every stratum's total, so the reduced fit's probabilities are the same for
-    # all (its llf is not: statsmodels includes log C(n, k) per cell); each full refit starts from them (value
-    # dummies at zero), which halves its iterations.
-    full, reduced, null_params = fits
-    start = np.concatenate([null_params, np.zeros(full.shape[1] - reduced.shape[1])])
+    # Several cells per (value, stratum): the same fits for any one design (`batch_glm.design_llf`, checked against
+    # statsmodels' fits), all permuted tables together.
+    full, reduced = fits
 
-    def one_by_one(batch: np.ndarray) -> np.ndarray:
-        return np.array(
-            [
-                max(
-                    0.0,
-                    2.0
-                    * (
-                        binomial_llf(kp[keep], nk, full, start)[0]
-                        - binomial_llf(kp[keep], nk, reduced, null_params)[0]
-                    ),
-                )
-                for kp in batch
-            ]
+    def refits(batch: np.ndarray) -> np.ndarray:
+        return np.maximum(
+            0.0, 2.0 * (design_llf(batch[:, keep], nk, full) - design_llf(batch[:, keep], nk, reduced))
         )
 
-    return one_by_one, observed
+    return refits, float(refits(k[None])[0])
 
 
 def _permutation_lrt(
@@ -299,24 +282,34 @@ def interaction_lrt(
         return None, None
     codes = [np.unique(x[keep], return_inverse=True)[1] for x in (strata, a, b)]
     additive = design_matrix(codes)
-    full = design_matrix([*codes, interaction_codes(codes[1], codes[2])])
-    df = np.linalg.matrix_rank(full) - np.linalg.matrix_rank(additive)
+    # The A×B dummies span A's and B's, and missing combinations make more of them dependent: the full model is
+    # fitted on the columns that span it (statsmodels' pinv-based fit of the redundant design can stop far below
+    # the additive model's maximum on a separated table, which clips the statistic to 0).
+    full = spanning_columns(design_matrix([*codes, interaction_codes(codes[1], codes[2])]))
+    df = full.shape[1] - np.linalg.matrix_rank(additive)
     _, p_add, _ = binomial_llf(k[keep], n[keep], additive)
     draws = np.tile(k, (n_boot, 1))
     draws[:, keep] = rng.binomial(n[keep], p_add, size=(n_boot, int(keep.sum())))
     if df == 0:
         return None, draws
-    # An A×B design can be rank-deficient (missing combinations); statsmodels' pinv copes with it.
     observed = lrt_statistic(k[keep], n[keep], full, additive)
     if not is_sparse(n[keep], p_add):
         return LRT(observed, int(df), float(stats.chi2.sf(observed, df)), "asymptotic"), draws
-    null = np.array([lrt_statistic(d[keep], n[keep], full, additive) for d in draws])
+
+    # The bootstrap tables' statistics in one batched solve (`batch_glm.design_llf`, checked against statsmodels'
+    # fits); the observed statistic is compared with them as that solver computes it.
+    def statistic(tables: np.ndarray) -> np.ndarray:
+        nk = n[keep]
+        return np.maximum(0.0, 2.0 * (design_llf(tables, nk, full) - design_llf(tables, nk, additive)))
+
+    reference = float(statistic(k[None, keep])[0])
+    null = statistic(draws[:, keep])
     return LRT(
         observed,
         int(df),
-        permutation_p(observed, null),
+        permutation_p(reference, null),
         "parametric_bootstrap",
-        not _reaches(observed, null).any(),
+        not _reaches(reference, null).any(),
     ), draws
 
 
