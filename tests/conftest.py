@@ -110,6 +110,7 @@ def _preload_for_the_run() -> None:
         "lerobot.policies",
         "lerobot.policies.act.modeling_act",
         "lerobot.scripts.lerobot_eval",
+        "lerobot.scripts.lerobot_train",
         "roboview.pipelines.evaluate",
         "roboview.pipelines.serve_policy",
     )

@@ -26,9 +26,8 @@ import json
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import datasets
 import pyarrow.parquet as pq
 
 from roboview.benchmark.protocols import Protocol, declared
@@ -37,6 +36,9 @@ from roboview.core.folders import folder_problem
 from roboview.tasks.repetition import SEED_ONLY, Repetition, repetition_of
 from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
 from roboview.variation.instances import TaskInstance, canonical_json
+
+if TYPE_CHECKING:
+    import datasets
 
 MANIFEST = "benchmark.json"
 # benchmark.json's `status` of a build that passed its gate (a failed one says "failed_gate").
@@ -53,30 +55,14 @@ READABLE_FORMATS = (4,)
 # Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
 NOT_IN_EPISODES = ("fairness", "preview")
 
-_CAMERA = {
-    "name": datasets.Value("string"),
-    "pos": datasets.List(datasets.Value("float64")),
-    "quat": datasets.List(datasets.Value("float64")),
-    "fovy": datasets.Value("float64"),
-}
-_FAIR_CAMERA = {
-    "camera": datasets.Value("string"),
-    "object_visible": datasets.Value("float64"),
-    "object_pixels": datasets.Value("int64"),
-    "object_in_frame": datasets.Value("bool"),
-    "box_visible": datasets.Value("float64"),
-    "box_pixels": datasets.Value("int64"),
-    "box_in_frame": datasets.Value("bool"),
-    "delta_e_nominal": datasets.Value("float64"),
-    "delta_e_table": datasets.Value("float64"),
-}
-
 
 class BenchmarkError(ValueError):
     """A folder that is not a readable RoboView benchmark (missing, failed, edited, other format)."""
 
 
 def _feature(example: Any) -> Any:
+    import datasets
+
     if isinstance(example, bool):
         return datasets.Value("bool")
     if isinstance(example, int):
@@ -90,6 +76,25 @@ def _feature(example: Any) -> Any:
 
 def instance_features(task: str, rejected: bool = False) -> datasets.Features:
     """The instance record's schema for `task`: ids, every factor, each factor's extra columns."""
+    import datasets  # here, not at the top: readers of a benchmark (every evaluation worker) need none of it
+
+    camera = {
+        "name": datasets.Value("string"),
+        "pos": datasets.List(datasets.Value("float64")),
+        "quat": datasets.List(datasets.Value("float64")),
+        "fovy": datasets.Value("float64"),
+    }
+    fair_camera = {
+        "camera": datasets.Value("string"),
+        "object_visible": datasets.Value("float64"),
+        "object_pixels": datasets.Value("int64"),
+        "object_in_frame": datasets.Value("bool"),
+        "box_visible": datasets.Value("float64"),
+        "box_pixels": datasets.Value("int64"),
+        "box_in_frame": datasets.Value("bool"),
+        "delta_e_nominal": datasets.Value("float64"),
+        "delta_e_table": datasets.Value("float64"),
+    }
     cols = {
         name: datasets.Value("string")
         for name in (
@@ -106,10 +111,10 @@ def instance_features(task: str, rejected: bool = False) -> datasets.Features:
     examples = record_columns({name: FACTORS[name].baseline for name in factor_names(task)})
     cols |= {name: _feature(value) for name, value in examples.items()}
     cols |= {
-        "cameras": datasets.List(_CAMERA),
+        "cameras": datasets.List(camera),
         "seed": datasets.Value("int64"),
         "fairness": {
-            "cameras": datasets.List(_FAIR_CAMERA),
+            "cameras": datasets.List(fair_camera),
             "passed": datasets.Value("bool"),
             "reject_reason": datasets.Value("string"),
             # stage 1b (optional): the VLM screen's yes / no / error and its analysis
@@ -131,6 +136,8 @@ def suite_hash(accepted: dict[str, list[dict]]) -> str:
 
 def write_split(rows: list[dict], path: Path, rejected: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
+    import datasets
+
     task = rows[0].get("task", DEFAULT_TASK)
     ds = datasets.Dataset.from_list(rows, features=instance_features(task, rejected))
     ds.to_parquet(str(path))

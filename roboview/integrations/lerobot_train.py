@@ -3,15 +3,15 @@ encoder layers, the backbone's learning rate that of the transformer) with no pr
 downloads ImageNet weights, which fails offline), a resume from a run folder's last checkpoint, and lerobot-train's
 periodic evaluation on frozen RoboView splits (the `roboview` env of the lerobot_env_roboview plugin).
 
-Kept apart from the `roboview.integrations.lerobot` package, which imports lerobot: this module only writes the
-command line, and lerobot runs in the process it starts.
+Kept apart from the `roboview.integrations.lerobot` package, which imports lerobot: this module writes the command
+line, and imports lerobot only to run it (`run_trainer`, in this process: a second interpreter would import torch and
+LeRobot's policies again, ≈ 7 CPU-seconds here).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -127,14 +127,30 @@ def thread_env(threads: int) -> dict[str, str]:
 
 
 def run_trainer(cmd: list[str], threads: int) -> None:
-    """Run lerobot-train with `threads` CPU threads, this checkout first on its path (lerobot imports
-    roboview.integrations.lerobot by name: its lerobot_env_roboview plugin); RuntimeError when it fails."""
-    root = str(Path(__file__).resolve().parents[2])
-    env = (
-        os.environ
-        | thread_env(threads)
-        | {"PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH", "")]))}
-    )
-    proc = subprocess.run(cmd, env=env)
-    if proc.returncode != 0:
-        raise RuntimeError(f"lerobot-train exited with {proc.returncode}; its log is above")
+    """Run lerobot-train's `cmd` (as `fresh_command` or `resume_command` write it) in this process, as its console
+    script runs it, with `threads` CPU threads (torch's now, and in the environment its data-loading and evaluation
+    processes inherit). RuntimeError when it exits with an error status; an exception in the trainer propagates with
+    its traceback."""
+    import torch
+    from lerobot.scripts import lerobot_train
+
+    if tuple(cmd[: len(TRAINER)]) != TRAINER:
+        raise ValueError(f"not a lerobot-train command: {cmd[: len(TRAINER)]}")
+    saved = {name: os.environ.get(name) for name in thread_env(threads)}
+    argv, torch_threads = sys.argv, torch.get_num_threads()
+    os.environ.update(thread_env(threads))
+    torch.set_num_threads(threads)
+    sys.argv = ["lerobot-train", *cmd[len(TRAINER) :]]
+    try:
+        lerobot_train.main()
+    except SystemExit as exc:
+        if exc.code not in (None, 0):
+            raise RuntimeError(f"lerobot-train exited with {exc.code}; its log is above") from None
+    finally:
+        sys.argv = argv
+        torch.set_num_threads(torch_threads)
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
