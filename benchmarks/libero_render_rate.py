@@ -37,11 +37,6 @@ import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")  # P single-threaded simulators, not P × cores threads
-
 MODES = ("images", "state", "images_soft", "state_soft")  # *_soft: LiberoWorld with hard_reset=False
 CAMERA_KEYS = ("agentview_image", "robot0_eye_in_hand_image")
 EPISODE_LENGTHS = (104, 280)  # a short success, and libero_object's full LeRobot budget
@@ -374,8 +369,19 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def single_threaded_headless() -> None:
+    """EGL rendering and P single-threaded simulators (not P × cores threads), unless the environment says otherwise:
+    set before this process imports a simulator, and inherited by the processes it spawns. Set by `main`, not on
+    import, so a program that imports this module (its --help read in-process) keeps its own environment."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+
+
 def main(argv: list[str] | None = None) -> dict:
     args = parse(argv)
+    single_threaded_headless()
     ctx = mp.get_context("spawn")
     barrier = ctx.Barrier(args.processes + 1)  # the workers and this process, which times each mode's wall
     results = ctx.Queue()

@@ -75,10 +75,11 @@ def pytest_collection_modifyitems(config, items):
 
 def schedule(items: list) -> list:
     """The order pytest-xdist hands out test files in (`make test` passes `--no-loadscope-reorder`, so it keeps this
-    one): files with the most tests first, as pytest-xdist's own order, except that a file marked `schedule_first`
-    goes before them all. That marks a file of one long test (the Ray cluster's, 1.5 min): by its count it would come
-    last, and one process would run it alone while the other has finished. Handing out the longest files first
-    instead was slower: the multi-process ones, started together, oversubscribe two cores (docs/performance.md)."""
+    one): files with the most tests first, as pytest-xdist's own order, except that the files marked `schedule_first`
+    go before them all, those with the fewest tests first. The mark is for a file of few long tests (the Ray cluster's
+    one test of 1.5 min, the expert's three sweeps): by its count it would come among the last, and one process would
+    run it alone while the other has finished. Handing out the longest files first instead was slower: the
+    multi-process ones, started together, oversubscribe two cores (docs/performance.md)."""
     files: dict[str, list] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)
@@ -86,7 +87,7 @@ def schedule(items: list) -> list:
     def first(tests: list) -> bool:
         return any(mark.name == "schedule_first" for mark in tests[0].iter_markers())
 
-    order = sorted(files.values(), key=lambda tests: (not first(tests), -len(tests)))
+    order = sorted(files.values(), key=lambda tests: (0, len(tests)) if first(tests) else (1, -len(tests)))
     return [item for tests in order for item in tests]
 
 
@@ -94,6 +95,26 @@ def pytest_runtest_setup(item):
     problem = item.stash.get(TIER_PROBLEM, None)
     if problem:
         pytest.fail(f"outside the tiers: {problem}", pytrace=False)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item):
+    """After a test and its fixtures' teardown: a variable that modules read at import time (tests/helpers/cli.py,
+    IMPORT_TIME, HF_*) left changed in this process would start every later command-line run of the process from a
+    fresh interpreter (seconds each) instead of a fork. The test that leaked it fails, naming it; the value is put
+    back."""
+    result = yield
+    from tests.helpers import cli
+
+    leaked = cli.import_time_changes(os.environ)
+    if leaked:
+        cli.restore_import_time(leaked)
+        pytest.fail(
+            f"{item.nodeid} left import-time environment variables changed (run's → now): {leaked}; set them in "
+            "the command's env= or with monkeypatch.setenv, or set them where the program runs, not on import",
+            pytrace=False,
+        )
+    return result
 
 
 def _preload_for_the_run() -> None:
@@ -117,6 +138,7 @@ def _preload_for_the_run() -> None:
 
 
 _preload_for_the_run()
+import tests.helpers.cli  # noqa: E402, F401  (its snapshot of the run's environment, taken before any test)
 
 
 @pytest.fixture(scope="session")

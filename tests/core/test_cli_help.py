@@ -195,3 +195,20 @@ def test_every_documented_flag_exists():
 
     wrong = documented_flag_problems()
     assert not wrong, "\n".join(wrong)
+
+
+def test_importing_a_harness_leaves_the_environment_as_it_was():
+    """A harness sets its rendering and thread variables where it runs (its `main`), not on import: a program that
+    imports it, as this file does to read its --help, keeps its own (tests/helpers/cli.py: a test process whose
+    import-time variables changed would start every later command-line run from a fresh interpreter)."""
+    import os
+
+    from tests.helpers import cli
+
+    before = dict(os.environ)
+    for name in (*HARNESSES, *STANDALONE):
+        importlib.import_module(f"benchmarks.{name}")
+    threads = {
+        k for k in {*before, *os.environ} if k.endswith("_NUM_THREADS") and before.get(k) != os.environ.get(k)
+    }
+    assert not threads and not cli.import_time_changes(os.environ), threads

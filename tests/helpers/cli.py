@@ -138,9 +138,27 @@ class Run:
         return self.output()
 
 
-def _needs_fresh(env: Mapping[str, str]) -> bool:
+def import_time_changes(env: Mapping[str, str]) -> dict[str, tuple[str | None, str | None]]:
+    """The variables read at import time whose value in `env` is not the test run's: name → (run's, env's)."""
     names = {*IMPORT_TIME, *(n for n in {*env, *_RUN_ENV} if n.startswith(("HF_", "HUGGINGFACE_")))}
-    if any(env.get(name) != _RUN_ENV.get(name) for name in names):
+    return {
+        name: (_RUN_ENV.get(name), env.get(name))
+        for name in sorted(names)
+        if env.get(name) != _RUN_ENV.get(name)
+    }
+
+
+def restore_import_time(names) -> None:
+    """Put this process's variables `names` back to the test run's values."""
+    for name in names:
+        if _RUN_ENV.get(name) is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = _RUN_ENV[name]
+
+
+def _needs_fresh(env: Mapping[str, str]) -> bool:
+    if import_time_changes(env):
         return True
     known = {str(ROOT), *sys.path}
     return any(p not in known for p in filter(None, env.get("PYTHONPATH", "").split(os.pathsep)))

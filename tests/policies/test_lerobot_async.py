@@ -18,7 +18,10 @@ from roboview.policies.types import policy_config
 from tests.helpers.evaluation import rows
 from tests.helpers.servers import LeRobotServer, free_port
 
-pytestmark = pytest.mark.slow
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.schedule_first,  # LeRobot's server started from a fresh interpreter per test, ≈ 25 s: never last (tests/conftest.py)
+]
 
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]
 

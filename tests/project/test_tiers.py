@@ -88,6 +88,8 @@ def test_files_are_handed_out_by_their_count_of_tests_with_schedule_first_files_
         Item("a.py::x", ["fast"]),
         Item("b.py::x", ["slow"]),
         Item("b.py::y", ["slow"]),
+        Item("sweeps.py::x", ["slow", "schedule_first"]),
+        Item("sweeps.py::y", ["slow", "schedule_first"]),
         Item("ray.py::x", ["slow", "schedule_first"]),
         Item("c.py::x", ["fast"]),
         Item("c.py::y", ["fast"]),
@@ -95,6 +97,18 @@ def test_files_are_handed_out_by_their_count_of_tests_with_schedule_first_files_
         Item("d.py::x", ["fast"]),
     ]
     order = [i.nodeid for i in schedule(items)]
-    # ray.py first; then by count (c 3, b 2); a and d tie at 1 and keep their collected order; a file stays whole.
-    assert order == ["ray.py::x", "c.py::x", "c.py::y", "c.py::z", "b.py::x", "b.py::y", "a.py::x", "d.py::x"]
+    # The schedule_first files first, fewest tests first (ray 1, sweeps 2); then by count (c 3, b 2); a and d tie at
+    # 1 and keep their collected order; a file stays whole.
+    assert order == [
+        "ray.py::x",
+        "sweeps.py::x",
+        "sweeps.py::y",
+        "c.py::x",
+        "c.py::y",
+        "c.py::z",
+        "b.py::x",
+        "b.py::y",
+        "a.py::x",
+        "d.py::x",
+    ]
     assert schedule(list(reversed(items)))[0].nodeid == "ray.py::x"

@@ -10,7 +10,10 @@ from roboview.tasks.pick_place import PickPlaceEnv
 from roboview.variation.factors import FACTORS, baselines
 from roboview.variation.instances import TaskInstance
 
-pytestmark = pytest.mark.slow
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.schedule_first,  # three sweeps of 48 episodes, ≈ 50 s: never the run's last file (tests/conftest.py, schedule)
+]
 
 
 def sweep(env: PickPlaceEnv) -> tuple[list[bool], list[int]]:

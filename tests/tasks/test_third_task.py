@@ -16,7 +16,10 @@ import textwrap
 import pyarrow.parquet as pq
 import pytest
 
-pytestmark = pytest.mark.slow
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.schedule_first,  # a build, collection and evaluation from the command line, ≈ 30 s: never last (tests/conftest.py)
+]
 
 LIFT_MODULE = textwrap.dedent('''
     """lift: grasp the small object and hold it at least 8 cm above the table."""
