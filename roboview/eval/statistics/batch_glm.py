@@ -50,9 +50,14 @@ def _expit(eta: np.ndarray) -> np.ndarray:
     return np.where(eta >= 0, 1.0, e) / (1.0 + e)
 
 
+def _loglik(k: np.ndarray, n: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """Σ k η − n log(1 + e^η) per table (the first axis): the binomial log-likelihood without Σ log C(n, k)."""
+    terms = k * eta - n * _softplus(eta)
+    return np.einsum("tc->t", terms.reshape(len(terms), -1))
+
+
 def _llf(k: np.ndarray, n: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    eta = a[:, :, None] + b[:, None, :]
-    return np.einsum("tvc->t", k * eta - n * _softplus(eta))
+    return _loglik(k, n, a[:, :, None] + b[:, None, :])
 
 
 def _newton_direction(
@@ -201,12 +206,8 @@ def _design_direction(
     return step, np.abs(score).max(axis=1)
 
 
-def _design_loglik(k: np.ndarray, n: np.ndarray, eta: np.ndarray) -> np.ndarray:
-    return np.einsum("tc->t", k * eta - n * _softplus(eta))
-
-
 def _design_at(scale, k, n, x, beta, step) -> np.ndarray:
-    return _design_loglik(k, n, (beta + scale[:, None] * step) @ x.T)
+    return _loglik(k, n, (beta + scale[:, None] * step) @ x.T)
 
 
 def _irls(k: np.ndarray, n: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -219,7 +220,7 @@ def _irls(k: np.ndarray, n: np.ndarray, x: np.ndarray) -> np.ndarray:
     gram = xw @ x
     gram[:, idx, idx] += RIDGE
     beta = np.linalg.solve(gram, (xw @ np.log(mu / (1 - mu))[..., None]))[..., 0]
-    current = _design_loglik(k, n, beta @ x.T)
+    current = _loglik(k, n, beta @ x.T)
     live = np.arange(len(k))
     for _ in range(ITERATIONS):
         kl, nl, bl = k[live], n[live], beta[live]

@@ -296,14 +296,13 @@ def interaction_lrt(
     if not is_sparse(n[keep], p_add):
         return LRT(observed, int(df), float(stats.chi2.sf(observed, df)), "asymptotic"), draws
 
-    # The bootstrap tables' statistics in one batched solve (`batch_glm.design_llf`, checked against statsmodels'
-    # fits); the observed statistic is compared with them as that solver computes it.
-    def statistic(tables: np.ndarray) -> np.ndarray:
-        nk = n[keep]
-        return np.maximum(0.0, 2.0 * (design_llf(tables, nk, full) - design_llf(tables, nk, additive)))
-
-    reference = float(statistic(k[None, keep])[0])
-    null = statistic(draws[:, keep])
+    # The observed table's and the bootstrap tables' statistics in one batched solve (`batch_glm.design_llf`,
+    # checked against statsmodels' fits): the observed statistic is compared with them as that solver computes it.
+    tables = np.vstack([k[None, keep], draws[:, keep]])
+    statistics = np.maximum(
+        0.0, 2.0 * (design_llf(tables, n[keep], full) - design_llf(tables, n[keep], additive))
+    )
+    reference, null = float(statistics[0]), statistics[1:]
     return LRT(
         observed,
         int(df),
