@@ -3,8 +3,6 @@
 import dataclasses
 import importlib
 import re
-import subprocess
-import sys
 import typing
 from pathlib import Path
 
@@ -12,6 +10,7 @@ import draccus
 import pytest
 
 from roboview.pipelines._console import VERBS
+from tests.helpers import cli
 from tests.helpers.docs import help_run
 
 pytestmark = pytest.mark.slow
@@ -171,19 +170,12 @@ def test_lists_are_written_comma_separated_everywhere():
     cfg = parse(BuildConfig, ["--factorial_colors=red,blue", "--cartesian=[color,shape]"])
     # brackets still read
     assert cfg.factorial_colors == ["red", "blue"] and cfg.cartesian == ["color", "shape"]
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.collect",
-            "--dataset.repo_id=t/x",
-            "--dataset.root=/nonexistent/roboview-test",
-            "--dataset.cameras=left_top,nope",
-        ],
-        capture_output=True,
-        text=True,
+    proc = cli.run(
+        "roboview.pipelines.collect",
+        "--dataset.repo_id=t/x",
+        "--dataset.root=/nonexistent/roboview-test",
+        "--dataset.cameras=left_top,nope",
         timeout=120,
-        cwd=ROOT,
     )
     assert proc.returncode != 0 and "nope" in proc.stderr  # the list was read: its bad entry is named
 
@@ -202,8 +194,6 @@ def test_importing_a_harness_leaves_the_environment_as_it_was():
     imports it, as this file does to read its --help, keeps its own (tests/helpers/cli.py: a test process whose
     import-time variables changed would start every later command-line run from a fresh interpreter)."""
     import os
-
-    from tests.helpers import cli
 
     before = dict(os.environ)
     for name in (*HARNESSES, *STANDALONE):

@@ -24,13 +24,6 @@ def _cli(module: str, *args: str, timeout: int = 120) -> subprocess.CompletedPro
     return cli.run(module, *args, timeout=timeout)
 
 
-def terminal_signals() -> None:
-    """In the child, before exec: Ctrl-C as a terminal's shell leaves it (default action, not blocked), whatever the
-    test process inherited (a test runner's worker may run with SIGINT ignored; exec keeps that)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-
-
 def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_benchmark, tmp_path):
     from roboview.pipelines.evaluate import BenchmarkConfig, EvalConfig, EvaluateConfig, run
     from roboview.policies.types import policy_config
@@ -46,16 +39,7 @@ def test_ctrl_c_during_evaluate_says_what_was_saved_and_a_rerun_resumes(tiny_ben
         f"--output_dir={out}",
     ]
     # Its own process group, signalled as a terminal's Ctrl-C is: the command and its workers all get SIGINT.
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "roboview.pipelines.evaluate", *flags],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-        preexec_fn=terminal_signals,
-        cwd=ROOT,
-        env=ENV,
-    )
+    proc = cli.start("roboview.pipelines.evaluate", *flags, new_session=True)
     journal = out / "episodes.jsonl"
     deadline = time.time() + 300
     while time.time() < deadline and not (journal.exists() and journal.read_text().count("\n") >= 1):
@@ -338,7 +322,7 @@ def test_ctrl_c_while_workers_are_still_starting_prints_no_traceback(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
-        preexec_fn=terminal_signals,
+        preexec_fn=cli.terminal_signals,
         cwd=ROOT,
         env=ENV,
     )

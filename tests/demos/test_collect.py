@@ -4,7 +4,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -96,9 +95,7 @@ def test_every_collected_dataset_has_a_dataset_card(reference):
 
 def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
     root = tmp_path / "ds"
-    cmd = [
-        sys.executable,
-        "-m",
+    proc = cli.start(
         "roboview.pipelines.collect",
         f"--dataset.repo_id={REPO_ID}",
         f"--dataset.root={root}",
@@ -106,8 +103,8 @@ def test_killed_run_resumes_without_loss_or_duplicates(reference, tmp_path):
         "--num_workers=1",
         "--checkpoint_every=1",
         *SMALL,
-    ]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        new_session=True,
+    )
     progress = root / "meta/roboview/progress.json"
     deadline = time.time() + 300
     while time.time() < deadline:

@@ -47,8 +47,14 @@ IMPORT_TIME = (
 _RUN_ENV = dict(os.environ)  # the environment the test run (and so its fork server) started with
 
 
-def _child(module: str, argv: list[str], env: dict[str, str], cwd: str, out: str, err: str) -> None:
+def _child(
+    module: str, argv: list[str], env: dict[str, str], cwd: str, out: str, err: str, new_session: bool
+) -> None:
     """In the forked child: the run's streams, environment, folder and argv, then the module as `__main__`."""
+    if (
+        new_session
+    ):  # a process group of its own (Popen's start_new_session), signalled as a terminal's Ctrl-C is
+        os.setsid()
     for fd, path in ((1, out), (2, err)):
         handle = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         os.dup2(handle, fd)
@@ -60,6 +66,9 @@ def _child(module: str, argv: list[str], env: dict[str, str], cwd: str, out: str
     extra = [cwd, *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]
     sys.path[:0] = [p for p in extra if p not in sys.path]
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(
+        signal.SIG_UNBLOCK, {signal.SIGINT}
+    )  # as a shell leaves it, whatever pytest's worker had
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     # A main process, as in a fresh interpreter: no parent process, and multiprocessing's default start method
     # (fork on Linux; a fork server's child would otherwise default to the fork server, so a library's worker
@@ -93,7 +102,15 @@ class Run:
     """A started command (subprocess.Popen's interface, the part the tests use): pid, poll, wait, send_signal,
     terminate, kill, communicate and returncode; its stdout and stderr are read when it has ended."""
 
-    def __init__(self, module: str, args: list[str], env: dict[str, str], cwd: Path, merge: bool) -> None:
+    def __init__(
+        self,
+        module: str,
+        args: list[str],
+        env: dict[str, str],
+        cwd: Path,
+        merge: bool,
+        new_session: bool = False,
+    ) -> None:
         self.args = [sys.executable, "-m", module, *args]
         self._dir = tempfile.TemporaryDirectory(prefix="roboview-cli-")
         self._out, self._err = Path(self._dir.name) / "stdout", Path(self._dir.name) / "stderr"
@@ -101,7 +118,7 @@ class Run:
         ctx = workers.start_context(())
         err = self._out if merge else self._err
         self._process = ctx.Process(
-            target=_child, args=(module, args, env, str(cwd), str(self._out), str(err))
+            target=_child, args=(module, args, env, str(cwd), str(self._out), str(err), new_session)
         )
         self._process.start()
         self.pid = self._process.pid
@@ -165,16 +182,39 @@ def _needs_fresh(env: Mapping[str, str]) -> bool:
 
 
 def start(
-    module: str, *args: str, env: Mapping[str, str] | None = None, cwd: Path = ROOT, merge: bool = False
+    module: str,
+    *args: str,
+    env: Mapping[str, str] | None = None,
+    cwd: Path = ROOT,
+    merge: bool = False,
+    new_session: bool = False,
 ) -> Run | subprocess.Popen:
     """`python -m module args` started in `cwd` with `env` (default: this process's); `merge` sends stderr to
-    stdout. A fork of the preloaded server, or a fresh interpreter where `env` needs one (see the module's doc)."""
+    stdout; `new_session` gives it a session and process group of its own (`os.killpg(run.pid, sig)` then signals
+    it and its workers, as a terminal's Ctrl-C or a lost machine does). A fork of the preloaded server, or a fresh
+    interpreter where `env` needs one (see the module's doc)."""
     env = dict(os.environ if env is None else env)
     if not _needs_fresh(env):
-        return Run(module, list(args), env, Path(cwd), merge)
+        return Run(module, list(args), env, Path(cwd), merge, new_session)
     command = [sys.executable, "-m", module, *args]
     err = subprocess.STDOUT if merge else subprocess.PIPE
-    return subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=err, text=True)
+    return subprocess.Popen(
+        command,
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=err,
+        text=True,
+        start_new_session=new_session,
+        preexec_fn=terminal_signals if new_session else None,
+    )
+
+
+def terminal_signals() -> None:
+    """In a fresh interpreter's child before exec: SIGINT as a shell leaves it (a runner's worker may ignore or
+    block it, and exec keeps both)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def run(

@@ -19,21 +19,35 @@ from tests.helpers import ROOT
 @functools.cache
 def help_run(module: str) -> subprocess.CompletedProcess:
     """`python -m module --help`, run once per module and in this process (runpy runs the module as `-m` does, at
-    80 columns as in a pipe): its exit code, stdout and stderr. The console scripts themselves run as processes in
-    tests/project/test_architecture.py."""
+    80 columns as in a pipe): its exit code, stdout and stderr."""
+    import runpy
+
+    run = lambda: runpy.run_module(module, run_name="__main__", alter_sys=True)  # noqa: E731
+    return _help_in_process(module, run, [sys.executable, "-m", module, "--help"])
+
+
+def script_help_run(script: Path) -> subprocess.CompletedProcess:
+    """An installed console script's `--help`: the script's own file run in this process as its interpreter runs
+    it (`runpy.run_path` as `__main__`), at 80 columns: its exit code, stdout and stderr."""
+    import runpy
+
+    run = lambda: runpy.run_path(str(script), run_name="__main__")  # noqa: E731
+    return _help_in_process(str(script), run, [str(script), "--help"])
+
+
+def _help_in_process(argv0: str, run, args: list[str]) -> subprocess.CompletedProcess:
     import contextlib
     import io
-    import runpy
     import traceback
     import warnings
 
     out, err, code = io.StringIO(), io.StringIO(), 0
     argv, columns = sys.argv, os.environ.get("COLUMNS")
-    sys.argv, os.environ["COLUMNS"] = [module, "--help"], "80"
+    sys.argv, os.environ["COLUMNS"] = [argv0, "--help"], "80"
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a module imported before, run again as __main__
-            runpy.run_module(module, run_name="__main__", alter_sys=True)
+            run()
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
     except Exception:  # noqa: BLE001  (reported as the process would: a traceback and exit code 1)
@@ -45,9 +59,7 @@ def help_run(module: str) -> subprocess.CompletedProcess:
             os.environ.pop("COLUMNS", None)
         else:
             os.environ["COLUMNS"] = columns
-    return subprocess.CompletedProcess(
-        [sys.executable, "-m", module, "--help"], code, out.getvalue(), err.getvalue()
-    )
+    return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
 
 
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]

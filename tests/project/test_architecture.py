@@ -182,12 +182,16 @@ def test_only_the_expert_is_privileged():
 
 
 def test_console_scripts_are_installed_and_answer_help():
+    """Every verb's installed script answers --help with its flags: each script's file runs in this process as its
+    interpreter runs it, and one runs as the program a user starts (its #! line and all)."""
+    import os
     import subprocess
     import sys
     import tomllib
     from pathlib import Path
 
     from roboview.pipelines._console import VERBS, script_name
+    from tests.helpers.docs import script_help_run
 
     declared = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"][
         "scripts"
@@ -204,5 +208,10 @@ def test_console_scripts_are_installed_and_answer_help():
         ("roboview-verify", "--results"),
         ("roboview-serve-policy", "--port"),
     ):
-        proc = subprocess.run([str(bindir / script), "--help"], capture_output=True, text=True, timeout=120)
+        assert os.access(bindir / script, os.X_OK), script
+        proc = script_help_run(bindir / script)
         assert proc.returncode == 0 and flag in proc.stdout, (script, proc.stderr[-500:])
+    proc = subprocess.run(
+        [str(bindir / "roboview-report"), "--help"], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0 and "--results" in proc.stdout, proc.stderr[-500:]

@@ -138,7 +138,8 @@ def run_local(
                     work = queue.pop()
                     in_flight[pool.submit(list(work))] = work
                 done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-                for future in done:
+                # In submission order, so that one worker's journal reads as its queue did.
+                for future in [f for f in in_flight if f in done]:
                     work = in_flight.pop(future)
                     try:
                         results = future.result()

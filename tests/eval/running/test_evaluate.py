@@ -48,9 +48,7 @@ def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
     ref = tmp_path / "ref"
     evaluate(bench, ref, splits="color,dist_scale", limit=2, repeats=2)
     out = tmp_path / "killed"
-    cmd = [
-        sys.executable,
-        "-m",
+    proc = cli.start(
         "roboview.pipelines.evaluate",
         f"--benchmark.path={bench}",
         "--policy.type=expert",
@@ -59,13 +57,7 @@ def test_interrupted_run_resumes_without_duplicates_or_gaps(bench, tmp_path):
         "--eval.n_repeats=2",
         "--eval.image_size=64",
         f"--output_dir={out}",
-    ]
-    proc = subprocess.Popen(
-        cmd,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-        env=os.environ | {"PYTHONPATH": str(ROOT)},
+        new_session=True,
     )
     journal = out / "episodes.jsonl"
     deadline = time.time() + 300
