@@ -6,8 +6,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -20,6 +18,7 @@ import pytest
 from roboview.benchmark import conformance
 from roboview.benchmark.format import BenchmarkError, instance_from_record, load_benchmark, read_rows
 from roboview.tasks.env import TaskEnv
+from tests.helpers import cli
 
 pytestmark = pytest.mark.slow
 
@@ -193,19 +192,7 @@ def test_an_injected_change_is_different(tiny_benchmark, monkeypatch, change, ki
 def test_softpipe_is_equivalent_with_its_drift_reported(tiny_benchmark):
     """Mesa's other software rasterizer draws edges differently: measured, within the tolerances."""
     env = {**os.environ, "GALLIUM_DRIVER": "softpipe", "MUJOCO_GL": "egl"}
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.verify",
-            f"--benchmark.path={tiny_benchmark}",
-            "--sample=4",
-        ],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=600,
-    )
+    proc = cli.run("roboview.pipelines.verify", f"--benchmark.path={tiny_benchmark}", "--sample=4", env=env)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     last = [line for line in proc.stdout.splitlines() if line.startswith("conformance:")][0]
     assert last.startswith("conformance: equivalent")

@@ -30,14 +30,13 @@ from pathlib import Path
 from roboview.core import workers
 from tests.helpers import ROOT
 
-# Variables that modules the fork server preloads read when imported (rendering backend, thread pools, Mesa's driver;
-# and every HF_* / HUGGINGFACE_* one: folders, endpoint, offline mode): a run that sets them differently gets a fresh
-# interpreter.
+# Variables that modules the fork server preloads read when imported (rendering backend, thread pools; and every
+# HF_* / HUGGINGFACE_* one: folders, endpoint, offline mode): a run that sets them differently gets a fresh
+# interpreter. Mesa's driver choice (GALLIUM_DRIVER, LIBGL_ALWAYS_SOFTWARE) is not among them: Mesa reads it when a
+# process makes its first EGL display, which the fork server, importing only, never does.
 IMPORT_TIME = (
     "MUJOCO_GL",
     "PYOPENGL_PLATFORM",
-    "GALLIUM_DRIVER",
-    "LIBGL_ALWAYS_SOFTWARE",
     "LP_NUM_THREADS",
     "OMP_NUM_THREADS",
     "MKL_NUM_THREADS",

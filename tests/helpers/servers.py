@@ -59,33 +59,39 @@ def stop(proc: cli.Run | subprocess.Popen) -> str:
 
 class LeRobotServer:
     """`python -m lerobot.async_inference.policy_server` on 127.0.0.1:`port` (a free one by default; its logs/ folder
-    and server.log go to `cwd`), returned once it answers."""
+    goes to `cwd`), returned once it answers. `fresh`: a fresh interpreter (what it prints goes to `cwd`/server.log)
+    instead of a fork of the preloaded server (tests/helpers/cli.py), for the tests that kill it mid-run: they expect
+    the killed episode to be lost, and a fork answers again within the lerobot_async client's reconnects (8, from
+    0.25 s), which then carries the episode on with the new server."""
 
-    def __init__(self, cwd: Path, port: int | None = None, timeout_s: float = 120) -> None:
+    def __init__(
+        self, cwd: Path, port: int | None = None, timeout_s: float = 120, fresh: bool = False
+    ) -> None:
         from roboview.policies.lerobot_async_connection import check_reachable
 
         port = port or free_port()
         self.address = f"127.0.0.1:{port}"
         self.log = cwd / "server.log"
-        # A fresh interpreter, not a fork of the preloaded server (tests/helpers/cli.py): the tests that kill it
-        # mid-run expect the killed episode to be lost, and a fork answers again within the lerobot_async client's
-        # reconnects (8, from 0.25 s), which then carries the episode on with the new server.
-        with self.log.open("a") as log:
-            self.proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "lerobot.async_inference.policy_server",
-                    "--host=127.0.0.1",
-                    f"--port={port}",
-                    "--fps=10",
-                    "--inference_latency=0",
-                    "--obs_queue_timeout=2",
-                ],
-                cwd=cwd,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env=os.environ | {"HF_HUB_OFFLINE": "1"},
+        args = [
+            "--host=127.0.0.1",
+            f"--port={port}",
+            "--fps=10",
+            "--inference_latency=0",
+            "--obs_queue_timeout=2",
+        ]
+        if fresh:
+            with self.log.open("a") as log:
+                self.proc = subprocess.Popen(
+                    [sys.executable, "-m", "lerobot.async_inference.policy_server", *args],
+                    cwd=cwd,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    env=os.environ | {"HF_HUB_OFFLINE": "1"},
+                )
+        else:
+            env = os.environ | {"HF_HUB_OFFLINE": "1"}
+            self.proc = cli.start(
+                "lerobot.async_inference.policy_server", *args, cwd=cwd, env=env, merge=True
             )
         deadline = time.time() + timeout_s
         while True:
@@ -95,10 +101,14 @@ class LeRobotServer:
             except ValueError:
                 if self.proc.poll() is not None or time.time() > deadline:
                     self.stop()
-                    raise RuntimeError(
-                        f"policy server did not start: {self.log.read_text()[-2000:]}"
-                    ) from None
+                    raise RuntimeError(f"policy server did not start: {self.printed()[-2000:]}") from None
                 time.sleep(0.3)
+
+    def printed(self) -> str:
+        """What the server printed so far (a fork's output is read once it has ended)."""
+        if isinstance(self.proc, cli.Run):
+            return self.proc.output()[0]
+        return self.log.read_text() if self.log.exists() else ""
 
     def kill(self) -> None:
         self.proc.send_signal(signal.SIGKILL)

@@ -20,7 +20,7 @@ from tests.helpers.servers import LeRobotServer, free_port
 
 pytestmark = [
     pytest.mark.slow,
-    pytest.mark.schedule_first,  # LeRobot's server started from a fresh interpreter per test, ≈ 25 s: never last (tests/conftest.py)
+    pytest.mark.schedule_first,  # a trained checkpoint and LeRobot's server, ≈ 25 s: never last (tests/conftest.py)
 ]
 
 ROW = ["instance_id", "repeat", "episode_seed", "success", "steps", "failure_reason"]

@@ -286,13 +286,7 @@ def test_a_checkpoint_is_found_by_hub_id_in_the_hub_cache(smolvla, tiny_benchmar
     assert pd.read_parquet(tmp_path / "ev" / "episodes.parquet")["policy"].tolist() == ["lerobot:smolvla"]
     provenance = json.loads((tmp_path / "ev" / "provenance.json").read_text())[0]
     assert provenance["checkpoint"]["path"] == str(snapshot.resolve())
-    proc = subprocess.run(
-        [*common, "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env=env,
-        cwd=ROOT,
-    )
+    # An id in no hub cache: refused before any work (a fork of the preloaded server, which reads the default cache).
+    proc = cli.run(*common[2:], "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}")
     assert proc.returncode == 2 and "'org/not-downloaded' is no local folder" in proc.stderr
     assert "not in the hub cache" in proc.stderr and not (tmp_path / "no").exists()

@@ -101,16 +101,23 @@ def check_replay(
 class Replayer:
     """Policies rebuilt from run.json and the workers that re-run their episodes, each kept for every later sample
     that needs the same one: a heavy policy (a checkpoint, a connection) is loaded once per board, not once per
-    bundle or episode."""
+    bundle or episode. An episode of a policy that reproduces its episodes is re-run once: bundles that claim it
+    with the same recorded policy (a copy, a forgery of an honest bundle) are each held to that one re-run."""
 
     def __init__(self) -> None:
         self._policies: dict[str, object] = {}
         self._workers: dict[tuple, object] = {}
+        self._episodes: dict[tuple, dict] = {}
+        self.episodes_run = 0  # episodes re-run so far (a re-run shared by several bundles counts once)
 
     @staticmethod
     def _key(run: dict) -> str:
         keys = ("policy", "policy_options", "policy_path", "policy_name", "control")
         return json.dumps({k: run.get(k) for k in keys}, sort_keys=True, default=str)
+
+    @classmethod
+    def _worker_key(cls, run: dict, task: str, record_media: bool) -> tuple:
+        return cls._key(run), run.get("image_size", 224), run.get("max_steps", 120), task, record_media
 
     def policy(self, run: dict):
         """The policy config run.json records (built once per distinct record)."""
@@ -126,9 +133,9 @@ class Replayer:
         call that needs the same one; `record_media`: keeping frames, paths and actions, as a pair replay does)."""
         from roboview.eval.running.rollout import EvalWorker, WorkerSpec
 
-        image_size, max_steps = run.get("image_size", 224), run.get("max_steps", 120)
-        key = (self._key(run), image_size, max_steps, task, record_media)
+        key = self._worker_key(run, task, record_media)
         if key not in self._workers:
+            _, image_size, max_steps, _, _ = key
             spec = WorkerSpec(policy, image_size, max_steps, record_media=record_media, task=task)
             self._workers[key] = EvalWorker(spec)
         return self._workers[key]
@@ -138,11 +145,18 @@ class Replayer:
         from roboview.eval.running.rollout import WorkItem
 
         items = {i.record["instance_id"]: i for items in bench.splits.values() for i in items}
+        reproducible = bool(getattr(policy, "reproducible", True))
         differ = []
         for row in sample:
-            item = items[row["instance_id"]]
-            worker = self.worker(run, policy, item.instance.task)
-            again = worker.run(WorkItem(item, int(row["repeat"]))).row
+            item, repeat = items[row["instance_id"]], int(row["repeat"])
+            # The instance id names the instance's content: the same id and repeat is the same episode.
+            key = (*self._worker_key(run, item.instance.task, False), row["instance_id"], repeat)
+            again = self._episodes.get(key) if reproducible else None
+            if again is None:
+                again = self.worker(run, policy, item.instance.task).run(WorkItem(item, repeat)).row
+                self.episodes_run += 1
+                if reproducible:
+                    self._episodes[key] = again
             changed = [
                 f"{k} {row.get(k)!r} → {again.get(k)!r}"
                 for k in REPLAYED

@@ -203,6 +203,29 @@ def test_replay_refuses_edited_rows(bundles, tmp_path):
     assert {c.name: c for c in honest.checks}["replay"].passed
 
 
+def test_an_episode_two_bundles_claim_is_re_run_once(bundles, tiny_benchmark):
+    """A board's replayer re-runs an episode once for every bundle that claims it with the same policy: a forgery of
+    an honest bundle is held to the honest bundle's re-runs, and caught by them."""
+    from roboview.benchmark.format import load_benchmark
+    from roboview.eval.verification.replay import Replayer, check_replay
+    from roboview.eval.verification.results import read_table
+
+    table, run = read_table(bundles["expert"])
+    rows, bench, replayer = table.to_pylist()[:3], load_benchmark(tiny_benchmark), Replayer()
+    try:
+        honest, _ = check_replay(rows, bench, run, 3, 0.05, replayer)
+        forged, _ = check_replay(
+            [r | {"success": not r["success"]} for r in rows], bench, run, 3, 0.05, replayer
+        )
+    finally:
+        replayer.close()
+    assert honest.passed and not forged.passed, (honest.detail, forged.detail)
+    assert (
+        "3 of 3 re-run episodes end differently" in forged.detail and "success False → True" in forged.detail
+    )
+    assert replayer.episodes_run == 3
+
+
 def test_published_bundle_dry_run_and_eval_results(bundles, tmp_path, capsys):
     from huggingface_hub import EvalResultEntry, parse_eval_result_entries
 

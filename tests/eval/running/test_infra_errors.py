@@ -487,7 +487,7 @@ def test_an_openpi_server_killed_and_restarted_mid_run(tiny_benchmark, tiny_chec
 
 def test_a_lerobot_policy_server_killed_and_restarted_mid_run(tiny_benchmark, tiny_checkpoint, tmp_path):
     port = _free_port()
-    servers = [LeRobotServer(tmp_path, port)]
+    servers = [LeRobotServer(tmp_path, port, fresh=True)]
     policy = policy_config(
         "lerobot_async",
         server=servers[0].address,
@@ -498,7 +498,7 @@ def test_a_lerobot_policy_server_killed_and_restarted_mid_run(tiny_benchmark, ti
     cfg = _cfg(tiny_benchmark, tmp_path / "ev", policy, splits="color,camera_pose", max_steps=6, retries=0)
     try:
         errors, _ = _kill_and_restart_mid_run(
-            cfg, servers[0].kill, lambda: servers.append(LeRobotServer(tmp_path, port))
+            cfg, servers[0].kill, lambda: servers.append(LeRobotServer(tmp_path, port, fresh=True))
         )
         _check_interrupted_then_rerun(cfg, errors, f"LeRobot policy server at 127.0.0.1:{port}", tmp_path)
     finally:
