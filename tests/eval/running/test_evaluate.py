@@ -376,9 +376,14 @@ def test_contexts_sample_keeps_every_value_and_the_policy_name_labels_rows(bench
         EvalConfig(contexts=-1)
 
 
-def _children(pid: int) -> set[int]:
-    out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
-    return {int(x) for x in out.split()}
+def _descendants(pid: int) -> set[int]:
+    """Every process under `pid`: its fork server and the workers that server forked, among others."""
+    import psutil
+
+    try:
+        return {p.pid for p in psutil.Process(pid).children(recursive=True)}
+    except psutil.NoSuchProcess:
+        return set()
 
 
 def _alive(pid: int) -> bool:
@@ -390,29 +395,23 @@ def _alive(pid: int) -> bool:
 
 def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
     # A SIGKILLed evaluation used to leave its spawned workers (≈ 640 MB each) idle for good.
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "roboview.pipelines.evaluate",
-            f"--benchmark.path={bench}",
-            "--policy.type=expert",
-            "--eval.image_size=64",
-            "--eval.num_workers=2",
-            f"--output_dir={tmp_path / 'ev'}",
-        ],
-        env=os.environ | {"PYTHONPATH": str(ROOT)},
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
+    proc = cli.start(
+        "roboview.pipelines.evaluate",
+        f"--benchmark.path={bench}",
+        "--policy.type=expert",
+        "--eval.image_size=64",
+        "--eval.num_workers=2",
+        f"--output_dir={tmp_path / 'ev'}",
+        new_session=True,
     )
+    workers: set[int] = set()
     try:
         deadline = time.time() + 120
         journal = tmp_path / "ev" / "episodes.jsonl"
         while time.time() < deadline and not (journal.exists() and journal.stat().st_size):
             time.sleep(0.5)  # an episode finished: the workers are up
-        workers = _children(proc.pid)
-        assert len(workers) >= 2, "the pool never started"
+        workers = _descendants(proc.pid)
+        assert len(workers) >= 3, "the pool never started"  # its fork server and two workers
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         deadline = time.time() + 30
@@ -420,8 +419,9 @@ def test_workers_exit_when_the_parent_is_killed(bench, tmp_path):
             time.sleep(0.5)
         assert not [w for w in workers if _alive(w)], "workers outlived their parent"
     finally:
-        for w in _children(proc.pid) if proc.poll() is None else ():
-            os.kill(w, signal.SIGKILL)
+        for w in workers | (_descendants(proc.pid) if proc.poll() is None else set()):
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
         if proc.poll() is None:
             proc.kill()
 
