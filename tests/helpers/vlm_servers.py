@@ -24,6 +24,9 @@ class ScriptedServer:
         self.active = 0
         self.max_active = 0
         self.delay_s = 0.0
+        # Set: every scripted status says when to try again (`retry-after-ms`, as an overloaded endpoint does); the
+        # openai client then waits that long instead of its own backoff.
+        self.retry_after_ms: int | None = None
         self._lock = threading.Lock()
         self.server = ThreadingHTTPServer(("127.0.0.1", 0), self._handler())
         self.server.daemon_threads = True
@@ -46,6 +49,8 @@ class ScriptedServer:
             def _send(self, status, body):
                 data = json.dumps(body).encode()
                 self.send_response(status)
+                if status >= 400 and outer.retry_after_ms is not None:
+                    self.send_header("retry-after-ms", str(outer.retry_after_ms))
                 self.send_header("Content-Type", "application/json")
                 self.send_header("Content-Length", str(len(data)))
                 self.end_headers()

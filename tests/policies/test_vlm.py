@@ -304,6 +304,7 @@ def test_a_misbehaving_server_never_crashes_an_evaluation_and_resume_reasks_noth
     # Episode by episode (one worker, in order): prose twice, a refusal, a 500 storm, then answers.
     script = [("text", "no"), ("text", "no"), ("refusal", "nope"), *[("status", 500)] * 9]
     s = ScriptedServer(ClassicCVModel(), script)
+    s.retry_after_ms = 1  # what the storm is called matters here, not how long the client waits between tries
     try:
 
         def run(out):
