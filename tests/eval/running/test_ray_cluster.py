@@ -41,9 +41,9 @@ ARGS = [
 class Cluster(LocalCluster):
     """LocalCluster, skipping the test with the reason where Ray cannot start the nodes here."""
 
-    def __init__(self, tmp: Path, workers: int = 1) -> None:
+    def __init__(self, tmp: Path, workers: int = 1, head_cpus: int = 1) -> None:
         try:
-            super().__init__(workers=workers, cpus=1, scratch=tmp)
+            super().__init__(workers=workers, cpus=1, head_cpus=head_cpus, scratch=tmp)
         except TimeoutError as exc:
             pytest.skip(str(exc))
 
@@ -136,7 +136,7 @@ def test_two_nodes_share_the_work_a_lost_worker_node_costs_its_episodes_in_fligh
     assert "stopped answering" in stopped and "rerun the same command" in stopped, stopped[-3000:]
     written = _journal_rows(resumed)
     assert 3 <= written < len(reference)
-    fresh = Cluster(tmp_path, workers=1)
+    fresh = Cluster(tmp_path, workers=0, head_cpus=2)  # a fresh head alone, with the cores of both nodes
     try:
         proc = _evaluate(tiny_benchmark, resumed, fresh)
         output, _ = proc.communicate(timeout=600)
