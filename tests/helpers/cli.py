@@ -50,9 +50,8 @@ def _child(
     module: str, argv: list[str], env: dict[str, str], cwd: str, out: str, err: str, new_session: bool
 ) -> None:
     """In the forked child: the run's streams, environment, folder and argv, then the module as `__main__`."""
-    if (
-        new_session
-    ):  # a process group of its own (Popen's start_new_session), signalled as a terminal's Ctrl-C is
+    # A process group of its own (Popen's start_new_session), signalled as a terminal's Ctrl-C is.
+    if new_session:
         os.setsid()
     for fd, path in ((1, out), (2, err)):
         handle = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
@@ -64,10 +63,9 @@ def _child(
     # `python -m` puts the working folder first on the path, then PYTHONPATH's folders.
     extra = [cwd, *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]
     sys.path[:0] = [p for p in extra if p not in sys.path]
+    # SIGINT raises KeyboardInterrupt and is not blocked, as a shell leaves it, whatever pytest's worker had.
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.pthread_sigmask(
-        signal.SIG_UNBLOCK, {signal.SIGINT}
-    )  # as a shell leaves it, whatever pytest's worker had
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     # A main process, as in a fresh interpreter: no parent process, and multiprocessing's default start method
     # (fork on Linux; a fork server's child would otherwise default to the fork server, so a library's worker

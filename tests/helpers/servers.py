@@ -79,6 +79,7 @@ class LeRobotServer:
             "--inference_latency=0",
             "--obs_queue_timeout=2",
         ]
+        env = os.environ | {"HF_HUB_OFFLINE": "1"}
         if fresh:
             with self.log.open("a") as log:
                 self.proc = subprocess.Popen(
@@ -86,10 +87,9 @@ class LeRobotServer:
                     cwd=cwd,
                     stdout=log,
                     stderr=subprocess.STDOUT,
-                    env=os.environ | {"HF_HUB_OFFLINE": "1"},
+                    env=env,
                 )
         else:
-            env = os.environ | {"HF_HUB_OFFLINE": "1"}
             self.proc = cli.start(
                 "lerobot.async_inference.policy_server", *args, cwd=cwd, env=env, merge=True
             )
