@@ -134,6 +134,10 @@ def _preload_for_the_run() -> None:
         "lerobot.scripts.lerobot_train",
         "roboview.pipelines.evaluate",
         "roboview.pipelines.serve_policy",
+        # Imported where they are first used: by the VLM agents' and the fairness screen's workers (the openai
+        # client), by each conformance check (the GL driver's strings); once here instead.
+        "openai",
+        "OpenGL.GL",
     )
 
 

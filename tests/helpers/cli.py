@@ -19,6 +19,7 @@ import multiprocessing
 import os
 import runpy
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -73,6 +74,7 @@ def _child(
     multiprocessing.current_process().name = "MainProcess"
     mp_process._parent_process = None
     multiprocessing.set_start_method(None, force=True)
+    _start_fork_server()
     sys.argv = [module, *argv]
     # As in a fresh `python -m`, the module itself is not imported yet (its imports are: that is the saving).
     sys.modules.pop(module, None)
@@ -93,6 +95,45 @@ def _child(
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code or 0)
+
+
+def _start_fork_server() -> None:
+    """The run's own fork server (roboview.core.workers), started now as a fork of this process instead of from a
+    fresh interpreter when the run's first pool needs it.
+
+    multiprocessing starts a fork server by running `python -c "from multiprocessing.forkserver import main; ..."`
+    with the listening socket and the "alive" pipe's read end, which then imports its preloads: seconds of CPU for
+    a policy's libraries, once per command-line run that starts a pool. This process has imported them all already
+    and, just forked from the test process's fork server, runs one thread and holds no GL context: a fork of it now
+    is that server, its modules already there. Its descriptors are closed but for stdin, stdout, stderr, the socket
+    and the pipe (what the fresh interpreter inherits), and it serves the run's pools as multiprocessing's own
+    `main` until the last of its clients exits; the run's workers are its children, as they would be."""
+    from multiprocessing import connection, forkserver, resource_tracker
+
+    server = forkserver._forkserver
+    resource_tracker.ensure_running()
+    listener = socket.socket(socket.AF_UNIX)
+    address = connection.arbitrary_address("AF_UNIX")
+    listener.bind(address)
+    os.chmod(address, 0o600)
+    listener.listen()
+    alive_r, alive_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        keep = {0, 1, 2, listener.fileno(), alive_r}
+        for fd in map(int, os.listdir("/proc/self/fd")):
+            if fd not in keep:
+                try:
+                    os.close(fd)
+                except OSError:  # the descriptor listdir read /proc/self/fd with, already gone
+                    pass
+        try:
+            forkserver.main(listener.fileno(), alive_r, [])
+        finally:
+            os._exit(0)
+    listener.close()
+    os.close(alive_r)
+    server._forkserver_address, server._forkserver_alive_fd, server._forkserver_pid = address, alive_w, pid
 
 
 class Run:

@@ -3,8 +3,6 @@ then evaluated through `roboview.pipelines.evaluate --policy.type=lerobot` and t
 the instruction reaches the tokenizer, the four cameras the image inputs, the 8-D state the (padded) state."""
 
 import json
-import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -24,7 +22,6 @@ pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-ENV = os.environ | {"PYTHONPATH": str(ROOT)}
 
 
 @pytest.fixture(scope="module")
@@ -253,17 +250,21 @@ def test_the_semantic_grounding_layer_rewrites_what_smolvla_reads(smolvla, tiny_
 
 def test_a_checkpoint_is_found_by_hub_id_in_the_hub_cache(smolvla, tiny_benchmark, tmp_path):
     import shutil
+    import uuid
+
+    from huggingface_hub import constants
 
     checkpoint, _ = smolvla
-    cache = tmp_path / "hub"
-    snapshot = cache / "models--org--tiny-smolvla" / "snapshots" / ("ab" * 20)
+    # The test run's own hub cache (under its cache folder, tests/conftest.py), the one a command-line run reads;
+    # a repo name of this test's alone.
+    repo = f"org/tiny-smolvla-{uuid.uuid4().hex[:8]}"
+    folder = Path(constants.HF_HUB_CACHE) / f"models--{repo.replace('/', '--')}"
+    snapshot = folder / "snapshots" / ("ab" * 20)
     shutil.copytree(checkpoint, snapshot)
-    (cache / "models--org--tiny-smolvla" / "refs").mkdir()
-    (cache / "models--org--tiny-smolvla" / "refs" / "main").write_text("ab" * 20)
-    env = ENV | {"HF_HUB_CACHE": str(cache), "HF_HUB_OFFLINE": "1"}
+    (folder / "refs").mkdir()
+    (folder / "refs" / "main").write_text("ab" * 20)
+    assert constants.HF_HUB_OFFLINE
     common = [
-        sys.executable,
-        "-m",
         "roboview.pipelines.evaluate",
         f"--benchmark.path={tiny_benchmark}",
         "--policy.type=lerobot",
@@ -274,19 +275,15 @@ def test_a_checkpoint_is_found_by_hub_id_in_the_hub_cache(smolvla, tiny_benchmar
         "--eval.max_steps=3",
         "--eval.num_workers=1",
     ]
-    proc = subprocess.run(
-        [*common, "--policy.path=org/tiny-smolvla", f"--output_dir={tmp_path / 'ev'}"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env=env,
-        cwd=ROOT,
-    )
+    try:
+        proc = cli.run(*common, f"--policy.path={repo}", f"--output_dir={tmp_path / 'ev'}")
+    finally:
+        shutil.rmtree(folder)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert pd.read_parquet(tmp_path / "ev" / "episodes.parquet")["policy"].tolist() == ["lerobot:smolvla"]
     provenance = json.loads((tmp_path / "ev" / "provenance.json").read_text())[0]
     assert provenance["checkpoint"]["path"] == str(snapshot.resolve())
-    # An id in no hub cache: refused before any work (a fork of the preloaded server, which reads the default cache).
-    proc = cli.run(*common[2:], "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}")
+    # An id in no hub cache: refused before any work.
+    proc = cli.run(*common, "--policy.path=org/not-downloaded", f"--output_dir={tmp_path / 'no'}")
     assert proc.returncode == 2 and "'org/not-downloaded' is no local folder" in proc.stderr
     assert "not in the hub cache" in proc.stderr and not (tmp_path / "no").exists()
