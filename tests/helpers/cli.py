@@ -5,7 +5,9 @@ A fresh interpreter spends seconds importing torch, LeRobot's policies and RoboV
 (10 CPU-seconds for `import lerobot.policies` on a 2-core machine). Here each run is a child of the test process's
 fork server (`roboview.core.workers`, preloaded by tests/conftest.py): a real process of its own, with its own
 argv, environment, working folder, stdout and stderr (files, read back when it ends), exit status and signals, that
-runs the module with `runpy` as `__main__` and its exit handlers before it exits.
+runs the module with `runpy` as `__main__` and its exit handlers before it exits. A run's own worker pools get
+their fork server the same way: a fork of the run made before the module starts (`_start_fork_server`), not a fresh
+interpreter importing the policy's libraries again.
 
 What a fork cannot change is what the preloaded modules read when they were imported. A run whose environment
 differs from the test run's in a variable read at import time (`IMPORT_TIME`), or that puts a folder on PYTHONPATH

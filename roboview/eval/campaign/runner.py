@@ -203,7 +203,7 @@ def run(cfg: EvaluateConfig) -> EvaluateResult:
     except KeyboardInterrupt as exc:  # Ctrl-C: cli_main ends with this line instead of a traceback
         from roboview.core.cli import interrupted
 
-        n = len(store.rows)
+        n = store.saved()
         raise interrupted(
             exc, f"{n} episode{'s' * (n != 1)} saved in {cfg.output_dir}; rerun the same command to resume"
         ) from exc

@@ -128,6 +128,13 @@ class EpisodeStore:
         os.fsync(self._journal.fileno())
         return len(new)
 
+    def saved(self) -> int:
+        """Episodes in the journal on disk now, its buffer flushed first: what a rerun resumes from. A Ctrl-C can land
+        inside `add`, between keeping a row and writing it, so `rows` may hold one more than the disk."""
+        self._journal.flush()
+        os.fsync(self._journal.fileno())
+        return len(read_journal(self.out))
+
     def done(self, key: tuple[str, int]) -> bool:
         """The pair has a row that counts (one ended by infrastructure is run again)."""
         return key in self.rows and is_counted(self.rows[key])

@@ -504,3 +504,16 @@ def test_a_lerobot_policy_server_killed_and_restarted_mid_run(tiny_benchmark, ti
     finally:
         for server in servers:
             server.stop()
+
+
+@pytest.mark.fast
+def test_an_interrupted_store_counts_the_episodes_on_disk(tmp_path):
+    """A Ctrl-C can land inside `EpisodeStore.add`, between keeping a row and journalling it: what the interrupted
+    message counts is the journal on disk (flushed first), what a rerun resumes from."""
+    store = EpisodeStore(tmp_path / "ev", {"benchmark_version": "v", "policy": "still"})
+    row = {"split": "color", "instance_id": "a", "repeat": 0, "success": True, "status": "ok"}
+    store.add(row)
+    store.rows[("b", 0)] = {**row, "instance_id": "b"}  # kept, the interrupt before its line was written
+    store._journal.write(json.dumps({**row, "instance_id": "c"}) + "\n")  # written, not yet flushed
+    assert len(store.rows) == 2 and store.saved() == 2
+    assert [r["instance_id"] for r in read_journal(tmp_path / "ev")] == ["a", "c"]
