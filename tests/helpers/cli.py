@@ -99,6 +99,10 @@ def _child(
         os._exit(code or 0)
 
 
+# multiprocessing.forkserver.main's parameters, the ones `_start_fork_server` passes (Python 3.12's).
+SERVER_MAIN = ("listener_fd", "alive_r", "preload", "main_path", "sys_path")
+
+
 def _start_fork_server() -> None:
     """The run's own fork server (roboview.core.workers), started now as a fork of this process instead of from a
     fresh interpreter when the run's first pool needs it.
@@ -110,8 +114,12 @@ def _start_fork_server() -> None:
     is that server, its modules already there. Its descriptors are closed but for stdin, stdout, stderr, the socket
     and the pipe (what the fresh interpreter inherits), and it serves the run's pools as multiprocessing's own
     `main` until the last of its clients exits; the run's workers are its children, as they would be."""
+    import inspect
     from multiprocessing import connection, forkserver, resource_tracker
 
+    known = list(inspect.signature(forkserver.main).parameters) == [*SERVER_MAIN]
+    if not known or not os.path.isdir("/proc/self/fd"):
+        return  # another multiprocessing (its server takes more, e.g. an auth key) or no /proc: it starts its own
     server = forkserver._forkserver
     resource_tracker.ensure_running()
     listener = socket.socket(socket.AF_UNIX)
