@@ -107,7 +107,7 @@ def run(cfg: LiberoVsLeRobotConfig) -> dict:
             str(bin_dir / "roboview-evaluate"),
             f"--benchmark.path={cfg.benchmark.path}",
             "--benchmark.splits=libero_color",
-            "--benchmark.values=red",
+            "--benchmark.values=original",
             f"--eval.limit={cfg.episodes}",
             "--policy.type=lerobot",
             f"--policy.path={cfg.checkpoint}",

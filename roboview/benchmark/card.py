@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from roboview.variation.factors import DEFAULT_TASK
+from roboview.variation.factors import DEFAULT_TASK, baselines
 from roboview.variation.instances import split_task
 
 
@@ -153,12 +153,15 @@ Total accepted: {total}.
 
 def _build_section(suite: dict) -> str:
     """How the instances were built: the SVGF preset, its union mode and splits, the ids and seeds."""
+    # The baselines in the world of the suite's first task (LIBERO's and Meta-World's color: `original`).
+    base = baselines((suite.get("tasks") or [DEFAULT_TASK])[0])
     return f"""## How the instances were built
 
 Structured Variant-Generation Framework with the `{suite["preset"]}` preset: union mode
 `{suite["union_mode"]}` for the generalization context space C_Gen (Structured Union over initial
 position × shape × instruction), each visual split V_i × C_Gen(V_i) with every other visual factor
-at its baseline (color red, camera pose original, Euler 0,0, distance 0); factorial split
+at its baseline (color {base["color"]}, camera pose {base["camera_pose"]}, Euler {base["camera_euler"]}, \
+distance {base["dist_scale"]}); factorial split
 color × camera_pose over colors {", ".join(suite["factorial_colors"])} in the baseline context c*.
 Extra Cartesian splits: {suite["cartesian"] or "none"}. Value subsets: {suite["value_subsets"] or "none (full factor sets)"}.
 `instance_id` is the first 16 hex digits of SHA-256 over the canonical JSON of the instance's

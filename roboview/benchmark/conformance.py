@@ -37,7 +37,13 @@ from PIL import Image
 from scipy import ndimage
 
 from roboview.benchmark.format import CONFORMANCE as FOLDER
-from roboview.benchmark.format import REFERENCE, Benchmark, BenchmarkError, instance_from_record
+from roboview.benchmark.format import (
+    REFERENCE,
+    Benchmark,
+    BenchmarkError,
+    benchmark_format,
+    instance_from_record,
+)
 from roboview.core import files
 from roboview.core.files import files_sha256
 from roboview.tasks.world import load_world
@@ -350,10 +356,12 @@ def check(
     tol = tolerances or Tolerances(**reference["tolerances"])
     envs = envs or _Envs(reference["image_size"])
     checks = []
+    # A format-4 LIBERO row's `red` baseline is rendered as it was built: the object's own texture (`original`).
+    fmt = benchmark_format(root)
     try:
         for entry in reference["instances"]:
             iid = entry["instance_id"]
-            instance = instance_from_record(entry)
+            instance = instance_from_record(entry, fmt)
             ref_state = reference["physics"].get(iid)
             steps = reference["rollout_steps"] if ref_state is not None else 0
             images, state = observe(*envs(instance.task), instance, steps)

@@ -17,6 +17,11 @@ Identity: every cell of every table is hashed (`content_checksums`); a table's h
 hashes, and the benchmark version derives from every table's hash and the conformance reference. Loading a
 split recomputes its hashes and refuses a table edited after the build, naming the row and the column; each
 row must also rebuild into an instance whose id, value, context and seed are the stored ones.
+
+Baseline labels: from format 5 a factor whose baseline is its world's own look is stored under the world's label
+(LIBERO's and Meta-World's color `original`; red there is a red re-skin). A format-4 benchmark, built when that
+baseline was stored as the registered value (`red`), reads as its build meant it: in such a task a row's registered
+baseline becomes the label (`labelled`), under the id it was published with.
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ from roboview.benchmark.protocols import Protocol, declared
 from roboview.core.files import files_sha256
 from roboview.core.folders import folder_problem
 from roboview.tasks.repetition import SEED_ONLY, Repetition, repetition_of
-from roboview.variation.factors import DEFAULT_TASK, FACTORS, factor_names, record_columns
+from roboview.variation.factors import DEFAULT_TASK, FACTORS, baseline_of, factor_names, record_columns
 from roboview.variation.instances import TaskInstance, canonical_json
 
 if TYPE_CHECKING:
@@ -47,11 +52,14 @@ CHECKSUMS = "checksums.json"
 # The conformance reference (roboview.benchmark.conformance writes and checks it).
 CONFORMANCE = "conformance"
 REFERENCE = "reference.json"
-# 4: content hashes over every cell, the simulation stack and the conformance reference. 3: rows store `task`
-# and `context_subspace`. 2: `context_subspace` recovered by hashing. 1: the `seed` column hashed instance_id.
-# Formats before 4 carry no content hashes, so an edit would pass: they are not read.
-FORMAT_VERSION = 4
-READABLE_FORMATS = (4,)
+# 5: a factor whose baseline is its world's own look is stored under the world's label (LIBERO's and Meta-World's
+# color `original`), so their `red` is a red re-skin. 4: content hashes over every cell, the simulation stack and the
+# conformance reference; read with the registered baseline it stored there (`red`) as the label (`labelled`).
+# 3: rows store `task` and `context_subspace`. 2: `context_subspace` recovered by hashing. 1: the `seed` column
+# hashed instance_id. Formats before 4 carry no content hashes, so an edit would pass: they are not read.
+FORMAT_VERSION = 5
+READABLE_FORMATS = (4, 5)
+LABELLED_FORMAT = 5
 # Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
 NOT_IN_EPISODES = ("fairness", "preview")
 
@@ -292,6 +300,9 @@ class BenchmarkItem:
     record: dict  # the row's columns but fairness and preview: they travel into every episode row
     # What repeat r of the instance runs (roboview.tasks.repetition): the seed alone, or LIBERO's next init state.
     repetition: Repetition = SEED_ONLY
+    # The record as its build wrote it, where this version reads it otherwise (a format-4 row whose world now labels
+    # its baseline: `red` there read as `original`; `labelled`); None: `record` is as written.
+    as_built: dict | None = None
 
     def episode(self, repeat: int) -> TaskInstance:
         """The instance the env is reset with for repeat `repeat` (the row is recorded under `record`)."""
@@ -343,10 +354,36 @@ def read_manifest(root: Path) -> dict:
 DERIVED = ("value", "context_id", "seed", "task")
 
 
-def instance_from_record(record: dict) -> TaskInstance:
+def benchmark_format(root: Path) -> int | None:
+    """The format benchmark.json at `root` declares (None: none)."""
+    return json.loads((Path(root) / MANIFEST).read_text()).get("format")
+
+
+def labelled(record: dict) -> dict:
+    """A row of a benchmark written before worlds labelled their baselines (format 4) as this version reads it: where
+    the row's task's world labels a factor's baseline (`baseline_of`: LIBERO's and Meta-World's color `original`), the
+    registered baseline the row stored there (`red`, which then meant the object's own look) becomes the label, in the
+    factor's column, in `value` and in the factor's record columns (`color_hex`…). Any other row: itself."""
+    task = record.get("task") or DEFAULT_TASK
+    changed = {
+        name: baseline_of(name, task)
+        for name in factor_names(task)
+        if baseline_of(name, task) != FACTORS[name].baseline and record.get(name) == FACTORS[name].baseline
+    }
+    if not changed:
+        return record
+    out = {**record, **changed}
+    if "value" in record:
+        out["value"] = "|".join(out[name] for name in record["factor"].split("|"))
+    extra = record_columns(changed)
+    return out | {name: value for name, value in extra.items() if name in record}
+
+
+def instance_from_record(record: dict, fmt: int | None = FORMAT_VERSION) -> TaskInstance:
     """Rebuild the instance; its id, value, context and seed must reproduce the stored ones (else the row was
     edited: a `value` that names another color, a `context_id` or `seed` that leaves its context's common random
-    numbers)."""
+    numbers). `fmt`: the benchmark's format; a format-4 row whose world labels a baseline it stored as the registered
+    value is rebuilt at the label (`labelled`), under the id it was published with."""
     task = record.get("task") or DEFAULT_TASK
     factors = {name: record[name] for name in factor_names(task) if name in record}
     try:
@@ -370,6 +407,16 @@ def instance_from_record(record: dict) -> TaskInstance:
                 f"{record[column]!r} but the instance's parameters give {getattr(instance, column)!r}; "
                 "the row was edited after it was built: rebuild it with roboview.pipelines.build_benchmark"
             )
+    if fmt is not None and fmt < LABELLED_FORMAT and (read := labelled(record)) is not record:
+        meant = TaskInstance(
+            instance.split,
+            instance.varied,
+            {name: read[name] for name, _ in instance.factors},
+            instance.context_subspace,
+            instance.task,
+        )
+        object.__setattr__(meant, "instance_id", record["instance_id"])  # the id it was published with
+        return meant
     return instance
 
 
@@ -394,15 +441,18 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
         )
     out: dict[str, list[BenchmarkItem]] = {}
     rules: dict[str, Repetition] = {}
+    fmt = manifest.get("format")
     for split in chosen:
         rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
         out[split] = []
         for row in rows:
-            instance = instance_from_record(row)
+            instance = instance_from_record(row, fmt)
             if instance.task not in rules:
                 rules[instance.task] = repetition_of(instance.task, manifest.get("suite"))
-            record = {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
-            out[split].append(BenchmarkItem(instance, record, rules[instance.task]))
+            written = {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
+            record = labelled(written) if fmt < LABELLED_FORMAT else written
+            built = written if record is not written else None
+            out[split].append(BenchmarkItem(instance, record, rules[instance.task], built))
     return Benchmark(root, manifest["benchmark_version"], out, declared(manifest, available), manifest)
 
 

@@ -15,7 +15,8 @@ init state 0; a repeat runs the next init state, as in the `libero` task) and `l
   names the instruction as a second change of every value.
 
 **Visual factors**: LIBERO-plus's five camera sub-factors (`view_*`, roboview.variation.factors.view) and the
-`libero` task's own (color, lighting…), applied the same way.
+`libero` task's own (color, lighting…), applied the same way, with LIBERO's world's baseline labels (color
+`original`: the object's own texture).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from dataclasses import replace
 from roboview.libero.plus import SHORT, SUB_FACTORS, TASK, View, instruction_of, variant_name
 from roboview.libero.suites import SUITES
 from roboview.libero.task import (
+    BASELINE_LABELS,
     LIBERO_MAX_STEPS,
     N_INIT_STATES,
     LiberoTaskEnv,
@@ -33,10 +35,12 @@ from roboview.libero.task import (
 )
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.presets import register_preset
-from roboview.variation.factors import Factor, register_factor
+from roboview.variation.factors import Factor, register_baseline_labels, register_factor
 from roboview.variation.instances import SuiteConfig
 
 INSTRUCTION_MODES = ("libero", "liberoplus")
+# LIBERO's world: its baselines are LIBERO's own look (color `original`), as in the `libero` task.
+register_baseline_labels(TASK, BASELINE_LABELS)
 
 LIBEROPLUS_TASK = register_factor(
     Factor(
@@ -88,7 +92,7 @@ class LiberoPlusTaskEnv(LiberoTaskEnv):
         return baseline_liberoplus_instance()
 
     def appliers(self, values: dict[str, str]) -> list:
-        return appliers(values, always_view=True)
+        return appliers(values, always_view=True, task=TASK)
 
     def instruction_of(self, instance, world) -> str:
         if instance.get("liberoplus_instruction") == "libero":

@@ -18,7 +18,8 @@ unchanged:
 
 - `color`: the task's target object (LIBERO's `obj_of_interest[0]`) re-skinned a solid CSS color (its texture
   replaced: a tint on LIBERO's dark textures changes ~0.6 % of the agentview pixels and is barely visible). The
-  baseline `red` is the object's own texture.
+  baseline is the object's own texture, named `original` (the world's baseline label); every CSS color, red
+  included, is a re-skin.
 - `camera_pose` (orbital poses of `agentview` around the workspace), `camera_euler`, `dist_scale`: the `agentview`
   camera only; the wrist camera moves with the hand and is never perturbed.
 - `lighting`: every light's diffuse level (dim 0.45×, bright 1.6×) and, away from `top`, its direction.
@@ -50,7 +51,7 @@ from roboview.sim.cameras import CameraPose, camera_pose_of
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
-from roboview.variation.factors import Factor, register_factor
+from roboview.variation.factors import Factor, register_baseline_labels, register_factor
 
 if TYPE_CHECKING:
     from roboview.variation.instances import TaskInstance
@@ -76,6 +77,8 @@ CONTROL = "ee_delta"
 N_INIT_STATES = 50
 # The factors LIBERO's scenes cannot take (an instance setting one away from its baseline is refused).
 NOT_APPLICABLE = ("distractors", "object_size")
+# The baselines that are LIBERO's own look, by name: the object's own texture is `original`, not red.
+BASELINE_LABELS = {"color": "original"}
 
 register_world(
     World(
@@ -97,8 +100,10 @@ register_world(
         install="make install-libero",
         wing=__package__,  # roboview.libero
         not_applicable=NOT_APPLICABLE,
+        baseline_labels=BASELINE_LABELS,
     )
 )
+register_baseline_labels(TASK, BASELINE_LABELS)
 # The `{"motors": [...]}` names LeRobot-format LIBERO datasets give the state and the action.
 STATE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper", "gripper")
 ACTION_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "gripper")
@@ -210,7 +215,7 @@ class LiberoTaskEnv(WorldEnv):
 
     def appliers(self, values: dict[str, str]) -> list:
         """The LIBERO appliers of an instance's visual factor values."""
-        return appliers(values)
+        return appliers(values, task=self.task)
 
     def instruction_of(self, instance, world) -> str:
         """What the policy is told: LIBERO's own instruction of the task."""
@@ -328,8 +333,9 @@ class LiberoTaskEnv(WorldEnv):
             self.libero_world = None
 
 
-def appliers(values: dict[str, str], always_view: bool = False) -> list:
-    """LIBERO's appliers for an instance's visual factor values (nothing for a value at its baseline)."""
+def appliers(values: dict[str, str], always_view: bool = False, task: str = TASK) -> list:
+    """LIBERO's appliers for an instance's visual factor values (nothing for a value at its baseline in `task`'s
+    world: color `original` is the object's own texture, `red` a red re-skin)."""
     from roboview.libero import factors as lf
     from roboview.libero.plus import SUB_FACTORS, LiberoPlusView, View
     from roboview.variation.colors import get_color
@@ -349,7 +355,7 @@ def appliers(values: dict[str, str], always_view: bool = False) -> list:
     # pose); otherwise only when one of them is set.
     view = View.of(values)
     rest = {k: v for k, v in values.items() if k not in SUB_FACTORS}
-    out = visual_appliers(rest, make, "LIBERO")
+    out = visual_appliers(rest, make, "LIBERO", task)
     return [LiberoPlusView(view), *out] if always_view or view.changes else out
 
 

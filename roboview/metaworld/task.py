@@ -16,8 +16,9 @@ effort (+1 closes). **Success**: Meta-World's `info["success"]`, after every ste
 (Meta-World's `max_path_length`; lerobot-eval's budget).
 
 **Visual factors** (`roboview.metaworld.factors` says how), every baseline being Meta-World's scene unchanged:
-`color` (the task's object, `OBJECTS`, re-skinned), `camera_pose`, `camera_euler`, `dist_scale` (corner2),
-`lighting`, `table_texture`. `distractors` and `object_size` do not apply: an instance setting them is refused.
+`color` (the task's object, `OBJECTS`, re-skinned a CSS color, red included; its baseline, the object's own look, is
+named `original`), `camera_pose`, `camera_euler`, `dist_scale` (corner2), `lighting`, `table_texture`. `distractors`
+and `object_size` do not apply: an instance setting them is refused.
 
 **Expert.** Meta-World's own scripted policy for the task (`metaworld.policies`, as LeRobot maps them), reading the
 39-d state.
@@ -36,7 +37,7 @@ from roboview.sim.cameras import CameraPose, camera_pose_of
 from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
-from roboview.variation.factors import Factor, register_factor
+from roboview.variation.factors import Factor, register_baseline_labels, register_factor
 
 if TYPE_CHECKING:
     from roboview.variation.instances import TaskInstance
@@ -55,6 +56,8 @@ CONTROL = "xyz_delta"
 STATE_NAMES = ("x", "y", "z", "gripper")
 ACTION_NAMES = ("dx", "dy", "dz", "gripper")
 NOT_APPLICABLE = ("distractors", "object_size")
+# The baselines that are Meta-World's own look, by name: the object's own material is `original`, not red.
+BASELINE_LABELS = {"color": "original"}
 # The registered tasks and the body of each one's object (what `color` re-skins and the fairness gate judges): the
 # tasks whose object is one body a policy must find, which Meta-World's scripted policy solves at baseline and which
 # corner2 shows (bin-picking-v3's puck sits in a bin that hides 62 % of it from corner2 at baseline: the gate
@@ -108,8 +111,10 @@ register_world(
         install="make install-metaworld",
         wing=__package__,  # roboview.metaworld
         not_applicable=NOT_APPLICABLE,
+        baseline_labels=BASELINE_LABELS,
     )
 )
+register_baseline_labels(TASK, BASELINE_LABELS)
 
 METAWORLD_TASK = register_factor(
     Factor(
@@ -125,7 +130,8 @@ METAWORLD_TASK = register_factor(
 
 
 def appliers(values: dict[str, str], body: str) -> list:
-    """Meta-World's appliers for an instance's visual factor values (nothing for a value at its baseline)."""
+    """Meta-World's appliers for an instance's visual factor values (nothing for a value at its baseline: color
+    `original` is the object's own look, `red` a red re-skin)."""
     from roboview.metaworld import factors as mf
     from roboview.variation.colors import get_color
     from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
@@ -139,7 +145,7 @@ def appliers(values: dict[str, str], body: str) -> list:
         "lighting": mf.Lighting.of,
         "table_texture": mf.TableTexture,
     }
-    return visual_appliers(values, make, "Meta-World")
+    return visual_appliers(values, make, "Meta-World", TASK)
 
 
 def baseline_metaworld_instance(metaworld_task: str = METAWORLD_TASK.baseline) -> TaskInstance:

@@ -22,7 +22,7 @@ from scipy import ndimage
 
 from roboview.tasks.world import WorldEnv, load_world
 from roboview.variation.colors import delta_e_2000, get_color, srgb_to_lab
-from roboview.variation.factors import FACTORS
+from roboview.variation.factors import FACTORS, baseline_of
 
 
 @dataclass(frozen=True)
@@ -119,7 +119,7 @@ class FairnessProbe:
         # Under a non-default light the rendered colour moves away from the nominal one by design: only
         # the object-table contrast (which a light that hides the object still fails) is judged.
         judge_nominal = all(
-            FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
+            FACTORS[name].keeps_nominal_color or value == baseline_of(name, self.env.instance.task)
             for name, value in self.env.instance.factors
         )
         results, reasons = [], []
@@ -254,12 +254,12 @@ class ObjectProbe:
         # At its baseline the object wears LIBERO's own texture, as LIBERO's scene shows it to every policy: there is
         # no nominal color to compare with, and its contrast with the surface is LIBERO's design (a black bowl on a
         # dark table), not the factor's doing. Both color checks judge the re-skinned object only.
-        recolored = color != FACTORS["color"].baseline
+        recolored = color != baseline_of("color", self.env.instance.task)
         judge_nominal = recolored and all(
-            FACTORS[name].keeps_nominal_color or value == FACTORS[name].baseline
+            FACTORS[name].keeps_nominal_color or value == baseline_of(name, self.env.instance.task)
             for name, value in self.env.instance.factors
         )
-        nominal = np.asarray(get_color(color).lab)
+        nominal = np.asarray(get_color(color).lab) if recolored else None  # `original`: no nominal color
         results, reasons = [], []
         for cam in self.cameras:
             obj_mask = np.isin(self._segment(cam), geoms)

@@ -95,10 +95,12 @@ register_preset(
 )
 
 # LIBERO's scenes (roboview.libero.task; docs/libero.md). Their factors: every visual factor but distractors and
-# object_size. `libero_tiny`: one context (libero_object task 0, init state 0) and a few values: 4 instances,
-# for tests and `make demo-libero`. `libero`: the 40 tasks of the four suites (init state 0) × every value of the
-# six factors, 7,880 instances (a GPU-scale study; docs/libero.md says how to run a share of it). Its color split
-# does not pass the fairness gate on every LIBERO object yet (docs/libero.md#build-and-evaluate).
+# object_size; the color baseline is the object's own texture, `original` (LIBERO's baseline label), and every CSS
+# color, red included, a re-skin. `libero_tiny`: one context (libero_object task 0, init state 0) and a few values:
+# 4 instances, for tests and `make demo-libero`. `libero`: the 40 tasks of the four suites (init state 0) × every
+# value of the six factors (color: `original` and the 141 CSS colors), 7,920 instances (a GPU-scale study;
+# docs/libero.md says how to run a share of it). Its color split does not pass the fairness gate on every LIBERO
+# object yet (docs/libero.md#build-and-evaluate).
 LIBERO_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture")
 register_preset(
     SuiteConfig(
@@ -108,7 +110,7 @@ register_preset(
         splits=("color", "camera_pose", "lighting"),
         factorial_colors=(),
         value_subsets=(
-            ("color", ("red", "blue")),
+            ("color", ("original", "blue")),
             ("camera_pose", ("orbit_r1_3",)),
             ("lighting", ("dim_left",)),
             ("libero_task", ("libero_object/0",)),
@@ -126,7 +128,7 @@ register_preset(
         splits=LIBERO_SPLITS,
         factorial_colors=(),
         value_subsets=(
-            ("color", ("red", "blue", "green")),
+            ("color", ("original", "blue", "green")),
             ("camera_pose", ("orbit_r1_3",)),
             ("camera_euler", ("6,0",)),
             ("dist_scale", ("4",)),
@@ -163,7 +165,7 @@ register_preset(
         preset="metaworld_tiny",
         tasks=("metaworld",),
         value_subsets=(
-            ("color", ("red", "blue")),
+            ("color", ("original", "blue")),
             ("camera_pose", ("orbit_r1_3",)),
             ("lighting", ("dim_left",)),
             ("metaworld_task", ("push-v3",)),

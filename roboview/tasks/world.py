@@ -73,6 +73,11 @@ class World:
     wing: str = ""
     # The factors its scenes cannot take (an instance setting one away from its baseline is refused).
     not_applicable: tuple[str, ...] = ()
+    # Visual factor → the name of its baseline where the baseline is the world's own look, not the registered value
+    # (LIBERO's and Meta-World's objects wear their own textures at the color baseline: {"color": "original"}, where
+    # every CSS color, red included, is a re-skin). The wing registers them for each of its tasks
+    # (`roboview.variation.factors.register_baseline_labels`); empty: the registered baselines (RoboView's red).
+    baseline_labels: Mapping[str, str] = field(default_factory=dict)
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     @property

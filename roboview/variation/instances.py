@@ -23,10 +23,12 @@ from roboview.variation.colors import get_color
 from roboview.variation.factors import (
     DEFAULT_TASK,
     FACTORS,
+    baseline_of,
     context_factors,
     factor_names,
     load_factor,
     record_columns,
+    swept_values,
     visual_factors,
 )
 from roboview.variation.svgf import (
@@ -107,7 +109,7 @@ class TaskInstance:
     `factors` may be given as a mapping or as (name, value) pairs; it is stored as pairs in the
     canonical factor order (visual, then context) so instances are hashable and compare equal
     whatever order they were built in. The paper's seven factors must all be given; a factor
-    registered later may be left out, which means its baseline.
+    registered later may be left out, which means its baseline (in the task's world: `baseline_of`).
 
     Policies never see an instance: its factor values name the object's color and shape
     (`roboview.policies.base.Episode` is what they get).
@@ -129,7 +131,7 @@ class TaskInstance:
         names = factor_names(self.task)
         for name in names:
             if name not in pairs and not load_factor(name).always_in_id:
-                pairs[name] = load_factor(name).baseline
+                pairs[name] = baseline_of(name, self.task)
         if set(pairs) != set(names):
             missing = sorted(set(names) - set(pairs))
             extra = sorted(set(pairs) - set(names))
@@ -138,7 +140,7 @@ class TaskInstance:
                 f"missing {missing}, unknown {extra}"
             )
         for name, value in pairs.items():
-            load_factor(name).validate(value)
+            load_factor(name).validate(value, self.task)
         object.__setattr__(self, "factors", tuple((name, pairs[name]) for name in names))
         object.__setattr__(self, "varied", tuple(self.varied))
         if not self.varied or len(set(self.varied)) != len(self.varied):
@@ -173,7 +175,7 @@ class TaskInstance:
         return {
             name: value
             for name, value in self.factors
-            if load_factor(name).always_in_id or value != load_factor(name).baseline
+            if load_factor(name).always_in_id or value != baseline_of(name, self.task)
         }
 
     def _with_task(self, params: dict[str, Any]) -> dict[str, Any]:
@@ -300,11 +302,17 @@ class SuiteConfig:
         if len(set(self.cartesian)) != len(self.cartesian):
             raise ValueError(f"cartesian splits listed twice in {self.cartesian!r}")
         for name, values in self.value_subsets:
-            # Subsets may only hold swept values: camera_pose 'original' is a baseline, not a pose.
-            FactorSampler(name, values)
-            bad = [v for v in values if v not in load_factor(name).values]
-            if bad:
-                raise ValueError(f"value_subsets[{name!r}]: {bad} are not swept values of {name}")
+            # Subsets may only hold swept values: camera_pose 'original' is a baseline, not a pose; color 'original'
+            # (a world's own look, `swept_values`) is swept where every task of the suite labels its baseline so.
+            owner = load_factor(name).task
+            for task in [owner] if owner else self.tasks:
+                bad = [v for v in values if v not in swept_values(name, task)]
+                if bad:
+                    raise ValueError(
+                        f"value_subsets[{name!r}]: {bad} are not swept values of {name}"
+                        + ("" if owner else f" in the {task} task")
+                    )
+                FactorSampler(name, values, task)
         if len({name for name, _ in self.value_subsets}) != len(self.value_subsets):
             raise ValueError("value_subsets names a factor twice")
 
@@ -337,7 +345,7 @@ def split_trees(cfg: SuiteConfig, task: str = DEFAULT_TASK) -> dict[str, tuple[t
             tree = factorial_subspace(cfg.factorial_colors, subsets, task)
             trees[split_name(split, task)] = (("color", "camera_pose"), tree)
         else:
-            trees[split_name(split, task)] = ((split,), task_subspace(split, c_gen, subsets))
+            trees[split_name(split, task)] = ((split,), task_subspace(split, c_gen, subsets, task))
     for factors in cfg.cartesian:
         tree = cartesian_subspace(factors, subsets, task)
         trees[split_name(cartesian_split_name(factors), task)] = (tuple(factors), tree)

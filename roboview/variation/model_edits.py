@@ -151,15 +151,16 @@ class Lighting:
             model.light_dir[:] = d / np.linalg.norm(d)
 
 
-def visual_appliers(values: dict[str, str], make: dict, world: str) -> list:
-    """The appliers of an instance's visual factor values away from their baselines, in `make`'s order (`make`:
-    factor → value → applier, the factors the world can apply); a one-line ValueError naming a factor it cannot."""
-    from roboview.variation.factors import FACTORS
+def visual_appliers(values: dict[str, str], make: dict, world: str, task: str | None = None) -> list:
+    """The appliers of an instance's visual factor values away from their baselines in `task`'s world (`baseline_of`:
+    LIBERO's color `original` applies nothing, its `red` re-skins), in `make`'s order (`make`: factor → value →
+    applier, the factors the world can apply); a one-line ValueError naming a factor it cannot."""
+    from roboview.variation.factors import FACTORS, baseline_of
 
     changed = {
         k: v
         for k, v in values.items()
-        if k in FACTORS and FACTORS[k].kind != "context" and v != FACTORS[k].baseline
+        if k in FACTORS and FACTORS[k].kind != "context" and v != baseline_of(k, task)
     }
     refused = [k for k in changed if k not in make]
     if refused:

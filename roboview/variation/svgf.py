@@ -32,10 +32,12 @@ import numpy as np
 from roboview.variation.factors import (
     DEFAULT_TASK,
     Factor,
+    baseline_of,
     baselines,
     context_factors,
     factor_names,
     load_factor,
+    swept_values,
     visual_factors,
 )
 
@@ -66,14 +68,17 @@ class SamplerModule(ABC):
 
 
 class FactorSampler(SamplerModule):
-    """Sweeps a registered factor, optionally restricted to a subset of its values."""
+    """Sweeps a registered factor, optionally restricted to a subset of its values. With `task`, its values are
+    those the task's split sweeps (`swept_values`: a world's baseline label, LIBERO's color `original`, first)."""
 
-    def __init__(self, factor: Factor | str, values: Sequence[str] | None = None) -> None:
+    def __init__(
+        self, factor: Factor | str, values: Sequence[str] | None = None, task: str | None = None
+    ) -> None:
         self._factor = factor if isinstance(factor, Factor) else load_factor(factor)
         if values is None:
-            self._values = self._factor.values
+            self._values = swept_values(self._factor.name, task)
         else:
-            self._values = tuple(self._factor.validate(v) for v in values)
+            self._values = tuple(self._factor.validate(v, task) for v in values)
             if not self._values or len(set(self._values)) != len(self._values):
                 raise ValueError(f"{self._factor.name}: need distinct values, got {values!r}")
 
@@ -88,9 +93,9 @@ class FactorSampler(SamplerModule):
 class FixedSampler(SamplerModule):
     """Holds a factor at one value (usually its baseline) while others vary."""
 
-    def __init__(self, factor: Factor | str, value: str) -> None:
+    def __init__(self, factor: Factor | str, value: str, task: str | None = None) -> None:
         self._factor = factor if isinstance(factor, Factor) else load_factor(factor)
-        self._value = self._factor.validate(value)
+        self._value = self._factor.validate(value, task)
 
     @property
     def name(self) -> str:
@@ -113,7 +118,7 @@ class ContextSampler:
         unknown = sorted(set(values) - set(context_factors(task)))
         if unknown:
             raise ValueError(f"not context factors: {unknown}; allowed for {task}: {context_factors(task)}")
-        self.modules = tuple(FactorSampler(name, values.get(name)) for name in context_factors(task))
+        self.modules = tuple(FactorSampler(name, values.get(name), task) for name in context_factors(task))
 
     def sample_context(self, rng: np.random.Generator) -> dict[str, str]:
         """All 7 factor values: visual at baseline, context drawn in context_factors() order."""
@@ -212,17 +217,17 @@ class RecursiveVariantTaskManager:
 # --- the Structured Union, task subspaces and splits --------------------------------------------
 
 
-def _sampler(name: str, subsets: Mapping[str, Sequence[str]]) -> FactorSampler:
-    return FactorSampler(name, subsets.get(name))
+def _sampler(name: str, subsets: Mapping[str, Sequence[str]], task: str = DEFAULT_TASK) -> FactorSampler:
+    return FactorSampler(name, subsets.get(name), task)
 
 
-def _fixed_at_baseline(names: Sequence[str]) -> tuple[FixedSampler, ...]:
-    return tuple(FixedSampler(name, load_factor(name).baseline) for name in names)
+def _fixed_at_baseline(names: Sequence[str], task: str = DEFAULT_TASK) -> tuple[FixedSampler, ...]:
+    return tuple(FixedSampler(name, baseline_of(name, task), task) for name in names)
 
 
 def baseline_context(task: str = DEFAULT_TASK) -> Product:
     """The baseline context G (c* of the factorial split), labelled "base"."""
-    return Product(Label(SUBSPACE_KEY, "base"), *_fixed_at_baseline(context_factors(task)))
+    return Product(Label(SUBSPACE_KEY, "base"), *_fixed_at_baseline(context_factors(task), task))
 
 
 def context_space(
@@ -241,18 +246,18 @@ def context_space(
     subspaces: list[VariantNode] = []
     contains_baseline = False
     for name in context_factors(task):
-        values = _sampler(name, subsets).values()
+        values = _sampler(name, subsets, task).values()
         if union_mode == "dedupe":
-            contains_baseline |= load_factor(name).baseline in values
-            values = tuple(v for v in values if v != load_factor(name).baseline)
+            contains_baseline |= baseline_of(name, task) in values
+            values = tuple(v for v in values if v != baseline_of(name, task))
             if not values:
                 continue
         others = [other for other in context_factors(task) if other != name]
         subspaces.append(
             Product(
                 Label(SUBSPACE_KEY, name),
-                FactorSampler(name, values),
-                *_fixed_at_baseline(others),
+                FactorSampler(name, values, task),
+                *_fixed_at_baseline(others, task),
             )
         )
     if contains_baseline:
@@ -261,9 +266,12 @@ def context_space(
 
 
 def task_subspace(
-    factor: str, c_gen: VariantNode, subsets: Mapping[str, Sequence[str]] | None = None
+    factor: str,
+    c_gen: VariantNode,
+    subsets: Mapping[str, Sequence[str]] | None = None,
+    task: str = DEFAULT_TASK,
 ) -> Product:
-    """T(V_i) = V_i × C_Gen(V_i), the other visual factors held at their baselines B_{-i}.
+    """T(V_i) = V_i × C_Gen(V_i), the other visual factors held at their baselines B_{-i} (in `task`'s world).
 
     Context-major order (all values of V_i within one context, then the next context), so the
     first N instances of a split already give a per-context spread over V_i.
@@ -271,7 +279,7 @@ def task_subspace(
     if factor not in visual_factors():
         raise ValueError(f"task subspaces exist for visual factors {visual_factors()}, not {factor!r}")
     others = [name for name in visual_factors() if name != factor]
-    return Product(c_gen, _sampler(factor, subsets or {}), *_fixed_at_baseline(others))
+    return Product(c_gen, _sampler(factor, subsets or {}, task), *_fixed_at_baseline(others, task))
 
 
 def factorial_subspace(
@@ -281,9 +289,9 @@ def factorial_subspace(
     others = [name for name in visual_factors() if name not in ("color", "camera_pose")]
     return Product(
         baseline_context(task),
-        FactorSampler("color", colors),
-        _sampler("camera_pose", subsets or {}),
-        *_fixed_at_baseline(others),
+        FactorSampler("color", colors, task),
+        _sampler("camera_pose", subsets or {}, task),
+        *_fixed_at_baseline(others, task),
     )
 
 
@@ -299,6 +307,6 @@ def cartesian_subspace(
     others = [name for name in factor_names(task) if name not in factors]
     return Product(
         Label(SUBSPACE_KEY, "cartesian"),
-        *(_sampler(name, subsets or {}) for name in factors),
-        *_fixed_at_baseline(others),
+        *(_sampler(name, subsets or {}, task) for name in factors),
+        *_fixed_at_baseline(others, task),
     )

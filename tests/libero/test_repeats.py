@@ -23,7 +23,7 @@ def _suite(preset: str) -> dict:
     return {"value_subsets": {k: list(v) for k, v in load_preset(preset).value_subsets}}
 
 
-def _libero(init_state: str = "0", color: str = "red") -> TaskInstance:
+def _libero(init_state: str = "0", color: str = "original") -> TaskInstance:
     base = dict(baseline_libero_instance("libero_object/0", init_state).factors)
     return TaskInstance("color", ("color",), base | {"color": color}, "base", task="libero")
 
@@ -156,7 +156,7 @@ def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
     assert len(hard) == 3 and hard == {i: soft[i] for i in hard}
     bench, out = tmp_path / "soft", tmp_path / "eval"
 
-    def evaluate(repeats: int):  # the color split: red and blue, each run at init states 0 and 1
+    def evaluate(repeats: int):  # the color split: original and blue, each run at init states 0 and 1
         policy = policy_config("expert", control="ee_delta")
         run(
             EvaluateConfig(
@@ -191,4 +191,4 @@ def test_libero_repeats_end_to_end(tmp_path, monkeypatch):
     assert (
         sum(s.get("n_seed_only_copies", 0) for s in metrics["splits"].values()) == (old["repeat"] > 0).sum()
     )
-    assert metrics["splits"]["libero_color"]["n_episodes"] == 2  # red and blue, once each
+    assert metrics["splits"]["libero_color"]["n_episodes"] == 2  # original and blue, once each

@@ -89,7 +89,8 @@ def test_the_baseline_is_lerobots_libero_episode(env):
 def test_a_factor_changes_only_itself(env):
     blocks = {}
     cases = {
-        "red": instance("color"),
+        "own": instance("color"),  # color `original`: the object's own texture
+        "red": instance("color", color="red"),  # a red re-skin, not the baseline
         "blue": instance("color", color="blue"),
         "original": instance("camera_pose"),
         "orbit": instance("camera_pose", camera_pose="orbit_r1_3"),
@@ -97,10 +98,12 @@ def test_a_factor_changes_only_itself(env):
     for name, case in cases.items():
         obs, _ = env.reset(seed=SEED, options={"instance": case})
         blocks[name] = (isolation.components(env, SEED), np.array(obs["observation.images.agentview"]))
-    (red, image), (blue, recolored) = blocks["red"], blocks["blue"]
-    (original, _), (orbit, moved) = blocks["original"], blocks["orbit"]
+    (own, image), (red, reskinned), (blue, recolored) = blocks["own"], blocks["red"], blocks["blue"]
+    (original, unmoved), (orbit, moved) = blocks["original"], blocks["orbit"]
+    assert cases["own"].get("color") == "original" and np.array_equal(image, unmoved)
+    assert not np.array_equal(image, reskinned) and not np.array_equal(reskinned, recolored)
     assert not np.array_equal(image, recolored) and not np.array_equal(image, moved)
-    assert red == blue  # instruction, robot, object pose, seed, context and both cameras: identical
+    assert own == red == blue  # instruction, robot, object pose, seed, context and both cameras: identical
     assert {k for k in original if original[k] != orbit[k]} == {"camera:agentview"}  # what camera_pose alters
     obs, _ = env.reset(seed=SEED, options={"instance": instance(color="blue")})
     assert np.array_equal(obs["observation.images.agentview"], recolored)  # a reset repeats bit for bit
@@ -154,7 +157,7 @@ def test_the_libero_presets():
     assert len(tiny) == 4 and {i.get("libero_task") for i in tiny} == {CONTEXT}
     assert {i.split for i in tiny} == {"libero_color", "libero_camera_pose", "libero_lighting"}
     full = generate_suite(load_preset("libero"))
-    assert len(full) == 7880 and len({i.get("libero_task") for i in full}) == 40
+    assert len(full) == 7920 and len({i.get("libero_task") for i in full}) == 40  # color: original + 141 CSS
 
 
 def test_the_conformance_reference_rolls_out_only_what_the_expert_scripts():

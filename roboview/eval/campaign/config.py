@@ -23,8 +23,8 @@ class BenchmarkConfig:
     path: str = "outputs/benchmark"
     # Comma-separated splits to evaluate; empty: every split of the benchmark.
     splits: str = ""
-    # Comma-separated values to keep (the `value` column, e.g. red for the baseline color);
-    # empty: every value.
+    # Comma-separated values to keep (the `value` column, e.g. the baseline color: red in RoboView's scene, original
+    # in LIBERO's and Meta-World's); empty: every value.
     values: str = ""
     # Run even when this machine's conformance check says it renders or simulates the benchmark `different`ly
     # from the machine that built it (roboview.pipelines.verify shows the figures); every row is then marked `different`.

@@ -85,19 +85,26 @@ def _heatmap(ax: plt.Axes, grid: np.ndarray, rows: list[str], cols: list[str], t
 
 
 def category_color(category: str) -> str:
-    """Bar color of a basic category: the CSS color of the same name."""
+    """Bar color of a basic category: the CSS color of the same name (a baseline label, `original`: gray)."""
     return COLORS[category].hex if category in COLORS else "#808080"
+
+
+def _category(value: str) -> str | None:
+    """The basic color category of a CSS color value (None: a baseline label, no color)."""
+    return COLORS[value].category if value in COLORS else None
 
 
 def category_stats(per: dict[str, dict[str, dict]]) -> dict[str, list[dict]]:
     """Per basic color category that any policy's episodes cover: per policy (in `per`'s order) its pooled SR and
     episodes (SR NaN for a policy without episodes there). Categories the benchmark holds no color of are left
-    out, so a chart never shows an absent category as a 0 % bar."""
+    out, so a chart never shows an absent category as a 0 % bar. A value that is no CSS color is a world's baseline
+    label (LIBERO's and Meta-World's `original`: the object's own look) and is its own bar, first, under its name."""
     out: dict[str, list[dict]] = {}
-    for category in CATEGORIES:
+    labels = list(dict.fromkeys(v for values in per.values() for v in values if v not in COLORS))
+    for category in [*labels, *CATEGORIES]:
         stats = []
         for values in per.values():
-            members = [s for v, s in values.items() if v in COLORS and COLORS[v].category == category]
+            members = [s for v, s in values.items() if v == category or _category(v) == category]
             n = sum(s["n_episodes"] for s in members)
             k = sum(round(s["sr"] * s["n_episodes"]) for s in members)
             stats.append({"sr": k / n if n else math.nan, "n_episodes": n})

@@ -137,13 +137,13 @@ def verify(episodes: pd.DataFrame) -> dict[str, dict[str, Any]]:
 def _riding(rows: pd.DataFrame) -> list[str]:
     """Components that change with the values because a context factor of these rows is set away from its baseline
     and declares them (`Factor.alters` of a context factor), in factor order."""
-    from roboview.variation.factors import FACTORS
+    from roboview.variation.factors import FACTORS, baseline_of
 
     out: list[str] = []
     for factor in FACTORS.values():
         if factor.kind != "context" or not factor.alters or factor.name not in rows:
             continue
-        if (rows[factor.name].astype(str) != factor.baseline).any():
+        if (rows[factor.name].astype(str) != baseline_of(factor.name, factor.task)).any():
             out += [c for c in factor.alters if c not in out]
     return out
 

@@ -102,7 +102,8 @@ class RerunLogger:
                 rr.Points3D(
                     result.object_path[step : step + 1],
                     radii=0.012,
-                    colors=[int(255 * c) for c in row["color_rgb"]],
+                    # The object's nominal color; a world's own look (`original`) has none: gray.
+                    colors=[int(255 * c) for c in row.get("color_rgb") or (0.5, 0.5, 0.5)],
                 ),
             )
         rec.log(f"{base}/ee_path", rr.LineStrips3D([result.ee_path], colors=[40, 120, 255]), static=True)

@@ -159,17 +159,22 @@ def compare_policies(episodes: pd.DataFrame, cfg: MetricsConfig) -> list[dict[st
 
 
 def all_baseline(episodes: pd.DataFrame) -> pd.DataFrame | None:
-    """The episodes of the all-baseline instances (every visual factor at its baseline) of the single-factor splits;
-    None when the table lacks the factor columns."""
-    from roboview.variation.factors import baselines, visual_factors
+    """The episodes of the all-baseline instances (every visual factor at its baseline in the row's task's world:
+    LIBERO's color `original`, RoboView's red) of the single-factor splits; None when the table lacks the factor
+    columns."""
+    import roboview.tasks  # noqa: F401  (registers the worlds and their baseline labels)
+    from roboview.variation.factors import DEFAULT_TASK, baseline_of, visual_factors
 
     # Results written before a factor existed lack its column: there it was at its baseline.
     present = [f for f in visual_factors() if f in episodes.columns]
     if not present:
         return None
     base = episodes[~episodes["factor"].astype(str).str.contains("|", regex=False)]
+    named = base["task"].fillna(DEFAULT_TASK).astype(str) if "task" in base else None
+    tasks = named if named is not None else pd.Series(DEFAULT_TASK, index=base.index)
     for factor in present:
-        base = base[base[factor].astype(str) == str(baselines()[factor])]
+        expected = tasks.map({task: baseline_of(factor, task) for task in tasks.unique()})
+        base = base[base[factor].astype(str) == expected[base.index]]
     return base
 
 
@@ -216,7 +221,8 @@ def control_deltas(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[
 
 def baseline_retest(episodes: pd.DataFrame) -> dict[str, Any] | None:
     """The built-in control arm: the all-baseline instance of a context runs in several single-factor
-    splits (color red, Euler (0, 0), distance 0) with the same seeds. Its outcomes should agree across
+    splits (color at its baseline: red in RoboView's scene, `original` in LIBERO's and Meta-World's; Euler (0, 0),
+    distance 0) with the same seeds. Its outcomes should agree across
     splits; `agreement` is the share of (context, repeat) pairs seen in ≥ 2 splits whose outcomes all
     agree (1.0 for a deterministic policy), `sr_by_split` the baseline SR in each split.
     None when the table lacks the factor columns or no pair repeats."""

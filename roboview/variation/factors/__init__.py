@@ -22,17 +22,21 @@ import importlib
 import importlib.metadata
 
 from roboview.variation.factors.base import (
+    BASELINE_LABELS,
     DEFAULT_TASK,
     FACTOR_KINDS,
     FACTORS,
     Factor,
     SceneApplier,
+    baseline_of,
     baselines,
     context_factors,
     factor_names,
     load_factor,
     record_columns,
+    register_baseline_labels,
     register_factor,
+    swept_values,
     unregister_factor,
     visual_factors,
 )
@@ -69,6 +73,7 @@ from roboview.variation.factors.camera import (  # noqa: E402  (after registrati
 )
 
 __all__ = [
+    "BASELINE_LABELS",
     "BUILTIN_MODULES",
     "CAMERA_POSE_BASELINE",
     "DEFAULT_TASK",
@@ -80,6 +85,7 @@ __all__ = [
     "N_ORBIT_RINGS",
     "Factor",
     "SceneApplier",
+    "baseline_of",
     "baselines",
     "context_factors",
     "factor_names",
@@ -88,7 +94,9 @@ __all__ = [
     "parse_dist_scale",
     "parse_euler",
     "record_columns",
+    "register_baseline_labels",
     "register_factor",
+    "swept_values",
     "unregister_factor",
     "visual_factors",
 ]

@@ -11,6 +11,13 @@ know about it.
 
 Context factors (kind "context") belong to one task: they diversify its scenarios (where the object
 starts, which solid it is, how the instruction is phrased) and the task's env places them itself.
+
+A task whose world shows its own look at a visual factor's baseline (LIBERO's and Meta-World's objects wear their
+own textures: there is no red there) names that baseline for what it is: its world declares a *baseline label*
+(`World.baseline_labels`, color → `original`), its wing registers it for each of its tasks here
+(`register_baseline_labels`), and every place that asks for a factor's baseline where the task is known asks
+`baseline_of(factor, task)`. For such a task the label is the baseline and a swept value (its split's control arm),
+and every registered value is a real change (red is a red re-skin).
 """
 
 from __future__ import annotations
@@ -88,15 +95,17 @@ class Factor:
         if not self.title:
             object.__setattr__(self, "title", self.name.replace("_", " ").capitalize())
 
-    def is_valid(self, value: str) -> bool:
-        """True for a swept value or the baseline."""
-        return value == self.baseline or value in self.values
+    def is_valid(self, value: str, task: str | None = None) -> bool:
+        """True for a swept value or the baseline; with `task`, also the baseline label of `task`'s world
+        (`baseline_of`: LIBERO's color `original`)."""
+        return value == self.baseline or value in self.values or value == _label(self.name, task)
 
-    def validate(self, value: str) -> str:
-        """Return `value` if valid; otherwise raise naming the value and the allowed set."""
-        if self.is_valid(value):
+    def validate(self, value: str, task: str | None = None) -> str:
+        """Return `value` if valid (for `task`, where given); otherwise raise naming the value and the allowed set."""
+        if self.is_valid(value, task):
             return value
-        allowed = self.values if self.baseline in self.values else (self.baseline, *self.values)
+        base = baseline_of(self.name, task)
+        allowed = self.values if base in self.values else (base, *self.values)
         close = difflib.get_close_matches(str(value), allowed, n=3)
         hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         raise ValueError(f"unknown {self.name} {value!r}; allowed: {', '.join(allowed)}{hint}")
@@ -142,9 +151,50 @@ def factor_names(task: str = DEFAULT_TASK) -> tuple[str, ...]:
     return visual_factors() + context_factors(task)
 
 
+# task → {visual factor → the label its baseline goes by in that task's world}: filled by each world's wing for each
+# of its tasks from its `World.baseline_labels` (LIBERO's `libero` and `liberoplus`, Meta-World's `metaworld`:
+# color → original). A task not here takes every factor's registered baseline (RoboView's scene: red).
+BASELINE_LABELS: dict[str, dict[str, str]] = {}
+
+
+def register_baseline_labels(task: str, labels: Mapping[str, str]) -> None:
+    """Name the baselines of `task`'s visual factors that are its world's own look (`{"color": "original"}`). A label
+    must not be a registered value of its factor (it would mean two things); a task registers its labels once."""
+    if task in BASELINE_LABELS:
+        raise ValueError(f"task {task!r} already registered its baseline labels")
+    for name, label in labels.items():
+        factor = load_factor(name)
+        if factor.kind != "visual":
+            raise ValueError(
+                f"baseline label of {name!r}: only a visual factor's baseline is a world's own look"
+            )
+        if label in factor.values:
+            raise ValueError(f"baseline label {label!r} of {name!r} is one of its values; name it apart")
+    BASELINE_LABELS[task] = dict(labels)
+
+
+def _label(name: str, task: str | None) -> str | None:
+    return BASELINE_LABELS.get(task, {}).get(name) if task is not None else None
+
+
+def baseline_of(name: str, task: str | None = None) -> str:
+    """Factor `name`'s baseline in `task`'s world: its world's label where it declares one (LIBERO's color:
+    `original`), else the registered baseline (also without a task)."""
+    label = _label(name, task)
+    return load_factor(name).baseline if label is None else label
+
+
+def swept_values(name: str, task: str | None = None) -> tuple[str, ...]:
+    """The values a split of factor `name` sweeps in `task`: its world's baseline label first where it declares one
+    (the split's control arm), then every registered value."""
+    label = _label(name, task)
+    values = load_factor(name).values
+    return values if label is None else (label, *values)
+
+
 def baselines(task: str = DEFAULT_TASK) -> dict[str, str]:
-    """Every factor of `task` at its baseline."""
-    return {name: FACTORS[name].baseline for name in factor_names(task)}
+    """Every factor of `task` at its baseline (its world's label where it declares one)."""
+    return {name: baseline_of(name, task) for name in factor_names(task)}
 
 
 def record_columns(values: Mapping[str, str]) -> dict[str, Any]:

@@ -1,4 +1,8 @@
-"""`color`: the manipulated object's RGB, one of 141 CSS named colors (roboview.variation.colors)."""
+"""`color`: the manipulated object's RGB, one of 141 CSS named colors (roboview.variation.colors).
+
+The registered baseline is `red`, the color of RoboView's own object. A world whose object keeps its own look at
+the baseline (LIBERO's and Meta-World's textures) labels that baseline `original` (`World.baseline_labels`): there
+every CSS color, red included, is a re-skin, and `original` records no nominal color."""
 
 from __future__ import annotations
 
@@ -20,6 +24,10 @@ class ObjectColor:
 
 
 def _columns(value: str) -> dict:
+    """The value's hex, sRGB and CIELAB; a world's own look (a baseline label, not a CSS color: `original`) has no
+    nominal color: an empty hex and null sRGB and Lab (the columns' types stay those of a color)."""
+    if value not in COLORS:
+        return {"color_hex": "", "color_rgb": None, "color_lab": None}
     color = get_color(value)
     return {"color_hex": color.hex, "color_rgb": list(color.rgb), "color_lab": list(color.lab)}
 
