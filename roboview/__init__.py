@@ -20,9 +20,9 @@ One package, in rooms that each import only the rooms below them (docs/layout.md
 
 Beside the package, not installed: benchmarks/, the throughput and statistics studies (docs/performance.md):
 throughput, render_rate, collect_rate, serving, cluster, gpu, policy_latency, torch_threads.sh, verify_rate,
-conformance_drift, adaptive, paired_compare, stats_calibration, cv_excess_interval, glm_refits, libero_throughput,
-libero_render, libero_render_rate, libero_expert, libero_vs_lerobot_eval, libero_plus_poses, metaworld_expert,
-metaworld_vs_lerobot_eval.
+conformance_drift, adaptive, paired_compare, stats_calibration, cv_excess_interval, glm_refits, interval_coverage,
+libero_throughput, libero_render, libero_render_rate, libero_expert, libero_vs_lerobot_eval, libero_plus_poses,
+metaworld_expert, metaworld_vs_lerobot_eval.
 
 Importing `roboview` itself loads nothing; `import roboview.tasks` registers `RoboView/PickPlace-v0` and the
 other tasks' gymnasium ids.

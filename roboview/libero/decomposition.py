@@ -18,8 +18,8 @@ From one policy's episodes of a `liberoplus_camera*` benchmark (the `liberoplus`
   0) and over scale (percent above 100): a logistic GLM (statsmodels) of success on magnitude with standard errors
   clustered by task, the fitted success at 0, and the magnitude at which the fitted success falls to half of it,
   with a delta-method 95 % interval (None where success does not fall with magnitude).
-- **Per variant**, where repeats ran (init states 0, 1, …): its rate with a Wilson interval, its paired difference
-  to the no-change view over the same init states and McNemar's exact test.
+- **Per variant**, where repeats ran (init states 0, 1, …): its rate with a Clopper–Pearson interval, its paired
+  difference to the no-change view over the same init states and McNemar's exact test.
 
 Every number is validated against known truth by simulation (tests/libero/test_plus_decomposition.py).
 """
@@ -68,11 +68,13 @@ def _views(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def _rate(success: pd.Series) -> dict[str, Any]:
-    """The success rate with its Wilson 95 % interval (statsmodels)."""
+    """The success rate with its Clopper–Pearson 95 % interval (statsmodels)."""
     from statsmodels.stats.proportion import proportion_confint
 
     k, n = int(success.sum()), int(len(success))
-    ci = [float(x) for x in proportion_confint(k, n, alpha=0.05, method="wilson")] if n else None
+    # Clopper–Pearson ("beta"), the interval roboview.eval.statistics.tables.rate_interval gives every other success
+    # rate (this wing may not import roboview.eval): it covers ≥ 95 % at every rate, near 1 too (docs/statistics.md).
+    ci = [float(x) for x in proportion_confint(k, n, alpha=0.05, method="beta")] if n else None
     return {"sr": k / n if n else None, "ci95": ci, "n": n}
 
 
@@ -447,8 +449,8 @@ FIGURE = "analysis_liberoplus_dose_response.png"
 
 
 def plot(results: dict[str, dict[str, Any]], output_dir) -> dict[str, str | None]:
-    """Success against azimuth magnitude and against scale, per policy: the rates with Wilson intervals, the fitted
-    logistic curve, and the half-magnitude with its interval (a shaded band)."""
+    """Success against azimuth magnitude and against scale, per policy: the rates with Clopper–Pearson intervals, the
+    fitted logistic curve, and the half-magnitude with its interval (a shaded band)."""
     from pathlib import Path
 
     import matplotlib.pyplot as plt
@@ -471,7 +473,7 @@ def plot(results: dict[str, dict[str, Any]], output_dir) -> dict[str, str | None
             lo = np.array([c["ci95"][0] for c in d["curve"]])
             hi = np.array([c["ci95"][1] for c in d["curve"]])
             color = f"C{i}"
-            err = np.clip([sr - lo, hi - sr], 0, None)  # Wilson's ends can cross the rate by a rounding error
+            err = np.clip([sr - lo, hi - sr], 0, None)  # the ends hold the rate; the clip absorbs float noise
             ax.errorbar(x, sr, yerr=err, fmt="o", ms=3, capsize=2, color=color, label=policy)
             if d["slope"] is not None:
                 a = np.log(d["sr_at_0"] / (1 - d["sr_at_0"]))

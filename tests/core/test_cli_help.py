@@ -32,6 +32,7 @@ HARNESSES = (
     "conformance_drift",
     "cv_excess_interval",
     "glm_refits",
+    "interval_coverage",
     "gpu",
     "libero_expert",
     "libero_render",

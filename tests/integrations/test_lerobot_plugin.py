@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 pytestmark = pytest.mark.fast
@@ -221,3 +222,46 @@ def test_the_plugin_fits_the_checkpoint_lerobot_eval_loads(tiny_benchmark, tmp_p
     assert RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark), control="ee_delta").image_size == 64
     monkeypatch.setattr("sys.argv", ["lerobot-train", "--policy.type=act"])  # no checkpoint to read: 96
     assert RoboViewEnv(task="color", benchmark_path=str(tiny_benchmark)).image_size == 96
+
+
+def test_eval_info_carries_each_values_paired_difference_to_the_control_arm(tmp_path):
+    """convert's `add_control_arm`: each single-factor group of eval_info.json gains its control arm and, per value,
+    `delta_control` with `delta_control_ci95` beside `p_control`, the numbers metrics.json holds."""
+    import json
+
+    from roboview.eval.statistics.metrics import MetricsConfig, compute_metrics
+    from roboview.integrations.lerobot.convert import add_control_arm
+    from roboview.variation.factors import baselines
+
+    red, near = baselines()["color"], baselines()["dist_scale"]
+    rows = [
+        {
+            "policy": "lerobot-eval",
+            "split": "color",
+            "factor": "color",
+            "value": value,
+            "context_id": f"c{r // 6}",
+            "instance_id": f"color/{value}/c{r // 6}",
+            "repeat": r % 6,
+            "success": success,
+            "color": value,
+            "dist_scale": near,
+        }
+        for value, outcomes in ((red, [1] * 12), ("blue", [1, 1] + [0] * 10))
+        for r, success in enumerate(outcomes)
+    ]
+    info = {"per_group": {"color": {"pc_success": 58.3, "n_episodes": 24}}, "per_task": []}
+    path = tmp_path / "eval_info.json"
+    add_control_arm(path, info, rows)
+    group = json.loads(path.read_text())["per_group"]["color"]
+    assert group["pc_success"] == 58.3 and (group["sr_control"], group["n_control_episodes"]) == (1.0, 12)
+    assert group["sr_control_ci95"] == pytest.approx([0.025 ** (1 / 12), 1.0])  # 12/12, Clopper–Pearson
+    blue = group["per_value"]["blue"]
+    assert (blue["delta_control"], blue["n_control_pairs"]) == (pytest.approx(-10 / 12), 12)
+    assert blue["p_control"] == pytest.approx(2 * 0.5**10)  # McNemar exact: 10 pairs differ, all one way
+    assert blue["delta_control_ci95"] == pytest.approx([-0.9530, -0.4619], abs=1e-4)  # Newcombe, φ = 0
+    native = compute_metrics(pd.DataFrame(rows), MetricsConfig(n_perm=20, n_glm=5, max_perm=20, n_boot=0))
+    assert group["per_value"] == {
+        v: {k: native["splits"]["color"]["per_value"][v][k] for k in group["per_value"][v]}
+        for v in group["per_value"]
+    }

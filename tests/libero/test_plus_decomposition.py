@@ -143,6 +143,8 @@ def test_no_decline_gives_no_half_magnitude_and_repeats_give_per_variant_rates()
         "ci95": d["curve"][1]["ci95"],
         "n": 6,
     }
+    # 4/6 with its Clopper–Pearson interval, as every other success rate of the report has it.
+    assert d["curve"][1]["ci95"] == pytest.approx([0.2228, 0.9567], abs=1e-4)
     [variant] = result["per_variant"]
     assert (
         variant["n"] == 6

@@ -312,10 +312,10 @@ def _claim(
     label: str, source: str, checked: Checked, out: Path, metrics_cfg: MetricsConfig, plots: bool
 ) -> Claim:
     """A claim measured alone (its own report; never pooled or tested with another bundle): what it claims overall,
-    with the Wilson interval."""
+    with its Clopper–Pearson interval."""
     from roboview.eval.reporting.report import HTML_FILE, load_results, write_report
     from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
-    from roboview.eval.statistics.tables import wilson_ci95
+    from roboview.eval.statistics.tables import rate_ci95
 
     episodes, src = load_results([checked.path / PARQUET], [label])
     report_dir = out / "reports" / label.replace("/", "_")
@@ -334,7 +334,7 @@ def _claim(
         False,
         checked.replay_note,
         sr=k / n if n else None,
-        sr_ci95=list(wilson_ci95(k, n)) if n else None,
+        sr_ci95=rate_ci95(k, n),
         covered=checked.covered,
     )
 

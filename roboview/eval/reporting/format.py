@@ -77,14 +77,21 @@ def directions(m: dict) -> tuple[list[tuple[str, float]], list[tuple[str, float]
 
 def against_control(m: dict) -> str:
     """The clause that names a split's values differing from its control arm on the same (context, repeat) seeds
-    (McNemar p < ALPHA): "; against the control arm (…): blue −50.00 (p 0.004)", "…: none" where none does; empty
-    where no control episode ran."""
+    (McNemar p < ALPHA), each difference ×100 with its paired 95 % interval (`delta_control_ci95`): "; against the
+    control arm (…): blue -50.00 [-75.33, -10.12] (p 0.004)", "…: none" where none does; empty where no control
+    episode ran."""
     paired = {v: s for v, s in m["per_value"].items() if s.get("p_control") is not None}
     if not paired:
         return ""
     sig = sorted((s["delta_control"], v) for v, s in paired.items() if s["p_control"] < ALPHA)
-    named = ", ".join(f"{v} {100 * d:+.2f} (p {p_fmt(paired[v]['p_control'])})" for d, v in sig) or "none"
-    return f"; against the control arm (same seeds, McNemar p < 0.05): {named}"
+    named = (
+        ", ".join(
+            f"{v} {100 * d:+.2f}{pct_ci(paired[v].get('delta_control_ci95'))} (p {p_fmt(paired[v]['p_control'])})"
+            for d, v in sig
+        )
+        or "none"
+    )
+    return f"; against the control arm (same seeds, McNemar p < 0.05; Δ ×100 [paired 95 % CI]): {named}"
 
 
 def split_title(split: str) -> str:

@@ -4,7 +4,7 @@ The board is built from result bundles of one benchmark version that `roboview.p
 `roboview.pipelines.leaderboard`, verifies them, re-runs a sample of each, and lists the rest apart with the
 reason). Two tables, never mixed: the ranked bundles (their replay passed) and the claims (verified, but not re-run
 here), each measured alone and never compared. The ranked bundles' episodes are pooled and measured exactly as `roboview.pipelines.report` measures several policies (`compute_all_metrics`): per
-split the success rate with its Wilson 95 % interval and `cv_excess` (bias beyond binomial noise) with its
+split the success rate with its Clopper–Pearson 95 % interval and `cv_excess` (bias beyond binomial noise) with its
 interval; paired tests between every two policies on the episodes they share (McNemar for SR, the swap
 permutation test for cv_excess), Holm-adjusted per split and metric. The ranks follow the values; the
 **groups** are a compact letter display of those tests: two policies that share a letter are not
@@ -25,7 +25,7 @@ import pandas as pd
 
 from roboview.eval.running.results import infra_mask
 from roboview.eval.statistics.ranking import ALPHA, pooled_p_sr, rank_table
-from roboview.eval.statistics.tables import wilson_ci95
+from roboview.eval.statistics.tables import rate_ci95
 
 BOARD_JSON = "leaderboard.json"
 BOARD_HTML = "leaderboard.html"
@@ -59,7 +59,7 @@ class Claim(Entry):
     lettered or compared with another bundle."""
 
     table: str = "claims"
-    # Its success rate over every counted episode of the splits it covers, with the Wilson 95 % interval.
+    # Its success rate over every counted episode of the splits it covers, with its Clopper–Pearson 95 % interval.
     sr: float | None = None
     sr_ci95: list[float] | None = None
     covered: list[str] = field(default_factory=list)
@@ -177,7 +177,7 @@ def rank_metrics(
 
 def _factorial(layouts, counted: pd.DataFrame, reference, alpha: float) -> dict[str, dict[str, list]]:
     """Each factorial split's SR table (its bias measures are interaction coefficients, reported per bundle):
-    Wilson intervals, McNemar on the (instance, repeat) pairs two bundles share, Holm-adjusted."""
+    Clopper–Pearson intervals, McNemar on the (instance, repeat) pairs two bundles share, Holm-adjusted."""
     out: dict[str, dict[str, list]] = {}
     for split in sorted({s for layout in layouts.values() for s in layout.get("interactions", {})}):
         have = {
@@ -208,8 +208,8 @@ def _overall(layouts, counted: pd.DataFrame, names: list[str], reference, alpha:
         frozenset((a, b)): pooled_p_sr(counted, a, b) for i, a in enumerate(names) for b in names[i + 1 :]
     }
     sr = {x: k[x] / n[x] for x in names if n[x]}
-    wilson = {x: list(wilson_ci95(k[x], n[x])) for x in names if n[x]}
-    overall = {"sr": _rows(sr, pooled, True, wilson, n, alpha, reference)}
+    ci = {x: rate_ci95(k[x], n[x]) for x in names if n[x]}
+    overall = {"sr": _rows(sr, pooled, True, ci, n, alpha, reference)}
     mean_cv = {
         x: float(np.mean(v))
         for x in names

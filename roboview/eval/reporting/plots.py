@@ -2,7 +2,7 @@
 
 Why from the dict: a figure and the table next to it then show the same numbers. Each figure
 needs one split; when no policy has it the figure is skipped and the reason goes into report.md.
-Success counts behind the Wilson intervals are recovered as round(sr × n_episodes), exact because
+Success counts behind the Clopper–Pearson intervals are recovered as round(sr × n_episodes), exact because
 sr was computed as count / n.
 """
 
@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from roboview.eval.statistics.significance import logistic_trend  # noqa: E402
-from roboview.eval.statistics.tables import wilson_interval  # noqa: E402
+from roboview.eval.statistics.tables import rate_interval  # noqa: E402
 from roboview.variation.colors import CATEGORIES, COLORS  # noqa: E402
 from roboview.variation.factors import (  # noqa: E402
     DIST_STEP_M,
@@ -46,11 +46,11 @@ def _per_value(layouts: Layouts, split: str, key: str = "splits") -> dict[str, d
     return {p: lay[key][split]["per_value"] for p, lay in layouts.items() if split in lay[key]}
 
 
-def _wilson_err(stats: list[dict]) -> np.ndarray:
-    """Asymmetric error bars (2, n) around each SR from its Wilson interval."""
+def _rate_err(stats: list[dict]) -> np.ndarray:
+    """Asymmetric error bars (2, n) around each SR from its Clopper–Pearson interval."""
     err = []
     for s in stats:
-        lo, hi = wilson_interval(round(s["sr"] * s["n_episodes"]), s["n_episodes"])
+        lo, hi = rate_interval(round(s["sr"] * s["n_episodes"]), s["n_episodes"])
         err.append((s["sr"] - lo, hi - s["sr"]))
     return np.clip(np.array(err).T, 0, None)  # k/n recomputed from sr may differ by float noise
 
@@ -114,7 +114,7 @@ def category_stats(per: dict[str, dict[str, dict]]) -> dict[str, list[dict]]:
 
 
 def plot_color_categories(layouts: Layouts, path: Path) -> None:
-    """SR per basic color category (pooled over its colors' episodes), Wilson 95 % error bars; only the
+    """SR per basic color category (pooled over its colors' episodes), Clopper–Pearson 95 % error bars; only the
     categories the episodes cover (the title names the absent ones)."""
     per = _per_value(layouts, "color")
     table = category_stats(per)
@@ -127,7 +127,7 @@ def plot_color_categories(layouts: Layouts, path: Path) -> None:
             np.array(shown) + (i - (len(per) - 1) / 2) * width,
             [table[names[j]][i]["sr"] for j in shown],
             width,
-            yerr=_wilson_err([table[names[j]][i] for j in shown]),
+            yerr=_rate_err([table[names[j]][i] for j in shown]),
             capsize=2,
             label=policy,
             color=[category_color(names[j]) for j in shown],
@@ -218,13 +218,13 @@ def plot_camera_euler(layouts: Layouts, path: Path) -> None:
 
 
 def plot_dist_scale(layouts: Layouts, path: Path) -> None:
-    """SR against how far the cameras moved back (0.05·k m), Wilson 95 % band."""
+    """SR against how far the cameras moved back (0.05·k m), Clopper–Pearson 95 % band."""
     fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
     for i, (policy, values) in enumerate(_per_value(layouts, "dist_scale").items()):
         items = sorted(values.items(), key=lambda kv: parse_dist_scale(kv[0]))
         x = [DIST_STEP_M * parse_dist_scale(v) for v, _ in items]
         sr = np.array([s["sr"] for _, s in items])
-        err = _wilson_err([s for _, s in items])
+        err = _rate_err([s for _, s in items])
         ax.plot(x, sr, marker=_MARKERS[i % len(_MARKERS)], label=policy)
         ax.fill_between(x, sr - err[0], sr + err[1], alpha=0.2)
     ax.set(
@@ -327,7 +327,7 @@ def _bars(layouts: Layouts, split: str, path: Path, title: str, order: list[str]
     for i, (policy, values) in enumerate(per.items()):
         items = [(v, values[v]) for v in order if v in values]
         x = np.array([order.index(v) for v, _ in items]) + (i - (len(per) - 1) / 2) * width
-        err = _wilson_err([s for _, s in items])
+        err = _rate_err([s for _, s in items])
         ax.bar(x, [s["sr"] for _, s in items], width, yerr=err, capsize=3, label=policy)
     ax.set_xticks(range(len(order)), order, rotation=30, ha="right")
     ax.set(ylabel="success rate", ylim=(0, 1.05), title=title)
@@ -336,7 +336,7 @@ def _bars(layouts: Layouts, split: str, path: Path, title: str, order: list[str]
 
 
 def plot_table_texture(layouts: Layouts, path: Path) -> None:
-    """SR per table texture, Wilson 95 % intervals."""
+    """SR per table texture, Clopper–Pearson 95 % intervals."""
     from roboview.variation.factors import FACTORS
 
     _bars(
@@ -351,7 +351,7 @@ def _dose_response(layouts: Layouts, split: str, path: Path, xlabel: str, title:
         x = np.array([float(v) for v, _ in items])
         sr = np.array([s["sr"] for _, s in items])
         n = np.array([s["n_episodes"] for _, s in items], dtype=float)
-        err = _wilson_err([s for _, s in items])
+        err = _rate_err([s for _, s in items])
         line = ax.errorbar(
             x, sr, yerr=err, marker=_MARKERS[i % len(_MARKERS)], ls="none", capsize=3, label=policy
         )

@@ -162,14 +162,14 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
         "SR [95 % CI]",
         "sr",
         lambda row: pct(row[1]["sr"]) + pct_ci(row[1]["sr_ci95"]),
-        "success rate, successes / episodes of the split, ×100, with its Wilson 95 % interval",
+        "success rate, successes / episodes of the split, ×100, with its Clopper–Pearson 95 % interval",
     ),
     Column(
         "control SR [95 % CI]",
         "sr_control",
         lambda row: pct(row[1].get("sr_control")) + pct_ci(row[1].get("sr_control_ci95")),
         "the control arm: success of the all-baseline instance on the same contexts and seeds, ×100, with its "
-        "Wilson 95 % interval; N/A: none of it was run",
+        "Clopper–Pearson 95 % interval; N/A: none of it was run",
     ),
     Column(
         "CV",

@@ -30,7 +30,8 @@ from roboview.eval.statistics.tables import (
     conditional_cv,
     excess,
     group_sum,
-    wilson_ci95,
+    paired_difference_ci95,
+    rate_ci95,
 )
 
 N_INNER = 100  # permutations behind each swap's noise floor
@@ -180,7 +181,7 @@ def all_baseline(episodes: pd.DataFrame) -> pd.DataFrame | None:
 
 def control_arm(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str, Any]:
     """A split's control arm as result fields: the success of the all-baseline instance of each (context, repeat) the
-    split ran, on the same seed (from whichever split ran it: they share the seed), with its Wilson interval.
+    split ran, on the same seed (from whichever split ran it: they share the seed), with its Clopper–Pearson interval.
     `base`: the table's all-baseline episodes (`all_baseline`, selected once for every split). `sr_control` None
     where no such episode was run (a sample without the baseline value)."""
     pairs = set(zip(split_rows["context_id"], split_rows["repeat"]))
@@ -191,15 +192,16 @@ def control_arm(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str
     k = 0 if base is None else int(base["success"].sum())
     return {
         "sr_control": k / n if n else None,
-        "sr_control_ci95": list(wilson_ci95(k, n)) if n else None,
+        "sr_control_ci95": rate_ci95(k, n),
         "n_control_episodes": n,
     }
 
 
 def control_deltas(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str, dict[str, Any]]:
     """Per value of a single-factor split, its paired difference to the control arm: `delta_control` = SR(value) −
-    SR(control) over the (context, repeat) pairs both ran (same seed), `n_control_pairs`, and `p_control`, McNemar's
-    test on those pairs (`paired_success_test`). Empty where no control episode was run."""
+    SR(control) over the (context, repeat) pairs both ran (same seed), `delta_control_ci95`, its 95 % interval
+    (Newcombe's hybrid score interval for paired rates, `paired_difference_ci95`), `n_control_pairs`, and `p_control`,
+    McNemar's test on those pairs (`paired_success_test`). Empty where no control episode was run."""
     if base is None or base.empty:
         return {}
     control = base.drop_duplicates(["context_id", "repeat"]).set_index(["context_id", "repeat"])["success"]
@@ -213,6 +215,7 @@ def control_deltas(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[
         b = control.loc[both].to_numpy().astype(bool)
         out[str(value)] = {
             "delta_control": float(a.mean() - b.mean()),
+            "delta_control_ci95": paired_difference_ci95(a, b),
             "n_control_pairs": int(len(both)),
             "p_control": paired_success_test(a, b),
         }

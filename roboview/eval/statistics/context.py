@@ -4,7 +4,7 @@ change a policy's success?
 The benchmark's contexts come from variation subspaces (per_subspace mode): in the instruction subspace
 only the instruction varies, every other context factor at its baseline. For each context factor f this
 module takes the episodes of f's subspace across every single-factor split — the same visual conditions
-under each value of f — and reports SR per value of f with its Wilson interval, plus a likelihood-ratio
+under each value of f — and reports SR per value of f with its Clopper–Pearson interval, plus a likelihood-ratio
 test of a binomial GLM `f + condition` against `condition`, where a condition is a (split, visual value)
 pair. The reference is χ², or, when cells are sparse, permutations of f's labels among the episodes of
 one (condition, repeat) — the same calibration as the splits' `p_value`.
@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from roboview.eval.statistics import significance as stats
-from roboview.eval.statistics.tables import CellTable, MetricsConfig, value_order, wilson_ci95
+from roboview.eval.statistics.tables import CellTable, MetricsConfig, rate_ci95, value_order
 from roboview.variation.factors import DEFAULT_TASK, baselines, context_factors
 
 
@@ -58,7 +58,7 @@ def context_factor_metrics(
     for value in value_order(factor, eps[factor].unique()):
         mine = eps[eps[factor] == value]
         k, n = int(mine["success"].sum()), len(mine)
-        per_value[value] = {"sr": k / n, "sr_ci95": wilson_ci95(k, n), "n_episodes": n}
+        per_value[value] = {"sr": k / n, "sr_ci95": rate_ci95(k, n), "n_episodes": n}
     return {
         "task": task,
         "n_episodes": len(eps),

@@ -48,9 +48,9 @@ from roboview.eval.statistics.tables import (  # noqa: F401 — re-exported: the
     conditional_cv,
     excess,
     group_sum,
+    rate_ci95,
+    rate_interval,
     value_order,
-    wilson_ci95,
-    wilson_interval,
 )
 
 log = logging.getLogger(__name__)
@@ -99,7 +99,7 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
         "n_contexts": int(ctx.max() + 1),
         "n_contexts_all_failed": int(np.sum(ctx_k == 0)),
         "sr": k / n,
-        "sr_ci95": wilson_ci95(k, n),
+        "sr_ci95": rate_ci95(k, n),
         "cv": None,
         "cv_null": None,
         "cv_excess": None,
@@ -244,7 +244,7 @@ def interaction_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConf
         "factors": [a, b],
         "n_instances": int(episodes["instance_id"].nunique()),
         "sr": k / n,
-        "sr_ci95": wilson_ci95(k, n),
+        "sr_ci95": rate_ci95(k, n),
         "n_episodes": n,
         **{
             key: dict.fromkeys((a, b))

@@ -8,7 +8,9 @@ Pass the `--env.*` flags given to lerobot-eval: every split lerobot-eval ran (a 
 eval_info.json) is converted; lerobot's episode i of a split is the split's i-th (instance, repeat) (reset
 seed start_seed + i), and its success is that entry's `successes[i]`. lerobot-eval records
 no step counts or failure reasons, so those columns say so. eval_info.json's `per_group.<split>` then carries the
-split's control arm beside `pc_success` (`sr_control`, `sr_control_ci95`, `n_control_episodes`).
+split's control arm beside `pc_success` (`sr_control`, `sr_control_ci95`, `n_control_episodes`) and, for a
+single-factor split, each value's paired difference to it (`per_value.<v>`: `delta_control`, `delta_control_ci95`,
+`n_control_pairs`, `p_control`), as metrics.json has them.
 """
 
 from __future__ import annotations
@@ -100,11 +102,13 @@ def convert(
 
 def add_control_arm(path: Path, info: dict, rows: list[dict]) -> None:
     """eval_info.json's `per_group.<split>` gains the split's control arm beside `pc_success`: `sr_control` (the
-    all-baseline instance of each (context, repeat) the split ran, on the same seed), `sr_control_ci95` (Wilson) and
-    `n_control_episodes`; written back atomically."""
+    all-baseline instance of each (context, repeat) the split ran, on the same seed), `sr_control_ci95`
+    (Clopper–Pearson) and `n_control_episodes`; a single-factor split also `per_value.<v>`, each value against the
+    control arm on the pairs both ran: `delta_control`, `delta_control_ci95` (Newcombe's paired interval),
+    `n_control_pairs`, `p_control` (McNemar), the numbers metrics.json holds. Written back atomically."""
     import pandas as pd
 
-    from roboview.eval.statistics.compare import all_baseline, control_arm
+    from roboview.eval.statistics.compare import all_baseline, control_arm, control_deltas
 
     episodes = pd.DataFrame(rows)
     base = all_baseline(episodes)
@@ -112,6 +116,8 @@ def add_control_arm(path: Path, info: dict, rows: list[dict]) -> None:
         group = (info.get("per_group") or {}).get(str(split))
         if isinstance(group, dict):
             group.update(control_arm(base, split_rows))
+            if "|" not in str(split_rows["factor"].iloc[0]):
+                group["per_value"] = control_deltas(base, split_rows)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(info, indent=2))
     tmp.replace(path)

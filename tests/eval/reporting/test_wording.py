@@ -63,3 +63,25 @@ def test_a_rerun_with_nothing_new_says_so_instead_of_nan(capsys):
     collect_summary(None, CollectResult(Path("ds"), 6, 0, 0, 0, 0.1))
     out = capsys.readouterr().out
     assert "nan" not in out and "already complete, nothing new to collect" in out
+
+
+def test_the_values_against_the_control_arm_carry_their_paired_interval():
+    """report.md and report.html name the values that differ from the control arm with Δ ×100 and its paired
+    interval: blue succeeds in 2 of 12 seeds the control arm all succeeds in."""
+    import pandas as pd
+
+    from roboview.eval.reporting.format import against_control
+    from roboview.eval.statistics.compare import control_deltas
+
+    pairs = pd.DataFrame({"context_id": ["c0"] * 6 + ["c1"] * 6, "repeat": list(range(6)) * 2})
+    rows = pd.concat(
+        [pairs.assign(value="blue", success=[1, 1] + [0] * 10), pairs.assign(value="red", success=1)]
+    )
+    deltas = control_deltas(pairs.assign(success=1), rows)
+    # A margin is empty (the control arm never fails), so φ = 0: Δ ∓ the root sum of squares of the Wilson distances,
+    # l(2/12) = 0.0470, u(2/12) = 0.4480, l(12/12) = 12 / (12 + 1.96²) = 0.7575.
+    assert deltas["blue"]["delta_control_ci95"] == pytest.approx([-0.9530, -0.4619], abs=1e-4)
+    assert against_control({"per_value": deltas}) == (
+        "; against the control arm (same seeds, McNemar p < 0.05; Δ ×100 [paired 95 % CI]): "
+        "blue -83.33 [-95.30, -46.19] (p 0.0020)"
+    )

@@ -16,8 +16,8 @@ from roboview.eval.statistics.metrics import (
     conditional_cv,
     interaction_metrics,
     policy_layouts,
+    rate_interval,
     split_metrics,
-    wilson_interval,
 )
 
 pytestmark = pytest.mark.fast
@@ -88,8 +88,8 @@ def test_split_where_everything_fails_has_null_cv():
     assert m["sr"] == 0.0
     assert (m["cv"], m["cv_null"], m["cv_excess"], m["p_value"], m["p_value_cv"]) == (None,) * 5
     assert m["n_contexts_all_failed"] == 2
-    # Wilson stays defined at 0/12: an upper bound on SR, 1.96²/(12 + 1.96²).
-    assert m["sr_ci95"] == pytest.approx([0.0, 3.8415 / 15.8415], abs=1e-4)
+    # The interval stays defined at 0/12: an upper bound on SR, Clopper–Pearson's 1 − 0.025^(1/12).
+    assert m["sr_ci95"] == pytest.approx([0.0, 1 - 0.025 ** (1 / 12)], abs=1e-12)
 
 
 # Factorial 2 × 2 in one context, 2 repeats: SR(a1,b1)=1, SR(a2,b1)=.5, SR(a1,b2)=0, SR(a2,b2)=.5.
@@ -121,12 +121,6 @@ def test_factorial_all_failed_is_null():
     assert m["cv"] == {"A": None, "B": None}
     assert m["iec"] == {"A|B": None, "B|A": None}
     assert m["iec_null"] == {"A|B": None, "B|A": None} and m["p_interaction"] is None
-
-
-def test_wilson_interval_known_values():
-    assert wilson_interval(8, 10) == pytest.approx((0.490, 0.943), abs=1e-3)
-    assert wilson_interval(0, 0) is None
-    assert wilson_interval(10, 10)[1] == 1.0
 
 
 def _noisy(seed: int = 0, contexts: int = 3, values: int = 6, repeats: int = 5) -> pd.DataFrame:
@@ -305,7 +299,7 @@ def test_per_value_p_value_is_exact_where_the_cmh_chi_square_is_not():
 
 def test_the_control_arm_is_a_result_field_of_every_split():
     """sr_control: the all-baseline instance of each (context, repeat) a split ran, on the same seed, whichever split
-    holds it (a deduplicated benchmark keeps it in one); with its Wilson interval."""
+    holds it (a deduplicated benchmark keeps it in one); with its Clopper–Pearson interval."""
     from roboview.variation.factors import baselines
 
     red, near = baselines()["color"], baselines()["dist_scale"]
@@ -318,7 +312,8 @@ def test_the_control_arm_is_a_result_field_of_every_split():
     m = compute_metrics(pd.concat([color, dist], ignore_index=True), FAST)
     c, d = m["splits"]["color"], m["splits"]["dist_scale"]
     assert (c["sr_control"], c["n_control_episodes"]) == (0.75, 4)
-    assert c["sr_control_ci95"] == pytest.approx(list(wilson_interval(3, 4)))
+    assert c["sr_control_ci95"] == pytest.approx(list(rate_interval(3, 4)))
+    assert c["sr_control_ci95"] == pytest.approx([0.1941, 0.975**0.25], abs=1e-4)
     # dist_scale ran c1's two repeats: its control arm is red's c1 episodes, taken from the color split.
     assert (d["sr_control"], d["n_control_episodes"]) == (1.0, 2)
     # Each value's paired difference to the control arm on the same (context, repeat) seeds, McNemar-tested:
@@ -326,8 +321,12 @@ def test_the_control_arm_is_a_result_field_of_every_split():
     blue = c["per_value"]["blue"]
     assert (blue["delta_control"], blue["n_control_pairs"]) == (-0.5, 4)
     assert blue["p_control"] == pytest.approx(0.625)
+    # Its paired interval: 1 pair blue alone succeeds in, 3 red alone does, so φ = −1 and the interval is the Wilson
+    # limits' differences, [l(1/4) − u(3/4), u(1/4) − l(3/4)] (tests/eval/statistics/test_rate_intervals.py).
+    assert blue["delta_control_ci95"] == pytest.approx([-0.9088, 0.3987], abs=1e-4)
     assert (c["per_value"][red]["delta_control"], c["per_value"][red]["p_control"]) == (0.0, 1.0)
     assert (d["per_value"]["3"]["delta_control"], d["per_value"]["3"]["n_control_pairs"]) == (-0.5, 2)
+    assert d["per_value"]["3"]["delta_control_ci95"] == pytest.approx([-0.9055, 0.2726], abs=1e-4)
     flat = compute_metrics(HAND, FAST)["splits"]["color"]  # no factor columns: no control arm to read
     assert (flat["sr_control"], flat["n_control_episodes"]) == (None, 0)
     assert not any("delta_control" in v for v in flat["per_value"].values())
