@@ -73,7 +73,7 @@ def test_every_factor_changes_only_itself_and_the_next_baseline_is_unchanged():
         base, _ = env.reset(seed=SEED, options={"instance": instance()})
         base = {k: np.array(v) for k, v in base.items()}
         values = {
-            "color": "blue",
+            "color": "red",  # a re-skin: the baseline is the object's own look, `original`
             "camera_pose": "orbit_r0_2",
             "camera_euler": "6,-6",
             "dist_scale": "4",
