@@ -39,7 +39,7 @@ def write_card(out: Path, manifest: dict) -> None:
         [
             _front_matter(manifest, total),
             _counts_section(manifest, total),
-            _build_section(manifest["suite"]),
+            _build_section(manifest["suite"], split_task(next(iter(manifest["splits"]), ""))[0]),
             _fairness_section(manifest),
         ]
     )
@@ -151,10 +151,10 @@ Total accepted: {total}.
 """
 
 
-def _build_section(suite: dict) -> str:
-    """How the instances were built: the SVGF preset, its union mode and splits, the ids and seeds."""
-    # The baselines in the world of the suite's first task (LIBERO's and Meta-World's color: `original`).
-    base = baselines((suite.get("tasks") or [DEFAULT_TASK])[0])
+def _build_section(suite: dict, task: str = DEFAULT_TASK) -> str:
+    """How the instances were built: the SVGF preset, its union mode and splits, the ids and seeds; the baselines
+    named are those of `task`'s world (the first split's: LIBERO's and Meta-World's color `original`)."""
+    base = baselines(task)
     return f"""## How the instances were built
 
 Structured Variant-Generation Framework with the `{suite["preset"]}` preset: union mode
