@@ -78,7 +78,11 @@ def run(cfg: MetaWorldVsLeRobotConfig) -> dict:
     lerobot_cmd += [f"--eval.batch_size={cfg.batch_size}", "--seed=1000", f"--output_dir={lerobot_dir}"]
     lerobot_s = timed(lerobot_cmd, env, out / "lerobot_eval.log")
     roboview_cmd = [str(bin_dir / "roboview-evaluate"), f"--benchmark.path={cfg.benchmark.path}"]
-    roboview_cmd += ["--benchmark.splits=metaworld_color", "--benchmark.values=original", "--policy.type=lerobot"]
+    roboview_cmd += [
+        "--benchmark.splits=metaworld_color",
+        "--benchmark.values=original",
+        "--policy.type=lerobot",
+    ]
     roboview_cmd += [
         f"--policy.path={cfg.checkpoint}",
         "--policy.device=cpu",
