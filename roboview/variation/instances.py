@@ -306,13 +306,13 @@ class SuiteConfig:
             # (a world's own look, `swept_values`) is swept where every task of the suite labels its baseline so.
             owner = load_factor(name).task
             for task in [owner] if owner else self.tasks:
+                FactorSampler(name, values, task)
                 bad = [v for v in values if v not in swept_values(name, task)]
                 if bad:
                     raise ValueError(
                         f"value_subsets[{name!r}]: {bad} are not swept values of {name}"
                         + ("" if owner else f" in the {task} task")
                     )
-                FactorSampler(name, values, task)
         if len({name for name, _ in self.value_subsets}) != len(self.value_subsets):
             raise ValueError("value_subsets names a factor twice")
 

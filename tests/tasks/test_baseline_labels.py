@@ -50,10 +50,13 @@ def test_original_is_a_value_only_where_a_world_labels_it():
     base = dict(baseline_instance("pick_place").factors)
     with pytest.raises(ValueError, match="unknown color 'original'"):
         TaskInstance("color", ("color",), base | {"color": "original"}, "base")
-    with pytest.raises(
-        ValueError, match=r"\['original'\] are not swept values of color in the pick_place task"
-    ):
+    with pytest.raises(ValueError, match="unknown color 'original'"):
         SuiteConfig(value_subsets=(("color", ("original", "red")),))
+    # A baseline that is no swept value (camera_pose's `original`) stays out of a subset, in every task.
+    with pytest.raises(
+        ValueError, match=r"\['original'\] are not swept values of camera_pose in the libero task"
+    ):
+        SuiteConfig(tasks=("libero",), value_subsets=(("camera_pose", ("original",)),))
     libero = dict(baseline_libero_instance().factors)
     red = TaskInstance("libero_color", ("color",), libero | {"color": "red"}, "base", task="libero")
     assert red.instance_id != baseline_libero_instance().instance_id
