@@ -32,7 +32,7 @@ from roboview.core.folders import folder_problem
 from roboview.core.workers import WorkerPool
 from roboview.tasks import DEFAULT_TASK, load_task
 from roboview.tasks.fairness import FairnessThresholds
-from roboview.variation.instances import SuiteConfig, generate_suite
+from roboview.variation.instances import SuiteConfig, generate_suite, split_name
 
 OFFENDERS_FILE = "fairness_report.csv"
 SCREEN_FILE = "vlm_screen.csv"
@@ -83,11 +83,32 @@ class Judged:
     accepted: list[bool]
     rejected_by: list[str]
     decisions: dict[str, Decision]
+    # The splits kept whatever the gate says (SuiteConfig.ungated_splits, by their benchmark names).
+    ungated: frozenset[str] = frozenset()
 
     @property
     def gate_pass_rate(self) -> float:
         """The share of candidates the stage-1 gate passed."""
         return sum(r["fairness"]["passed"] for r in self.records) / len(self.records)
+
+    @property
+    def gated(self) -> list[dict]:
+        """The candidates the gate may drop (those outside the ungated splits)."""
+        return [r for r in self.records if r["split"] not in self.ungated]
+
+    @property
+    def gated_pass_rate(self) -> float:
+        """The share of the gated candidates the gate passed (1.0 where none is gated): what the floor judges."""
+        gated = self.gated
+        return sum(r["fairness"]["passed"] for r in gated) / len(gated) if gated else 1.0
+
+    def kept_over_gate(self) -> dict[str, int]:
+        """Per ungated split, how many of its candidates the gate would have dropped (all kept)."""
+        out: dict[str, int] = {}
+        for r in self.records:
+            if r["split"] in self.ungated:
+                out[r["split"]] = out.get(r["split"], 0) + (not r["fairness"]["passed"])
+        return out
 
     def by_split(self) -> dict[str, list[dict]]:
         """The accepted records of every split, in suite order."""
@@ -174,8 +195,9 @@ def build(spec: BuildSpec, output_dir: Path) -> BuildResult:
     decisions = read_decisions(spec.decisions, {i.instance_id for i in instances}) if spec.decisions else {}
     t0 = time.perf_counter()
     records = render_all(spec, instances)
-    verdicts = [adjudicate(r, decisions.get(r["instance_id"])) for r in records]
-    judged = Judged(records, [ok for ok, _ in verdicts], [who for _, who in verdicts], decisions)
+    ungated = ungated_split_names(spec.suite)
+    verdicts = [adjudicate(r, decisions.get(r["instance_id"]), r["split"] in ungated) for r in records]
+    judged = Judged(records, [ok for ok, _ in verdicts], [who for _, who in verdicts], decisions, ungated)
     # Write into a sibling temp folder and swap it in: never a half-written benchmark.
     tmp = output_dir.with_name(output_dir.name + ".building")
     shutil.rmtree(tmp, ignore_errors=True)
@@ -187,7 +209,7 @@ def build(spec: BuildSpec, output_dir: Path) -> BuildResult:
     sheet = output_dir / sheet.relative_to(tmp)
     if manifest["status"] != bio.BUILT:
         raise GateFailure(
-            f"only {judged.gate_pass_rate:.1%} of {len(records)} candidates pass the fairness gate "
+            f"only {judged.gated_pass_rate:.1%} of {len(judged.gated)} gated candidates pass the fairness gate "
             f"(need {spec.min_pass_rate:.0%}); offenders in {output_dir / OFFENDERS_FILE}, "
             f"previews in {sheet}. Fix the scene (camera aims, positions), not the threshold."
         )
@@ -208,7 +230,7 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
     manifest and the card into `tmp`; the manifest."""
     screen = _screen(spec, judged.records, tmp)
     by_split, rejected = judged.by_split(), judged.rejected_rows()
-    passed = judged.gate_pass_rate >= spec.min_pass_rate
+    passed = judged.gated_pass_rate >= spec.min_pass_rate
     content, reference, stack, protocols = {}, None, None, None
     if passed:
         protocols = protocols_json([s for s, rows in by_split.items() if rows], spec.suite.preset)
@@ -228,6 +250,15 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
         "candidates": len(judged.records),
         "gate_pass_rate": judged.gate_pass_rate,
         "min_pass_rate": spec.min_pass_rate,
+        **(
+            {
+                "ungated_splits": sorted(judged.ungated),
+                "gated_pass_rate": judged.gated_pass_rate,
+                "kept_over_gate": judged.kept_over_gate(),
+            }
+            if judged.ungated
+            else {}
+        ),
         "splits": bio.split_counts(judged.records, judged.accepted, judged.rejected_by),
         "rejected": len(rejected),
         **({"rejected_tables": sorted(map(rejected_table, _by_task(rejected)))} if rejected else {}),
@@ -247,6 +278,11 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
     return manifest
 
 
+def ungated_split_names(suite: SuiteConfig) -> frozenset[str]:
+    """The benchmark names of the suite's ungated splits, for each of its tasks."""
+    return frozenset(split_name(s, task) for s in suite.ungated_splits for task in suite.tasks)
+
+
 def suite_record(suite: SuiteConfig) -> dict:
     """The suite as the manifest records it."""
     return {
@@ -256,6 +292,7 @@ def suite_record(suite: SuiteConfig) -> dict:
         "factorial_colors": list(suite.factorial_colors),
         "cartesian": [list(c) for c in suite.cartesian],
         "value_subsets": {k: list(v) for k, v in suite.value_subsets},
+        **({"ungated_splits": list(suite.ungated_splits)} if suite.ungated_splits else {}),
     }
 
 

@@ -62,6 +62,9 @@ READABLE_FORMATS = (4, 5)
 LABELLED_FORMAT = 5
 # Columns that never travel into episode rows (docs/formats.md, "Episode records": everything but fairness and preview does).
 NOT_IN_EPISODES = ("fairness", "preview")
+# The episode column carrying the gate's verdict of the instance, in a benchmark that keeps an external benchmark's
+# variants whatever the gate says (its manifest's `ungated_splits`).
+GATE_COLUMN = "gate_passed"
 
 
 class BenchmarkError(ValueError):
@@ -442,6 +445,7 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
     out: dict[str, list[BenchmarkItem]] = {}
     rules: dict[str, Repetition] = {}
     fmt = manifest.get("format")
+    kept_over_gate = bool(manifest.get("ungated_splits"))
     for split in chosen:
         rows = verify_table(root, root / "data" / f"{split}.parquet", manifest)
         out[split] = []
@@ -450,6 +454,10 @@ def load_benchmark(path: str | Path, splits: list[str] | None = None) -> Benchma
             if instance.task not in rules:
                 rules[instance.task] = repetition_of(instance.task, manifest.get("suite"))
             written = {k: v for k, v in row.items() if k not in NOT_IN_EPISODES}
+            if (
+                kept_over_gate
+            ):  # an external benchmark's set kept whatever the gate said: its verdict travels along
+                written[GATE_COLUMN] = bool(row["fairness"]["passed"])
             record = labelled(written) if fmt < LABELLED_FORMAT else written
             built = written if record is not written else None
             out[split].append(BenchmarkItem(instance, record, rules[instance.task], built))

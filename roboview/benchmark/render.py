@@ -7,6 +7,7 @@ applied in place by the env's reset — no recompiles.
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -17,9 +18,17 @@ from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import IMAGE_KEY
 from roboview.tasks.fairness import FairnessThresholds
 from roboview.tasks.world import load_world
+from roboview.variation.factors import baselines, visual_factors
 from roboview.variation.instances import TaskInstance
 
 PREVIEW_SIZE = 128  # pixels per camera tile in the stored preview
+
+
+def no_change_view(instance: TaskInstance) -> TaskInstance:
+    """`instance`'s context with every visual factor at its baseline (the task's label of it)."""
+    visual = set(visual_factors())
+    base = {name: value for name, value in baselines(instance.task).items() if name in visual}
+    return replace(instance, factors={**dict(instance.factors), **base})
 
 
 def preview_png(frames: list[np.ndarray], size: int = PREVIEW_SIZE) -> bytes:
@@ -49,6 +58,7 @@ class InstanceRenderer:
         self.probes: dict[str, Any] = {}
         self.screen = screen[0](screen[1]) if screen is not None else None
         self.thresholds = thresholds
+        self._views: dict[tuple, Any] = {}
         self._use(task)
 
     def _use(self, task: str) -> None:
@@ -60,10 +70,15 @@ class InstanceRenderer:
 
     def record(self, instance: TaskInstance) -> dict:
         self._use(instance.task)
+        view = self._no_change_view(instance)
         obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
         cameras = self.probe.cameras
         rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in cameras}
-        fairness = self.probe.measure(rgb, self.thresholds).to_record()
+        if view is None and load_world(self.env.world).gate_reference == "no_change_view":
+            view = self.probe.measure(
+                rgb, self.thresholds
+            )  # the no-change view itself: judged against itself
+        fairness = self.probe.measure(rgb, self.thresholds, *([view] if view else [])).to_record()
         vlm = (
             screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
         )
@@ -74,6 +89,23 @@ class InstanceRenderer:
             "fairness": fairness,
             "preview": {"bytes": preview_png([rgb[c] for c in cameras]), "path": None},
         }
+
+    def _no_change_view(self, instance: TaskInstance):
+        """The gate's report of `instance`'s context at every visual factor's baseline (on the same seed), where the
+        world judges against it (`World.gate_reference`); None where it does not, or `instance` is that view."""
+        if load_world(self.env.world).gate_reference != "no_change_view":
+            return None
+        base = no_change_view(instance)
+        if base.factors == instance.factors:
+            return None
+        key = (base.task, base.factors, instance.seed)
+        if key not in self._views:
+            obs, _ = self.env.reset(seed=instance.seed, options={"instance": base})
+            rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in self.probe.cameras}
+            if len(self._views) >= 256:  # a batch holds one world's instances: a few contexts at a time
+                self._views.clear()
+            self._views[key] = self.probe.measure(rgb, self.thresholds)
+        return self._views[key]
 
     def records(self, instances: list[TaskInstance]) -> list[dict]:
         """`record` of each of `instances` (one world's, in one call: its model is compiled once)."""

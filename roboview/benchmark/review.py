@@ -52,9 +52,10 @@ def read_decisions(path: Path, known_ids: set[str]) -> dict[str, Decision]:
     }
 
 
-def adjudicate(record: dict, decision: Decision | None) -> tuple[bool, str]:
-    """(accepted, rejected_by) after stage 1 (the gate) and stage 2 (a decision, if any)."""
-    gate_passed = record["fairness"]["passed"]
+def adjudicate(record: dict, decision: Decision | None, ungated: bool = False) -> tuple[bool, str]:
+    """(accepted, rejected_by) after stage 1 (the gate) and stage 2 (a decision, if any); an `ungated` record (an
+    external benchmark's own variant) passes stage 1 whatever the gate measured, its verdict kept in its record."""
+    gate_passed = record["fairness"]["passed"] or ungated
     if decision is None:
         return gate_passed, "" if gate_passed else "gate"
     if decision.verdict == "reject":

@@ -36,6 +36,10 @@ from scipy import stats as sps
 
 from roboview.libero.plus import LIBERO_PLUS_SPLITS, NO_CHANGE, SHORT, SUB_FACTORS, SUITES
 
+# The episode column with the fairness gate's verdict of the instance (roboview.benchmark.format.GATE_COLUMN, which
+# this wing's floor may not import).
+GATE_COLUMN = "gate_passed"
+
 KEY = "liberoplus_camera"
 TITLE = "LIBERO-plus's camera dimension, taken apart"
 N_BOOT = 2000
@@ -214,6 +218,8 @@ def dose_response(rows: pd.DataFrame, factor: str) -> dict[str, Any] | None:
     if y.min() == y.max():
         return out  # all succeeded or all failed: no slope to fit
     groups = pd.factorize(sub["context_id"])[0]
+    if groups.max() < 1:
+        return out  # one block: clustered standard errors need two (one task from one init state has no slope's error)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
@@ -272,9 +278,8 @@ def _is_liberoplus(split: str) -> bool:
     return str(split).removeprefix("liberoplus_") in LIBERO_PLUS_SPLITS
 
 
-def camera_number(rows: pd.DataFrame) -> dict[str, Any]:
-    """The camera dimension's success rate as LIBERO-plus totals it and as vla-eval averages it."""
-    variants = rows[rows["split"].map(_is_liberoplus) & (rows["kind"] != "")]
+def _totals(variants: pd.DataFrame) -> dict[str, Any]:
+    """Micro (every variant episode alike: LIBERO-plus's README) and macro (the suites' mean: vla-eval's) totals."""
     suite = variants["liberoplus_task"].astype(str).str.split("/").str[0]
     per_suite = {s: _rate(variants.loc[suite == s, "success"]) for s in SUITES if (suite == s).any()}
     rates = [r["sr"] for r in per_suite.values()]
@@ -283,8 +288,23 @@ def camera_number(rows: pd.DataFrame) -> dict[str, Any]:
         "vla_eval": float(np.mean(rates)) if rates else None,
         "per_suite": per_suite,
         "n_variants": int(variants.drop_duplicates("instance_id").shape[0]),
+    }
+
+
+def camera_number(rows: pd.DataFrame) -> dict[str, Any]:
+    """The camera dimension's success rate as LIBERO-plus totals it and as vla-eval averages it, over every variant
+    run; and, where the benchmark kept LIBERO-plus's set whatever the fairness gate said (its rows carry the gate's
+    verdict, `gate_passed`), the same over the variants the gate passes (`fair`) and how many it does not."""
+    variants = rows[rows["split"].map(_is_liberoplus) & (rows["kind"] != "")]
+    out = {
+        **_totals(variants),
         "no_change": _rate(rows[rows["kind"] == ""].drop_duplicates(["context_id", "repeat"])["success"]),
     }
+    if GATE_COLUMN in variants and variants[GATE_COLUMN].notna().all():
+        fair = variants[variants[GATE_COLUMN].astype(bool)]
+        out["fair"] = _totals(fair)
+        out["n_variants_unfair"] = out["n_variants"] - out["fair"]["n_variants"]
+    return out
 
 
 def compute(episodes: pd.DataFrame) -> dict[str, Any] | None:
@@ -344,10 +364,19 @@ def _camera_line(result: dict[str, Any]) -> str:
         if "liberoplus" in result["instruction"]
         else "LIBERO's own, whatever the view (only the camera changes)"
     )
+    fair = cam.get("fair")
+    over_fair = (
+        f" Over the {fair['n_variants']:,} variants the fairness gate passes ({cam['n_variants_unfair']:,} of LIBERO-"
+        f"plus's set it does not: the target leaves the frame or hides, kept as LIBERO-plus runs them): "
+        f"**{_pct(fair['liberoplus']['sr'])}** {_ci(fair['liberoplus']['ci95'])} as LIBERO-plus totals it, "
+        f"{_pct(fair['vla_eval'])} as vla-eval averages it."
+        if fair
+        else ""
+    )
     return (
         f"Camera success rate over LIBERO-plus's {cam['n_variants']:,} variants run: **{_pct(lp['sr'])}** "
         f"{_ci(lp['ci95'])} as LIBERO-plus totals it ({lp['n']:,} episodes alike); {_pct(cam['vla_eval'])} as "
-        f"vla-eval averages it (the suites' mean: {suites}). The no-change view: {_pct(base['sr'])} "
+        f"vla-eval averages it (the suites' mean: {suites}).{over_fair} The no-change view: {_pct(base['sr'])} "
         f"{_ci(base['ci95'])} (n {base['n']}). Instruction: {told}."
     )
 

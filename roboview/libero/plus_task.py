@@ -23,7 +23,15 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from roboview.libero.plus import SHORT, SUB_FACTORS, TASK, View, instruction_of, variant_name
+from roboview.libero.plus import (
+    LIBERO_PLUS_SPLITS,
+    SHORT,
+    SUB_FACTORS,
+    TASK,
+    View,
+    instruction_of,
+    variant_name,
+)
 from roboview.libero.suites import SUITES
 from roboview.libero.task import (
     BASELINE_LABELS,
@@ -156,6 +164,9 @@ LIBERO_PLUS = SuiteConfig(
     factorial_colors=(),
     value_subsets=(("liberoplus_init_state", ("0",)),),
     generator="roboview.libero.plus:camera_suite",
+    # LIBERO-plus's own variants (and each task's no-change view) are kept whatever the gate says: its number is over
+    # its whole set. The single-change parts RoboView adds stay gated.
+    ungated_splits=LIBERO_PLUS_SPLITS,
 )
 register_preset(LIBERO_PLUS)
 register_preset(

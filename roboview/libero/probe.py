@@ -11,3 +11,7 @@ class LiberoFairnessProbe(ObjectProbe):
     """The gate in LIBERO's scenes: the object in `agentview`; the wrist camera measured, not judged."""
 
     geom_groups = (VISUAL_GROUP,)
+    # robosuite reads its frames bottom row first and the observations turn them 180°: against mujoco.Renderer's
+    # top-row-first frames that is a left-right mirror. (Flipping both axes here put the mask on the floor beside a
+    # low object: libero_object/1's cream cheese measured the floor's colour whatever its re-skin, ΔE2000 0.6.)
+    flip_axes = (1,)

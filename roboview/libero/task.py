@@ -92,6 +92,8 @@ register_world(
         wrist_cameras=tuple(name for name, camera in CAMERAS.items() if camera == "robot0_eye_in_hand"),
         controls=(CONTROL,),
         probe="roboview.libero.probe:LiberoFairnessProbe",
+        # LIBERO's scenes are its designers': the gate judges each value against its context's no-change view.
+        gate_reference="no_change_view",
         render_size=IMAGE_SIZE,
         proprio_key=PROPRIO_KEY,
         instruction="LIBERO's own, one per task (its bddl file's language)",

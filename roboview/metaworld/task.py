@@ -103,6 +103,8 @@ register_world(
         image_features={"top": "observation.image"},
         controls=(CONTROL,),
         probe="roboview.metaworld.probe:MetaWorldFairnessProbe",
+        # Meta-World's scenes are its designers': the gate judges each value against its context's no-change view.
+        gate_reference="no_change_view",
         render_size=NATIVE_SIZE,
         fps=FPS,
         instruction="LeRobot's description of the task (one per task)",

@@ -134,6 +134,14 @@ def _print_summary(manifest: dict) -> None:
         pass_rate = c["accepted"] / c["candidates"]
         print(f"{split:<{width}}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{pass_rate:>8.1%}")
     print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
+    kept = manifest.get("kept_over_gate", {})
+    if any(kept.values()):
+        total = sum(manifest["splits"][s]["candidates"] for s in kept)
+        print(
+            f"the gate would drop {sum(kept.values()):,} of the {total:,} instances of the external benchmark's own "
+            f"set ({', '.join(sorted(kept))}); kept, each with its verdict (fairness.passed): reports give its number "
+            "over all of them and over the fair ones"
+        )
 
 
 def _print_screen(screen: dict) -> None:

@@ -14,7 +14,7 @@ with the table's rendered color by CIEDE2000.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import mujoco
 import numpy as np
@@ -43,11 +43,20 @@ class FairnessThresholds:
     min_delta_e_table: float = 3.0
     # Maximum CIEDE2000 between the object's rendered and nominal colors (catches lighting failures).
     max_delta_e_nominal: float = 45.0
+    # In a world judged against its context's no-change view (`World.gate_reference`), the share of that view's own
+    # figure a value must keep where the view itself is under a threshold. Measured at 256² on the three LIBERO tasks
+    # whose no-change view is (libero_object/8, libero_goal/0, libero_10/4): a camera turned ±6° or pulled back keeps
+    # 0.88–1.0 of the view's figure when the same clutter or fixture edge merely shifts (libero_object/8's pudding 0.52–
+    # 0.58 visible against 0.58), and 0.00–0.53 when the target swings out (libero_10/4 at yaw −6°: 0.00; libero_goal/0's
+    # cabinet at yaw −6°: 0.47 in frame against 0.88). 0.85 lies between the two.
+    min_share_of_view: float = 0.85
 
     def __post_init__(self) -> None:
         for name in ("min_object_visible", "min_box_visible"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name}={getattr(self, name)} must lie in [0, 1]")
+        if not 0.0 < self.min_share_of_view <= 1.0:
+            raise ValueError(f"min_share_of_view={self.min_share_of_view} must lie in (0, 1]")
         if self.min_object_pixels < 1 or self.min_delta_e_table < 0 or self.max_delta_e_nominal <= 0:
             raise ValueError("pixel and ΔE thresholds must be positive")
 
@@ -65,6 +74,9 @@ class CameraFairness:
     box_in_frame: bool
     delta_e_nominal: float
     delta_e_table: float
+    # The share of the object's unoccluded silhouette that falls inside the frame (1.0: wholly in frame), measured
+    # where it is not wholly in frame (a fixture larger than the frame: LIBERO's cabinets) on a render widened 2×.
+    object_frame_share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -176,23 +188,49 @@ def violations(
     min_pixels: float,
     scene_camera: bool,
     judge_nominal: bool = True,
+    view: CameraFairness | None = None,
 ) -> list[str]:
     """Why one camera's measurements fail the thresholds, one reason each (empty when they pass); the box is
-    judged only by a `scene_camera`, the object's colour shift only with `judge_nominal`."""
+    judged only by a `scene_camera`, the object's colour shift only with `judge_nominal`.
+
+    `view`: the same camera's measures of the context's no-change view, in a world whose look is another
+    benchmark's design (`World.gate_reference`). A value is then asked to show the object no worse than that world
+    shows it to every policy: each floor is the threshold or `min_share_of_view` of the no-change view's own figure,
+    whichever is lower (a chocolate pudding 58 % visible among LIBERO's clutter may stay about that visible; a blue
+    re-skin of a black bowl on a dark table may stand out from it about as little as the bowl itself does). An
+    object the no-change view does not hold wholly in frame (a cabinet larger than the frame) is judged by the share
+    of it in frame, not by being whole."""
     out = []
-    if r.object_visible < t.min_object_visible:
-        out.append(f"{r.camera}: object visible {r.object_visible:.2f} < {t.min_object_visible}")
-    if r.object_pixels < min_pixels:
-        out.append(f"{r.camera}: object area {r.object_pixels} px < {min_pixels:.0f}")
+
+    def floor(threshold: float, own: float | None, digits: int = 2) -> tuple[float, str]:
+        """The floor a measure is held to, and how the reason writes it: the threshold as written, or the share of
+        the no-change view's figure, saying so."""
+        if own is None or np.isnan(own) or t.min_share_of_view * own >= threshold:
+            return threshold, f"{threshold}" if digits else f"{threshold:.0f}"
+        least = t.min_share_of_view * own
+        return least, f"{least:.{digits}f} ({t.min_share_of_view:.0%} of its no-change view's {own:.2f})"
+
+    least, said = floor(t.min_object_visible, view and view.object_visible)
+    if r.object_visible < least:
+        out.append(f"{r.camera}: object visible {r.object_visible:.2f} < {said}")
+    least, said = floor(min_pixels, view and float(view.object_pixels), 0)
+    if r.object_pixels < least:
+        out.append(f"{r.camera}: object area {r.object_pixels} px < {said}")
     if t.require_in_frame and not r.object_in_frame:
-        out.append(f"{r.camera}: object not wholly in frame")
+        if view is None or view.object_in_frame:
+            out.append(f"{r.camera}: object not wholly in frame")
+        else:  # the world's own view does not hold it whole either: judged by how much of it is in frame
+            least, said = floor(t.min_object_visible, view.object_frame_share)
+            if r.object_frame_share < least:
+                out.append(f"{r.camera}: object {r.object_frame_share:.2f} in frame < {said}")
     if scene_camera:
         if r.box_visible < t.min_box_visible:
             out.append(f"{r.camera}: box visible {r.box_visible:.2f} < {t.min_box_visible}")
         if t.require_in_frame and not r.box_in_frame:
             out.append(f"{r.camera}: box not wholly in frame")
-    if not np.isnan(r.delta_e_table) and r.delta_e_table < t.min_delta_e_table:
-        out.append(f"{r.camera}: object-table ΔE2000 {r.delta_e_table:.1f} < {t.min_delta_e_table}")
+    least, said = floor(t.min_delta_e_table, view and view.delta_e_table, 1)
+    if not np.isnan(r.delta_e_table) and r.delta_e_table < least:
+        out.append(f"{r.camera}: object-table ΔE2000 {r.delta_e_table:.1f} < {said}")
     if judge_nominal and not np.isnan(r.delta_e_nominal) and r.delta_e_nominal > t.max_delta_e_nominal:
         out.append(f"{r.camera}: rendered-nominal ΔE2000 {r.delta_e_nominal:.1f} > {t.max_delta_e_nominal}")
     return out
@@ -215,8 +253,12 @@ class ObjectProbe:
     # The geom groups the world's renderer draws (robosuite: the visual geoms, group 1, not the collision geoms that
     # coincide with them).
     geom_groups: tuple[int, ...] = (0, 1, 2)
-    # Whether the observations hand the world's render turned 180° (LIBERO's, Meta-World's corner2: upright).
-    upright_flip: bool = True
+    # The axes along which the observations hand the world's frame flipped against what `mujoco.Renderer` draws
+    # (top row first): Meta-World's corner2 is drawn top row first by gymnasium's renderer and flipped on both axes.
+    # A wing whose renderer reads its frames otherwise declares its own (LIBERO's: robosuite reads them bottom row
+    # first, so after its 180° turn they differ from mujoco.Renderer's by a left-right mirror alone). The
+    # segmentation must land on the observed pixels: the colour measures read the frame under it.
+    flip_axes: tuple[int, ...] = (0, 1)
 
     def __init__(self, env) -> None:
         self.env = env
@@ -224,8 +266,12 @@ class ObjectProbe:
         self.cameras, self.judged, self.names = world.observed_cameras, world.judged_cameras, world.cameras
         self._seg: mujoco.Renderer | None = None
 
-    def _segment(self, camera: str, alone: list[int] | None = None) -> np.ndarray:
+    def _segment(self, camera: str, alone: list[int] | None = None, widen: float = 1.0) -> np.ndarray:
+        """Geom ids per pixel of `camera` as the observations hand the frame (`alone`: those geoms drawn alone;
+        `widen`: the field of view's tangent scaled by it, so the frame is the central 1/widen of the render)."""
         model, data = self.env.model, self.env.data
+        cam = model.camera(self.names[camera]).id
+        fovy = float(model.cam_fovy[cam])
         if self._seg is None or self._seg.model is not model:  # a hard reset compiled a new model
             if self._seg is not None:
                 self._seg.close()
@@ -239,16 +285,29 @@ class ObjectProbe:
             if alone is not None:
                 model.geom_rgba[:, 3] = 0.0
                 model.geom_rgba[alone, 3] = 1.0
-            self._seg.update_scene(
-                data, camera=model.camera(self.names[camera]).id, scene_option=self._option
-            )
+            model.cam_fovy[cam] = np.degrees(2 * np.arctan(widen * np.tan(np.radians(fovy) / 2)))
+            self._seg.update_scene(data, camera=cam, scene_option=self._option)
             seg = self._seg.render()
         finally:
             model.geom_rgba[:] = rgba
+            model.cam_fovy[cam] = fovy
         ids = np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
-        return ids[::-1, ::-1] if self.upright_flip else ids  # as the observations hand the image
+        return np.flip(ids, self.flip_axes) if self.flip_axes else ids  # as the observations hand the image
 
-    def measure(self, rgb: dict[str, np.ndarray], thresholds: FairnessThresholds) -> FairnessReport:
+    def frame_share(self, camera: str, geoms: list[int], widen: float = 2.0) -> float:
+        """The share of the geoms' unoccluded silhouette inside `camera`'s frame, from a render `widen`× wider (a
+        silhouette that overflows even that counts only what it shows: an upper bound)."""
+        wide = np.isin(self._segment(camera, geoms, widen), geoms)
+        size = wide.shape[0]
+        lo, hi = int(round(size * (1 - 1 / widen) / 2)), int(round(size * (1 + 1 / widen) / 2))
+        total = int(wide.sum())
+        return float(wide[lo:hi, lo:hi].sum() / total) if total else 0.0
+
+    def measure(
+        self, rgb: dict[str, np.ndarray], thresholds: FairnessThresholds, view: FairnessReport | None = None
+    ) -> FairnessReport:
+        """The gate's measures of the current scene and its verdict; `view`: the context's no-change view's report,
+        which each value is judged against in a world whose look is another benchmark's (`violations`)."""
         geoms = list(self.env.object_geoms())
         color = self.env.instance.get("color")
         # At its baseline the object wears LIBERO's own texture, as LIBERO's scene shows it to every policy: there is
@@ -265,23 +324,27 @@ class ObjectProbe:
             obj_mask = np.isin(self._segment(cam), geoms)
             alone = np.isin(self._segment(cam, geoms), geoms)
             obj_lab = mean_lab(rgb[cam], obj_mask)
+            whole = in_frame(alone)
             result = CameraFairness(
                 camera=cam,
                 object_visible=fraction(obj_mask, alone),
                 object_pixels=int(obj_mask.sum()),
-                object_in_frame=in_frame(alone),
+                object_in_frame=whole,
                 box_visible=1.0,
                 box_pixels=0,
                 box_in_frame=True,
                 delta_e_nominal=delta_e(obj_lab, nominal),
-                delta_e_table=delta_e(obj_lab, mean_lab(rgb[cam], ring(obj_mask)))
-                if recolored
-                else float("nan"),
+                # Measured at the baseline too: the contrast the world gives its own object is what a re-skin is
+                # judged against where the gate takes the no-change view's figures.
+                delta_e_table=delta_e(obj_lab, mean_lab(rgb[cam], ring(obj_mask))),
+                object_frame_share=1.0 if whole or cam not in self.judged else self.frame_share(cam, geoms),
             )
             results.append(result)
             if cam in self.judged:
                 min_pixels = thresholds.min_object_pixels * (self.env.image_size / 224) ** 2
-                reasons += violations(result, thresholds, min_pixels, False, judge_nominal)
+                own = next((c for c in view.cameras if c.camera == cam), None) if view is not None else None
+                judged = result if recolored else replace(result, delta_e_table=float("nan"))
+                reasons += violations(judged, thresholds, min_pixels, False, judge_nominal, own)
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
     def close(self) -> None:

@@ -78,6 +78,10 @@ class World:
     # every CSS color, red included, is a re-skin). The wing registers them for each of its tasks
     # (`roboview.variation.factors.register_baseline_labels`); empty: the registered baselines (RoboView's red).
     baseline_labels: Mapping[str, str] = field(default_factory=dict)
+    # What the fairness gate judges a value against: "thresholds" (RoboView's scene, drawn with the gate in mind) or
+    # "no_change_view" (a world whose look is another benchmark's design, LIBERO's and Meta-World's: each value against
+    # its own context's no-change view, what that world shows every policy; roboview.tasks.fairness.violations).
+    gate_reference: str = "thresholds"
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     @property
@@ -103,6 +107,7 @@ class World:
 
 
 WORLDS: dict[str, World] = {}
+GATE_REFERENCES = ("thresholds", "no_change_view")
 
 
 def register_world(world: World) -> World:
@@ -112,6 +117,10 @@ def register_world(world: World) -> World:
     if unknown or not set(world.judged_cameras) <= set(world.observed_cameras):
         raise ValueError(
             f"world {world.name!r}: cameras {unknown or world.judged_cameras} are not its cameras"
+        )
+    if world.gate_reference not in GATE_REFERENCES:
+        raise ValueError(
+            f"world {world.name!r}: gate_reference {world.gate_reference!r}; allowed: {', '.join(GATE_REFERENCES)}"
         )
     WORLDS[world.name] = world
     return world

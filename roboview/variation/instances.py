@@ -262,11 +262,22 @@ class SuiteConfig:
     # of factor values, e.g. LIBERO-plus's camera variants (roboview.libero.plus.camera_suite); its `splits` then
     # name the splits it makes (without their task prefix).
     generator: str = ""
+    # Splits that hold an external benchmark's own variants (LIBERO-plus's camera variants, each context's no-change
+    # view among them), named as in `splits`: a build keeps every instance of them whatever the fairness gate says,
+    # its verdict recorded (`fairness.passed`), so a number over them is over that benchmark's whole set; the report
+    # gives it over all of them and over the fair ones. The other splits (RoboView's own additions) stay gated.
+    ungated_splits: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         # Config parsers may hand in lists; tuples keep the config frozen and hashable.
         object.__setattr__(self, "splits", tuple(self.splits))
         object.__setattr__(self, "tasks", tuple(self.tasks))
+        object.__setattr__(self, "ungated_splits", tuple(self.ungated_splits))
+        stray = [s for s in self.ungated_splits if s not in self.splits]
+        if stray:
+            raise ValueError(
+                f"ungated_splits {stray} are not splits of the suite; allowed: {', '.join(self.splits)}"
+            )
         if (
             not self.tasks
             or len(set(self.tasks)) != len(self.tasks)

@@ -300,6 +300,9 @@ def test_build_evaluate_report_and_verify_the_tiny_preset(tmp_path):
     build(BuildConfig(output_dir=str(bench), preset="liberoplus_camera_tiny", image_size=64, num_workers=1))
     manifest = json.loads((bench / "benchmark.json").read_text())
     assert (manifest["candidates"], manifest["rejected"]) == (8, 0)
+    # LIBERO-plus's own variants are kept whatever the gate says; here it passes them all.
+    assert manifest["suite"]["ungated_splits"] == list(plus.LIBERO_PLUS_SPLITS)
+    assert set(manifest["kept_over_gate"].values()) == {0}
     run(
         EvaluateConfig(
             BenchmarkConfig(str(bench)),
@@ -318,6 +321,8 @@ def test_build_evaluate_report_and_verify_the_tiny_preset(tmp_path):
     result = metrics["analyses"]["liberoplus_camera"]
     assert result["camera"]["liberoplus"]["n"] == 8 and result["camera"]["n_variants"] == 4
     assert result["camera"]["no_change"]["n"] == 2
+    assert episodes["gate_passed"].all() and result["camera"]["fair"]["n_variants"] == 4
+    assert result["camera"]["n_variants_unfair"] == 0
     assert set(result["kinds"]) == {
         "azimuth",
         "elevation",

@@ -65,6 +65,30 @@ def test_the_camera_number_as_liberoplus_totals_it_and_as_vla_eval_averages_it()
     assert lo < 0.6 < hi
 
 
+def test_the_camera_number_over_all_variants_and_over_the_fair_ones():
+    # libero_spatial: 10 azimuth variants, 9 succeed, the 3 last unfair (their target leaves the frame: 2 of them
+    # failed); libero_object: 4 scale variants, 2 succeed, all fair.
+    rows = [row(0, (i + 1, 0, 100, 0, 0), i < 9, "view_azimuth") | {"gate_passed": i < 7} for i in range(10)]
+    rows += [
+        row(1, (0, 0, 101 + i, 0, 0), i < 2, "view_scale", "libero_object/0") | {"gate_passed": True}
+        for i in range(4)
+    ]
+    rows += [row(0, NO_CHANGE, True, "view_azimuth") | {"gate_passed": False}]  # kept: the control arm
+    camera = analyse(rows)["camera"]
+    assert camera["liberoplus"]["sr"] == pytest.approx(11 / 14) and camera["n_variants"] == 14
+    assert camera["vla_eval"] == pytest.approx((0.9 + 0.5) / 2)
+    fair = camera["fair"]
+    assert fair["n_variants"] == 11 and camera["n_variants_unfair"] == 3
+    assert fair["liberoplus"]["sr"] == pytest.approx(9 / 11) and fair["vla_eval"] == pytest.approx(
+        (1.0 + 0.5) / 2
+    )
+    assert camera["no_change"]["n"] == 1  # the no-change view counts whatever its verdict
+    text = dec._camera_line(analyse(rows))
+    assert "Over the 11 variants the fairness gate passes (3 of LIBERO-plus's set it does not" in text
+    # A benchmark that gated its variants (no verdict column) reports the one number.
+    assert "fair" not in analyse([{k: v for k, v in r.items() if k != "gate_passed"} for r in rows])["camera"]
+
+
 def _blocks(rng, n_blocks: int, p_none: float, kinds: dict[tuple, float]) -> list[dict]:
     """Each block: its no-change episode and one episode of each view in `kinds` (view → success probability)."""
     rows = []
