@@ -119,6 +119,8 @@ def instance_features(task: str, rejected: bool = False) -> datasets.Features:
             *factor_names(task),
         )
     }
+    # The registered baselines: a value of every factor whose extra columns have the types every value's share (a
+    # world's baseline label, `original`, fills the same columns with an empty hex and nulls).
     examples = record_columns({name: FACTORS[name].baseline for name in factor_names(task)})
     cols |= {name: _feature(value) for name, value in examples.items()}
     cols |= {
