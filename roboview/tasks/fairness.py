@@ -86,8 +86,12 @@ class FairnessReport:
     reject_reason: str
 
     def to_record(self) -> dict:
+        """The record a benchmark stores (format.py's `fairness` struct). The frame share is judged, not stored: it is
+        measured only where the object is not wholly in frame, and a failing value's reason states it."""
         return {
-            "cameras": [asdict(c) for c in self.cameras],
+            "cameras": [
+                {k: v for k, v in asdict(c).items() if k != "object_frame_share"} for c in self.cameras
+            ],
             "passed": self.passed,
             "reject_reason": self.reject_reason,
         }
