@@ -9,8 +9,10 @@ and `fairness_report.csv` (the offenders), then raises `GateFailure`.
 from __future__ import annotations
 
 import csv
+import re
 import shutil
 import time
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import closing, contextmanager
 from dataclasses import asdict, dataclass, field
@@ -270,12 +272,32 @@ def _write_folder(spec: BuildSpec, judged: Judged, tmp: Path) -> dict:
         **({"protocols": protocols} if protocols else {}),
         "benchmark_version": bio.benchmark_version(spec.suite.preset, content, reference, protocols),
         "fairness_stats": fairness_stats(judged.records),
+        "rejection_kinds": rejection_kinds(judged.records),
         **({"vlm_screen": screen} if screen is not None else {}),
     }
     bio.write_manifest(tmp, manifest)
     if passed:
         write_card(tmp, manifest)
     return manifest
+
+
+def rejection_kinds(records: list[dict]) -> dict[str, dict[str, int]]:
+    """Per split, how many candidates the gate failed for each kind of reason (a reason's words without its figures:
+    "agentview: object not wholly in frame", "agentview: object visible < …"); a candidate counts under each of its
+    reasons. Splits the gate passed whole are left out."""
+    out: dict[str, Counter] = {}
+    for r in records:
+        if r["fairness"]["passed"]:
+            continue
+        kinds = {reason_kind(part) for part in r["fairness"]["reject_reason"].split("; ")}
+        out.setdefault(r["split"], Counter()).update(kinds)
+    return {split: dict(c.most_common()) for split, c in out.items()}
+
+
+def reason_kind(reason: str) -> str:
+    """A gate reason without its figures: "agentview: object visible 0.45 < 0.49 (…)" → "agentview: object visible"."""
+    words = re.sub(r"\s*[<>].*$", "", reason)  # the comparison and what follows it
+    return re.sub(r"\s[-\d.]+(?:\s*px)?(?=\s|$)", "", words).strip()  # the measured figure
 
 
 def ungated_split_names(suite: SuiteConfig) -> frozenset[str]:

@@ -134,6 +134,8 @@ def _print_summary(manifest: dict) -> None:
         pass_rate = c["accepted"] / c["candidates"]
         print(f"{split:<{width}}{c['candidates']:>11}{c['accepted']:>10}{rejected:>10}{pass_rate:>8.1%}")
     print(f"suite hash {manifest['suite_hash'][:16]}…  version {manifest['benchmark_version']}")
+    for split, kinds in manifest.get("rejection_kinds", {}).items():
+        print(f"  {split} gate failures: " + "; ".join(f"{kind} ×{n}" for kind, n in kinds.items()))
     kept = manifest.get("kept_over_gate", {})
     if any(kept.values()):
         total = sum(manifest["splits"][s]["candidates"] for s in kept)

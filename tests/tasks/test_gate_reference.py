@@ -119,3 +119,28 @@ def test_an_external_benchmark_own_variants_are_kept_whatever_the_gate_says():
         from dataclasses import replace
 
         replace(suite, ungated_splits=("colour",))
+
+
+def test_a_build_counts_each_split_gate_failures_by_kind():
+    from roboview.benchmark.build import rejection_kinds
+
+    def record(split: str, reason: str) -> dict:
+        return {"split": split, "fairness": {"passed": not reason, "reject_reason": reason}}
+
+    records = [
+        record("libero_camera_euler", "agentview: object 0.47 in frame < 0.6"),
+        record(
+            "libero_camera_euler", "agentview: object visible 0.00 < 0.6; agentview: object area 0 px < 33"
+        ),
+        record(
+            "libero_camera_euler", "agentview: object visible 0.45 < 0.49 (85% of its no-change view's 0.58)"
+        ),
+        record("libero_color", ""),
+    ]
+    assert rejection_kinds(records) == {
+        "libero_camera_euler": {
+            "agentview: object visible": 2,
+            "agentview: object in frame": 1,
+            "agentview: object area": 1,
+        }
+    }
