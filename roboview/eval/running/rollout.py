@@ -6,8 +6,10 @@ numbers: every value of a context shares it), so every backend and machine produ
 
 Every row has a `status`: `ok` when its outcome is the policy's (a success, or a failure of the policy itself:
 its output, an exception from its own code, the step budget), `infra_error` when infrastructure ended it (an
-`InfraError` such as a policy server lost mid-episode or a `RenderError`, a call still failing with a transient
-error after `POLICY_RETRIES` retries, a worker that died: `lost_row`). Infra rows count in no rate.
+`InfraError` such as a policy server lost mid-episode or a `RenderError`, a frame the policy was handed that cannot be
+right (`roboview.eval.running.frames`: constant, or unchanged across a reset that moved the scene), a call still
+failing with a transient error after `POLICY_RETRIES` retries, a worker that died: `lost_row`). Infra rows count in
+no rate.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 from roboview.benchmark.format import BenchmarkItem
 from roboview.core.workers import set_worker_rank
 from roboview.eval.running import isolation
+from roboview.eval.running.frames import FrameCheck
 from roboview.eval.running.policy_server import RemotePolicy, ServerHandle
 from roboview.eval.running.row import INFRA_ERROR, STATUS_OK, EpisodeRow
 from roboview.policies.base import Episode, PolicyConfig, TransientPolicyError
@@ -185,6 +188,7 @@ class EvalWorker:
             else make_policy_batch(spec.policy, self.envs)
         )
         self.env, self.policy = self.envs[0], self.batch.policy(0)
+        self.frame_checks = [FrameCheck(env) for env in self.envs]
         if spec.torch_threads and "torch" in sys.modules:  # a torch policy was loaded; eval/ names none
             sys.modules["torch"].set_num_threads(spec.torch_threads)
 
@@ -242,6 +246,9 @@ class EvalWorker:
                     self._guarded(ep, self._record, slot, ep)
             acting = {slot: ep for slot, ep in running.items() if not ep.error}
             actions = self._actions(acting)
+            for slot, ep in acting.items():  # what the policy was shown, even where it then failed
+                if not ep.infra:
+                    self._guarded(ep, self.frame_checks[slot].check, ep.obs)
             for slot, ep in list(running.items()):
                 if not ep.error:
                     self._guarded(ep, self._step, slot, ep, actions[slot])
@@ -278,6 +285,7 @@ class EvalWorker:
             ep.fail(_infra_reason(exc), infra=True)
             return ep
         ep.isolation = isolation.record(env, seed)
+        self.frame_checks[slot].new_episode()
         try:
             self._call_policy(self.batch.reset, slot, Episode.of(env, seed))
         except PolicyFailed as exc:

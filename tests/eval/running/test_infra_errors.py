@@ -1,7 +1,9 @@
 """Episodes ended by infrastructure are not policy failures: `status` infra_error, counted in no rate, run again.
 
-In-process: a transient error still failing after its retries, an `InfraError`, a render failure and a worker that
-keeps dying become infra_error rows while a policy's own exception stays an `ok` failure; the evaluator re-runs
+In-process: a transient error still failing after its retries, an `InfraError`, a render failure, a frame that cannot
+be right (all black, in RoboView's and LIBERO's scenes made dark through their model arrays; a Meta-World frame frozen
+by another MuJoCo renderer made in the process) and a worker that keeps dying become infra_error rows while a
+policy's own exception stays an `ok` failure, and a dark frame that is not constant passes; the evaluator re-runs
 infra rows after its pass and on a rerun (the new row replaces the old one); adaptive decisions, metrics and the
 report leave them out. Against real servers on 127.0.0.1 (openpi-server's `WebsocketPolicyServer` via
 `roboview.pipelines.serve_policy --server=openpi`, and lerobot's own `lerobot.async_inference.policy_server`): the server is
@@ -17,6 +19,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
@@ -105,6 +108,90 @@ class _Scripted(_Still):
 class ScriptedConfig(PolicyConfig):
     def build(self, view):
         return self.policy  # set by the test on the instance (in-process worker only)
+
+
+def _darken(model) -> tuple:
+    """Every light off, the headlight's ambient and diffuse too, and every geom black and matte, through the model's
+    arrays: the camera then renders all 0. Returns what `_undarken` puts back."""
+    head = model.vis.headlight
+    saved = (
+        model.light_active.copy(),
+        int(head.active),
+        head.ambient.copy(),
+        head.diffuse.copy(),
+        model.geom_rgba.copy(),
+        model.geom_matid.copy(),
+    )
+    model.light_active[:], head.active, head.ambient[:], head.diffuse[:] = 0, 0, 0, 0
+    model.geom_rgba[:], model.geom_matid[:] = (0, 0, 0, 1), -1
+    return saved
+
+
+def _undarken(model, saved: tuple) -> None:
+    head = model.vis.headlight
+    model.light_active[:], head.active, head.ambient[:], head.diffuse[:] = saved[:4]
+    model.geom_rgba[:], model.geom_matid[:] = saved[4:]
+
+
+class _DarkensOnce(_Still):
+    """Privileged: the first episode of the whole run (a marker file remembers it across workers) it darkens its env
+    (`_darken`) after the reset, reads the first camera (rendered all 0) and puts the scene back; then it holds the
+    arm (joint control) or sends zero deltas. Every other episode it reads the camera of a normal scene."""
+
+    def __init__(self, env, marker: str) -> None:
+        self.env, self.marker, self.saved = env, Path(marker), None
+
+    def reset(self, episode) -> None:
+        if not self.marker.exists():
+            self.marker.touch()
+            self.saved = _darken(self.env.model)
+
+    def select_action(self, observation):
+        observation[f"observation.images.{self.env.cameras[0]}"]
+        if self.saved is not None:
+            _undarken(self.env.model, self.saved)
+            self.saved = None
+        if self.env.control == "joint":
+            return super().select_action(observation)
+        return np.zeros(self.env.action_space.shape, np.float32)
+
+
+@dataclass
+class DarkOnceConfig(PolicyConfig):
+    privileged: ClassVar[bool] = True
+    marker: str = ""
+    control: str = "joint"
+
+    def build(self, env):
+        return _DarkensOnce(env, self.marker)
+
+    def env_control(self) -> str:
+        return self.control
+
+
+class _LooksOnce(_Still):
+    """Reads Meta-World's camera at the first step of each episode only (as the `vision` agent reads one frame per
+    episode) and pushes the hand along x."""
+
+    def reset(self, episode) -> None:
+        self.looked = False
+
+    def select_action(self, observation):
+        if not self.looked:
+            self.looked = observation["observation.images.corner2"] is not None
+        return np.array([0.5, 0.0, 0.0, 0.0], np.float32)
+
+
+@dataclass
+class LooksOnceConfig(PolicyConfig):
+    def build(self, view):
+        return _LooksOnce()
+
+    def observed_cameras(self) -> tuple[str, ...]:
+        return ("corner2",)
+
+    def env_control(self) -> str:
+        return "xyz_delta"
 
 
 def _item(bench: Path, split: str = "color", index: int = 0):
@@ -202,6 +289,143 @@ def test_a_render_failure_is_an_infra_error(tiny_benchmark):
         assert worker.run(rollout.WorkItem(item, 0)).row["status"] == "ok"
     finally:
         worker.close()
+
+
+GL_CAUSE = "another renderer in this process may have taken the GL context"
+
+
+def test_a_black_frame_is_an_infra_error_left_out_of_the_rates_and_run_again(
+    tiny_benchmark, tmp_path, monkeypatch
+):
+    """RoboView's scene renders all 0 for the first episode of the run: its row is infra_error naming the camera,
+    the metrics leave it out, and the same command runs it again."""
+    monkeypatch.setitem(PolicyConfig.get_known_choices(), "dark_once", DarkOnceConfig)
+    out = tmp_path / "ev"
+    cfg = _cfg(tiny_benchmark, out, DarkOnceConfig(marker=str(tmp_path / "dark")), retries=0)
+    first = run(cfg)
+    rows = _rows(out)
+    assert first.infra_errors == 1 and sorted(rows["status"]) == [INFRA_ERROR, "ok"]
+    dark = rows[rows["status"] == INFRA_ERROR].iloc[0]
+    assert dark["failure_reason"] == (
+        f"infrastructure error: RenderError: render: camera front returned a constant frame (all 0) — {GL_CAUSE}"
+    )
+    assert dark["steps"] == 0 and not dark["success"]  # ended before the env stepped on the frame
+    color = compute_all_metrics(rows, FAST)["splits"]["color"]
+    assert color["n_infra_errors"] == 1 and color["n_episodes"] == 1
+    assert color["sr"] == rows.loc[rows["status"] == "ok", "success"].mean()
+    again = run(cfg)  # resumed: only the infra one runs, on a scene that renders
+    rows = _rows(out)
+    assert again.new_episodes == 1 and again.infra_errors == 0 and (rows["status"] == "ok").all()
+    assert len(rows) == 2 and not rows.duplicated(["instance_id", "repeat"]).any()
+
+
+def test_a_black_frame_is_an_infra_error_on_liberos_scenes(tmp_path):
+    pytest.importorskip("libero", reason="LIBERO not installed (make install-libero)")
+    from roboview.benchmark.format import BenchmarkItem
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from roboview.libero.task import baseline_libero_instance
+
+    instance = baseline_libero_instance("libero_object/0", "1")
+    work = WorkItem(BenchmarkItem(instance, instance.to_record()), 0)
+    config = DarkOnceConfig(marker=str(tmp_path / "dark"), control="ee_delta")
+    worker = EvalWorker(WorkerSpec(config, image_size=64, max_steps=3, task="libero"))
+    try:
+        dark, lit, again = (worker.run(work).row for _ in range(3))
+    finally:
+        worker.close()
+    assert dark["status"] == INFRA_ERROR and dark["failure_reason"].endswith(
+        f"render: camera agentview returned a constant frame (all 0) — {GL_CAUSE}"
+    )
+    # The same context and repeat run again start from the state the last frame was taken in: not flagged.
+    assert lit["status"] == again["status"] == "ok" and again["steps"] == 3
+
+
+def test_a_frame_frozen_by_another_mujoco_renderer_is_an_infra_error():
+    """The real failure: a second MuJoCo renderer made and used in the process leaves its GL context current;
+    Meta-World's renderer (gymnasium's, which does not make its own context current) then reads back a frame
+    that no longer changes with the scene. The episode that starts on it is not told apart (its first frame is new
+    to the env); the next reset, which moves the scene, shows the same frame: infra_error."""
+    pytest.importorskip("metaworld", reason="Meta-World not installed (make install-metaworld)")
+    import mujoco
+
+    from roboview.benchmark.format import BenchmarkItem
+    from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
+    from roboview.metaworld.task import baseline_metaworld_instance
+
+    instance = baseline_metaworld_instance()
+    item = BenchmarkItem(instance, instance.to_record())
+    worker = EvalWorker(WorkerSpec(LooksOnceConfig(), image_size=64, max_steps=4, task="metaworld"))
+    other = None
+    try:
+        # The policy reads one frame an episode; the same episode again shows the same first frame: not flagged.
+        first, again = (worker.run(WorkItem(item, 0)).row for _ in range(2))
+        assert first["status"] == again["status"] == "ok"
+        model = mujoco.MjModel.from_xml_string(
+            "<mujoco><worldbody><light pos='0 0 1'/><geom type='sphere' size='.1'/></worldbody></mujoco>"
+        )
+        other = mujoco.Renderer(model, 64, 64)
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        other.update_scene(data)
+        other.render()
+        frozen = worker.run(WorkItem(item, 1, video=True))
+        frames = frozen.video["corner2"]
+        assert len(frames) == 5 and (frames == frames[0]).all()  # 4 steps of the hand moving, one frame
+        row = worker.run(WorkItem(item, 2)).row
+    finally:
+        worker.close()
+        if other is not None:
+            other.close()
+    assert row["status"] == INFRA_ERROR and not row["success"] and row["steps"] == 0
+    reason = row["failure_reason"]
+    assert reason.startswith(
+        "infrastructure error: RenderError: render: camera corner2 returned the last frame it showed before the "
+        "reset though the scene moved ("
+    ) and reason.endswith(f" m) — {GL_CAUSE}")  # the puck: another seed's position
+
+
+def test_a_dark_frame_that_is_not_constant_passes(env):
+    """RoboView's scene lit at 3 % renders dark (every pixel ≤ 5 of 255) and passes; with the light at 0 it renders
+    all 0 and does not."""
+    from roboview.eval.running.frames import FrameCheck
+
+    model, check = env.model, FrameCheck(env)
+    env.reset(seed=3)
+    head = model.vis.headlight
+    arrays = (model.light_diffuse, model.light_specular, head.ambient, head.diffuse, head.specular)
+    saved = [a.copy() for a in arrays]
+    try:
+        model.light_diffuse[:] *= 0.03
+        for a in arrays[1:]:
+            a[:] = 0
+        dark = env.render_camera("front")
+        assert dark.max() <= 5 and len(np.unique(dark.reshape(-1, 3), axis=0)) > 1
+        check.check({"observation.images.front": dark})
+        model.light_diffuse[:] = 0
+        with pytest.raises(RenderError, match=r"camera front returned a constant frame \(all 0\)"):
+            check.check({"observation.images.front": env.render_camera("front")})
+    finally:
+        for a, value in zip(arrays, saved, strict=True):
+            a[:] = value
+
+
+@pytest.mark.fast
+def test_a_frame_is_constant_only_when_every_pixel_is_the_same_color():
+    from roboview.eval.running.frames import constant_color, describe
+
+    black = np.zeros((224, 224, 3), np.uint8)
+    assert constant_color(black) == (0, 0, 0) and describe((0, 0, 0)) == "all 0"
+    fog = np.broadcast_to(np.array([10, 20, 30], np.uint8), (256, 256, 3))  # one color, not contiguous
+    assert constant_color(fog) == (10, 20, 30) and describe((10, 20, 30)) == "every pixel (10, 20, 30)"
+    assert constant_color(np.full((64, 64), 7, np.uint8)) == (7,)
+    dark = black.copy()
+    dark[137, 59, 2] = 1  # one dim pixel
+    assert constant_color(dark) is None
+    red = np.zeros((224, 224, 3), np.uint8)
+    red[:, :, 0] = 5  # every pixel (5, 0, 0): one color, though the channels differ
+    assert constant_color(red) == (5, 0, 0)
+    red[-1, -1] = (5, 0, 1)
+    assert constant_color(red) is None
 
 
 def test_a_worker_that_keeps_dying_becomes_an_infra_row_and_the_run_goes_on(tiny_benchmark):
