@@ -122,7 +122,11 @@ class MetaWorldScene:
         return raw, float(reward), bool(done), bool(truncated), info
 
     def render(self) -> np.ndarray:
-        """corner2 as LeRobot hands it: flipped on both axes (upright)."""
+        """corner2 as LeRobot hands it: flipped on both axes (upright). Its GL context is made current first:
+        gymnasium's renderer does not, so after another MuJoCo renderer in the process drew (LeRobot's MetaworldEnv
+        on another task, a `mujoco.Renderer`) it read back that renderer's buffer — a frame frozen, or another scene's
+        meshes."""
+        self.make_current()
         return np.ascontiguousarray(np.flip(self.inner.render(), (0, 1)))
 
     def close(self) -> None:

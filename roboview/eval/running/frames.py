@@ -1,9 +1,10 @@
 """Frames that cannot be right: the evaluator's check of every camera image a policy is handed, in every world.
 
 A MuJoCo renderer that does not make its own GL context current before it draws (gymnasium's, behind Meta-World's
-scenes) draws in whatever context is current. Once another renderer is made and used in the same process (a
-`mujoco.Renderer` on another model), nothing raises, and the env's frames come back all black, or as one frame frozen
-while the scene moves on. A policy shown such frames fails through no fault of its own, so after every policy call
+scenes, until `MetaWorldScene.render` made it so) draws in whatever context is current. Once another renderer is made
+and used in the same process (a `mujoco.Renderer` on another model), nothing raises, and the env's frames come back
+all black, or as one frame frozen while the scene moves on. Every world here now makes its own context current; the
+check catches what another world, renderer or driver still gets wrong. A policy shown such frames fails through no fault of its own, so after every policy call
 `FrameCheck.check` looks at the frames the observation holds — the cameras the policy read (a lazy observation's
 unread cameras are never rendered for the check) and those the evaluator rendered for a video — and raises
 `RenderError` (the episode ends as `infra_error`, counted in no rate, re-run later) when

@@ -340,15 +340,16 @@ def test_a_black_frame_is_an_infra_error_on_liberos_scenes(tmp_path):
     assert lit["status"] == again["status"] == "ok" and again["steps"] == 3
 
 
-def test_a_frame_frozen_by_another_mujoco_renderer_is_an_infra_error():
-    """The real failure: a second MuJoCo renderer made and used in the process leaves its GL context current;
-    Meta-World's renderer (gymnasium's, which does not make its own context current) then reads back a frame
-    that no longer changes with the scene. The episode that starts on it is not told apart (its first frame is new
-    to the env); the next reset, which moves the scene, shows the same frame: infra_error."""
+def test_another_mujoco_renderer_leaves_metaworld_frames_right_and_a_frozen_frame_is_an_infra_error():
+    """The real failure: a second MuJoCo renderer made and used in the process left its GL context current, and
+    Meta-World's renderer (gymnasium's, which does not make its own context current) read back a frame that no longer
+    changed with the scene. The scene now makes its context current before it renders: its frames follow the hand.
+    A frame frozen across a reset that moved the scene (what that failure handed the policy) is an infra error."""
     pytest.importorskip("metaworld", reason="Meta-World not installed (make install-metaworld)")
     import mujoco
 
     from roboview.benchmark.format import BenchmarkItem
+    from roboview.eval.running.frames import FrameCheck
     from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
     from roboview.metaworld.task import baseline_metaworld_instance
 
@@ -357,9 +358,8 @@ def test_a_frame_frozen_by_another_mujoco_renderer_is_an_infra_error():
     worker = EvalWorker(WorkerSpec(LooksOnceConfig(), image_size=64, max_steps=4, task="metaworld"))
     other = None
     try:
-        # The policy reads one frame an episode; the same episode again shows the same first frame: not flagged.
-        first, again = (worker.run(WorkItem(item, 0)).row for _ in range(2))
-        assert first["status"] == again["status"] == "ok"
+        first = worker.run(WorkItem(item, 0)).row
+        assert first["status"] == "ok"
         model = mujoco.MjModel.from_xml_string(
             "<mujoco><worldbody><light pos='0 0 1'/><geom type='sphere' size='.1'/></worldbody></mujoco>"
         )
@@ -368,20 +368,23 @@ def test_a_frame_frozen_by_another_mujoco_renderer_is_an_infra_error():
         mujoco.mj_forward(model, data)
         other.update_scene(data)
         other.render()
-        frozen = worker.run(WorkItem(item, 1, video=True))
-        frames = frozen.video["corner2"]
-        assert len(frames) == 5 and (frames == frames[0]).all()  # 4 steps of the hand moving, one frame
-        row = worker.run(WorkItem(item, 2)).row
+        moving = worker.run(WorkItem(item, 1, video=True))
+        frames = moving.video["corner2"]
+        assert len(frames) == 5 and not (frames == frames[0]).all()  # 4 steps of the hand moving: it moves
+        assert moving.row["status"] == "ok"
+        # The frame the last episode ended on, handed again after a reset that moved the puck: an infra error.
+        env = worker.env
+        check = FrameCheck(env)
+        last = env.render_camera("corner2")
+        check.check({"observation.images.corner2": last})
+        env.reset(seed=instance.seed + 1, options={"instance": instance})
+        check.new_episode()
+        with pytest.raises(RenderError, match=r"camera corner2 returned the last frame it showed before the reset"):
+            check.check({"observation.images.corner2": last})
     finally:
         worker.close()
         if other is not None:
             other.close()
-    assert row["status"] == INFRA_ERROR and not row["success"] and row["steps"] == 0
-    reason = row["failure_reason"]
-    assert reason.startswith(
-        "infrastructure error: RenderError: render: camera corner2 returned the last frame it showed before the "
-        "reset though the scene moved ("
-    ) and reason.endswith(f" m) — {GL_CAUSE}")  # the puck: another seed's position
 
 
 def test_a_dark_frame_that_is_not_constant_passes(env):
