@@ -379,7 +379,9 @@ def test_another_mujoco_renderer_leaves_metaworld_frames_right_and_a_frozen_fram
         check.check({"observation.images.corner2": last})
         env.reset(seed=instance.seed + 1, options={"instance": instance})
         check.new_episode()
-        with pytest.raises(RenderError, match=r"camera corner2 returned the last frame it showed before the reset"):
+        with pytest.raises(
+            RenderError, match=r"camera corner2 returned the last frame it showed before the reset"
+        ):
             check.check({"observation.images.corner2": last})
     finally:
         worker.close()
