@@ -189,7 +189,7 @@ def phase_lerobot_eval(bench: str, path: str, split: str, episodes: int, batch: 
 def phase_breakdown(bench: str, policy: str, path: str, splits: str, episodes: int, out: Path) -> dict:
     """One worker in this process, timers around rendering, physics, the policy and the results' I/O."""
     from roboview.benchmark.format import load_benchmark
-    from roboview.eval.campaign.runner import resolve_image_size
+    from roboview.eval.campaign.plan import resolve_image_size
     from roboview.eval.running.results import EpisodeStore
     from roboview.eval.running.rollout import EvalWorker, WorkerSpec, WorkItem
     from roboview.policies.types import policy_config
