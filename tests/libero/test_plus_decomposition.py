@@ -83,7 +83,9 @@ def test_the_camera_number_over_all_variants_and_over_the_fair_ones():
         (1.0 + 0.5) / 2
     )
     assert camera["no_change"]["n"] == 1  # the no-change view counts whatever its verdict
-    text = dec._camera_line(analyse(rows))
+    from roboview.libero.decomposition_report import camera_line
+
+    text = camera_line(analyse(rows))
     assert "Over the 11 variants the fairness gate passes (3 of LIBERO-plus's set it does not" in text
     # A benchmark that gated its variants (no verdict column) reports the one number.
     assert "fair" not in analyse([{k: v for k, v in r.items() if k != "gate_passed"} for r in rows])["camera"]

@@ -627,7 +627,7 @@ def test_a_forged_bundle_never_ranks_above_its_honest_original_on_a_default_boar
     page = (tmp_path / "board" / "leaderboard.html").read_text()
     ranked_part, claims_part = page.split("<h2>Claims (not replayed here: not ranked, not compared)</h2>")
     assert "random@forged_served" not in ranked_part and "random@forged_served" in claims_part
-    assert "55.56 [37.31, 72.41]" in claims_part and "<h1>RoboView-Bias leaderboard</h1>" in page
+    assert "55.56 [35.33, 74.52]" in claims_part and "<h1>RoboView-Bias leaderboard</h1>" in page
     assert "2 ranked bundle(s) (replay passed), 1 claim(s) listed apart, 2 rejected" in page
 
 
