@@ -20,7 +20,8 @@ The factors:
 - `Lighting(scale, direction)`: every light's diffuse scaled; optionally every light pointed along `direction`.
 - `TableTexture(pattern)`: the support surface under `workspace_center` (a downward ray, static geoms only: the table
   top, or the floor in floor scenes) gets a procedural texture written into `tex_data` and uploaded with
-  `mjr_uploadTexture` on the live render context.
+  `mjr_uploadTexture` on the live render context (the first static textured geom below: the hand and the objects are
+  looked past).
 """
 
 from __future__ import annotations
@@ -208,18 +209,24 @@ class PullBack:
 
 
 def support_texture(world) -> int:
-    """Texture of the static visual geom straight below workspace_center (table top, or floor)."""
+    """Texture of the support surface below workspace_center (the table top, or the floor): the first static,
+    textured visual geom a downward ray meets. The hand hovering over the objects (libero_10's living-room tasks) and
+    the objects themselves are dynamic geoms: the ray looks past them."""
     model, data = world.model, world.data
-    center = workspace_center(world)
+    start, down = workspace_center(world) + [0, 0, 0.3], np.array([0.0, 0.0, -1.0])
     groups = np.zeros(6, np.uint8)
     groups[VISUAL_GROUP] = 1
     geom = np.zeros(1, np.int32)
-    mujoco.mj_ray(model, data, center + [0, 0, 0.3], np.array([0.0, 0.0, -1.0]), groups, 1, -1, geom)
-    mat = model.geom_matid[geom[0]] if geom[0] >= 0 else -1
-    tex = model.mat_texid[mat, mujoco.mjtTextureRole.mjTEXROLE_RGB] if mat >= 0 else -1
-    if tex < 0:
-        raise RuntimeError("no textured support surface found below the workspace center")
-    return int(tex)
+    for _ in range(64):  # at most the geoms stacked under the center
+        dist = mujoco.mj_ray(model, data, start, down, groups, 1, -1, geom)
+        if geom[0] < 0:
+            break
+        mat = model.geom_matid[geom[0]]
+        tex = model.mat_texid[mat, mujoco.mjtTextureRole.mjTEXROLE_RGB] if mat >= 0 else -1
+        if model.body_weldid[model.geom_bodyid[geom[0]]] == 0 and tex >= 0:
+            return int(tex)
+        start = start + down * (dist + 1e-4)
+    raise RuntimeError("no textured support surface found below the workspace center")
 
 
 @dataclass(frozen=True)

@@ -86,3 +86,27 @@ def test_metaworld_mask_lands_on_the_reskinned_object():
         assert np.allclose(get_color("blue").rgb, (0, 0, 1))
     finally:
         r.close()
+
+
+@pytest.mark.parametrize(
+    "task, what_was_hit",
+    [
+        ("libero_spatial/0", "the black bowl under the workspace center"),
+        ("libero_10/4", "the hand hovering over the objects"),
+    ],
+)
+def test_the_table_texture_is_the_table_not_what_lies_on_it(task, what_was_hit):
+    """The support surface is the first static textured geom below the workspace center: a downward ray once stopped
+    at the first geom it met, so `table_texture` re-textured libero_spatial/0's bowl, and on libero_10/4 (the hand
+    over the objects, untextured) it stopped the `libero` preset's build."""
+    from roboview.libero.env import LiberoWorld
+    from roboview.libero.factors import support_texture
+
+    suite, task_id = task.split("/")
+    world = LiberoWorld(suite, int(task_id), image_size=32)
+    try:
+        world.reset(seed=0)
+        name = world.model.texture(support_texture(world)).name
+    finally:
+        world.close()
+    assert name in ("tex-table", "tex-living_room_table"), f"{what_was_hit}: {name}"
