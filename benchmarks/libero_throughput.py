@@ -6,7 +6,7 @@
 Why: a LIBERO episode's hard reset compiles a new MuJoCo model (3–4 s here), more than the scripted expert's whole
 rollout; RoboView's LIBERO env compiles one model per task and restores it in place between episodes
 (bit-identical: tests/libero/test_task.py, tests/libero/test_world.py). This runs the same commands both ways in
-one sitting, `soft` (the default) and `hard` (`ROBOVIEW_LIBERO_HARD_RESET=1`, LeRobot's path), and, for a path
+one run, `soft` (the default) and `hard` (`ROBOVIEW_LIBERO_HARD_RESET=1`, LeRobot's path), and, for a path
 `git:REV`, RoboView's code at that git revision (a detached worktree of this checkout, run with this interpreter:
 `--paths=[soft,hard,git:9eea313~1]` adds the release before one model per task), and writes:
 
