@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from roboview.libero.decomposition import CAMERA
 from roboview.libero.plus import (
     LIBERO_PLUS_SPLITS,
     SHORT,
@@ -139,7 +140,7 @@ register_task(
         seed_randomizes="fixture placement (cabinets, stoves…) in some scenes, nothing in others",
         repeat_factor="liberoplus_init_state",
         world_factor="liberoplus_task",
-        analyses=("roboview.libero.decomposition",),
+        analyses=(CAMERA,),
     )
 )
 

@@ -20,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 from roboview.sim.motion import MotionPlanner
+from roboview.tasks.decomposition import Decomposition
 from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS, action_names, state_names
 from roboview.variation.factors import DEFAULT_TASK, context_factors
 
@@ -61,10 +62,10 @@ class Task:
     # The context factor whose value names the compiled world an instance runs in (LIBERO's `libero_task`: one
     # model per LIBERO task); builds and evaluations hand a worker one world's instances together. "": one world.
     world_factor: str = ""
-    # Modules of analyses particular to this task, run on each policy's episodes of it beside the splits' statistics:
-    # each has KEY and TITLE, `compute(episodes) -> dict | None` (metrics.json's `analyses.<KEY>`) and
-    # `markdown(result, policy) -> list[str]` (its report section). LIBERO-plus's camera decomposition is one.
-    analyses: tuple[str, ...] = ()
+    # Analyses particular to this task, as designs (data), run on each policy's episodes of it beside the splits'
+    # statistics: a `Decomposition` takes one factor apart into its sub-factors (roboview.tasks.decomposition;
+    # metrics.json's `analyses.<key>` and its report section). LIBERO-plus's camera decomposition is one.
+    analyses: tuple[Decomposition, ...] = ()
 
     def world_of(self, instance: TaskInstance) -> str:
         """The world `instance` runs in: the task's name, and its `world_factor`'s value where it has one."""
@@ -124,14 +125,9 @@ def register_task(task: Task) -> Task:
     return task
 
 
-def analysis_modules() -> dict[str, Any]:
-    """Every registered task's analysis modules (`Task.analyses`), by their KEY."""
-    out = {}
-    for task in TASKS.values():
-        for name in task.analyses:
-            module = importlib.import_module(name)
-            out[module.KEY] = module
-    return out
+def analysis_designs() -> dict[str, Decomposition]:
+    """Every registered task's analyses (`Task.analyses`), by their key."""
+    return {design.key: design for task in TASKS.values() for design in task.analyses}
 
 
 def load_task(name: str = DEFAULT_TASK) -> Task:

@@ -1,4 +1,5 @@
-"""The LIBERO-plus camera decomposition's statistics (roboview.libero.decomposition), checked against known truth:
+"""The LIBERO-plus camera decomposition (its design roboview.libero.decomposition, its statistics
+roboview.eval.statistics.decompose), checked against known truth:
 the camera number both ways on a constructed table, and by simulation the kind effects' intervals and tests, the
 interaction's behaviour when costs add and when they compound, and the dose–response's half-magnitude interval."""
 
@@ -6,7 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from roboview.libero import decomposition as dec
+from roboview.eval.statistics import decompose as dec
+from roboview.libero.decomposition import CAMERA
 from roboview.libero.plus import NO_CHANGE, SUB_FACTORS
 
 pytestmark = pytest.mark.fast
@@ -42,11 +44,11 @@ def row(
 
 
 def analyse(rows: list[dict]) -> dict:
-    return dec.compute(pd.DataFrame(rows))
+    return dec.compute(pd.DataFrame(rows), CAMERA)
 
 
 def views(rows: list[dict]) -> pd.DataFrame:
-    return dec._views(pd.DataFrame(rows))
+    return dec.views(pd.DataFrame(rows), CAMERA)
 
 
 def test_the_camera_number_as_liberoplus_totals_it_and_as_vla_eval_averages_it():
@@ -83,9 +85,9 @@ def test_the_camera_number_over_all_variants_and_over_the_fair_ones():
         (1.0 + 0.5) / 2
     )
     assert camera["no_change"]["n"] == 1  # the no-change view counts whatever its verdict
-    from roboview.libero.decomposition_report import camera_line
+    from roboview.eval.reporting.decomposition import totals_line
 
-    text = camera_line(analyse(rows))
+    text = totals_line(analyse(rows), CAMERA)
     assert "Over the 11 variants the fairness gate passes (3 of LIBERO-plus's set it does not" in text
     # A benchmark that gated its variants (no verdict column) reports the one number.
     assert "fair" not in analyse([{k: v for k, v in r.items() if k != "gate_passed"} for r in rows])["camera"]
@@ -109,9 +111,9 @@ def test_a_kind_effect_interval_covers_the_truth_and_its_test_holds_alpha():
     azimuths = {(a, 0, 100, 0, 0): 0.5 for a in (10, 20, 340)}
     covered = rejected_null = 0
     for _ in range(SIMS):
-        k = dec.kind_effects(views(_blocks(rng, 30, 0.8, azimuths)))["azimuth"]
+        k = dec.kind_effects(views(_blocks(rng, 30, 0.8, azimuths)), CAMERA)["azimuth"]
         covered += k["ci95_effect"][0] <= -0.3 <= k["ci95_effect"][1]
-        null = dec.kind_effects(views(_blocks(rng, 30, 0.7, {v: 0.7 for v in azimuths})))["azimuth"]
+        null = dec.kind_effects(views(_blocks(rng, 30, 0.7, {v: 0.7 for v in azimuths})), CAMERA)["azimuth"]
         rejected_null += null["p"] < 0.05
     assert 0.88 <= covered / SIMS <= 0.99
     assert rejected_null / SIMS <= 0.09
@@ -124,10 +126,10 @@ def test_the_interaction_is_zero_when_costs_add_and_negative_when_they_compound(
     compound = {**parts, (30, 15, 100, 0, 0): 0.2}  # −0.4
     false_alarms = detected = covered = 0
     for _ in range(SIMS):
-        null = dec.interactions(views(_blocks(rng, 40, 0.9, additive)))["azimuth + elevation"]
+        null = dec.interactions(views(_blocks(rng, 40, 0.9, additive)), CAMERA)["azimuth + elevation"]
         false_alarms += null["p"] < 0.05
         covered += null["ci95"][0] <= 0 <= null["ci95"][1]
-        bad = dec.interactions(views(_blocks(rng, 60, 0.9, compound)))["azimuth + elevation"]
+        bad = dec.interactions(views(_blocks(rng, 60, 0.9, compound)), CAMERA)["azimuth + elevation"]
         detected += bad["p"] < 0.05 and bad["interaction"] < 0
         assert null["n_variants"] == 10  # one two-change variant per task (10 tasks), its parts beside it
     assert false_alarms / SIMS <= 0.09 and covered / SIMS >= 0.88
@@ -150,7 +152,7 @@ def test_the_dose_response_recovers_the_half_magnitude():
                 m = min(az, 360 - az)
                 p = 1 / (1 + np.exp(-(a + b * m)))
                 rows.append(row(block, (az, 0, 100, 0, 0), rng.random() < p, "view_azimuth", task))
-        d = dec.dose_response(views(rows), "view_azimuth")
+        d = dec.dose_response(views(rows), CAMERA.sub_factor("view_azimuth"))
         estimates.append(d["half_magnitude"])
         lo, hi = d["half_magnitude_ci95"]
         covered += lo <= truth <= hi

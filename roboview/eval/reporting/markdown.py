@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from roboview.eval.reporting import run_sections
+from roboview.eval.reporting import decomposition, run_sections
 from roboview.eval.reporting.format import (
     ALPHA,
     against_control,
@@ -109,19 +109,19 @@ def _strips(strips: dict[str, Any] | None) -> list[str]:
 
 def _analyses(layouts: dict[str, dict]) -> list[str]:
     """Each task analysis (metrics.json `analyses`, `Task.analyses`) in its own words, per policy."""
-    from roboview.tasks.base import analysis_modules
+    from roboview.tasks.base import analysis_designs
 
     lines: list[str] = []
-    for key, module in analysis_modules().items():
+    for key, design in analysis_designs().items():
         ran = {
             name: layout["analyses"][key]
             for name, layout in layouts.items()
             if key in layout.get("analyses", {})
         }
         if ran:
-            lines += [f"## {module.TITLE}", ""]
+            lines += [f"## {design.title}", ""]
             for name, result in ran.items():
-                lines += module.markdown(result, name, markdown_table)
+                lines += decomposition.markdown(result, name, design)
     return lines
 
 

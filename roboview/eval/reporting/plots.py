@@ -440,12 +440,13 @@ def make_plots(layouts: Layouts, output_dir: Path) -> dict[str, str | None]:
             plot_forest(split)(view, output_dir / name)
             outcome[name] = None
     # A task analysis draws its own figures (`analysis_<name>.png`), from every policy's result.
-    from roboview.tasks.base import analysis_modules
+    from roboview.eval.reporting.decomposition import plot
+    from roboview.tasks.base import analysis_designs
 
-    for key, module in analysis_modules().items():
+    for key, design in analysis_designs().items():
         ran = {
             p: layout["analyses"][key] for p, layout in layouts.items() if key in layout.get("analyses", {})
         }
-        if ran and hasattr(module, "plot"):
-            outcome |= module.plot(ran, output_dir)
+        if ran:
+            outcome |= plot(ran, output_dir, design)
     return outcome
