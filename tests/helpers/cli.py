@@ -11,12 +11,14 @@ interpreter importing the policy's libraries again.
 
 What a fork cannot change is what the preloaded modules read when they were imported. A run whose environment
 differs from the test run's in a variable read at import time (`IMPORT_TIME`), or that puts a folder on PYTHONPATH
-the fork server does not have, starts a fresh interpreter instead, so it sees exactly what it asked for.
+the fork server does not have, starts a fresh interpreter instead, so it sees exactly what it asked for; so does
+every run on a Python without the internals a fork needs (`cpython_internals`). tests/core/test_cli_runner.py runs
+the same cases both ways and compares them.
 """
 
 from __future__ import annotations
 
-import atexit
+import functools
 import multiprocessing
 import os
 import runpy
@@ -25,9 +27,8 @@ import socket
 import subprocess
 import sys
 import tempfile
-import traceback
-from collections.abc import Mapping
-from multiprocessing import process as mp_process
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 from roboview.core import workers
@@ -49,10 +50,84 @@ IMPORT_TIME = (
 _RUN_ENV = dict(os.environ)  # the environment the test run (and so its fork server) started with
 
 
+# What the forked runs need of CPython beyond its documented interface, looked up in one place
+# (`cpython_internals`). Checked against CPython 3.12.1 and 3.13.0, identical in all of it:
+#   atexit._run_exitfuncs                    a process multiprocessing started ends with os._exit, which skips the
+#                                            exit handlers: the run calls them, as an interpreter does at its exit
+#   multiprocessing.process._parent_process  set to None: the run is a main process, with no parent process
+#   multiprocessing.forkserver._forkserver   and its _forkserver_address, _forkserver_alive_fd, _forkserver_pid:
+#                                            the run's own fork server, started as a fork (`_start_fork_server`, a
+#                                            copy of ForkServer.ensure_running that forks instead of exec'ing a
+#                                            fresh interpreter), handed to multiprocessing as if it had started it
+#   multiprocessing.forkserver.main          the server's loop, with the parameters SERVER_MAIN
+#   multiprocessing.connection.arbitrary_address   the server's socket path, as ensure_running picks it
+# Where the first two are missing (another Python), `start` runs every command in a fresh interpreter: slower,
+# equally correct. Where only the fork-server part differs (e.g. a `main` that also takes an auth key), runs are
+# still forked and their pools start multiprocessing's own fork server, from a fresh interpreter.
+SERVER_MAIN = ("listener_fd", "alive_r", "preload", "main_path", "sys_path")
+SERVER_STATE = ("_forkserver_address", "_forkserver_alive_fd", "_forkserver_pid")
+
+
+@dataclass(frozen=True)
+class Internals:
+    """The CPython internals a forked run uses, as functions (see `cpython_internals`)."""
+
+    run_exit_handlers: Callable[[], None]
+    forget_parent_process: Callable[[], None]
+    # (listener_fd, alive_r): serve forks until the last client exits; None: this Python's fork server differs
+    serve_forks: Callable[[int, int], None] | None
+    socket_address: Callable[[], str] | None
+    # (address, alive_w, pid): the server multiprocessing's pools of this process then use
+    adopt_fork_server: Callable[[str, int, int], None] | None
+
+
+@functools.cache
+def cpython_internals() -> Internals | None:
+    """CPython's private names the forked runs rest on (listed above), checked present and of the expected shape;
+    None where they are not, and commands then run in fresh interpreters."""
+    import atexit
+    import inspect
+    from multiprocessing import connection, forkserver, process
+
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
+    if sys.implementation.name != "cpython" or not callable(run_exit_handlers):
+        return None
+    if not hasattr(process, "_parent_process"):
+        return None
+    forget = lambda: setattr(process, "_parent_process", None)  # noqa: E731
+    server = getattr(forkserver, "_forkserver", None)
+    main = getattr(forkserver, "main", None)
+    usable = (
+        all(hasattr(server, name) for name in SERVER_STATE)
+        and callable(main)
+        and list(inspect.signature(main).parameters) == [*SERVER_MAIN]
+        and callable(getattr(connection, "arbitrary_address", None))
+        and os.path.isdir("/proc/self/fd")  # the server closes what it should not inherit by listing them
+    )
+    if not usable:
+        return Internals(run_exit_handlers, forget, None, None, None)
+
+    def adopt(address: str, alive_w: int, pid: int) -> None:
+        server._forkserver_address, server._forkserver_alive_fd, server._forkserver_pid = (
+            address,
+            alive_w,
+            pid,
+        )
+
+    return Internals(
+        run_exit_handlers,
+        forget,
+        lambda listener_fd, alive_r: main(listener_fd, alive_r, []),
+        lambda: connection.arbitrary_address("AF_UNIX"),
+        adopt,
+    )
+
+
 def _child(
     module: str, argv: list[str], env: dict[str, str], cwd: str, out: str, err: str, new_session: bool
 ) -> None:
     """In the forked child: the run's streams, environment, folder and argv, then the module as `__main__`."""
+    internals = cpython_internals()
     # A process group of its own (Popen's start_new_session), signalled as a terminal's Ctrl-C is.
     if new_session:
         os.setsid()
@@ -74,36 +149,49 @@ def _child(
     # (fork on Linux; a fork server's child would otherwise default to the fork server, so a library's worker
     # processes, e.g. lerobot-eval's vector envs, would each start from a fresh interpreter).
     multiprocessing.current_process().name = "MainProcess"
-    mp_process._parent_process = None
+    internals.forget_parent_process()
     multiprocessing.set_start_method(None, force=True)
-    _start_fork_server()
+    _start_fork_server(internals)
     sys.argv = [module, *argv]
     # As in a fresh `python -m`, the module itself is not imported yet (its imports are: that is the saving).
     sys.modules.pop(module, None)
-    code: object = 0
+    _exit(_run_main(module), internals)
+
+
+def _run_main(module: str) -> int | None:
+    """Run `module` as `__main__`; its exit status as the interpreter reports it (None: ended by Ctrl-C)."""
     try:
         runpy.run_module(module, run_name="__main__", alter_sys=True)
     except SystemExit as exc:
-        code = exc.code
+        if exc.code is None or isinstance(exc.code, int):
+            return exc.code or 0
+        print(exc.code, file=sys.stderr)  # `sys.exit("message")`: the message, status 1
+        return 1
+    except KeyboardInterrupt:
+        sys.excepthook(*sys.exc_info())
+        return None
     except BaseException:  # as the interpreter does: the traceback on stderr, status 1
-        traceback.print_exc()
-        code = 1
+        sys.excepthook(*sys.exc_info())
+        return 1
+    return 0
+
+
+def _exit(code: int | None, internals: Internals) -> None:
+    """As an interpreter ends: the exit handlers, the streams flushed, the status; an uncaught KeyboardInterrupt
+    ends it by SIGINT (a shell's status 130), as CPython does."""
     try:
-        atexit._run_exitfuncs()
+        internals.run_exit_handlers()
     finally:
-        if code is not None and not isinstance(code, int):
-            print(code, file=sys.stderr)
-            code = 1
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(code or 0)
+        if code is None:
+            signal.signal(signal.SIGINT, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGINT)
+            code = 128 + signal.SIGINT  # (CPython's status where the signal did not end it)
+        os._exit(code)
 
 
-# multiprocessing.forkserver.main's parameters, the ones `_start_fork_server` passes (Python 3.12's).
-SERVER_MAIN = ("listener_fd", "alive_r", "preload", "main_path", "sys_path")
-
-
-def _start_fork_server() -> None:
+def _start_fork_server(internals: Internals) -> None:
     """The run's own fork server (roboview.core.workers), started now as a fork of this process instead of from a
     fresh interpreter when the run's first pool needs it.
 
@@ -114,16 +202,17 @@ def _start_fork_server() -> None:
     is that server, its modules already there. Its descriptors are closed but for stdin, stdout, stderr, the socket
     and the pipe (what the fresh interpreter inherits), and it serves the run's pools as multiprocessing's own
     `main` until the last of its clients exits; the run's workers are its children, as they would be."""
-    import inspect
-    from multiprocessing import connection, forkserver, resource_tracker
+    from multiprocessing import resource_tracker
 
-    known = list(inspect.signature(forkserver.main).parameters) == [*SERVER_MAIN]
-    if not known or not os.path.isdir("/proc/self/fd"):
-        return  # another multiprocessing (its server takes more, e.g. an auth key) or no /proc: it starts its own
-    server = forkserver._forkserver
+    if (
+        internals.serve_forks is None
+        or internals.socket_address is None
+        or internals.adopt_fork_server is None
+    ):
+        return  # another multiprocessing: the run's first pool starts its own server
     resource_tracker.ensure_running()
     listener = socket.socket(socket.AF_UNIX)
-    address = connection.arbitrary_address("AF_UNIX")
+    address = internals.socket_address()
     listener.bind(address)
     os.chmod(address, 0o600)
     listener.listen()
@@ -138,12 +227,12 @@ def _start_fork_server() -> None:
                 except OSError:  # the descriptor listdir read /proc/self/fd with, already gone
                     pass
         try:
-            forkserver.main(listener.fileno(), alive_r, [])
+            internals.serve_forks(listener.fileno(), alive_r)
         finally:
             os._exit(0)
     listener.close()
     os.close(alive_r)
-    server._forkserver_address, server._forkserver_alive_fd, server._forkserver_pid = address, alive_w, pid
+    internals.adopt_fork_server(address, alive_w, pid)
 
 
 class Run:
@@ -242,7 +331,7 @@ def start(
     it and its workers, as a terminal's Ctrl-C or a lost machine does). A fork of the preloaded server, or a fresh
     interpreter where `env` needs one (see the module's doc)."""
     env = dict(os.environ if env is None else env)
-    if not _needs_fresh(env):
+    if cpython_internals() is not None and not _needs_fresh(env):
         return Run(module, list(args), env, Path(cwd), merge, new_session)
     command = [sys.executable, "-m", module, *args]
     err = subprocess.STDOUT if merge else subprocess.PIPE
