@@ -31,7 +31,7 @@ class CalibrationConfig:
     values: int = 9
     # Contexts per value.
     contexts: int = 4
-    # Repeats per (value, context).
+    # Repeats per (value, context): 2 or more (one repeat leaves the CV's permutation floor undefined).
     repeats: int = 5
     # Mean success rate of the simulated policy.
     sr: float = 0.7
@@ -42,6 +42,8 @@ class CalibrationConfig:
         for name in ("sims", "values", "contexts", "repeats"):
             if getattr(self, name) < 1:
                 raise ValueError(f"--{name}={getattr(self, name)} must be a positive count")
+        if self.repeats < 2:
+            raise ValueError(f"--repeats={self.repeats}: the CV's permutation floor needs 2 or more repeats")
         if not 0.0 < self.sr < 1.0:
             raise ValueError(f"--sr={self.sr} must lie in (0, 1)")
         if not self.taus or any(t < 0 for t in self.taus):
