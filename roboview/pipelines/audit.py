@@ -57,8 +57,8 @@ from roboview.pipelines._cli import cli_main
 class AuditConfig:
     # Per-episode results: .csv, .parquet or .jsonl; with --format, the harness's file or folder.
     results: str = ""
-    # Another harness's own results instead of a table: vla_eval or inspect_robots (docs/audit.md); empty: a
-    # table mapped with --map.*. With a format, --map.* flags override its default columns.
+    # Another harness's own results instead of a table (docs/audit.md); empty: a table mapped with --map.*. With a
+    # format, --map.* flags override its default columns.
     format: str = ""
     map: MapConfig = field(default_factory=MapConfig)
     # The factor's name when the file holds one factor and has no factor column.
@@ -73,6 +73,8 @@ class AuditConfig:
     # --metrics.max_glm,
     # --metrics.seed, --metrics.epsilon (docs/statistics.md).
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
+
+    help_details = {"format": lambda: f"One of: {', '.join(harness_names())}."}
 
     def __post_init__(self) -> None:
         if not self.tau > 0:

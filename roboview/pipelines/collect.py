@@ -57,7 +57,7 @@ class DatasetConfig:
     # left_top on the continuous orbital surface). What was drawn is recorded per episode in
     # meta/roboview/episodes.parquet. Empty: context-only randomization, as in the paper.
     randomize: list[str] = field(default_factory=list)
-    # Task the expert demonstrates: pick_place (the paper's), push or libero (roboview.tasks).
+    # Task the expert demonstrates: pick_place (the paper's), push, libero, liberoplus or metaworld (roboview.tasks).
     task: str = DEFAULT_TASK
     # Draw these context factors among the values named only: FACTOR=V1|V2,FACTOR=V (e.g.
     # libero_task=libero_object/0|libero_object/1); empty: every value of every context factor.

@@ -349,8 +349,9 @@ class ControlledConfig(PolicyConfig):
     joint)."""
 
     # Control mode the policy acts in: joint (7 joint targets + gripper), ee_delta or ee_abs (end effector:
-    # position + axis-angle + gripper, LIBERO convention; docs/control.md). Empty: the world's only control where
-    # it takes one (LIBERO's ee_delta), else joint.
+    # position + axis-angle + gripper, LIBERO convention; docs/control.md) or xyz_delta (Meta-World's: hand position
+    # delta + gripper). Empty: the world's only control where it takes one (LIBERO's ee_delta, Meta-World's
+    # xyz_delta), else joint.
     control: str = ""
 
     def __post_init__(self) -> None:

@@ -50,7 +50,8 @@ class ServeConfig:
     # custom layout: comma-separated wire_key=SOURCE, SOURCE = camera:NAME, camera_chw:NAME, depth:NAME, state,
     # state[i:j] or instruction (as --policy.key_map of the openpi policy).
     key_map: str = ""
-    # The task whose env defines the action and observation spaces the policy is built for.
+    # The task whose env defines the action and observation spaces the policy is built for: pick_place, push, libero,
+    # liberoplus or metaworld (roboview.tasks).
     task: str = DEFAULT_TASK
     # Image side the clients send; 0: the policy's own (a checkpoint's input size), else 224.
     image_size: int = 0

@@ -30,7 +30,7 @@ class VLMConfig(ControlledConfig):
 
     # The VLM endpoint the agent asks (--policy.endpoint.base_url, --policy.endpoint.model, ...).
     endpoint: Endpoint = field(default_factory=Endpoint)
-    # Scene camera the agent looks through (RGB-D; the VLM sees the RGB image).
+    # Scene camera the agent looks through: front, left_top, right_top or wrist (RGB-D; the VLM sees the RGB image).
     camera: str = "front"
 
     depth = True
