@@ -79,7 +79,7 @@ def schedule(items: list) -> list:
     go before them all, those with the fewest tests first. The mark is for a file of few long tests (the Ray cluster's
     one test of 1.5 min, the expert's three sweeps): by its count it would come among the last, and one process would
     run it alone while the other has finished. Handing out the longest files first instead was slower: the
-    multi-process ones, started together, oversubscribe two cores (docs/performance.md)."""
+    multi-process ones, started together, oversubscribe two cores (measured: docs/CHANGELOG.md)."""
     files: dict[str, list] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)
