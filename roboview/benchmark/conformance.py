@@ -46,7 +46,6 @@ from roboview.benchmark.format import (
 )
 from roboview.core import files
 from roboview.core.files import files_sha256
-from roboview.tasks.world import load_world
 from roboview.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -134,9 +133,7 @@ def observe(env, expert, instance, steps: int = 0) -> tuple[list[np.ndarray], di
     from roboview.tasks.env import IMAGE_KEY
 
     obs, _ = env.reset(seed=instance.seed, options={"instance": instance})
-    images = [
-        downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in load_world(env.world).observed_cameras
-    ]
+    images = [downsample(np.asarray(obs[IMAGE_KEY.format(cam)])) for cam in env.world.observed_cameras]
     if not steps:
         return images, None
     expert.reset()
@@ -164,7 +161,7 @@ class _Envs:
         from roboview.tasks import load_task, make_env
 
         if task not in self.envs:
-            self.cameras = load_world(load_task(task).env_class().world).observed_cameras
+            self.cameras = load_task(task).env_class().world.observed_cameras
             self.envs[task] = make_env(task, cameras=self.cameras, image_size=self.image_size, lazy=True)
             self.experts[task] = load_task(task).make_expert(self.envs[task])
             if self.stack is None:

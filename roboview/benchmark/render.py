@@ -17,7 +17,6 @@ from roboview.benchmark.screen import FAIRNESS_SCREEN, SCREEN_CAMERA, screen_ima
 from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import IMAGE_KEY
 from roboview.tasks.fairness import FairnessThresholds
-from roboview.tasks.world import load_world
 from roboview.variation.factors import baselines, visual_factors
 from roboview.variation.instances import TaskInstance
 
@@ -63,7 +62,7 @@ class InstanceRenderer:
 
     def _use(self, task: str) -> None:
         if task not in self.envs:
-            world = load_world(load_task(task).env_class().world)
+            world = load_task(task).env_class().world
             self.envs[task] = make_env(task, cameras=world.observed_cameras, image_size=self.image_size)
             self.probes[task] = world.make_probe(self.envs[task])
         self.env, self.probe = self.envs[task], self.probes[task]
@@ -74,7 +73,7 @@ class InstanceRenderer:
         obs, _ = self.env.reset(seed=instance.seed, options={"instance": instance})
         cameras = self.probe.cameras
         rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in cameras}
-        if view is None and load_world(self.env.world).gate_reference == "no_change_view":
+        if view is None and self.env.world.gate_reference == "no_change_view":
             view = self.probe.measure(
                 rgb, self.thresholds
             )  # the no-change view itself: judged against itself
@@ -93,7 +92,7 @@ class InstanceRenderer:
     def _no_change_view(self, instance: TaskInstance):
         """The gate's report of `instance`'s context at every visual factor's baseline (on the same seed), where the
         world judges against it (`World.gate_reference`); None where it does not, or `instance` is that view."""
-        if load_world(self.env.world).gate_reference != "no_change_view":
+        if self.env.world.gate_reference != "no_change_view":
             return None
         base = no_change_view(instance)
         if base.factors == instance.factors:
@@ -113,7 +112,7 @@ class InstanceRenderer:
 
     def _recorded_cameras(self) -> tuple[str, ...]:
         """The cameras whose calibration the world records (RoboView's scene: all four; LIBERO's: its two)."""
-        return load_world(self.env.world).recorded_cameras
+        return self.env.world.recorded_cameras
 
     def close(self) -> None:
         for env in self.envs.values():

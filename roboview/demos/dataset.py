@@ -23,7 +23,7 @@ from roboview.core.folders import folder_problem
 from roboview.demos.recorder import DemoEpisode
 from roboview.tasks import load_task
 from roboview.tasks.env import STATE_KEY, action_names, state_names
-from roboview.tasks.world import camera_of_feature, feature_key, load_world
+from roboview.tasks.world import camera_of_feature, feature_key
 from roboview.variation.factors import DEFAULT_TASK
 
 log = logging.getLogger(__name__)
@@ -171,7 +171,7 @@ def write_card(root: Path, repo_id: str, task: str, provenance_rows: int, contro
 
     info = json.loads((root / "meta" / "info.json").read_text())
     cameras = [c for c in map(camera_of_feature, info["features"]) if c]
-    world = load_world(load_task(task).env_class().world)
+    world = load_task(task).env_class().world
     description = (
         f"Scripted expert demonstrations of the RoboView `{task}` task ({world.title}), collected with "
         f"context-only randomization: its context factors ({', '.join(load_task(task).context_factors())}) and the "

@@ -14,7 +14,6 @@ import numpy as np
 
 from roboview.tasks import DEFAULT_TASK, load_task, make_env
 from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
-from roboview.tasks.world import load_world
 from roboview.variation.factors import FACTORS, context_factors
 from roboview.variation.instances import TaskInstance, seed_from_text
 from roboview.variation.randomization import Randomization, sample_randomization
@@ -107,7 +106,7 @@ class DemoCollector:
             task, cameras=cameras, image_size=image_size, fps=fps, max_steps=max_steps, control=control
         )
         self.expert = load_task(task).make_expert(self.env)  # its actions are in the env's control
-        self.episode_visuals = load_world(self.env.world).episode_visuals
+        self.episode_visuals = self.env.world.episode_visuals
         # The state recorded with each action: the one the control's policies read (LIBERO-style for EE).
         self.state_key = STATE_KEY if control == "joint" else EE_STATE_KEY
 

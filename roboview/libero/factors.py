@@ -149,6 +149,11 @@ class ObjectColor:
         if self.mode not in ("tint", "skin"):
             raise ValueError(f"mode {self.mode!r} invalid; allowed: tint, skin")
 
+    @classmethod
+    def skin(cls, rgb: tuple[float, float, float]) -> ObjectColor:
+        """The target object re-skinned `rgb`: LIBERO's `color` factor (a tint barely shows on its dark textures)."""
+        return cls(rgb, mode="skin")
+
     def apply(self, world) -> None:
         model, con = world.model, world.render_context.con
         n_roles = model.mat_texid.shape[1]

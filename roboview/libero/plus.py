@@ -277,6 +277,11 @@ class LiberoPlusView:
 
     view: View
 
+    @classmethod
+    def of(cls, values: dict[str, str]) -> LiberoPlusView:
+        """The applier of the view an instance's `view_*` values describe (LIBERO's `World.appliers`)."""
+        return cls(View.of(values))
+
     def apply(self, world) -> None:
         from roboview.libero.factors import AGENTVIEW
 

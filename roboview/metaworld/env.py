@@ -63,9 +63,10 @@ def scripted_policy(task: str):
 class MetaWorldScene:
     """One Meta-World task's env (`self.inner`) as LeRobot builds it, rendered at `image_size`."""
 
-    def __init__(self, task: str, image_size: int = NATIVE_SIZE) -> None:
+    def __init__(self, task: str, image_size: int = NATIVE_SIZE, object_body: str = "obj") -> None:
         metaworld = import_metaworld()
-        self.task, self.image_size = task, image_size
+        # `object_body`: the body of the task's object (what the `color` factor re-skins).
+        self.task, self.image_size, self.object_body = task, image_size, object_body
         mt1 = metaworld.MT1(task, seed=MT1_SEED)
         env = mt1.train_classes[task](
             render_mode="rgb_array", camera_name=CAMERA, width=image_size, height=image_size

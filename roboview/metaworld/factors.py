@@ -4,7 +4,7 @@ The scene keeps one compiled model and one render context; before every reset th
 context's material-texture table, which MuJoCo copies when the context is made) are put back, then the instance's
 appliers run. Every baseline is Meta-World's scene unchanged (as LeRobot's `MetaworldEnv` renders it).
 
-- `ObjectColor`: the task's object (`OBJECTS`) re-skinned a solid color (its geoms' material detached: Meta-World's
+- `ObjectColor`: the task's object (`OBJECTS`, the scene's `object_body`) re-skinned a solid color (its geoms' material detached: Meta-World's
   wood and metal textures would otherwise tint it).
 - `OrbitalPose`, `CameraEuler`, `PullBack`: `corner2`, the camera a policy watches (the math is shared with
   LIBERO's: `roboview.variation.model_edits`). corner2 renders upside down and LeRobot flips it; the rotations here
@@ -92,13 +92,14 @@ def _camera(scene) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class ObjectColor:
-    """The geoms of `body` colored `rgb` (0–1), their material detached."""
+    """The geoms of `body` (None: the scene's task object, `MetaWorldScene.object_body`) colored `rgb` (0–1), their
+    material detached."""
 
     rgb: tuple[float, float, float]
-    body: str
+    body: str | None = None
 
     def apply(self, scene) -> None:
-        for geom in object_geoms(scene.model, self.body):
+        for geom in object_geoms(scene.model, self.body or scene.object_body):
             scene.model.geom_rgba[geom, :3] = self.rgb
             scene.model.geom_matid[geom] = -1
 

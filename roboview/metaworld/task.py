@@ -17,8 +17,8 @@ effort (+1 closes). **Success**: Meta-World's `info["success"]`, after every ste
 
 **Visual factors** (`roboview.metaworld.factors` says how), every baseline being Meta-World's scene unchanged:
 `color` (the task's object, `OBJECTS`, re-skinned a CSS color, red included; its baseline, the object's own look, is
-named `original`), `camera_pose`, `camera_euler`, `dist_scale` (corner2), `lighting`, `table_texture`. `distractors`
-and `object_size` do not apply: an instance setting them is refused.
+named `original`), `camera_pose`, `camera_euler`, `dist_scale` (corner2), `lighting`, `table_texture` (the world's
+applier table, `APPLIERS`). `distractors` and `object_size` do not apply: an instance setting them is refused.
 
 **Expert.** Meta-World's own scripted policy for the task (`metaworld.policies`, as LeRobot maps them), reading the
 39-d state.
@@ -34,28 +34,43 @@ import numpy as np
 
 from roboview.metaworld.env import CAMERA, FPS, MAX_STEPS, NATIVE_SIZE
 from roboview.sim.cameras import CameraPose, camera_pose_of
-from roboview.sim.observation import LazyObservation
 from roboview.tasks.base import Task, register_task
-from roboview.tasks.world import World, WorldEnv, WorldExpert, register_world
+from roboview.tasks.world import (
+    EE_STATE_KEY,
+    IMAGE_KEY,
+    STATE_KEY,
+    World,
+    WorldEnv,
+    WorldExpert,
+    register_world,
+)
 from roboview.variation.factors import Factor, register_baseline_labels, register_factor
 
 if TYPE_CHECKING:
     from roboview.variation.instances import TaskInstance
 
-TASK = WORLD = "metaworld"
+TASK = "metaworld"
 # RoboView's name of Meta-World's camera → Meta-World's; `top` is LeRobot's name of the same view (its `pixels/top`
 # env feature, stored and read as `observation.image`), so a LeRobot Meta-World checkpoint finds its camera.
 CAMERAS = {"corner2": CAMERA, "top": CAMERA}
 OBSERVED_CAMERAS = ("corner2",)
-IMAGE_KEY = "observation.images.{}"
-STATE_KEY = "observation.state"
-EE_STATE_KEY = "observation.ee_state"
 RAW_STATE_KEY = "metaworld.state"
 CONTROL = "xyz_delta"
 # The `{"motors": [...]}` names of the 4-d state and action (LeRobot's Meta-World datasets name them so).
 STATE_NAMES = ("x", "y", "z", "gripper")
 ACTION_NAMES = ("dx", "dy", "dz", "gripper")
-NOT_APPLICABLE = ("distractors", "object_size")
+# Each visual factor's applier on Meta-World's scenes (`roboview.metaworld.factors`), in the order they run; its scenes
+# take no distractors and no object size.
+APPLIERS = {
+    "color": "roboview.metaworld.factors:ObjectColor",
+    "camera_pose": "roboview.metaworld.factors:OrbitalPose",
+    "camera_euler": "roboview.metaworld.factors:CameraEuler",
+    "dist_scale": "roboview.metaworld.factors:PullBack",
+    "lighting": "roboview.variation.model_edits:Lighting",
+    "table_texture": "roboview.metaworld.factors:TableTexture",
+    "distractors": None,
+    "object_size": None,
+}
 # The baselines that are Meta-World's own look, by name: the object's own material is `original`, not red.
 BASELINE_LABELS = {"color": "original"}
 # The registered tasks and the body of each one's object (what `color` re-skins and the fairness gate judges): the
@@ -91,9 +106,9 @@ INSTRUCTIONS = {
     "soccer-v3": "Kick a soccer into the goal",
 }
 
-register_world(
+WORLD = register_world(
     World(
-        name=WORLD,
+        name="metaworld",
         title="Meta-World's tasks (MT50), built, seeded and observed as LeRobot's MetaworldEnv",
         cameras=CAMERAS,
         observed_cameras=OBSERVED_CAMERAS,
@@ -107,12 +122,10 @@ register_world(
         gate_reference="no_change_view",
         render_size=NATIVE_SIZE,
         fps=FPS,
-        instruction="LeRobot's description of the task (one per task)",
-        success="Meta-World's info['success'], after every step",
         requires="metaworld",
         install="make install-metaworld",
         wing=__package__,  # roboview.metaworld
-        not_applicable=NOT_APPLICABLE,
+        appliers=APPLIERS,
         baseline_labels=BASELINE_LABELS,
     )
 )
@@ -129,25 +142,6 @@ METAWORLD_TASK = register_factor(
         title="Meta-World task",
     )
 )
-
-
-def appliers(values: dict[str, str], body: str) -> list:
-    """Meta-World's appliers for an instance's visual factor values (nothing for a value at its baseline: color
-    `original` is the object's own look, `red` a red re-skin)."""
-    from roboview.metaworld import factors as mf
-    from roboview.variation.colors import get_color
-    from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
-    from roboview.variation.model_edits import visual_appliers
-
-    make = {
-        "color": lambda v: mf.ObjectColor(tuple(get_color(v).rgb), body),
-        "camera_pose": lambda v: mf.OrbitalPose(*parse_camera_pose(v)),
-        "camera_euler": lambda v: mf.CameraEuler(*parse_euler(v)),
-        "dist_scale": lambda v: mf.PullBack(parse_dist_scale(v)),
-        "lighting": mf.Lighting.of,
-        "table_texture": mf.TableTexture,
-    }
-    return visual_appliers(values, make, "Meta-World", TASK)
 
 
 def baseline_metaworld_instance(metaworld_task: str = METAWORLD_TASK.baseline) -> TaskInstance:
@@ -170,14 +164,8 @@ class MetaWorldTaskEnv(WorldEnv):
     world = WORLD
     asset_packages = ("metaworld",)
     target = None
-    observed_cameras = OBSERVED_CAMERAS
-    camera_names = tuple(CAMERAS)
-    controls = (CONTROL,)
     robot_type = "sawyer"
-
-    @classmethod
-    def feature_names(cls, control: str) -> tuple[dict, dict]:
-        return {"motors": list(STATE_NAMES)}, {"motors": list(ACTION_NAMES)}
+    state_feature_names, action_feature_names = STATE_NAMES, ACTION_NAMES
 
     def __init__(
         self,
@@ -191,31 +179,14 @@ class MetaWorldTaskEnv(WorldEnv):
         lazy: bool = True,
         control: str = CONTROL,
     ) -> None:
-        unknown = [c for c in cameras if c not in CAMERAS]
-        if unknown:
-            raise ValueError(
-                f"Meta-World's scenes have no camera {', '.join(map(repr, unknown))}; allowed: {', '.join(CAMERAS)}"
-            )
-        if control != CONTROL:
-            raise ValueError(
-                f"Meta-World's scenes take control={CONTROL!r} only (hand xyz delta + gripper), not {control!r}"
-            )
-        if depth:
-            raise ValueError("Meta-World's scenes render no depth here (depth=False)")
-        self.cameras, self.image_size, self.fps, self.depth = tuple(cameras), image_size, fps, depth
-        self.control, self.joint_action_space, self.render_mode = control, None, render_mode
+        self.setup(cameras, image_size, fps, depth, control, render_mode)
+        # The hand xyz delta and the gripper in [-1, 1]; LeRobot's `agent_pos` state.
+        self.spaces(gym.spaces.Box(-1.0, 1.0, (len(ACTION_NAMES),), np.float32), len(STATE_NAMES))
         self.max_steps = max_steps or MAX_STEPS
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
-        image = gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8)
-        state = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
-        self.observation_space = gym.spaces.Dict(
-            {**{IMAGE_KEY.format(c): image for c in self.cameras}, STATE_KEY: state, EE_STATE_KEY: state}
-        )
         self.scene = None
         self.instance = baseline_metaworld_instance()
         self.instruction = INSTRUCTIONS[self.instance.get("metaworld_task")]
         self.steps, self._success = 0, False
-        self._observations = 0
         self._scene(self.instance.get("metaworld_task"))
 
     # ---- episodes -------------------------------------------------------------------------------------------
@@ -227,7 +198,7 @@ class MetaWorldTaskEnv(WorldEnv):
         scene = self._scene(name)
         raw = scene.reset(
             seed=instance.seed if seed is None else int(seed),
-            factors=appliers(dict(instance.factors), OBJECTS[name]),
+            factors=self.world.make_appliers(dict(instance.factors), TASK),
         )
         self.instance, self.instruction, self.steps, self._success = instance, INSTRUCTIONS[name], 0, False
         return self._observation(raw), {"task": name}
@@ -255,17 +226,15 @@ class MetaWorldTaskEnv(WorldEnv):
         if self.scene is None or self.scene.task != name:
             if self.scene is not None:
                 self.scene.close()
-            self.scene = MetaWorldScene(name, image_size=self.image_size)
+            self.scene = MetaWorldScene(name, image_size=self.image_size, object_body=OBJECTS[name])
         return self.scene
 
-    def _observation(self, raw: np.ndarray) -> LazyObservation:
+    def _observation(self, raw: np.ndarray) -> dict:
         state = np.asarray(raw[:4], np.float32)
         eager = {STATE_KEY: state, EE_STATE_KEY: state.copy(), RAW_STATE_KEY: np.asarray(raw, np.float64)}
         # corner2 and top are one view: rendered once per observation, whichever key is read first.
         lazy = dict.fromkeys((IMAGE_KEY.format(c) for c in self.cameras), functools.cache(self.scene.render))
-        self._observations += 1
-        count = self._observations
-        return LazyObservation(eager, lazy, lambda: self._observations == count)
+        return self.observation(eager, lazy)
 
     # ---- what the evaluator, the builder and the certificate read --------------------------------------------
     @property
@@ -302,7 +271,7 @@ class MetaWorldTaskEnv(WorldEnv):
         return self.scene.render()
 
     def camera_ids(self) -> dict[str, int]:
-        return {name: self.scene.camera_id for name in OBSERVED_CAMERAS}
+        return {name: self.scene.camera_id for name in self.world.recorded_cameras}
 
     def camera_pose(self, name: str) -> CameraPose:
         return camera_pose_of(self.model, self.data, self.scene.camera_id, name)

@@ -23,7 +23,6 @@ from roboview.demos.recorder import parse_contexts
 from roboview.pipelines._cli import cli_main
 from roboview.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
 from roboview.tasks import DEFAULT_TASK, load_task
-from roboview.tasks.world import load_world
 from roboview.variation.randomization import validate_randomize
 
 VCODECS = ("libsvtav1", "h264", "hevc")
@@ -80,22 +79,22 @@ class DatasetConfig:
         )
         with flag_errors("--dataset.task"):
             env_class = load_task(self.task).env_class()
-        unknown = [c for c in self.cameras if c not in env_class.camera_names]
+        unknown = [c for c in self.cameras if c not in env_class.world.cameras]
         if unknown or not self.cameras or len(set(self.cameras)) != len(self.cameras):
             raise ValueError(
                 f"--dataset.cameras={self.cameras}: unknown or repeated camera(s) {unknown}; "
-                f"allowed for --dataset.task={self.task}: {', '.join(env_class.camera_names)}"
+                f"allowed for --dataset.task={self.task}: {', '.join(env_class.world.cameras)}"
             )
         if self.vcodec not in VCODECS:
             raise ValueError(f"--dataset.vcodec={self.vcodec!r} unknown; allowed: {', '.join(VCODECS)}")
         with flag_errors("--dataset.randomize"):
             self.randomize = list(validate_randomize(self.randomize))
-        if self.randomize and not load_world(env_class.world).episode_visuals:
+        if self.randomize and not env_class.world.episode_visuals:
             raise ValueError(
                 f"--dataset.randomize={','.join(self.randomize)}: domain randomization draws RoboView's scene's "
-                f"colors and camera poses; --dataset.task={self.task} runs in the {env_class.world} world"
+                f"colors and camera poses; --dataset.task={self.task} runs in the {env_class.world.name} world"
             )
-        world = load_world(env_class.world)
+        world = env_class.world
         if world.fps and self.fps not in (0, world.fps):
             raise ValueError(
                 f"--dataset.fps={self.fps}: the {world.name} world runs at {world.fps} Hz; drop the flag"
@@ -106,11 +105,11 @@ class DatasetConfig:
                 f"--dataset.fps={self.fps} must be a positive divisor of 500 (e.g. 5, 10, 20, 25)"
             )
         # No control given: the world's only one (LIBERO's ee_delta), or joint where the world takes several.
-        self.control = self.control or load_world(env_class.world).default_control or "joint"
-        if self.control not in env_class.controls:
+        self.control = self.control or env_class.world.default_control or "joint"
+        if self.control not in env_class.world.controls:
             raise ValueError(
                 f"--dataset.control={self.control!r} is not a control of --dataset.task={self.task}; allowed: "
-                f"{', '.join(env_class.controls)}"
+                f"{', '.join(env_class.world.controls)}"
             )
         with flag_errors("--dataset.contexts"):
             self.context_values = parse_contexts(self.contexts, self.task)

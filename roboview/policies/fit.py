@@ -29,25 +29,29 @@ def fit_policy(policy: PolicyConfig, tasks: Sequence[str], instances: Iterable[T
                 f"({', '.join(unscripted[:4])}{' …' if len(unscripted) > 4 else ''}); evaluate a benchmark of the "
                 "ones it scripts (LIBERO: libero_object and libero_spatial, e.g. --preset=liberoplus_camera_object)"
             )
-    shared = [c for c in next(iter(envs.values())).controls if all(c in e.controls for e in envs.values())]
+    shared = [
+        c
+        for c in next(iter(envs.values())).world.controls
+        if all(c in e.world.controls for e in envs.values())
+    ]
     policy.settle_control(tuple(shared))
     control = policy.env_control()
     for task, env in envs.items():
-        if control not in env.controls:
+        if control not in env.world.controls:
             # A checkpoint acts in the control its action was trained in: another flag cannot fit it.
             settable = hasattr(policy, "control") and not policy.checkpoint
-            hint = f" (pass --policy.control={env.controls[0]})" if settable else ""
+            hint = f" (pass --policy.control={env.world.controls[0]})" if settable else ""
             raise ValueError(
-                f"the {task!r} task's env takes control {', '.join(env.controls)}; {describe(policy)} acts in "
+                f"the {task!r} task's env takes control {', '.join(env.world.controls)}; {describe(policy)} acts in "
                 f"{control!r}{hint}"
             )
-        if policy.privileged and env.observed_cameras:
+        if policy.privileged and env.world.privileged_cameras:
             continue  # a privileged policy is given the world's own cameras
-        missing = [c for c in policy.observed_cameras() if c not in env.camera_names]
+        missing = [c for c in policy.observed_cameras() if c not in env.world.cameras]
         if missing:
             raise ValueError(
                 f"{describe(policy)} observes camera(s) {', '.join(missing)}, which the {task!r} task's env does "
-                f"not render; its cameras: {', '.join(env.camera_names)}"
+                f"not render; its cameras: {', '.join(env.world.cameras)}"
             )
 
 

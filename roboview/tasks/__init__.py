@@ -20,8 +20,6 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 
-from roboview.sim.cameras import ALL_CAMERAS
-from roboview.sim.control import CONTROLS
 from roboview.tasks.base import (
     DEFAULT_MAX_STEPS,
     TASKS,
@@ -34,27 +32,7 @@ from roboview.tasks.base import (
 )
 from roboview.tasks.env import TaskEnv
 from roboview.tasks.expert import ScriptedExpert
-from roboview.tasks.world import World, register_world
 from roboview.variation.factors import DEFAULT_TASK
-
-# RoboView's own world: the shared scene of `roboview.sim`, which the built-in tasks (pick_place, push) build on.
-register_world(
-    World(
-        name="roboview",
-        title="RoboView's scene: Franka Panda + Robotiq 2F-85, one small object, four cameras",
-        cameras={c: c for c in ALL_CAMERAS},
-        # VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
-        observed_cameras=("front", "left_top", "wrist"),
-        judged_cameras=("front", "left_top", "wrist"),
-        recorded_cameras=ALL_CAMERAS,
-        wrist_cameras=("wrist",),
-        controls=CONTROLS,
-        probe="roboview.tasks.fairness:FairnessProbe",
-        episode_visuals=True,
-        instruction="the task's `instruction` context factor (paraphrases of one goal)",
-        success="the task's own test (`is_success`), after every step",
-    )
-)
 
 # Registry lines: imported in this order, the order of the tasks in a suite that names several.
 BUILTIN_MODULES = (

@@ -140,7 +140,7 @@ def load_task(name: str = DEFAULT_TASK) -> Task:
 def camera_names() -> tuple[str, ...]:
     """Every camera name some registered task's env renders (a checkpoint that wants another is refused at once;
     whether the benchmark's own tasks render it is checked when the run is planned)."""
-    return tuple(dict.fromkeys(c for task in TASKS.values() for c in task.env_class().camera_names))
+    return tuple(dict.fromkeys(c for task in TASKS.values() for c in task.env_class().world.cameras))
 
 
 def feature_dims() -> list[tuple[str, int, int]]:
@@ -149,7 +149,7 @@ def feature_dims() -> list[tuple[str, int, int]]:
     out = []
     for task in TASKS.values():
         env_class = task.env_class()
-        for control in env_class.controls:
+        for control in env_class.world.controls:
             declared = env_class.feature_names(control)
             if declared is None:
                 declared = (state_names(control), action_names(control))
@@ -163,7 +163,7 @@ def control_of_action_names(names: list[str]) -> str | None:
     its actions so (LeRobot-format LIBERO datasets: LIBERO's OSC_POSE deltas, `ee_delta`); None: no world's."""
     for task in TASKS.values():
         env_class = task.env_class()
-        for control in env_class.controls:
+        for control in env_class.world.controls:
             declared = env_class.feature_names(control)
             action = action_names(control) if declared is None else declared[1]
             if list(action["motors"] if isinstance(action, dict) else action) == list(names):

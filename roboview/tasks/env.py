@@ -42,7 +42,15 @@ from roboview.sim.scene import (
     RenderQuality,
     Scene,
 )
-from roboview.tasks.world import WorldEnv
+from roboview.tasks.world import (  # the observation keys too, which every policy imports from here
+    DEPTH_KEY,
+    EE_STATE_KEY,
+    IMAGE_KEY,
+    STATE_KEY,
+    World,
+    WorldEnv,
+    register_world,
+)
 from roboview.variation.factors import (
     DEFAULT_TASK,
     FACTORS,
@@ -61,11 +69,6 @@ DEFAULT_MAX_STEPS = 120
 ASSUMED_REACH_M = 0.04
 STATE_NAMES = tuple(f"joint{i}" for i in range(1, 8)) + ("gripper",)
 ACTION_NAMES = tuple(f"joint{i}_target" for i in range(1, 8)) + ("gripper_close",)
-IMAGE_KEY = "observation.images.{}"
-DEPTH_KEY = "observation.depth.{}"
-STATE_KEY = "observation.state"
-# The end-effector state (8: EE_STATE_NAMES), in every control mode's observations.
-EE_STATE_KEY = "observation.ee_state"
 
 # Per-episode jitter drawn from the episode seed (kept small so the named position stays meaningful).
 POSITION_JITTER_M = 0.01
@@ -94,19 +97,23 @@ def _joint_action_space(arm_range: np.ndarray) -> gym.spaces.Box:
     return gym.spaces.Box(low, high, dtype=np.float32)
 
 
-def _observation_space(cameras: Sequence[str], image_size: int, depth: bool) -> gym.spaces.Dict:
-    """The observations' spaces: each camera's image (and depth map), the joint state and the EE state."""
-    spaces = {
-        IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8) for c in cameras
-    }
-    if depth:
-        spaces |= {
-            DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
-            for c in cameras
-        }
-    spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(STATE_NAMES),), np.float32)
-    spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (len(EE_STATE_NAMES),), np.float32)
-    return gym.spaces.Dict(spaces)
+# RoboView's own world: the shared scene of `roboview.sim`, which the built-in tasks (pick_place, push) build on.
+WORLD = register_world(
+    World(
+        name="roboview",
+        title="RoboView's scene: Franka Panda + Robotiq 2F-85, one small object, four cameras",
+        cameras={c: c for c in ALL_CAMERAS},
+        # VLM agents watch `front`; π0-style policies `left_top` + `wrist`.
+        observed_cameras=("front", "left_top", "wrist"),
+        judged_cameras=("front", "left_top", "wrist"),
+        recorded_cameras=ALL_CAMERAS,
+        wrist_cameras=("wrist",),
+        controls=CONTROLS,
+        probe="roboview.tasks.fairness:FairnessProbe",
+        episode_visuals=True,
+        privileged_own_cameras=True,
+    )
+)
 
 
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
@@ -155,22 +162,11 @@ class TaskEnv(WorldEnv):
     # fairness gate measures `target_geoms()` under the record's box_* fields; the `vision` policy's
     # perception looks for it by this name.
     target: str | None = None
-    # The simulated world the task runs in (the fairness gate and the builder pick its probe and cameras by it).
-    world: str = "roboview"
-    # The cameras a privileged policy (which reads the simulator's state) is given; empty: the policy's own choice.
-    observed_cameras: tuple[str, ...] = ()
-    # Every camera the env renders by name and every control it takes: a policy's cameras and control are checked
-    # against these before any episode (roboview.eval.campaign.runner.plan).
-    camera_names: tuple[str, ...] = ALL_CAMERAS
-    controls: tuple[str, ...] = CONTROLS
+    # The simulated world the task runs in: its cameras, controls and probe (RoboView's scene).
+    world = WORLD
+    renders_depth = True
     # The robot, as a LeRobot dataset of this env names it (`robot_type`).
     robot_type: str = "franka_panda_robotiq_2f85"
-
-    @classmethod
-    def feature_names(cls, control: str) -> tuple[list | dict, list | dict] | None:
-        """The names a LeRobot dataset of this env gives `observation.state` and `action` in `control`; None: RoboView's
-        own (the joints or the EE state, and the control's action names)."""
-        return None
 
     # -- what a task declares ----------------------------------------------------------------
     @staticmethod
@@ -225,15 +221,9 @@ class TaskEnv(WorldEnv):
         lazy: bool = False,
         control: str = "joint",
     ) -> None:
-        check_control(control)
+        self.setup(cameras, image_size, fps, depth, control, render_mode)
         self._check_settings(render_mode, cameras, image_size, fps, max_steps)
-        self.render_mode = render_mode
-        self.cameras = tuple(cameras)
-        self.image_size = image_size
-        self.fps = fps
         self.max_steps = max_steps
-        self.depth = depth
-        self.control = control
         # Lazy: observations render their cameras when read (roboview.sim.observation), so steps
         # whose images no one reads cost physics only; the pixels are those eager rendering gives.
         self.lazy = lazy
@@ -258,26 +248,23 @@ class TaskEnv(WorldEnv):
         # The joint-target action (what the scripted planners plan in, whatever the control).
         self.joint_action_space = _joint_action_space(self.scene.ids.arm_range)
         if control == "joint":
-            self.action_space = self.joint_action_space
+            action_space = self.joint_action_space
         else:
-            self.action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
-        self.observation_space = _observation_space(self.cameras, image_size, depth)
+            action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
+        self.spaces(action_space, len(STATE_NAMES), len(EE_STATE_NAMES))
 
     @classmethod
     def _check_settings(
         cls, render_mode: str | None, cameras: Sequence[str], image_size: int, fps: int, max_steps: int
     ) -> None:
-        """ValueError for a render mode, camera, image size, control rate or step budget the env cannot take."""
+        """ValueError for a render mode, no camera, an image size, control rate or step budget the env cannot take."""
         if render_mode not in (None, *cls.metadata["render_modes"]):
             raise ValueError(
                 f"render_mode={render_mode!r} unsupported; allowed: None, "
                 f"{', '.join(map(repr, cls.metadata['render_modes']))}"
             )
-        unknown = [c for c in cameras if c not in ALL_CAMERAS]
-        if unknown or not cameras:
-            raise ValueError(
-                f"unknown camera(s) {unknown or list(cameras)}; allowed: {', '.join(ALL_CAMERAS)}"
-            )
+        if not cameras:
+            raise ValueError(f"no camera given; allowed: {', '.join(ALL_CAMERAS)}")
         check_image_size(image_size)
         if fps <= 0 or 500 % fps:
             raise ValueError(f"fps={fps} must divide the 500 Hz physics rate (e.g. 5, 10, 20, 25, 50)")

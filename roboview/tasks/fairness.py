@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 from scipy import ndimage
 
-from roboview.tasks.world import WorldEnv, load_world
+from roboview.tasks.world import WorldEnv
 from roboview.variation.colors import delta_e_2000, get_color, srgb_to_lab
 from roboview.variation.factors import FACTORS, baseline_of
 
@@ -103,7 +103,7 @@ class FairnessProbe:
     def __init__(self, env: WorldEnv, cameras: tuple[str, ...] | None = None) -> None:
         """`cameras`: those measured (default: the world's observed cameras)."""
         self.env = env
-        self.cameras = cameras or load_world(env.world).observed_cameras
+        self.cameras = cameras or env.world.observed_cameras
         self._seg = env.new_renderer()
         self._seg.enable_segmentation_rendering()
 
@@ -266,7 +266,7 @@ class ObjectProbe:
 
     def __init__(self, env) -> None:
         self.env = env
-        world = load_world(env.world)
+        world = env.world
         self.cameras, self.judged, self.names = world.observed_cameras, world.judged_cameras, world.cameras
         self._seg: mujoco.Renderer | None = None
 

@@ -3,9 +3,10 @@
 A *world* is a simulator with its own scenes, robot and cameras: RoboView's own scene (`roboview.sim`, with the
 `pick_place` and `push` tasks), LIBERO's scenes (`roboview.libero`), Meta-World's (`roboview.metaworld`). A world
 lives in its own *wing* (a package, or RoboView's `sim` + task modules); it registers one `World` (its facts) and
-its tasks, and its env subclasses `WorldEnv`. Everything outside the wing — the policy clients, the fairness gate,
-the builder, collect, the recorder, the renderer — reads the facts from `load_world(env.world)` or from the env,
-and never imports the wing (tests/project/test_imports.py enforces it). The recipe for a new world is docs/extending.md.
+its tasks, and its env subclasses `WorldEnv`, which holds the `World` (`env.world`). Everything outside the wing — the
+policy clients, the fairness gate, the builder, collect, the recorder, the renderer — reads the facts from `env.world`
+or `load_world(name)`, and never imports the wing (tests/project/test_imports.py enforces it). The recipe for a new
+world is docs/extending.md.
 
     >>> load_world("roboview").observed_cameras
     ('front', 'left_top', 'wrist')
@@ -13,18 +14,39 @@ and never imports the wing (tests/project/test_imports.py enforces it). The reci
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 
+from roboview.sim.observation import LazyObservation
+
 if TYPE_CHECKING:
     from roboview.sim.cameras import CameraPose
     from roboview.variation.instances import TaskInstance
+
+# RoboView's observation keys, every world's (a LeRobot dataset's feature keys): each camera's image and depth map,
+# the state a policy reads in its control, and the end-effector state.
+IMAGE_KEY = "observation.images.{}"
+DEPTH_KEY = "observation.depth.{}"
+STATE_KEY = "observation.state"
+EE_STATE_KEY = "observation.ee_state"
+# An applier table's entry: "module:attr" (resolved when first used: only the wing imports the wing), or the callable.
+Maker = str | Callable[..., Any]
+
+
+def resolve(target: Maker) -> Any:
+    """What a "module:attr" string names (`attr` may be dotted: a class's constructor `ObjectColor.skin`); a callable
+    as it is."""
+    if not isinstance(target, str):
+        return target
+    module, _, attr = target.partition(":")
+    return functools.reduce(getattr, attr.split("."), importlib.import_module(module))
 
 
 @dataclass(frozen=True)
@@ -62,17 +84,25 @@ class World:
     proprio_key: str = ""
     # Whether demos draw per-episode visual randomization (object color, camera jitter) on top of the instance.
     episode_visuals: bool = False
-    # Where an episode's instruction and success come from (one line each, for the docs and the task card).
-    instruction: str = ""
-    success: str = ""
     # The module a world outside the core install needs, and the command that installs it ("": always there).
     requires: str = ""
     install: str = ""
     # The package the world lives in (its wing: env, task, factors, probe, expert), which nothing outside it imports;
     # "": RoboView's own scene, the shared base (`roboview.sim` and the task modules of `roboview.tasks`).
     wing: str = ""
-    # The factors its scenes cannot take (an instance setting one away from its baseline is refused).
-    not_applicable: tuple[str, ...] = ()
+    # Visual factor → its applier on the world's scenes: a `Maker`, called with the value's arguments
+    # (`roboview.variation.model_edits.value_args`: color's sRGB, camera_pose's ring and step …), whose applier's
+    # `apply(scene)` edits the compiled model after every reset. A tuple of factors takes one applier together
+    # (LIBERO-plus's five view sub-factors: its pose arithmetic takes all five), its maker called with their
+    # {factor: value}. None: the factor does not apply to the world's scenes; a factor the table does not name is one
+    # the world lacks (`status`). An instance setting one it does not take away from its baseline is refused. The
+    # appliers run in the table's order. None for the whole table: every visual factor's own applier (`Factor.bind`,
+    # written for RoboView's scene, which may itself refuse a value: the view sub-factors there).
+    appliers: Mapping[str | tuple[str, ...], Maker | None] | None = None
+    # Whether a privileged policy (the scripted expert: it reads the simulator's state) watches the cameras it names
+    # (RoboView's scene, which renders every policy's); False: the observed cameras, whatever it names (the videos of
+    # LIBERO's and Meta-World's episodes show what every other policy sees).
+    privileged_own_cameras: bool = False
     # Visual factor → the name of its baseline where the baseline is the world's own look, not the registered value
     # (LIBERO's and Meta-World's objects wear their own textures at the color baseline: {"color": "original"}, where
     # every CSS color, red included, is a re-skin). The wing registers them for each of its tasks
@@ -82,7 +112,6 @@ class World:
     # "no_change_view" (a world whose look is another benchmark's design, LIBERO's and Meta-World's: each value against
     # its own context's no-change view, what that world shows every policy; roboview.tasks.fairness.violations).
     gate_reference: str = "thresholds"
-    extra: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def scene_cameras(self) -> tuple[str, ...]:
@@ -94,6 +123,62 @@ class World:
         """The control a policy given none acts in: the world's only one (None where it takes several)."""
         return self.controls[0] if len(self.controls) == 1 else None
 
+    @property
+    def privileged_cameras(self) -> tuple[str, ...]:
+        """The cameras a privileged policy is given (empty: the ones it names)."""
+        return () if self.privileged_own_cameras else self.observed_cameras
+
+    def status(self, factor: str) -> str:
+        """Whether the world "takes" visual factor `factor` (it has an applier), "refuses" it (declared not to apply to
+        its scenes) or "lacks" it (its table does not name it: neither an applier nor a refusal is written for it)."""
+        if self.appliers is None:
+            return "takes"
+        for key, maker in self.appliers.items():
+            if factor == key or (isinstance(key, tuple) and factor in key):
+                return "refuses" if maker is None else "takes"
+        return "lacks"
+
+    @property
+    def not_applicable(self) -> tuple[str, ...]:
+        """The registered visual factors the world takes no applier for (refused or lacked)."""
+        from roboview.variation.factors import visual_factors
+
+        return tuple(f for f in visual_factors() if self.status(f) != "takes")
+
+    def make_appliers(
+        self, values: Mapping[str, str], task: str | None = None, always: Collection[str] = ()
+    ) -> list:
+        """The appliers of an instance's visual factor `values` away from their baselines in `task`'s world
+        (`baseline_of`: LIBERO's color `original` applies nothing, its `red` re-skins), in the table's order; those of
+        the factors in `always` also at their baseline. A one-line ValueError names a factor the world does not
+        take."""
+        from roboview.variation.factors import FACTORS, baseline_of, visual_factors
+        from roboview.variation.model_edits import value_args
+
+        changed = {
+            k
+            for k, v in values.items()
+            if k in FACTORS and FACTORS[k].kind != "context" and v != baseline_of(k, task)
+        }
+        refused = [k for k in values if k in changed and self.status(k) != "takes"]
+        if refused:
+            takes = [f for f in visual_factors() if self.status(f) == "takes"]
+            raise ValueError(
+                f"the {self.name} world cannot apply {', '.join(refused)}; its factors: {', '.join(takes)}"
+            )
+        out = []
+        for key, maker in (self.appliers or {}).items():
+            group = key if isinstance(key, tuple) else (key,)
+            if maker is None or not any(f in changed or f in always for f in group):
+                continue
+            make = resolve(maker)
+            out.append(
+                make({f: values[f] for f in group if f in values})
+                if isinstance(key, tuple)
+                else make(*value_args(key, values[key]))
+            )
+        return out
+
     def installed(self) -> bool:
         """Whether the world's package imports here."""
         if not self.requires:
@@ -102,8 +187,7 @@ class World:
 
     def make_probe(self, env: WorldEnv) -> Any:
         """The world's fairness probe on `env`."""
-        module, _, attr = self.probe.partition(":")
-        return getattr(importlib.import_module(module), attr)(env)
+        return resolve(self.probe)(env)
 
 
 WORLDS: dict[str, World] = {}
@@ -111,12 +195,20 @@ GATE_REFERENCES = ("thresholds", "no_change_view")
 
 
 def register_world(world: World) -> World:
+    from roboview.variation.factors import FACTORS
+
     if world.name in WORLDS:
         raise ValueError(f"world {world.name!r} is already registered")
     unknown = [c for c in (*world.observed_cameras, *world.recorded_cameras) if c not in world.cameras]
     if unknown or not set(world.judged_cameras) <= set(world.observed_cameras):
         raise ValueError(
             f"world {world.name!r}: cameras {unknown or world.judged_cameras} are not its cameras"
+        )
+    named = [f for key in world.appliers or () for f in (key if isinstance(key, tuple) else (key,))]
+    strange = [f for f in named if f not in FACTORS or FACTORS[f].kind != "visual"]
+    if strange:
+        raise ValueError(
+            f"world {world.name!r}: its appliers name {', '.join(strange)}, no registered visual factor"
         )
     if world.gate_reference not in GATE_REFERENCES:
         raise ValueError(
@@ -150,21 +242,18 @@ def native_render_size(cameras: Sequence[str]) -> int:
     return world.render_size if world is not None else 0
 
 
-IMAGE_FEATURE = "observation.images.{}"
-
-
 def feature_key(camera: str) -> str:
     """The LeRobot feature key of `camera`'s images: a world's own (`World.image_features`), else
     `observation.images.<camera>`."""
     for world in WORLDS.values():
         if camera in world.image_features:
             return world.image_features[camera]
-    return IMAGE_FEATURE.format(camera)
+    return IMAGE_KEY.format(camera)
 
 
 def camera_of_feature(key: str) -> str | None:
     """The camera a LeRobot image feature `key` holds (None: `key` is no image feature)."""
-    prefix = IMAGE_FEATURE.format("")
+    prefix = IMAGE_KEY.format("")
     if key.startswith(prefix):
         return key.removeprefix(prefix)
     return next((c for w in WORLDS.values() for c, k in w.image_features.items() if k == key), None)
@@ -188,30 +277,53 @@ def proprio_of(observation: Mapping[str, Any]) -> np.ndarray | None:
     return None
 
 
+def observation_space(
+    cameras: Sequence[str], image_size: int, depth: bool, state_size: int, ee_state_size: int
+) -> gym.spaces.Dict:
+    """The observations' spaces: each camera's image (and depth map), the state and the EE state."""
+    spaces = {
+        IMAGE_KEY.format(c): gym.spaces.Box(0, 255, (image_size, image_size, 3), np.uint8) for c in cameras
+    }
+    if depth:
+        spaces |= {
+            DEPTH_KEY.format(c): gym.spaces.Box(0, np.inf, (image_size, image_size), np.float32)
+            for c in cameras
+        }
+    spaces[STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (state_size,), np.float32)
+    spaces[EE_STATE_KEY] = gym.spaces.Box(-np.inf, np.inf, (ee_state_size,), np.float32)
+    return gym.spaces.Dict(spaces)
+
+
 class WorldEnv(gym.Env):
     """The env interface of every world (a world's env subclasses it; RoboView's is `roboview.tasks.env.TaskEnv`).
 
     Beyond gymnasium's `reset(seed, options={"instance": TaskInstance})` and `step(action)`, everything outside a
-    world reads only what is declared here: the class facts below, the episode's `instruction`, `steps`,
-    `max_steps` and `instance`, and the methods. Observations use RoboView's keys (`observation.images.<camera>`,
-    `observation.state`, `observation.ee_state`)."""
+    world reads only what is declared here: the class facts below (the world's own through `world`: its cameras,
+    controls, observed cameras), the episode's `instruction`, `steps`, `max_steps` and `instance`, and the methods.
+    Observations use RoboView's keys (IMAGE_KEY, STATE_KEY, EE_STATE_KEY, DEPTH_KEY). A world's env calls `setup`
+    first, then writes what is its own: its scene, its reset, its raw observation, its step."""
 
-    # The world (its `World` in WORLDS) and the task (its `Task` in roboview.tasks.TASKS) this env runs.
-    world: str = ""
+    # The world this env runs in (its `World`, registered in WORLDS) and the task (its `Task` in roboview.tasks.TASKS).
+    world: World
     task: str = ""
     # The context factor naming the instruction ("": the world's own instruction, per context).
     instruction_factor: str = ""
     # What besides the object a policy must find ("box", "zone"; None: nothing the gate judges).
     target: str | None = None
-    # The cameras a privileged policy (which reads the simulator's state) is given; empty: the policy's own choice.
-    observed_cameras: tuple[str, ...] = ()
-    # Every camera the env renders by name and every control it takes (checked before any episode).
-    camera_names: tuple[str, ...] = ()
-    controls: tuple[str, ...] = ()
+    # Whether the env renders depth maps (`depth=True`).
+    renders_depth: bool = False
     # The robot, as a LeRobot dataset of this env names it (`robot_type`).
     robot_type: str = ""
     # The packages the scene's assets and code come from (the stack record names their versions).
     asset_packages: tuple[str, ...] = ()
+    # The joint-target action (RoboView's scene: what its scripted planners plan in); None: the world has none.
+    joint_action_space: gym.spaces.Box | None = None
+    # The `{"motors": [...]}` names a LeRobot dataset of this env gives its state and its action (LIBERO's, Meta-World's
+    # datasets name them so); empty: RoboView's own, per control (`feature_names`).
+    state_feature_names: tuple[str, ...] = ()
+    action_feature_names: tuple[str, ...] = ()
+    # Observations made so far: a lazy one renders only while it is the latest (`observation`).
+    observations_made: int = 0
 
     # The live episode, set by `reset`.
     instance: TaskInstance
@@ -221,11 +333,58 @@ class WorldEnv(gym.Env):
     image_size: int
     cameras: tuple[str, ...]
 
+    def setup(
+        self,
+        cameras: Sequence[str],
+        image_size: int,
+        fps: int,
+        depth: bool,
+        control: str,
+        render_mode: str | None,
+    ) -> None:
+        """Check `cameras`, `control` and `depth` against the world (a one-line ValueError naming what it takes) and
+        keep the settings; `spaces` then builds the observation and action spaces."""
+        world = self.world
+        unknown = [c for c in cameras if c not in world.cameras]
+        if unknown:
+            raise ValueError(
+                f"the {world.name} world has no camera {', '.join(map(repr, unknown))}; allowed: "
+                f"{', '.join(world.cameras)}"
+            )
+        if control not in world.controls:
+            raise ValueError(
+                f"the {world.name} world's scenes take control={world.controls[0]!r} only, not {control!r}"
+                if len(world.controls) == 1
+                else f"unknown control {control!r}; allowed: {', '.join(world.controls)}"
+            )
+        if depth and not self.renders_depth:
+            raise ValueError(f"the {world.name} world's scenes render no depth here (depth=False)")
+        self.cameras, self.image_size, self.fps, self.depth = tuple(cameras), image_size, fps, depth
+        self.control, self.render_mode = control, render_mode
+
+    def spaces(self, action_space: gym.spaces.Box, state_size: int, ee_state_size: int | None = None) -> None:
+        """`action_space`, and the observations' spaces of the cameras, image size and depth `setup` kept."""
+        self.action_space = action_space
+        self.observation_space = observation_space(
+            self.cameras, self.image_size, self.depth, state_size, ee_state_size or state_size
+        )
+
     @classmethod
     def feature_names(cls, control: str) -> tuple[list | dict, list | dict] | None:
         """The names a LeRobot dataset of this env gives `observation.state` and `action` in `control`; None:
         RoboView's own (the joints or the EE state, and the control's action names)."""
-        return None
+        if not cls.state_feature_names:
+            return None
+        return {"motors": list(cls.state_feature_names)}, {"motors": list(cls.action_feature_names)}
+
+    def observation(
+        self, eager: dict[str, Any], renders: dict[str, Callable[[], np.ndarray]]
+    ) -> LazyObservation:
+        """An observation of `eager` arrays and of images rendered when read (`renders`: key → render), readable
+        until the env makes its next one (roboview.sim.observation)."""
+        self.observations_made += 1
+        count = self.observations_made
+        return LazyObservation(eager, renders, lambda: self.observations_made == count)
 
     def is_success(self) -> bool:
         raise NotImplementedError

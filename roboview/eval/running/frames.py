@@ -32,7 +32,6 @@ import numpy as np
 
 from roboview.core.errors import RenderError
 from roboview.sim.observation import LazyObservation
-from roboview.tasks.world import load_world
 
 IMAGE_PREFIX = "observation.images."
 # How far the scene must have moved (an entry of the robot's state, in rad, m or gripper closure; the object, in m)
@@ -94,7 +93,7 @@ class FrameCheck:
 
     def __init__(self, env) -> None:
         self.env = env
-        world = load_world(env.world)
+        world = env.world
         scene = {world.cameras[c] for c in world.judged_cameras if c not in world.wrist_cameras}
         # The env's cameras (aliases too) in which the gate requires the object visible.
         self.object_cameras = {c for c in world.cameras if world.cameras[c] in scene}

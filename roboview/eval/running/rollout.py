@@ -165,7 +165,7 @@ class EvalWorker:
         self.spec = spec
         task = load_task(spec.task)
         # A privileged policy reads the simulator's state, no image: it watches the world's own cameras (the videos).
-        world_cameras = task.env_class().observed_cameras
+        world_cameras = task.env_class().world.privileged_cameras
         cameras = (
             world_cameras if spec.policy.privileged and world_cameras else spec.policy.observed_cameras()
         )

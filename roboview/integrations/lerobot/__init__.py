@@ -144,10 +144,9 @@ class RoboViewEnv(EnvConfig):
             raise ValueError("--env.task is empty: name the splits to run (color,camera_pose) or `all`")
         if not self.control:  # the benchmark's world's only control, else joint
             from roboview.tasks import load_task
-            from roboview.tasks.world import load_world
 
             task = episode_task(self.benchmark_path, self.splits()[0])
-            self.control = load_world(load_task(task).env_class().world).default_control or "joint"
+            self.control = load_task(task).env_class().world.default_control or "joint"
         self._fit_checkpoint()
         check_image_size(self.image_size, "--env.image_size")
         _, state_width, action_width = next(d for d in feature_dims() if d[0] == self.control)

@@ -11,7 +11,7 @@ import numpy as np
 from roboview.benchmark.format import BenchmarkItem, load_benchmark, select_items
 from roboview.tasks import make_env
 from roboview.tasks.env import EE_STATE_KEY, IMAGE_KEY, STATE_KEY
-from roboview.tasks.world import IMAGE_FEATURE, feature_key
+from roboview.tasks.world import feature_key
 from roboview.variation.instances import episode_seed
 
 log = logging.getLogger(__name__)
@@ -20,7 +20,7 @@ log = logging.getLogger(__name__)
 def single_image(cameras: tuple[str, ...]) -> bool:
     """Whether `cameras` is one camera whose LeRobot feature is its world's own single-image key (Meta-World's `top`:
     `observation.image`): lerobot then reads `pixels` as one array, not a dict of cameras."""
-    return len(cameras) == 1 and feature_key(cameras[0]) != IMAGE_FEATURE.format(cameras[0])
+    return len(cameras) == 1 and feature_key(cameras[0]) != IMAGE_KEY.format(cameras[0])
 
 
 def episode_plan(
