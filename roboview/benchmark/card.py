@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from roboview.benchmark.eval_tasks import analysis_task_ids, control_task_id, value_task_id
 from roboview.variation.factors import DEFAULT_TASK, baselines
 from roboview.variation.instances import split_task
+
+if TYPE_CHECKING:
+    from roboview.tasks.decomposition import Decomposition
 
 
 def _size_category(n: int) -> str:
@@ -52,31 +57,68 @@ EVAL_YAML = "eval.yaml"
 
 def write_eval_yaml(out: Path, manifest: dict) -> None:
     """`out/eval.yaml`, the file by which the Hub lists a dataset as a benchmark of any evaluation framework: its
-    name, description, `evaluation_framework: roboview` and one task per split (the split a model repo's
-    `.eval_results` entry names as its `task_id`), each with the protocols that cover it."""
+    name, description, `evaluation_framework: roboview` and its tasks, each one leaderboard and the `task_id` a model
+    repo's `.eval_results` entry names (roboview.benchmark.eval_tasks): per split the split, its control arm and, for
+    a single-factor split, each value its table holds; then each task analysis's total, single changes and no-change
+    view. A split's tasks carry the protocols that cover it. The layout of eval.yaml is the Hub's
+    (https://huggingface.co/docs/hub/eval-results, "Eval.yaml specification": `tasks[]` items need an `id`, may
+    have `config` and `split`); `metric`, `protocols` and `splits` are RoboView's own."""
     import yaml
 
     protocols = manifest.get("protocols") or {}
     splits = [s for s, counts in manifest["splits"].items() if counts.get("accepted")]
+    tasks = []
+    for split in splits:
+        covered = {"protocols": sorted(n for n, p in protocols.items() if split in p.get("splits", []))}
+        tasks += [
+            {"id": split, "split": split, "metric": "success rate ×100"} | covered,
+            {
+                "id": control_task_id(split),
+                "split": split,
+                "metric": "success rate ×100 of the control arm (the all-baseline instance on the split's seeds)",
+            }
+            | covered,
+            *(
+                {"id": value_task_id(split, v), "split": split, "metric": f"success rate ×100 of {v}"}
+                | covered
+                for v in _single_factor_values(out / "data" / f"{split}.parquet")
+            ),
+        ]
+    for design in _analyses(splits):
+        variant_splits = [s for s in splits if s.removeprefix(f"{design.task}_") in design.variant_splits]
+        tasks += [
+            {"id": i, "metric": what, "splits": variant_splits} for i, what in analysis_task_ids(design)
+        ]
     data = {
         "name": f"RoboView-Bias ({manifest['suite']['preset']})",
         "description": (
             "Visual bias of robot policies: one visual factor varied at a time over the same task contexts and "
-            "seeds; success rate per split, and the spread across the factor's values beyond binomial noise."
+            "seeds; success rate per split, its control arm and each value, and the spread across the factor's "
+            "values beyond binomial noise."
         ),
         "evaluation_framework": "roboview",
         "version": manifest["benchmark_version"],
-        "tasks": [
-            {
-                "id": split,
-                "split": split,
-                "metric": "success rate ×100",
-                "protocols": sorted(n for n, p in protocols.items() if split in p.get("splits", [])),
-            }
-            for split in splits
-        ],
+        "tasks": tasks,
     }
     (out / EVAL_YAML).write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
+
+
+def _single_factor_values(table: Path) -> list[str]:
+    """The values a single-factor split's table holds, in its order (none for a factorial split's)."""
+    import pyarrow.parquet as pq
+
+    rows = pq.read_table(table, columns=["factor", "value"]).to_pydict()
+    if any("|" in str(f) for f in rows["factor"]):
+        return []
+    return list(dict.fromkeys(map(str, rows["value"])))
+
+
+def _analyses(splits: list[str]) -> list[Decomposition]:
+    """The analyses the splits' tasks declare (`Task.analyses`), in the splits' order."""
+    from roboview.tasks import load_task
+
+    tasks = dict.fromkeys(split_task(s)[0] for s in splits)
+    return [design for task in tasks for design in load_task(task).analyses]
 
 
 def _front_matter(manifest: dict, total: int) -> str:

@@ -3,14 +3,16 @@ Hugging Face hub.
 
     roboview-publish --path=outputs/benchmark --repo_id=ORG/NAME [--dry_run=true]
     roboview-publish --results=outputs/eval/vision --repo_id=ORG/vision-results [--dry_run=true]
-           [--benchmark_repo_id=ORG/BENCH] [--model_repo_id=ORG/MODEL]
+           [--benchmark_repo_id=ORG/BENCH] [--model_repo_id=ORG/MODEL [--results_per_value=true]]
 
 With `--results`: the results folder is verified first (`roboview.pipelines.verify --results`, against `--benchmark.path` or
 the benchmark its provenance names) and refused, with the failed checks, unless every check passes. The bundle —
 the results, their report, verify.json, a dataset card and bundle.json (the SHA-256 of every file) — is written
 to `--staging_dir` (default: `<results>_bundle`) and uploaded as a Hub dataset. `--model_repo_id` also writes the
-model repo's `.eval_results/<benchmark>.yaml` (one entry per split: the success rate, the bundle as source), opened
-as a pull request. `--dry_run=true` writes the exact folder and lists what would be uploaded.
+model repo's `.eval_results/<benchmark>.yaml` in the Hub's layout (roboview.eval.reporting.eval_results: one entry
+per factor and one per control arm, each a success rate ×100 with its episodes and interval in the notes, the
+bundle as source; `--results_per_value=true` adds one per value), opened as a pull request. `--dry_run=true` writes
+the exact folder and the exact `.eval_results` file beside it, and lists what would be uploaded.
 
 Creates the dataset repo if missing, uploads the folder, and tags the upload with the benchmark
 version from `benchmark.json`. `--env_repo_id=ORG/NAME` also publishes RoboView as a LeRobot EnvHub env
@@ -23,6 +25,8 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import yaml
 
 from roboview.benchmark.format import BUILT, MANIFEST, load_benchmark
 from roboview.core.cli_errors import flag_errors
@@ -57,8 +61,11 @@ class PublishConfig:
     benchmark: BenchmarkPath = field(default_factory=BenchmarkPath)
     # Where the benchmark is published on the Hub (ORG/NAME): named in the card and in .eval_results.
     benchmark_repo_id: str | None = None
-    # Also write this model repo's .eval_results/<benchmark>.yaml (needs --benchmark_repo_id), opened as a PR.
+    # Also write this model repo's .eval_results/<benchmark>.yaml (needs --benchmark_repo_id), opened as a PR: one
+    # entry per factor and one per control arm.
     model_repo_id: str | None = None
+    # With --model_repo_id: also one .eval_results entry per value of each single-factor split (color=blue).
+    results_per_value: bool = False
     # Folder the bundle is written to before the upload (default: <results>_bundle); replaced if it exists.
     staging_dir: str | None = None
 
@@ -72,6 +79,11 @@ class PublishConfig:
         ):
             if value is not None and (value.count("/") != 1 or not all(value.split("/"))):
                 raise ValueError(f"--{flag}={value!r} must look like ORG/NAME")
+        if self.results_per_value and not (self.results and self.model_repo_id):
+            raise ValueError(
+                "--results_per_value=true needs --results=DIR and --model_repo_id=ORG/MODEL: it adds entries to "
+                "the model repo's .eval_results file"
+            )
         if self.results:
             from roboview.eval.running.inputs import results_folder_problem
 
@@ -151,7 +163,9 @@ def publish_results(cfg: PublishConfig) -> Plan:
 
     repos = BundleRepos(cfg.repo_id, cfg.benchmark_repo_id, cfg.model_repo_id)
     staging = Path(cfg.staging_dir) if cfg.staging_dir else None
-    staged = stage_bundle(Path(cfg.results), repos, cfg.benchmark.path or None, staging)
+    staged = stage_bundle(
+        Path(cfg.results), repos, cfg.benchmark.path or None, staging, cfg.results_per_value
+    )
     files = folder_files(staged.folder, [])
     the_plan = Plan(cfg.repo_id, staged.manifest["benchmark_version"], files, [], {})
     policy = staged.manifest["policy"]
@@ -159,8 +173,11 @@ def publish_results(cfg: PublishConfig) -> Plan:
         for rel, size in files:
             print(f"{size:>12,}  {cfg.repo_id}/{rel}")
         if staged.eval_results is not None:
-            size = len(staged.eval_results.encode())
-            print(f"{size:>12,}  {cfg.model_repo_id}/{repos.eval_results_path} (pull request)")
+            size, count = len(staged.eval_results.encode()), len(yaml.safe_load(staged.eval_results))
+            print(
+                f"{size:>12,}  {cfg.model_repo_id}/{repos.eval_results_path} (pull request): {count} entries, "
+                f"written to {staged.eval_results_file}"
+            )
         print(
             f"[dry run] result bundle of {policy} in {staged.folder}: {len(files)} files, "
             f"{the_plan.total_bytes:,} bytes; verified; nothing uploaded"

@@ -55,10 +55,15 @@ def test_splits_load_back_with_datasets_and_counts_match(built):
     card = (built / "README.md").read_text()
     assert card.startswith("---\nlicense: apache-2.0") and "split: camera_euler" in card
     assert "Suite hash" in card and "| color | 24 | 24 |" in card
-    # The Hub's benchmark file: one task per split, each with the protocols that cover it.
+    # The Hub's benchmark file: per split a task for the split, its control arm and (single-factor splits) each
+    # value its table holds, each with the protocols that cover it: the ids .eval_results entries name.
     listing = yaml.safe_load((built / "eval.yaml").read_text())
     assert listing["evaluation_framework"] == "roboview" and listing["name"] == "RoboView-Bias (tiny)"
-    assert [t["id"] for t in listing["tasks"]] == list(expected)
+    values = {s: list(dict.fromkeys(ds[s]["value"])) for s in expected if "_x_" not in s}
+    assert len(values["color"]) == 8 and len(values["camera_pose"]) == 3
+    assert [t["id"] for t in listing["tasks"]] == [
+        i for s in expected for i in (s, f"{s}/control", *(f"{s}={v}" for v in values.get(s, [])))
+    ]
     assert all(t["protocols"] == ["adaptive", "paper", "quick"] for t in listing["tasks"])
     # The protocols the manifest declares, covered by the version.
     manifest = json.loads((built / "benchmark.json").read_text())

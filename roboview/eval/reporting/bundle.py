@@ -7,9 +7,8 @@ dataset card (README.md: policy, benchmark id, version and content hash, Table 1
 of every other file. `roboview.pipelines.verify` checks a bundle's files against bundle.json, so a file edited after
 publication is refused.
 
-`eval_result_entries` writes the Hub's `.eval_results/<benchmark>.yaml` for a model repo: one entry per split,
-dataset id = the published benchmark, task id = the split, value = the success rate ×100, source = the bundle
-(huggingface_hub's `EvalResultEntry`, https://huggingface.co/docs/hub/eval-results).
+The model repo's `.eval_results/<benchmark>.yaml` that a bundle is the source of is written by
+roboview.eval.reporting.eval_results.
 """
 
 from __future__ import annotations
@@ -172,41 +171,3 @@ def _checks_table(checks: Sequence[dict[str, Any]]) -> list[str]:
         "|---|---|---|",
         *(f"| {c['name']} | {result[c['passed']]} | {c['detail']} |" for c in checks),
     ]
-
-
-def eval_result_entries(
-    metrics: dict[str, Any],
-    *,
-    benchmark_repo_id: str,
-    results_repo_id: str,
-    date: str,
-    revision: str | None = None,
-) -> list[Any]:
-    """One `huggingface_hub.EvalResultEntry` per split of one policy's metrics: the success rate ×100."""
-    from huggingface_hub import EvalResultEntry
-
-    return [
-        EvalResultEntry(
-            dataset_id=benchmark_repo_id,
-            task_id=split,
-            value=round(100 * m["sr"], 2),
-            dataset_revision=revision,
-            date=date,
-            source_url=f"{HUB}/datasets/{results_repo_id}",
-            source_name="RoboView-Bias result bundle (per-episode, verified)",
-            notes=f"{m['n_episodes']} episodes; 95% CI [{100 * m['sr_ci95'][0]:.2f}, {100 * m['sr_ci95'][1]:.2f}]; "
-            f"cv_excess {'N/A' if m['cv_excess'] is None else f'{100 * m["cv_excess"]:.2f}'}",
-        )
-        for split, m in metrics["splits"].items()
-    ]
-
-
-def eval_results_yaml(entries: Sequence[Any]) -> str:
-    from huggingface_hub import eval_result_entries_to_yaml
-
-    return yaml.safe_dump(eval_result_entries_to_yaml(list(entries)), sort_keys=False, allow_unicode=True)
-
-
-def eval_results_name(benchmark_repo_id: str) -> str:
-    """The file name in a model repo's `.eval_results/`: the benchmark's repo name."""
-    return f"{benchmark_repo_id.split('/')[-1]}.yaml"

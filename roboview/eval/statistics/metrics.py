@@ -121,8 +121,8 @@ def split_metrics(episodes: pd.DataFrame, cfg: MetricsConfig = MetricsConfig()) 
 def _split_per_value(
     table: CellTable, factor: str, ctx: np.ndarray, tested: bool
 ) -> dict[str, dict[str, Any]]:
-    """value → SR, episodes, signed deviation from its contexts' mean, and (`tested`) the CMH test against the
-    rest with its Benjamini-Hochberg q over the values."""
+    """value → SR (with its Clopper–Pearson interval), episodes, signed deviation from its contexts' mean, and
+    (`tested`) the CMH test against the rest with its Benjamini-Hochberg q over the values."""
     sr_cell = table.sr
     dev = sr_cell - (group_sum(sr_cell, ctx) / np.bincount(ctx))[ctx]
     tests = _per_value_tests(table, factor) if tested else {}
@@ -131,9 +131,11 @@ def _split_per_value(
     for value in value_order(factor, list(grouped.groups)):
         rows = grouped.get_group(value)
         test = tests.get(value, stats.ValueTest(None, None, None))
+        k, n = int(rows["k"].sum()), int(rows["n"].sum())
         per_value[value] = {
-            "sr": float(rows["k"].sum() / rows["n"].sum()),
-            "n_episodes": int(rows["n"].sum()),
+            "sr": k / n,
+            "sr_ci95": rate_ci95(k, n),
+            "n_episodes": n,
             "signed_dev": float(rows["dev"].mean()),
             "odds_ratio": test.odds_ratio,
             "odds_ratio_ci95": test.odds_ratio_ci95,

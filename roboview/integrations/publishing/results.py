@@ -15,7 +15,7 @@ from typing import Any
 import pandas as pd
 
 from roboview.benchmark.format import MANIFEST
-from roboview.eval.reporting import bundle
+from roboview.eval.reporting import bundle, eval_results
 from roboview.eval.reporting.report import HTML_FILE, REPORT_FILE, load_results, write_report
 from roboview.eval.running import provenance
 from roboview.eval.running.results import PARQUET, RUN_FILE, counted, is_privileged_run
@@ -35,24 +35,31 @@ class BundleRepos:
     @property
     def eval_results_path(self) -> str:
         """The `.eval_results` file's path in the model repo."""
-        return f".eval_results/{bundle.eval_results_name(self.benchmark_repo_id or 'x/roboview')}"
+        return f".eval_results/{eval_results.eval_results_name(self.benchmark_repo_id or 'x/roboview')}"
 
 
 @dataclass(frozen=True)
 class StagedBundle:
-    """A bundle folder ready to upload: its bundle.json, and the `.eval_results` text (None without a model repo)."""
+    """A bundle folder ready to upload: its bundle.json, and the `.eval_results` text and the file it was written to
+    beside the folder (None without a model repo)."""
 
     folder: Path
     manifest: dict[str, Any]
     eval_results: str | None
+    eval_results_file: Path | None = None
 
 
 def stage_bundle(
-    results: Path, repos: BundleRepos, benchmark: str | None = None, staging: Path | None = None
+    results: Path,
+    repos: BundleRepos,
+    benchmark: str | None = None,
+    staging: Path | None = None,
+    per_value: bool = False,
 ) -> StagedBundle:
     """Verify `results` against `benchmark` (default: the one their provenance names) and write the bundle to
-    `staging` (default: `<results>_bundle`, replaced if it exists). PublishError, with every failed check, for
-    results that do not verify, and for results of several policies."""
+    `staging` (default: `<results>_bundle`, replaced if it exists); with a model repo, its `.eval_results` file
+    beside it (`per_value`: an entry per value too). PublishError, with every failed check, for results that do not
+    verify, and for results of several policies."""
     verified = verify_results(results, benchmark)
     failed = [c for c in verified.checks if not c.passed]
     if failed:
@@ -81,12 +88,11 @@ def stage_bundle(
         )
     )
     written = bundle.write_manifest(staging, identity)
-    eval_results = (
-        _write_eval_results(staging, repos, report.metrics, entries, identity["benchmark_version"])
-        if repos.model_repo_id
-        else None
-    )
-    return StagedBundle(staging, written, eval_results)
+    if not repos.model_repo_id:
+        return StagedBundle(staging, written, None)
+    version = identity["benchmark_version"]
+    path = _write_eval_results(staging, repos, report.metrics, entries, version, per_value)
+    return StagedBundle(staging, written, path.read_text(), path)
 
 
 def _one_policy(results: Path, episodes: pd.DataFrame) -> str:
@@ -133,26 +139,29 @@ def _write_verify(staging: Path, verified: Report, entries: list[dict], identity
 
 
 def _write_eval_results(
-    staging: Path, repos: BundleRepos, metrics: dict, entries: list[dict], version: str
-) -> str:
-    """The model repo's `.eval_results` file (one entry per split, each at the benchmark's version: the tag its
-    release carries), written beside the bundle; its text."""
+    staging: Path, repos: BundleRepos, metrics: dict, entries: list[dict], version: str, per_value: bool
+) -> Path:
+    """The model repo's `.eval_results` file (roboview.eval.reporting.eval_results: an entry per split and per
+    control arm, with `per_value` per value too, each at the benchmark's version: the tag its release carries),
+    written to `<staging>_eval_results/.eval_results/`, beside the bundle; its path."""
     date = max((e.get("ended") or "" for e in entries), default="") or datetime.datetime.now(
         datetime.UTC
     ).isoformat(timespec="seconds")
-    text = bundle.eval_results_yaml(
-        bundle.eval_result_entries(
+    text = eval_results.eval_results_yaml(
+        eval_results.eval_result_entries(
             metrics,
             benchmark_repo_id=repos.benchmark_repo_id,
             results_repo_id=repos.repo_id,
             date=date,
             revision=version,
+            per_value=per_value,
         )
     )
     target = staging.with_name(staging.name + "_eval_results") / ".eval_results"
     target.mkdir(parents=True, exist_ok=True)
-    (target / bundle.eval_results_name(repos.benchmark_repo_id)).write_text(text)
-    return text
+    path = target / eval_results.eval_results_name(repos.benchmark_repo_id)
+    path.write_text(text)
+    return path
 
 
 def upload_bundle(staged: StagedBundle, repos: BundleRepos, private: bool = False) -> None:
