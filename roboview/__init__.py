@@ -2,12 +2,13 @@
 
 One package, in rooms that each import only the rooms below them (docs/layout.md):
 
-    core/          CLI plumbing, the worker pool, folders, files, errors
+    core/          CLI plumbing, the worker pool, the registries' discovery, folders, files, errors
     sim/           the simulated world every task shares
     variation/     the visual factors, colors, variant trees, benchmark instances
-    tasks/         one module per task (importing it registers the tasks and their gymnasium ids), the world contract
-    libero/        LIBERO's wing (its world, task, factors, expert; LIBERO-plus's camera variants), on the tasks' floor
-    metaworld/     Meta-World's wing (its world, task, factors), on the tasks' floor
+    tasks/         the registries of tasks, worlds and presets, the world contract, RoboView's own tasks and presets
+    libero/        LIBERO's wing (its world, task, factors, presets, expert; LIBERO-plus's camera variants and view
+                   factors), on the tasks' floor
+    metaworld/     Meta-World's wing (its world, task, factors, presets), on the tasks' floor
     benchmark/     render, fairness gate, the frozen benchmark folder, conformance
     demos/         scripted-expert demos into LeRobot datasets
     policies/      every policy type; serving/ holds the wire formats clients and servers share; vlm/ the VLM agents
@@ -24,8 +25,9 @@ conformance_drift, adaptive, paired_compare, stats_calibration, cv_excess_interv
 libero_throughput, libero_render, libero_render_rate, libero_expert, libero_vs_lerobot_eval, libero_plus_poses,
 metaworld_expert, metaworld_vs_lerobot_eval.
 
-Importing `roboview` itself loads nothing; `import roboview.tasks` registers `RoboView/PickPlace-v0` and the
-other tasks' gymnasium ids.
+Importing `roboview` itself loads nothing. The tasks, worlds and presets register when a registry is first read
+(`roboview.tasks.discover()` does it at once): every module named under the `roboview.tasks` entry-point group, so
+`RoboView/PickPlace-v0` and the other tasks' gymnasium ids too.
 """
 
 __version__ = "0.5.0"

@@ -5,13 +5,13 @@
 - `suites`: the four suites (spatial, object, goal, 10), their tasks, init states and step budgets.
 - `env.LiberoWorld`: one (suite, task, init state), built and reset exactly as LeRobot 0.6.1's `LiberoEnv`.
 - `factors`: visual appliers (object color, agentview pose, lighting, table texture) re-applied after each reset.
+- `task` (the `libero` world and task) and `plus_task` (LIBERO-plus's `liberoplus` task and presets): `roboview.tasks`
+  entry points (pyproject.toml), imported when a registry is first read; `presets` (LIBERO's suite presets) and `view`
+  (LIBERO-plus's `view_*` factors) register with `task`.
 
 Nothing here imports LIBERO, robosuite or torch at import time; they load when a world or suite is first used.
 """
 
-# The task registry first: a module of this wing imported on its own (`import roboview.libero.task`) then finds
-# every task and preset registered, its own included, instead of a registry half built around it.
-import roboview.tasks  # noqa: E402, F401
 from roboview.libero.bootstrap import PIP_INSTALL, LiberoMissing, ensure_libero
 from roboview.libero.env import LiberoWorld, lerobot_state, lerobot_view
 from roboview.libero.suites import SUITES, LiberoTask, get_task, init_state, max_steps, tasks

@@ -14,7 +14,7 @@ init state 0; a repeat runs the next init state, as in the `libero` task) and `l
   0 0 initstate 0"). Its numbers are comparable with LIBERO-plus's published ones, and the isolation certificate
   names the instruction as a second change of every value.
 
-**Visual factors**: LIBERO-plus's five camera sub-factors (`view_*`, roboview.variation.factors.view) and the
+**Visual factors**: LIBERO-plus's five camera sub-factors (`view_*`, roboview.libero.view) and the
 `libero` task's own (color, lighting…), applied the same way, with LIBERO's world's baseline labels (color
 `original`: the object's own texture).
 """
@@ -41,8 +41,7 @@ from roboview.libero.task import (
     LiberoTaskEnv,
     LiberoTaskExpert,
 )
-from roboview.tasks.base import Task, register_task
-from roboview.tasks.presets import register_preset
+from roboview.tasks.base import Task, register_preset, register_task
 from roboview.variation.factors import Factor, register_baseline_labels, register_factor
 from roboview.variation.instances import SuiteConfig
 

@@ -25,7 +25,8 @@ unchanged:
 - `lighting`: every light's diffuse level (dim 0.45×, bright 1.6×) and, away from `top`, its direction.
 - `table_texture`: the support surface's texture (the table, or the floor in libero_object's floor scenes)
   rewritten with the pattern of RoboView's texture of that name.
-- `view_*`: LIBERO-plus's five camera sub-factors, agentview where LIBERO-plus puts it (one applier for all five).
+- `view_*`: LIBERO-plus's five camera sub-factors (declared in `roboview.libero.view`), agentview where LIBERO-plus
+  puts it (one applier for all five).
 - `distractors`, `object_size`: not applicable to LIBERO's scenes; an instance that sets them is refused.
 
 The world's applier table (`APPLIERS`, its `World.appliers`) says which applier makes each factor's value.
@@ -48,6 +49,7 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
+import roboview.libero.view  # noqa: F401  (registers LIBERO-plus's view_* factors, which APPLIERS takes)
 from roboview.libero.env import IMAGE_SIZE
 from roboview.libero.plus import SUB_FACTORS
 from roboview.libero.suites import SUITES, max_steps
@@ -380,3 +382,6 @@ register_task(
         world_factor="libero_task",
     )
 )
+
+# The wing's presets (roboview.libero.presets), registered with its task.
+import roboview.libero.presets  # noqa: E402, F401

@@ -320,3 +320,6 @@ register_task(
         world_factor="metaworld_task",
     )
 )
+
+# The wing's presets (roboview.metaworld.presets), registered with its task.
+import roboview.metaworld.presets  # noqa: E402, F401

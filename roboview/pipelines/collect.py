@@ -22,7 +22,7 @@ from roboview.demos.dataset import CollectionSignature, DatasetRootError, check_
 from roboview.demos.recorder import parse_contexts
 from roboview.pipelines._cli import cli_main
 from roboview.sim.cameras import ALL_CAMERAS, IMAGE_SIZE_MIN, check_image_size
-from roboview.tasks import DEFAULT_TASK, load_task
+from roboview.tasks import DEFAULT_TASK, TASKS, load_task
 from roboview.variation.randomization import validate_randomize
 
 VCODECS = ("libsvtav1", "h264", "hevc")
@@ -56,7 +56,7 @@ class DatasetConfig:
     # left_top on the continuous orbital surface). What was drawn is recorded per episode in
     # meta/roboview/episodes.parquet. Empty: context-only randomization, as in the paper.
     randomize: list[str] = field(default_factory=list)
-    # Task the expert demonstrates: pick_place (the paper's), push, libero, liberoplus or metaworld (roboview.tasks).
+    # Task the expert demonstrates (pick_place: the paper's; roboview.tasks).
     task: str = DEFAULT_TASK
     # Draw these context factors among the values named only: FACTOR=V1|V2,FACTOR=V (e.g.
     # libero_task=libero_object/0|libero_object/1); empty: every value of every context factor.
@@ -64,6 +64,9 @@ class DatasetConfig:
     # Control the demos are recorded in: joint (observation.state = joints, action = 7 joint targets + gripper),
     # ee_delta or ee_abs (observation.state = the EE state, action = the 7-d EE action; docs/control.md).
     control: str = ""
+
+    # --help appends the registry's tasks to the description of --dataset.task.
+    help_details = {"task": lambda: f"One of: {', '.join(TASKS)}."}
 
     def __post_init__(self) -> None:
         if "/" not in self.repo_id or self.repo_id.startswith("/") or self.repo_id.endswith("/"):

@@ -1,4 +1,4 @@
-"""What a task is, and the live registry of tasks.
+"""What a task is, and the live registries of tasks and of suite presets.
 
 A task is what a policy is asked to do in the shared world (`roboview.sim`). A `Task` names its
 gymnasium id and env class, its privileged scripted expert, and the small context subsets the
@@ -8,6 +8,11 @@ TaskEnv`): what it adds to the scene (`add_target`), its target (`target`, `targ
 (`is_success`) and its scripted solution (`plan`). Its context factors are registered with
 `task=<name>` in the factor registry (`roboview.variation.factors.register_factor`). Envs are
 made through gymnasium (`make_env`), never by naming a class.
+
+Both registries are filled by the worlds' wings (their task modules, with their presets) and discovered when read
+(roboview.core.registry): they list RoboView's own tasks first, then LIBERO's, Meta-World's and LIBERO-plus's, as
+RoboView's `roboview.tasks` entry points order them, and then another package's. A preset is listed with its first
+task.
 """
 
 from __future__ import annotations
@@ -19,13 +24,14 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
+from roboview.core.registry import Registry
 from roboview.sim.motion import MotionPlanner
 from roboview.tasks.decomposition import Decomposition
 from roboview.tasks.env import ASSUMED_REACH_M, DEFAULT_MAX_STEPS, action_names, state_names
 from roboview.variation.factors import DEFAULT_TASK, context_factors
 
 if TYPE_CHECKING:
-    from roboview.variation.instances import TaskInstance
+    from roboview.variation.instances import SuiteConfig, TaskInstance
 
 
 def resolve(target: str) -> Any:
@@ -107,22 +113,49 @@ class Task:
         return resolve(self.expert)(env)
 
 
-TASKS: dict[str, Task] = {}
+def task_module(task: Task) -> str:
+    """The module a task comes from: its env's."""
+    return task.env.partition(":")[0]
+
+
+TASKS: Registry[Task] = Registry("task", origin=task_module)
 
 
 def register_task(task: Task) -> Task:
     """Add `task` to the registry and gymnasium's (a name can be registered once)."""
-    if task.name in TASKS:
+    if task.name in TASKS.registered:
         raise ValueError(f"task {task.name!r} is already registered")
     if not context_factors(task.name):
         raise ValueError(
             f"task {task.name!r} has no context factors: register them first with "
             f"register_factor(Factor(..., kind='context', task={task.name!r}))"
         )
-    TASKS[task.name] = task
+    TASKS.add(task.name, task)
     if task.gym_id not in gym.registry:
         gym.register(id=task.gym_id, entry_point=task.env, max_episode_steps=task.max_episode_steps)
     return task
+
+
+def preset_module(cfg: SuiteConfig) -> str:
+    """The module a preset is listed with: its first task's."""
+    task = TASKS.registered.get(cfg.tasks[0])
+    return "" if task is None else task_module(task)
+
+
+PRESETS: Registry[SuiteConfig] = Registry("preset", origin=preset_module)
+
+
+def register_preset(cfg: SuiteConfig) -> SuiteConfig:
+    """Add a suite preset under `cfg.preset` (a name can be registered once)."""
+    return PRESETS.add(cfg.preset, cfg)
+
+
+def load_preset(name: str) -> SuiteConfig:
+    """Return the registered suite preset `name`; unknown names raise listing the valid ones."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}") from None
 
 
 def analysis_designs() -> dict[str, Decomposition]:

@@ -47,6 +47,7 @@ from roboview.tasks.world import (  # the observation keys too, which every poli
     EE_STATE_KEY,
     IMAGE_KEY,
     STATE_KEY,
+    WORLDS,
     World,
     WorldEnv,
     register_world,
@@ -114,6 +115,22 @@ WORLD = register_world(
         privileged_own_cameras=True,
     )
 )
+
+
+class Lacked:
+    """RoboView's scene's applier of a visual factor that brings none for it (`Factor.bind` None: LIBERO-plus's
+    `view_*`): the baseline applies nothing, another value is refused."""
+
+    def __init__(self, factor: str) -> None:
+        self.factor, self.baseline = factor, load_factor(factor).baseline
+
+    def apply(self, value: str, rng: np.random.Generator) -> None:
+        if value != self.baseline:
+            takes = [name for name, world in WORLDS.items() if world.status(self.factor) == "takes"]
+            raise ValueError(
+                f"the roboview world cannot apply {self.factor}={value!r}: the factor brings no applier for RoboView's "
+                f"scene; the worlds that take it: {', '.join(takes) or 'none'}"
+            )
 
 
 def baseline_instance(task: str = DEFAULT_TASK) -> TaskInstance:
@@ -387,9 +404,11 @@ class TaskEnv(WorldEnv):
         return self._observation(), float(success), success, truncated, self._info(success)
 
     def applier(self, factor: str) -> SceneApplier:
-        """The factor's applier bound to this env's scene (bound on first use, then reused)."""
+        """The factor's applier bound to this env's scene (bound on first use, then reused; `Lacked` for a factor that
+        brings none for it)."""
         if factor not in self._appliers:
-            self._appliers[factor] = load_factor(factor).bind(self.scene)
+            bind = load_factor(factor).bind
+            self._appliers[factor] = Lacked(factor) if bind is None else bind(self.scene)
         return self._appliers[factor]
 
     @property

@@ -1,5 +1,9 @@
-"""Named suites over the registered tasks: the paper's, its set-union variant, the extended one, and
-small ones for demos and tests whose context values each task declares (`Task.small_contexts`).
+"""RoboView's own scene's suite presets: the paper's, its set-union variant, the extended one, and small ones for
+demos and tests whose context values each task declares (`Task.small_contexts`).
+
+The registry of presets is `roboview.tasks.base.PRESETS` (`register_preset`, `load_preset`, imported here too); each
+world's wing registers its own presets (roboview.libero.presets, roboview.metaworld.presets, and LIBERO-plus's in
+roboview.libero.plus_task), and this module, a `roboview.tasks` entry point, registers these.
 
     >>> load_preset("tiny").tasks
     ('pick_place',)
@@ -9,7 +13,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from roboview.tasks.base import load_task
+# The two tasks these presets name, registered first.
+import roboview.tasks.pick_place  # noqa: F401
+import roboview.tasks.push  # noqa: F401
+from roboview.tasks.base import PRESETS, load_preset, load_task, register_preset
 from roboview.variation.factors import DEFAULT_TASK
 from roboview.variation.instances import FACTORIAL_SPLIT, SuiteConfig
 
@@ -42,32 +49,13 @@ EXTENDED_SPLITS = (
     FACTORIAL_SPLIT,
 )
 
-PRESETS: dict[str, SuiteConfig] = {}
-
-
-def register_preset(cfg: SuiteConfig) -> SuiteConfig:
-    """Add a suite preset under `cfg.preset` (a name can be registered once)."""
-    if cfg.preset in PRESETS:
-        raise ValueError(f"preset {cfg.preset!r} is already registered")
-    PRESETS[cfg.preset] = cfg
-    return cfg
-
-
-def load_preset(name: str) -> SuiteConfig:
-    """Return the registered suite preset `name`; unknown names raise listing the valid ones."""
-    try:
-        return PRESETS[name]
-    except KeyError:
-        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}") from None
-
-
 # The paper's suite: 11 x (141 + 21 + 9 + 9) + 7 x 21 = 2,127 instances.
 register_preset(PAPER)
 # Same splits over the set-union C_Gen: 9 x 180 + 147 = 1,767 instances.
 register_preset(replace(PAPER, preset="paper_dedupe", union_mode="dedupe"))
 # 3 contexts (G, object left, cylinder) x a few values per visual factor (8 colors, 3 poses, 3 eulers,
 # 3 distances) + 2 colors x 3 poses = 57 instances.
-register_preset(
+TINY = register_preset(
     SuiteConfig(
         preset="tiny",
         union_mode="dedupe",
@@ -82,94 +70,16 @@ register_preset(replace(PAPER, preset="extended", splits=EXTENDED_SPLITS, tasks=
 # Both tasks and every factor: the tiny preset's values, two of each new factor's, two push starts × two zones.
 register_preset(
     replace(
-        PRESETS["tiny"],
+        TINY,
         preset="tiny_extended",
         splits=EXTENDED_SPLITS,
         tasks=(DEFAULT_TASK, "push"),
         value_subsets=(
-            *PRESETS["tiny"].value_subsets,
+            *TINY.value_subsets,
             *SMALL_EXTENDED_VISUALS,
             *load_task("push").small_contexts,
         ),
     )
 )
 
-# LIBERO's scenes (roboview.libero.task; docs/libero.md). Their factors: every visual factor but distractors and
-# object_size; the color baseline is the object's own texture, `original` (LIBERO's baseline label), and every CSS
-# color, red included, a re-skin. `libero_tiny`: one context (libero_object task 0, init state 0) and a few values:
-# 4 instances, for tests and `make demo-libero`. `libero`: the 40 tasks of the four suites (init state 0) × every
-# value of the six factors (color: `original` and the 141 CSS colors), 7,920 instances (a GPU-scale study;
-# docs/libero.md says how to run a share of it). Its color split does not pass the fairness gate on every LIBERO
-# object yet (docs/libero.md#build-and-evaluate).
-LIBERO_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture")
-register_preset(
-    SuiteConfig(
-        preset="libero_tiny",
-        tasks=("libero",),
-        union_mode="dedupe",
-        splits=("color", "camera_pose", "lighting"),
-        factorial_colors=(),
-        value_subsets=(
-            ("color", ("original", "blue")),
-            ("camera_pose", ("orbit_r1_3",)),
-            ("lighting", ("dim_left",)),
-            ("libero_task", ("libero_object/0",)),
-            ("init_state", ("0",)),
-        ),
-    )
-)
-# `libero_small`: one task (libero_object/0) from 10 init states × one or two values of each of the six factors:
-# 80 instances, a first bias profile of a learned policy that a CPU evaluates in well under an hour (docs/libero.md).
-register_preset(
-    SuiteConfig(
-        preset="libero_small",
-        tasks=("libero",),
-        union_mode="dedupe",
-        splits=LIBERO_SPLITS,
-        factorial_colors=(),
-        value_subsets=(
-            ("color", ("original", "blue", "green")),
-            ("camera_pose", ("orbit_r1_3",)),
-            ("camera_euler", ("6,0",)),
-            ("dist_scale", ("4",)),
-            ("lighting", ("dim_left",)),
-            ("table_texture", ("checker_dark",)),
-            ("libero_task", ("libero_object/0",)),
-            ("init_state", tuple(str(i) for i in range(10))),
-        ),
-    )
-)
-register_preset(
-    SuiteConfig(
-        preset="libero",
-        tasks=("libero",),
-        union_mode="dedupe",
-        splits=LIBERO_SPLITS,
-        factorial_colors=(),
-        value_subsets=(("init_state", ("0",)),),
-    )
-)
-# `libero_camera`: the `libero` preset's three camera splits alone (the 40 tasks, init state 0, every value of
-# camera_pose, camera_euler and dist_scale): 1,560 instances, a camera profile the size of LIBERO-plus's camera
-# dimension (1,599 variants). Repeats run init states 1, 2, … (docs/libero.md#cost-of-a-libero-profile).
-register_preset(
-    replace(PRESETS["libero"], preset="libero_camera", splits=("camera_pose", "camera_euler", "dist_scale"))
-)
-
-# Meta-World's scenes (roboview.metaworld.task; docs/metaworld.md): the same six factors as LIBERO's. `metaworld_tiny`:
-# push-v3 and a few values, 4 instances, for tests and a first look. `metaworld`: the registered tasks × every value
-# of the six factors (repeats run further seeds: further object and goal positions).
-register_preset(
-    replace(
-        PRESETS["libero_tiny"],
-        preset="metaworld_tiny",
-        tasks=("metaworld",),
-        value_subsets=(
-            ("color", ("original", "blue")),
-            ("camera_pose", ("orbit_r1_3",)),
-            ("lighting", ("dim_left",)),
-            ("metaworld_task", ("push-v3",)),
-        ),
-    )
-)
-register_preset(replace(PRESETS["libero"], preset="metaworld", tasks=("metaworld",), value_subsets=()))
+__all__ = ["EXTENDED_SPLITS", "PAPER", "PRESETS", "SMALL_VISUALS", "TINY", "load_preset", "register_preset"]

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
+from roboview.core.registry import Registry
 from roboview.sim.observation import LazyObservation
 
 if TYPE_CHECKING:
@@ -97,7 +98,7 @@ class World:
     # {factor: value}. None: the factor does not apply to the world's scenes; a factor the table does not name is one
     # the world lacks (`status`). An instance setting one it does not take away from its baseline is refused. The
     # appliers run in the table's order. None for the whole table: every visual factor's own applier (`Factor.bind`,
-    # written for RoboView's scene, which may itself refuse a value: the view sub-factors there).
+    # written for RoboView's scene; a factor with none, such as LIBERO-plus's `view_*`, is one the world lacks).
     appliers: Mapping[str | tuple[str, ...], Maker | None] | None = None
     # Whether a privileged policy (the scripted expert: it reads the simulator's state) watches the cameras it names
     # (RoboView's scene, which renders every policy's); False: the observed cameras, whatever it names (the videos of
@@ -130,9 +131,12 @@ class World:
 
     def status(self, factor: str) -> str:
         """Whether the world "takes" visual factor `factor` (it has an applier), "refuses" it (declared not to apply to
-        its scenes) or "lacks" it (its table does not name it: neither an applier nor a refusal is written for it)."""
+        its scenes) or "lacks" it (its table does not name it: neither an applier nor a refusal is written for it; in
+        RoboView's scene, which has no table, a factor that brings no applier for it, `Factor.bind`)."""
         if self.appliers is None:
-            return "takes"
+            from roboview.variation.factors import load_factor
+
+            return "takes" if load_factor(factor).bind is not None else "lacks"
         for key, maker in self.appliers.items():
             if factor == key or (isinstance(key, tuple) and factor in key):
                 return "refuses" if maker is None else "takes"
@@ -190,14 +194,16 @@ class World:
         return resolve(self.probe)(env)
 
 
-WORLDS: dict[str, World] = {}
+# Listed in the order of their wings (roboview.core.registry.rank): RoboView's own scene first.
+WORLDS: Registry[World] = Registry("world", origin=lambda world: world.wing or __package__)
 GATE_REFERENCES = ("thresholds", "no_change_view")
 
 
 def register_world(world: World) -> World:
     from roboview.variation.factors import FACTORS
 
-    if world.name in WORLDS:
+    factors = FACTORS.registered
+    if world.name in WORLDS.registered:
         raise ValueError(f"world {world.name!r} is already registered")
     unknown = [c for c in (*world.observed_cameras, *world.recorded_cameras) if c not in world.cameras]
     if unknown or not set(world.judged_cameras) <= set(world.observed_cameras):
@@ -205,7 +211,7 @@ def register_world(world: World) -> World:
             f"world {world.name!r}: cameras {unknown or world.judged_cameras} are not its cameras"
         )
     named = [f for key in world.appliers or () for f in (key if isinstance(key, tuple) else (key,))]
-    strange = [f for f in named if f not in FACTORS or FACTORS[f].kind != "visual"]
+    strange = [f for f in named if f not in factors or factors[f].kind != "visual"]
     if strange:
         raise ValueError(
             f"world {world.name!r}: its appliers name {', '.join(strange)}, no registered visual factor"
@@ -214,8 +220,7 @@ def register_world(world: World) -> World:
         raise ValueError(
             f"world {world.name!r}: gate_reference {world.gate_reference!r}; allowed: {', '.join(GATE_REFERENCES)}"
         )
-    WORLDS[world.name] = world
-    return world
+    return WORLDS.add(world.name, world)
 
 
 def load_world(name: str) -> World:

@@ -170,11 +170,17 @@ def test_bad_input_is_refused_in_one_line(monkeypatch):
         plus.variant("pick_up_the_bowl_view_400_0_100_0_0_initstate_0")
     assert "\n" not in str(info.value)
     assert plus.variant(plus.variants()[5].name) == plus.variants()[5]
-    # RoboView's own scene has no agentview: a sub-factor away from its baseline is refused.
-    applier = load_factor("view_azimuth").bind(None)
+    # RoboView's own scene has no agentview: the factor brings no applier for it, and a value away from its baseline is
+    # refused, naming the world that takes it.
+    from roboview.tasks.env import Lacked
+
+    assert load_factor("view_azimuth").bind is None
+    applier = Lacked("view_azimuth")
     applier.apply("0", np.random.default_rng(0))
     with pytest.raises(
-        ValueError, match=r"view_azimuth='31' moves LIBERO's agentview; RoboView's scene has none"
+        ValueError,
+        match=r"the roboview world cannot apply view_azimuth='31': the factor brings no applier for RoboView's "
+        r"scene; the worlds that take it: libero$",
     ):
         applier.apply("31", np.random.default_rng(0))
     # The scripted expert on tasks it does not script: refused before any episode, naming the presets it does.

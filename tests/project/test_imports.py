@@ -1,7 +1,8 @@
 """The import graph of RoboView's modules: no cycle, counting imports inside functions (a lazy import that
-breaks a cycle at run time still ties the two modules together) and imports by name (a registry's module list,
-`importlib.import_module("pkg.mod")`, a "pkg.mod:Class" a registry resolves); no module importing from a
-higher floor; and no module, test or benchmark importing another module's private (`_`-prefixed) name: what
+breaks a cycle at run time still ties the two modules together), imports by name (a registry's module list,
+`importlib.import_module("pkg.mod")`, a "pkg.mod:Class" a registry resolves) and the packages an import runs
+first (`import a.b.c` runs `a/b/__init__.py`: a module of a wing imports the wing's `__init__`); no module importing
+from a higher floor; and no module, test or benchmark importing another module's private (`_`-prefixed) name: what
 other modules need is public and documented."""
 
 from __future__ import annotations
@@ -45,6 +46,17 @@ def named_modules(tree: ast.AST) -> set[str]:
         for a, b in zip(node.elts, node.elts[1:])
         if isinstance(a, ast.Constant) and a.value == "-m"
     }
+    # An entry-point group's name (`ENTRY_POINT_GROUP = "roboview.tasks"`, `entry_points(group=...)`) names a group
+    # of a package's metadata, not a module.
+    groups = {
+        id(node.value)
+        for node in ast.walk(tree)
+        if (
+            isinstance(node, ast.Assign)
+            and any(getattr(t, "id", "").endswith("_GROUP") for t in node.targets)
+        )
+        or (isinstance(node, ast.keyword) and node.arg == "group")
+    }
     found = set()
     for node in ast.walk(tree):
         if (
@@ -58,21 +70,36 @@ def named_modules(tree: ast.AST) -> set[str]:
         elif (
             isinstance(node, ast.Constant)
             and isinstance(node.value, str)
-            and id(node) not in docstrings | run
+            and id(node) not in docstrings | run | groups
             and MODULE_STRING.match(node.value)
         ):
             found.add(node.value.partition(":")[0])
     return found
 
 
+def packages_above(module: str) -> set[str]:
+    """The packages importing `module` runs first: `a` and `a.b` for `a.b.c`."""
+    parts = module.split(".")
+    return {".".join(parts[:i]) for i in range(1, len(parts))}
+
+
 def import_graph() -> dict[str, set[str]]:
-    """module → the project modules it imports (the named module itself, not the packages above it)."""
-    modules = _modules()
+    """module → the project modules it imports."""
+    return graph_of(
+        {name: (path.name == "__init__.py", path.read_text()) for name, path in _modules().items()}
+    )
+
+
+def graph_of(sources: dict[str, tuple[bool, str]]) -> dict[str, set[str]]:
+    """module → the project modules it imports, from each module's (is a package, source): what it names, and the
+    packages above each of those that are not its own (`roboview.libero.task` imported from outside runs
+    `roboview/libero/__init__.py` first; a module's own packages are already running)."""
+    modules = set(sources)
     graph: dict[str, set[str]] = {}
-    for name, path in modules.items():
+    for name, (is_package, source) in sources.items():
         edges = set()
-        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        tree = ast.parse(path.read_text(), str(path))
+        package = name if is_package else name.rpartition(".")[0]
+        tree = ast.parse(source, name)
         edges |= {t for t in named_modules(tree) if t in modules and t != name}
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
@@ -91,7 +118,8 @@ def import_graph() -> dict[str, set[str]]:
             else:
                 continue
             edges |= {t for t in targets if t in modules and t != name}
-        graph[name] = edges
+        above = {p for t in edges for p in packages_above(t)} - packages_above(name) - {name}
+        graph[name] = edges | (above & modules)
     return graph
 
 
@@ -201,6 +229,8 @@ TASK = dict(env="roboview.tasks.push:PushEnv")
 importlib.import_module("eval")
 cmd = ["python", "-m", "roboview.pipelines.evaluate"]
 label = "a plain string, not.a.name:either"
+ENTRY_POINT_GROUP = "roboview.tasks"
+eps = entry_points(group="roboview.factors")
 '''
     found = named_modules(ast.parse(code))
     assert found == {"roboview.policies.vision", "not.a.module", "roboview.tasks.push", "eval"}
@@ -210,12 +240,47 @@ label = "a plain string, not.a.name:either"
         "roboview.policies.vision" in graph["roboview.policies.types"]
         and "roboview.policies.vision" not in graph["roboview.policies.base"]
     )
-    assert {"roboview.tasks.pick_place", "roboview.tasks.push"} <= graph["roboview.tasks"]
+    # The registries name no task module and no wing: those are `roboview.tasks` entry points (pyproject.toml).
+    assert not {m for m in graph["roboview.tasks"] if m.startswith(("roboview.libero", "roboview.metaworld"))}
+    assert "roboview.tasks.pick_place" not in graph["roboview.tasks"] | graph["roboview.core.registry"]
+    # A wing's module imports the contract's package, which its imports run first (its own package is running).
+    assert "roboview.tasks" in graph["roboview.libero.plus_task"]
+    assert "roboview.libero" not in graph["roboview.libero.plus_task"]
     # the default expert, "module:Class"
     assert "roboview.tasks.env" in graph["roboview.tasks.base"]
     assert "roboview.variation.factors.color" in graph["roboview.variation.factors"]
     assert "roboview.pipelines.collect" in graph["roboview.pipelines._console"]
     assert "roboview.integrations.lerobot.env" in graph["roboview.integrations.lerobot"]
+
+
+def test_a_circle_through_a_package_run_first_is_a_cycle():
+    """The task registry once imported each wing's task module by name (a tuple of module strings), and each wing's
+    `__init__` imported the registry back: the circle ran through the wing's package, which importing its task
+    module runs first, and held only through import order."""
+    sources = {
+        "roboview.tasks": (True, 'import importlib\nWINGS = ("roboview.libero.task",)\n'),
+        "roboview.tasks.base": (False, "TASKS = {}\n"),
+        "roboview.libero": (True, "import roboview.tasks\n"),
+        "roboview.libero.task": (False, "from roboview.tasks.base import TASKS\n"),
+    }
+    graph = graph_of(sources)
+    assert graph["roboview.tasks"] == {"roboview.libero.task", "roboview.libero"}
+    assert graph["roboview.libero.task"] == {"roboview.tasks.base", "roboview.tasks"}
+    assert cycles(graph) == [["roboview.libero", "roboview.libero.task", "roboview.tasks"]]
+    # Named through `importlib.import_module` the same.
+    sources["roboview.tasks"] = (True, 'import importlib\nimportlib.import_module("roboview.libero.task")\n')
+    assert cycles(graph_of(sources)) == [["roboview.libero", "roboview.libero.task", "roboview.tasks"]]
+    # The wing importing the contract module alone: its package imports no wing, so no circle.
+    sources["roboview.libero"] = (True, "")
+    sources["roboview.tasks"] = (True, "from roboview.tasks.base import TASKS\n")
+    assert cycles(graph_of(sources)) == []
+    # A package importing its own modules (the factor registry its factors) is no circle: they run inside it.
+    own = {
+        "pkg": (True, 'MODULES = ("pkg.a",)\n'),
+        "pkg.a": (False, "from pkg.base import X\n"),
+        "pkg.base": (False, ""),
+    }
+    assert graph_of(own)["pkg.a"] == {"pkg.base"} and cycles(graph_of(own)) == []
 
 
 def test_the_cycle_finder_finds_a_cycle():
@@ -237,12 +302,13 @@ def test_the_cycle_finder_finds_a_cycle():
     )  # imported inside a method
 
 
-def test_importing_the_package_registers_the_gym_ids():
+def test_reading_the_task_registry_registers_the_gym_ids():
     import subprocess
     import sys
 
     code = (
         "import gymnasium, roboview.tasks; from roboview.tasks import TASKS; "
+        "assert not [i for i in gymnasium.registry if i.startswith('RoboView/')], 'registered by an import'; "
         "print(sorted(t.gym_id for t in TASKS.values() if t.gym_id in gymnasium.registry))"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
@@ -266,6 +332,7 @@ FLOORS = (
         "roboview.core.cli_help",
         "roboview.core.workers",
         "roboview.core.ray_cluster",
+        "roboview.core.registry",
     ),
     ("roboview.sim",),
     ("roboview.variation",),
@@ -283,8 +350,8 @@ FLOORS = (
 
 
 def wing_imports(graph: dict[str, set[str]], wings: list[str]) -> list[str]:
-    """Edges into a world's wing from outside it: only the task registry (which names the wing's task module) and
-    the wing's own throughput studies (`benchmarks.<world>_*`) may cross."""
+    """Edges into a world's wing from outside it: only the wing's own throughput studies (`benchmarks.<world>_*`) may
+    cross (the registries import the wings through their `roboview.tasks` entry points, pyproject.toml)."""
 
     def inside(module: str, wing: str) -> bool:
         return module == wing or module.startswith(wing + ".")
@@ -296,7 +363,6 @@ def wing_imports(graph: dict[str, set[str]], wings: list[str]) -> list[str]:
         for wing in wings
         if inside(target, wing)
         and not inside(module, wing)
-        and module != "roboview.tasks"
         and not module.startswith(f"benchmarks.{wing.rpartition('.')[2]}_")
     )
 

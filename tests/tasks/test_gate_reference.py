@@ -77,8 +77,6 @@ def test_a_reskin_may_stand_out_as_little_as_the_world_own_object_does():
 
 
 def test_the_worlds_declare_what_the_gate_judges_against():
-    import roboview.tasks  # noqa: F401  (registers the worlds)
-
     assert WORLDS["roboview"].gate_reference == "thresholds"
     for name in ("libero", "metaworld"):
         if name in WORLDS:

@@ -1,7 +1,8 @@
 """Every registered world against every registered visual factor: whether the world takes it (a value away from its
 baseline is applied), refuses it (its applier table, `World.appliers`, declares the factor does not apply to its
-scenes, or RoboView's own applier refuses the value) or lacks it (its table does not name the factor: neither an applier
-nor a refusal is written for it, refused all the same). A new factor shows its row here, in every world at once."""
+scenes) or lacks it (its table does not name the factor: neither an applier nor a refusal is written for it, refused all
+the same; in RoboView's scene, which has no table, a factor that brings no applier for it: LIBERO-plus's `view_*`,
+declared in the LIBERO wing). A new factor shows its row here, in every world at once."""
 
 import numpy as np
 import pytest
@@ -23,11 +24,11 @@ lighting        takes     takes    takes
 table_texture   takes     takes    takes
 distractors     takes     refuses  refuses
 object_size     takes     refuses  refuses
-view_azimuth    refuses   takes    lacks
-view_elevation  refuses   takes    lacks
-view_scale      refuses   takes    lacks
-view_rotz       refuses   takes    lacks
-view_roty       refuses   takes    lacks
+view_azimuth    lacks     takes    lacks
+view_elevation  lacks     takes    lacks
+view_scale      lacks     takes    lacks
+view_rotz       lacks     takes    lacks
+view_roty       lacks     takes    lacks
 """
 
 
@@ -80,12 +81,13 @@ def test_every_world_takes_refuses_or_lacks_every_visual_factor(scene):
 
 
 def test_what_a_world_does_not_take_is_derived_from_its_table():
+    table = expected()
     for name, world in WORLDS.items():
-        if world.appliers is None:
-            assert world.not_applicable == (), name  # every factor brings its applier for RoboView's scene
-            continue
-        table = expected()
         assert world.not_applicable == tuple(f for f in visual_factors() if table[f, name] != "takes"), name
+    # RoboView's scene takes every factor that brings its applier for it, and lacks the LIBERO wing's view factors.
+    assert WORLDS["roboview"].appliers is None and WORLDS["roboview"].not_applicable == tuple(
+        f for f in visual_factors() if f.startswith("view_")
+    )
     assert WORLDS["metaworld"].status("view_azimuth") == "lacks"
     assert (
         WORLDS["libero"].status("view_azimuth") == "takes"

@@ -30,7 +30,7 @@ def test_factor_names_and_kinds():
         "table_texture",
         "distractors",
         "object_size",
-        # LIBERO-plus's camera sub-factors (the `liberoplus` task; RoboView's scene refuses them).
+        # LIBERO-plus's camera sub-factors (the LIBERO wing's; RoboView's and Meta-World's scenes lack them).
         "view_azimuth",
         "view_elevation",
         "view_scale",

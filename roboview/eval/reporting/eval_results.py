@@ -139,7 +139,6 @@ def analysis_scores(key: str, result: dict[str, Any], design: Decomposition) -> 
 
 def metric_scores(metrics: dict[str, Any], per_value: bool = False) -> list[Score]:
     """Every entry of one policy's metrics.json: its splits (single-factor, then factorial), then its analyses."""
-    import roboview.tasks  # noqa: F401  (registers the tasks, and the analyses they declare)
     from roboview.tasks.base import analysis_designs
 
     scores = []

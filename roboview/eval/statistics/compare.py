@@ -163,7 +163,6 @@ def all_baseline(episodes: pd.DataFrame) -> pd.DataFrame | None:
     """The episodes of the all-baseline instances (every visual factor at its baseline in the row's task's world:
     LIBERO's color `original`, RoboView's red) of the single-factor splits; None when the table lacks the factor
     columns."""
-    import roboview.tasks  # noqa: F401  (registers the worlds and their baseline labels)
     from roboview.variation.factors import DEFAULT_TASK, baseline_of, visual_factors
 
     # Results written before a factor existed lack its column: there it was at its baseline.

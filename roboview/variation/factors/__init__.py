@@ -5,7 +5,9 @@ and task context dimensions D, which only diversify the scenarios. Every factor 
 exactly as it is stored in the instance records, so the records, the samplers and the env all
 speak one vocabulary.
 
-Context factors belong to a task and are declared in its module (`roboview.tasks`).
+Context factors belong to a task and are declared in its module (`roboview.tasks`). A world's wing may declare
+visual factors of its own scenes (LIBERO-plus's `view_*`, roboview.libero.view); the registry, read, holds them too
+(roboview.core.registry.discover).
 
 To add a visual factor, write one module like `color.py` — a `Factor` with its values, baseline,
 title and an applier that writes a value into the compiled scene — and add it to BUILTIN_MODULES
@@ -51,8 +53,6 @@ BUILTIN_MODULES = (
     "roboview.variation.factors.table_texture",
     "roboview.variation.factors.distractors",
     "roboview.variation.factors.object_size",
-    # LIBERO-plus's camera sub-factors (the `liberoplus` task).
-    "roboview.variation.factors.view",
 )
 # Third-party factors: a package lists its factor modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.factors"

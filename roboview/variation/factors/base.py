@@ -29,6 +29,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from roboview.core.registry import Registry
+
 FACTOR_KINDS = ("visual", "context")
 DEFAULT_TASK = "pick_place"
 
@@ -60,7 +62,10 @@ class Factor:
     doc: str
     # Title of the factor's section and column in reports.
     title: str = ""
-    # Visual factors: `bind(scene) -> SceneApplier`. None for context factors (the task places them).
+    # Visual factors: `bind(scene) -> SceneApplier`, the applier in RoboView's own scene. None for context factors
+    # (the task places them), and for a visual factor RoboView's scene lacks (one a world's wing declares for its own
+    # scenes, which its applier table takes: LIBERO-plus's `view_*`); that scene then refuses a value away from the
+    # baseline.
     bind: Callable[[Any], SceneApplier] | None = field(default=None, compare=False, repr=False)
     # Scene additions the applier needs, made once when the scene is built (materials, parked bodies,
     # mesh variants): `extend_spec(spec)`. Compiled with everything else: no recompiles per instance.
@@ -88,8 +93,8 @@ class Factor:
             raise ValueError(f"factor {self.name!r} has no values")
         if len(set(self.values)) != len(self.values):
             raise ValueError(f"factor {self.name!r} has duplicate values")
-        if self.kind == "visual" and (self.bind is None or self.task is not None):
-            raise ValueError(f"visual factor {self.name!r} needs a `bind` applier and no task")
+        if self.kind == "visual" and self.task is not None:
+            raise ValueError(f"visual factor {self.name!r} applies to every task: it names none")
         if self.kind == "context" and self.task is None:
             raise ValueError(f"context factor {self.name!r} must name its task")
         if not self.title:
@@ -111,21 +116,19 @@ class Factor:
         raise ValueError(f"unknown {self.name} {value!r}; allowed: {', '.join(allowed)}{hint}")
 
 
-# The live registry, in registration order: the order of record columns and of appliers at reset.
-FACTORS: dict[str, Factor] = {}
+# The live registry, in registration order: the order of record columns and of appliers at reset. Read, it holds
+# every wing's factors (roboview.core.registry.discover).
+FACTORS: Registry[Factor] = Registry("factor")
 
 
 def register_factor(factor: Factor) -> Factor:
     """Add `factor` to the registry (a name can be registered once)."""
-    if factor.name in FACTORS:
-        raise ValueError(f"factor {factor.name!r} is already registered")
-    FACTORS[factor.name] = factor
-    return factor
+    return FACTORS.add(factor.name, factor)
 
 
 def unregister_factor(name: str) -> None:
     """Remove a factor (tests that register a throwaway factor clean up with this)."""
-    FACTORS.pop(name, None)
+    FACTORS.remove(name)
 
 
 def load_factor(name: str) -> Factor:
@@ -154,23 +157,23 @@ def factor_names(task: str = DEFAULT_TASK) -> tuple[str, ...]:
 # task → {visual factor → the label its baseline goes by in that task's world}: filled by each world's wing for each
 # of its tasks from its `World.baseline_labels` (LIBERO's `libero` and `liberoplus`, Meta-World's `metaworld`:
 # color → original). A task not here takes every factor's registered baseline (RoboView's scene: red).
-BASELINE_LABELS: dict[str, dict[str, str]] = {}
+BASELINE_LABELS: Registry[dict[str, str]] = Registry("baseline labels of task")
 
 
 def register_baseline_labels(task: str, labels: Mapping[str, str]) -> None:
     """Name the baselines of `task`'s visual factors that are its world's own look (`{"color": "original"}`). A label
     must not be a registered value of its factor (it would mean two things); a task registers its labels once."""
-    if task in BASELINE_LABELS:
+    if task in BASELINE_LABELS.registered:
         raise ValueError(f"task {task!r} already registered its baseline labels")
     for name, label in labels.items():
-        factor = load_factor(name)
+        factor = FACTORS.registered.get(name) or load_factor(name)
         if factor.kind != "visual":
             raise ValueError(
                 f"baseline label of {name!r}: only a visual factor's baseline is a world's own look"
             )
         if label in factor.values:
             raise ValueError(f"baseline label {label!r} of {name!r} is one of its values; name it apart")
-    BASELINE_LABELS[task] = dict(labels)
+    BASELINE_LABELS.add(task, dict(labels))
 
 
 def _label(name: str, task: str | None) -> str | None:
