@@ -87,6 +87,7 @@ def attempts(job: CollectionJob, first_attempt: int) -> Iterator[DemoEpisode]:
         sig.task,
         sig.control,
         sig.contexts,
+        sig.cover,
     )
     attempt = first_attempt
     if job.num_workers == 1:

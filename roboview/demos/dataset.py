@@ -58,6 +58,7 @@ class CollectionSignature:
     task: str = DEFAULT_TASK  # collections made before the task axis were pick_place
     control: str = "joint"  # collections made before end-effector control were joint
     contexts: tuple[tuple[str, tuple[str, ...]], ...] = ()  # the context values drawn from (empty: all)
+    cover: bool = False  # each attempt the next combination of `contexts`' values, not a random draw
 
 
 def demo_features(

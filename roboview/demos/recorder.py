@@ -7,6 +7,7 @@ what makes parallel collection deterministic and resumable.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field
 
@@ -34,6 +35,18 @@ def training_instance(
     return TaskInstance(
         split="train", varied=context_factors(task), factors=values, context_subspace="cartesian", task=task
     )
+
+
+def attempt_contexts(
+    contexts: dict[str, tuple[str, ...]], attempt: int, cover: bool
+) -> dict[str, tuple[str, ...]]:
+    """The context values attempt `attempt` draws from. `cover`: the attempt-th combination of the listed values (their
+    cartesian product, in the order listed, cycling), so N attempts over N combinations run each once; else all of
+    them, drawn at random."""
+    if not cover or not contexts:
+        return contexts
+    combos = list(itertools.product(*contexts.values()))
+    return {name: (value,) for name, value in zip(contexts, combos[attempt % len(combos)], strict=True)}
 
 
 def parse_contexts(text: str, task: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
@@ -97,8 +110,10 @@ class DemoCollector:
         task: str = DEFAULT_TASK,
         control: str = "joint",
         contexts: tuple[tuple[str, tuple[str, ...]], ...] = (),
+        cover: bool = False,
     ) -> None:
         self.seed = seed
+        self.cover = cover
         self.randomize = randomize
         self.task = task
         self.contexts = dict(contexts)
@@ -113,7 +128,8 @@ class DemoCollector:
     def run(self, attempt: int) -> DemoEpisode:
         start = time.perf_counter()
         ep_seed = attempt_seed(self.seed, attempt)
-        instance = training_instance(np.random.default_rng(ep_seed), self.task, self.contexts)
+        contexts = attempt_contexts(self.contexts, attempt, self.cover)
+        instance = training_instance(np.random.default_rng(ep_seed), self.task, contexts)
         # A world that draws per-episode visuals records the colors and camera poses its frames show; another
         # world's are its own.
         visuals = sample_randomization(ep_seed, self.randomize) if self.episode_visuals else None

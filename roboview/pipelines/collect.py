@@ -61,6 +61,10 @@ class DatasetConfig:
     # Draw these context factors among the values named only: FACTOR=V1|V2,FACTOR=V (e.g.
     # libero_task=libero_object/0|libero_object/1); empty: every value of every context factor.
     contexts: str = ""
+    # Cover the combinations of --dataset.contexts' values in turn instead of drawing them: attempt a runs the a-th
+    # combination (their cartesian product, in the order listed, cycling), so 10 tasks × 40 init states in 400
+    # attempts run each once. Needs --dataset.contexts.
+    cover_contexts: bool = False
     # Control the demos are recorded in: joint (observation.state = joints, action = 7 joint targets + gripper),
     # ee_delta or ee_abs (observation.state = the EE state, action = the 7-d EE action; docs/control.md).
     control: str = ""
@@ -116,6 +120,10 @@ class DatasetConfig:
             )
         with flag_errors("--dataset.contexts"):
             self.context_values = parse_contexts(self.contexts, self.task)
+        if self.cover_contexts and not self.contexts:
+            raise ValueError(
+                "--dataset.cover_contexts=true needs --dataset.contexts=FACTOR=V1|V2,… (the values to cover)"
+            )
 
 
 @dataclass
@@ -153,6 +161,7 @@ class CollectConfig:
             d.task,
             d.control,
             d.context_values,
+            d.cover_contexts,
         )
 
 
