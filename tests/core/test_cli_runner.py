@@ -125,12 +125,22 @@ def interrupted(proc, folder: Path) -> tuple[int, str]:
     return proc.returncode, err
 
 
+def default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_ends_a_run_as_it_ends_a_fresh_interpreter(folder):
     run = cli.start(MODULE, "wait", cwd=folder)
     assert isinstance(run, cli.Run)
     a = interrupted(run, folder)
+    # As a terminal starts it: Ctrl-C's default action (a test run started in the background, as `cmd &` in a script
+    # is, inherits SIGINT ignored, and an interpreter that starts with SIGINT ignored never raises KeyboardInterrupt).
     popen = subprocess.Popen(
-        [sys.executable, "-m", MODULE, "wait"], cwd=folder, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-m", MODULE, "wait"],
+        cwd=folder,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=default_sigint,
     )
     b = interrupted(popen, folder)
     assert a[0] == b[0] == -signal.SIGINT
