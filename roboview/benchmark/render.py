@@ -74,9 +74,9 @@ class InstanceRenderer:
         cameras = self.probe.cameras
         rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in cameras}
         if view is None and self.env.world.gate_reference == "no_change_view":
-            view = self.probe.measure(
-                rgb, self.thresholds
-            )  # the no-change view itself: judged against itself
+            # The no-change view itself, judged against itself; kept for its context's variants (no second render).
+            view = self.probe.measure(rgb, self.thresholds)
+            self._keep_view((instance.task, instance.factors, instance.seed), view)
         fairness = self.probe.measure(rgb, self.thresholds, *([view] if view else [])).to_record()
         vlm = (
             screen_image(self.screen, FAIRNESS_SCREEN, rgb[SCREEN_CAMERA]) if self.screen is not None else {}
@@ -101,10 +101,13 @@ class InstanceRenderer:
         if key not in self._views:
             obs, _ = self.env.reset(seed=instance.seed, options={"instance": base})
             rgb = {cam: obs[IMAGE_KEY.format(cam)] for cam in self.probe.cameras}
-            if len(self._views) >= 256:  # a batch holds one world's instances: a few contexts at a time
-                self._views.clear()
-            self._views[key] = self.probe.measure(rgb, self.thresholds)
+            self._keep_view(key, self.probe.measure(rgb, self.thresholds))
         return self._views[key]
+
+    def _keep_view(self, key: tuple, view: Any) -> None:
+        if len(self._views) >= 256:  # a batch holds one world's instances: a few contexts at a time
+            self._views.clear()
+        self._views[key] = view
 
     def records(self, instances: list[TaskInstance]) -> list[dict]:
         """`record` of each of `instances` (one world's, in one call: its model is compiled once)."""
