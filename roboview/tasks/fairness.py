@@ -108,6 +108,10 @@ class FairnessProbe:
         self._seg.enable_segmentation_rendering()
 
     def _segment(self, camera: str) -> np.ndarray:
+        # The env switched to a scene compiled with a factor's additions: a renderer of its model.
+        if self._seg.model is not self.env.model:
+            self._seg = self.env.new_renderer()
+            self._seg.enable_segmentation_rendering()
         self._seg.update_scene(self.env.data, camera=self.env.camera_ids()[camera])
         seg = self._seg.render()
         return np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
@@ -162,7 +166,20 @@ class FairnessProbe:
             reasons += violations(
                 result, thresholds, min_pixels, scene_camera=cam != "wrist", judge_nominal=judge_nominal
             )
+        reasons += factor_gates(self.env, rgb)
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
+
+
+def factor_gates(env: WorldEnv, rgb: dict[str, np.ndarray]) -> list[str]:
+    """The reasons of the visual factors' own checks (`Factor.gate`: scene_text's legible text) that the instance
+    sets away from their baselines; empty where they pass."""
+    task = env.instance.task
+    out = []
+    for name, value in env.instance.factors:
+        check = FACTORS[name].gate
+        if check is not None and value != baseline_of(name, task):
+            out += check(env, rgb)
+    return out
 
 
 def fraction(visible: np.ndarray, alone: np.ndarray) -> float:
@@ -349,6 +366,7 @@ class ObjectProbe:
                 own = next((c for c in view.cameras if c.camera == cam), None) if view is not None else None
                 judged = result if recolored else replace(result, delta_e_table=float("nan"))
                 reasons += violations(judged, thresholds, min_pixels, False, judge_nominal, own)
+        reasons += factor_gates(self.env, rgb)
         return FairnessReport(tuple(results), not reasons, "; ".join(reasons))
 
     def close(self) -> None:

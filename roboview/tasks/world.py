@@ -417,6 +417,11 @@ class WorldEnv(gym.Env):
         """`camera` rendered from the live state now, as observations hand it."""
         raise NotImplementedError
 
+    def text_card(self) -> Any:
+        """The live scene's text card (the `scene_text` factor's): `glyph_heights(cameras, rgb)` and `hidden(cameras)`
+        for the fairness gate, `geometry()` for the isolation certificate; None where the scene holds none."""
+        return None
+
     def camera_ids(self) -> dict[str, int]:
         """The recorded cameras' ids in the compiled model, by RoboView's name."""
         raise NotImplementedError

@@ -30,6 +30,7 @@ def test_factor_names_and_kinds():
         "table_texture",
         "distractors",
         "object_size",
+        "scene_text",
         # LIBERO-plus's camera sub-factors (the LIBERO wing's; RoboView's and Meta-World's scenes lack them).
         "view_azimuth",
         "view_elevation",
@@ -41,19 +42,20 @@ def test_factor_names_and_kinds():
     assert factor_names() == visual_factors() + context_factors()
     worlds = {f for t in ("libero", "liberoplus", "metaworld") for f in context_factors(t)}
     assert set(FACTORS) == set(factor_names()) | set(context_factors("push")) | worlds
-    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 13 + ["context"] * 3
-    assert {n: len(load_factor(n).values) for n in visual_factors()[8:]} == {
+    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 14 + ["context"] * 3
+    assert {n: len(load_factor(n).values) for n in visual_factors()[9:]} == {
         "view_azimuth": 150,
         "view_elevation": 1,
         "view_scale": 100,
         "view_rotz": 10,
         "view_roty": 10,
     }
-    assert {n: len(load_factor(n).values) for n in visual_factors()[4:8]} == {
+    assert {n: len(load_factor(n).values) for n in visual_factors()[4:9]} == {
         "lighting": 9,
         "table_texture": 8,
         "distractors": 5,
         "object_size": 7,
+        "scene_text": 7,
     }
 
 
@@ -67,6 +69,7 @@ def test_baselines():
         "table_texture": "plain",
         "distractors": "0",
         "object_size": "1.0",
+        "scene_text": "none",
         "view_azimuth": "0",
         "view_elevation": "0",
         "view_scale": "100",

@@ -186,6 +186,7 @@ def test_to_record_columns_and_values():
         "table_texture",
         "distractors",
         "object_size",
+        "scene_text",
         "view_azimuth",
         "view_elevation",
         "view_scale",

@@ -13,6 +13,7 @@ of each thing that must not change across the values of its block (`isolation` c
     seed              the episode seed
     context           every factor's value except those the split varies
     camera:<name>     each camera's calibration at t = 0 (position, orientation, field of view)
+    card              the scene_text card's pose and size, where the scene holds one (its texture is the factor)
 
 `verify` groups a split's episodes into blocks (context_id, repeat) and checks every component is the
 same for every value, except what the split's varied factors declare they change (`Factor.alters`:
@@ -66,6 +67,10 @@ def components(env, seed: int) -> dict[str, str]:
         "seed": _digest(int(seed)),
         "context": _digest({k: v for k, v in instance.factors if k not in instance.varied}),
     }
+    # Only a scene compiled with the card has one: every other episode's record stays as it was.
+    card = env.text_card() if hasattr(env, "text_card") else None
+    if card is not None:
+        out["card"] = _digest(card.geometry())
     for name in sorted(env.camera_ids()):
         pose = env.camera_pose(name)
         out[f"camera:{name}"] = _digest([*pose.pos, *pose.quat, pose.fovy])

@@ -178,12 +178,24 @@ def all_baseline(episodes: pd.DataFrame) -> pd.DataFrame | None:
     return base
 
 
+def control_rows(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> pd.DataFrame | None:
+    """The episodes a split's values are compared against: its factor's reference value where it declares one
+    (`Factor.reference`: scene_text's blank card, on the split's own contexts and seeds), else `base`, the
+    all-baseline ones."""
+    from roboview.variation.factors import FACTORS
+
+    factor = str(split_rows["factor"].iloc[0]) if len(split_rows) else ""
+    reference = FACTORS[factor].reference if factor in FACTORS else ""
+    return split_rows[split_rows["value"].astype(str) == reference] if reference else base
+
+
 def control_arm(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[str, Any]:
     """A split's control arm as result fields: the success of the all-baseline instance of each (context, repeat) the
     split ran, on the same seed (from whichever split ran it: they share the seed), with its Clopper–Pearson interval.
     `base`: the table's all-baseline episodes (`all_baseline`, selected once for every split). `sr_control` None
     where no such episode was run (a sample without the baseline value)."""
     pairs = set(zip(split_rows["context_id"], split_rows["repeat"]))
+    base = control_rows(base, split_rows)
     if base is not None:
         base = base.loc[np.array([p in pairs for p in zip(base["context_id"], base["repeat"])], dtype=bool)]
         base = base.drop_duplicates(["context_id", "repeat"])
@@ -201,6 +213,7 @@ def control_deltas(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> dict[
     SR(control) over the (context, repeat) pairs both ran (same seed), `delta_control_ci95`, its 95 % interval
     (Newcombe's hybrid score interval for paired rates, `paired_difference_ci95`), `n_control_pairs`, and `p_control`,
     McNemar's test on those pairs (`paired_success_test`). Empty where no control episode was run."""
+    base = control_rows(base, split_rows)
     if base is None or base.empty:
         return {}
     control = base.drop_duplicates(["context_id", "repeat"]).set_index(["context_id", "repeat"])["success"]

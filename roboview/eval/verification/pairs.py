@@ -78,12 +78,16 @@ def parting_step(a: np.ndarray, b: np.ndarray, tolerance: float = TOLERANCE) -> 
 
 def twin_of(item, items: dict[str, Any], against: str = ""):
     """The benchmark item `item`'s episode is paired with: the context's all-baseline instance (the control arm;
-    from `item`'s split if it holds one, else any split) or, with `against`, the instance of `item`'s split and
+    from `item`'s split if it holds one, else any split; the split's reference value where its factor declares one,
+    `Factor.reference`) or, with `against`, the instance of `item`'s split and
     context whose value is `against`. ValueError, one line, naming what exists when there is none."""
-    from roboview.variation.factors import baselines, visual_factors
+    from roboview.variation.factors import FACTORS, baselines, visual_factors
 
     context, split = item.record["context_id"], item.record["split"]
     same = [i for i in items.values() if i.record["context_id"] == context]
+    varied = item.instance.varied
+    # A factor declaring its own control arm (scene_text's blank card) pairs with that value of the split.
+    against = against or (FACTORS[varied[0]].reference if len(varied) == 1 else "")
     if against:
         found = [i for i in same if i.record["split"] == split and i.record["value"] == against]
         if not found:

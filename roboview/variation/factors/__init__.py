@@ -53,6 +53,7 @@ BUILTIN_MODULES = (
     "roboview.variation.factors.table_texture",
     "roboview.variation.factors.distractors",
     "roboview.variation.factors.object_size",
+    "roboview.variation.factors.scene_text",
 )
 # Third-party factors: a package lists its factor modules under this entry-point group.
 ENTRY_POINT_GROUP = "roboview.factors"

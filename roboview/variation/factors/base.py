@@ -70,6 +70,19 @@ class Factor:
     # Scene additions the applier needs, made once when the scene is built (materials, parked bodies,
     # mesh variants): `extend_spec(spec)`. Compiled with everything else: no recompiles per instance.
     extend_spec: Callable[[Any], None] | None = field(default=None, compare=False, repr=False)
+    # Scene additions made only for an instance that sets this factor away from its baseline: `add(spec, task)`. The
+    # env compiles them into a scene of its own, so every other instance's scene stays exactly as it was (the text
+    # card of `scene_text`, which no other instance's scene may hold).
+    extend_spec_when_set: Callable[[Any, str], None] | None = field(default=None, compare=False, repr=False)
+    # The swept value a split of this factor compares its values against (its control arm), where that is not the
+    # all-baseline instance: `scene_text`'s `blank`, the same card without text, whose baseline has no card. "": the
+    # all-baseline instance.
+    reference: str = ""
+    # A value's own fairness check beyond the gate's measures, run for an instance setting the factor away from its
+    # baseline: `gate(env, rgb) -> reasons` (empty: it passes). `scene_text`: the text legible, nothing hidden.
+    gate: Callable[[Any, Mapping[str, Any]], list[str]] | None = field(
+        default=None, compare=False, repr=False
+    )
     # Whether the object's rendered colour stays near its nominal colour away from the baseline; the
     # fairness gate's ΔE-to-nominal check applies only where every factor says so (lighting: False —
     # a dim light darkens every colour by design, which is not a fairness failure).
@@ -97,6 +110,10 @@ class Factor:
             raise ValueError(f"visual factor {self.name!r} applies to every task: it names none")
         if self.kind == "context" and self.task is None:
             raise ValueError(f"context factor {self.name!r} must name its task")
+        if self.reference and (self.reference not in self.values or self.reference == self.baseline):
+            raise ValueError(
+                f"factor {self.name!r}: reference {self.reference!r} must be a swept value other than the baseline"
+            )
         if not self.title:
             object.__setattr__(self, "title", self.name.replace("_", " ").capitalize())
 
