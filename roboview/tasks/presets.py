@@ -82,4 +82,9 @@ register_preset(
     )
 )
 
+# The typographic factor alone: a card with a word (`scene_text`), every value over the paper's 11 contexts (77
+# instances), and over the tiny preset's 3 (21).
+SCENE_TEXT = register_preset(replace(PAPER, preset="scene_text", splits=("scene_text",)))
+register_preset(replace(TINY, preset="scene_text_tiny", splits=("scene_text",)))
+
 __all__ = ["EXTENDED_SPLITS", "PAPER", "PRESETS", "SMALL_VISUALS", "TINY", "load_preset", "register_preset"]

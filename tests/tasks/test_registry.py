@@ -46,7 +46,7 @@ FIRST = (
 TASKS = ["pick_place", "push", "libero", "metaworld", "liberoplus"]
 WORLDS = ["roboview", "libero", "metaworld"]
 PRESETS = [
-    *("paper", "paper_dedupe", "tiny", "extended", "tiny_extended"),
+    *("paper", "paper_dedupe", "tiny", "extended", "tiny_extended", "scene_text", "scene_text_tiny"),
     *("libero_tiny", "libero_small", "libero", "libero_camera"),
     *("metaworld_tiny", "metaworld"),
     *(
