@@ -21,7 +21,7 @@ BOARD_DIR ?= outputs/board
 BOARD_PAGE ?= docs/results/board
 BOARD_VLM_PORT ?= 8765
 
-.PHONY: install install-libero install-metaworld sysdeps demo test test-fast lint format bench board clean-demo
+.PHONY: install install-libero install-liberoplus-noise install-metaworld sysdeps demo test test-fast lint format bench board clean-demo
 
 install: sysdeps $(STAMP)
 
@@ -35,6 +35,21 @@ $(LIBERO_STAMP): $(STAMP) roboview/libero/bootstrap.py
 	$(PY) -m $$($(PY) -c 'from roboview.libero.bootstrap import PIP_INSTALL; print(PIP_INSTALL)') -q
 	$(PY) -m roboview.libero >/dev/null
 	@touch $(LIBERO_STAMP)
+
+# LIBERO-plus's sensor noise (docs/liberoplus.md): its motion blur runs ImageMagick through Wand. ImageMagick's library
+# from apt (only when missing, as `sysdeps` installs), then Wand, and for the tests, which run LIBERO-plus's own noise
+# functions beside RoboView's, scikit-image (without dependencies; the one declaration of the packages is
+# roboview.libero.corruptions.PIP_INSTALL).
+NOISE_STAMP := $(VENV)/.liberoplus-noise-installed
+install-liberoplus-noise: install-libero $(NOISE_STAMP)
+
+$(NOISE_STAMP): $(LIBERO_STAMP) roboview/libero/corruptions.py
+	@if ! dpkg -s libmagickwand-6.q16-6 >/dev/null 2>&1; then \
+	  echo "[install] apt-get install libmagickwand-6.q16-6"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq libmagickwand-6.q16-6 >/dev/null; \
+	fi
+	$(PY) -m $$($(PY) -c 'from roboview.libero.corruptions import PIP_INSTALL; print(PIP_INSTALL)') -q
+	@touch $(NOISE_STAMP)
 
 # Meta-World's scenes (docs/metaworld.md): metaworld 3.0.0 as LeRobot's `metaworld` extra pins it (a 40 MB wheel with
 # its assets and scripted policies; everything it needs is already installed). The one declaration of the package
@@ -112,10 +127,10 @@ demo: install
 # listed at the end; test-fast: the `fast` tier (each test module declares its tier; tests/conftest.py): statistics,
 # formats, registries, imports, no rendering, training or servers.
 TEST_WORKERS ?= 2
-test: install install-libero install-metaworld lint
+test: install install-libero install-liberoplus-noise install-metaworld lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=30
 
-test-fast: install install-libero install-metaworld lint
+test-fast: install install-libero install-liberoplus-noise install-metaworld lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --tier=fast --durations=10
 
 lint: install

@@ -111,6 +111,9 @@ class LiberoWorld:
         self._frames = _FrameStore()
         self._step_count = 0
         self._visual_snapshot: dict[str, np.ndarray] | None = None
+        # Camera → the corruption its frames go through (`image(frame, seed, step)`), set by the factors at each reset
+        # (LIBERO-plus's sensor noise, roboview.libero.noise); none: the frames as rendered.
+        self.image_filters: dict[str, Any] = {}
         # The last factors left an edit a soft reset cannot undo: the next reset compiles a new model.
         self._dirty = False
         self.hard_resets = 0
@@ -307,6 +310,7 @@ class LiberoWorld:
                 self._visual_snapshot = snapshot_visuals(self)
             else:
                 restore_visuals(self, self._visual_snapshot)
+        self.image_filters = {}
         for factor in self.factors:
             factor.apply(self)
         self._dirty = any(not getattr(factor, "in_place", True) for factor in self.factors)

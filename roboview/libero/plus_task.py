@@ -23,7 +23,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from roboview.libero.decomposition import CAMERA
+from roboview.libero import noise
+from roboview.libero.decomposition import CAMERA, NOISE
 from roboview.libero.plus import (
     LIBERO_PLUS_SPLITS,
     SHORT,
@@ -103,7 +104,10 @@ class LiberoPlusTaskEnv(LiberoTaskEnv):
     def instruction_of(self, instance, world) -> str:
         if instance.get("liberoplus_instruction") == "libero":
             return world.task.language
-        return instruction_of(variant_name(world.task.name, View.of(instance.factor_values)))
+        values = instance.factor_values
+        name = variant_name(world.task.name, View.of(values))
+        code = noise.noise_code(values)
+        return instruction_of(f"{name}_noise_{code}" if code else name)
 
 
 def baseline_liberoplus_instance(task: str = LIBEROPLUS_TASK.baseline, init_state: str = "0"):
@@ -137,7 +141,7 @@ register_task(
         seed_randomizes="fixture placement (cabinets, stoves…) in some scenes, nothing in others",
         repeat_factor="liberoplus_init_state",
         world_factor="liberoplus_task",
-        analyses=(CAMERA,),
+        analyses=(CAMERA, NOISE),
     )
 )
 
@@ -198,6 +202,58 @@ register_preset(
             ("view_scale", ("125",)),
             ("view_rotz", ("6",)),
             ("view_roty", ("2",)),
+        ),
+    )
+)
+
+# LIBERO-plus's sensor-noise dimension (roboview.libero.noise; docs/liberoplus.md), on the `liberoplus` task: its 1,601
+# variants of the 40 tasks (agentview corrupted, init state 0), the severities it does not run of each type on each task
+# (the ladder), every one of them again on both cameras, and a no-change view per task.
+# `liberoplus_noise_suffixed`: the same, the policy told LIBERO-plus's instruction (which names the noise code).
+# `liberoplus_noise_object` (and `_spatial`, `_goal`, `_10`): one suite's share.
+# `liberoplus_noise_tiny`: libero_object/2, one severity of each type and a ladder one of fog: 13 instances.
+LIBERO_PLUS_NOISE = SuiteConfig(
+    preset="liberoplus_noise",
+    tasks=("liberoplus",),
+    union_mode="dedupe",
+    splits=noise.SPLITS,
+    factorial_colors=(),
+    value_subsets=(("liberoplus_init_state", ("0",)),),
+    generator="roboview.libero.noise:noise_suite",
+    # LIBERO-plus's own variants (and each task's no-change view) are kept whatever the gate says.
+    ungated_splits=noise.LIBERO_PLUS_SPLITS,
+)
+register_preset(LIBERO_PLUS_NOISE)
+register_preset(
+    replace(
+        LIBERO_PLUS_NOISE,
+        preset="liberoplus_noise_suffixed",
+        value_subsets=(*LIBERO_PLUS_NOISE.value_subsets, ("liberoplus_instruction", ("liberoplus",))),
+    )
+)
+for _suite in ("spatial", "object", "goal", "10"):
+    register_preset(
+        replace(
+            LIBERO_PLUS_NOISE,
+            preset=f"liberoplus_noise_{_suite}",
+            value_subsets=(
+                *LIBERO_PLUS_NOISE.value_subsets,
+                ("liberoplus_task", tuple(f"libero_{_suite}/{i}" for i in range(10))),
+            ),
+        )
+    )
+register_preset(
+    replace(
+        LIBERO_PLUS_NOISE,
+        preset="liberoplus_noise_tiny",
+        value_subsets=(
+            *LIBERO_PLUS_NOISE.value_subsets,
+            ("liberoplus_task", ("libero_object/2",)),
+            ("noise_motion_blur", ("3",)),
+            ("noise_gaussian_blur", ("2",)),
+            ("noise_zoom_blur", ("4",)),
+            ("noise_fog", ("1", "3")),  # 1: a severity LIBERO-plus does not run on this task (the ladder)
+            ("noise_glass_blur", ("5",)),
         ),
     )
 )

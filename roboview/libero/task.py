@@ -27,6 +27,8 @@ unchanged:
   rewritten with the pattern of RoboView's texture of that name.
 - `view_*`: LIBERO-plus's five camera sub-factors (declared in `roboview.libero.view`), agentview where LIBERO-plus
   puts it (one applier for all five).
+- `noise_*`: LIBERO-plus's sensor noise (roboview.libero.noise): agentview's frames (and with `noise_wrist` the
+  wrist camera's) corrupted after rendering, at reset and after every step, as LIBERO-plus corrupts them.
 - `distractors`, `object_size`: not applicable to LIBERO's scenes; an instance that sets them is refused.
 
 The world's applier table (`APPLIERS`, its `World.appliers`) says which applier makes each factor's value.
@@ -51,6 +53,7 @@ import numpy as np
 
 import roboview.libero.view  # noqa: F401  (registers LIBERO-plus's view_* factors, which APPLIERS takes)
 from roboview.libero.env import IMAGE_SIZE
+from roboview.libero.noise import NOISE_FACTORS, WRIST_FACTOR
 from roboview.libero.plus import SUB_FACTORS
 from roboview.libero.suites import SUITES, max_steps
 from roboview.sim.cameras import CameraPose, camera_pose_of
@@ -95,6 +98,9 @@ APPLIERS = {
     "dist_scale": "roboview.libero.factors:PullBack",
     "lighting": "roboview.variation.model_edits:Lighting",
     "table_texture": "roboview.libero.factors:TableTexture",
+    # LIBERO-plus's sensor noise: one applier for its five types and the wrist switch (a frame corruption, not a
+    # model edit: the env applies it to every observation's frames).
+    (*NOISE_FACTORS, WRIST_FACTOR): "roboview.libero.noise:SensorNoise.of",
     "distractors": None,
     "object_size": None,
 }
@@ -203,6 +209,7 @@ class LiberoTaskEnv(WorldEnv):
         self.libero_world = None
         self.instance = self.baseline_instance()
         self.instruction = ""
+        self.episode_seed = 0
         self.steps, self.max_steps = 0, max_steps or LIBERO_MAX_STEPS
         # The baseline task's world, built now: the stack is described, and the cameras calibrated, from it.
         self._world(*parse_libero_task(self.instance.get(self.task_factor)))
@@ -232,7 +239,8 @@ class LiberoTaskEnv(WorldEnv):
         self.instance, self.instruction = instance, self.instruction_of(instance, world)
         self.max_steps = self._max_steps_override or max_steps(suite)
         self.steps = 0
-        raw = world.reset(seed=0 if seed is None else int(seed))
+        self.episode_seed = 0 if seed is None else int(seed)
+        raw = world.reset(seed=self.episode_seed)
         return self._observation(raw), {"task": world.task.name}
 
     def step(self, action):
@@ -263,8 +271,18 @@ class LiberoTaskEnv(WorldEnv):
         proprio = np.concatenate([raw["robot0_eef_pos"], raw["robot0_eef_quat"], raw["robot0_gripper_qpos"]])
         eager = {STATE_KEY: state, EE_STATE_KEY: state.copy(), PROPRIO_KEY: proprio.astype(np.float64)}
 
+        filters, seed, step = self.libero_world.image_filters, self.episode_seed, self.steps
+
         def flipped(camera: str):
-            return lambda: np.ascontiguousarray(raw[image_key(CAMERAS[camera])][::-1, ::-1])
+            noise = filters.get(CAMERAS[camera])
+
+            def image() -> np.ndarray:
+                frame = raw[image_key(CAMERAS[camera])]
+                if noise is not None:  # on robosuite's raw frame, where LIBERO-plus corrupts it
+                    frame = noise(frame, seed, step)
+                return np.ascontiguousarray(frame[::-1, ::-1])
+
+            return image
 
         return self.observation(eager, {IMAGE_KEY.format(c): flipped(c) for c in self.cameras})
 
@@ -311,6 +329,11 @@ class LiberoTaskEnv(WorldEnv):
 
     def camera_ids(self) -> dict[str, int]:
         return {name: self.model.camera(CAMERAS[name]).id for name in self.world.recorded_cameras}
+
+    def image_filters(self) -> dict[str, str]:
+        """The recorded cameras whose frames go through a corruption (LIBERO-plus's noise), and which."""
+        filters = self.libero_world.image_filters
+        return {n: str(filters[CAMERAS[n]]) for n in self.world.recorded_cameras if CAMERAS[n] in filters}
 
     def camera_pose(self, name: str) -> CameraPose:
         """Read from LIBERO's compiled model."""

@@ -7,8 +7,12 @@ view. A *variant* changes one or more of them; its *kind* is the set it changes.
 against the no-change view, the sub-factors whose severity a dose–response is fitted over, the splits that hold the
 external benchmark's own variants (what its headline number is over) and the groups it averages over, and the words
 the report prints. Nothing here computes: a wing declares its design without importing the statistics, and the
-statistics read it from the task registry without importing the wing. LIBERO-plus's camera dimension
-(`roboview.libero.decomposition`) is one.
+statistics read it from the task registry without importing the wing. LIBERO-plus's camera and sensor-noise
+dimensions (`roboview.libero.decomposition`) are two.
+
+A design may declare a *twin*: the external variants run again with one more sub-factor changed (LIBERO-plus's noise
+on the wrist camera too, where LIBERO-plus leaves that camera clean), whose totals the result gives beside the
+external number and each against its original, paired by block.
 """
 
 from __future__ import annotations
@@ -46,6 +50,17 @@ class SubFactor:
 
 
 @dataclass(frozen=True)
+class Twin:
+    """Every variant run again with one more sub-factor changed (its `column` away from its no-change value)."""
+
+    # The sub-factor column the twins change.
+    column: str
+    # The twins in a few words ("on both cameras") and in a sentence for the report.
+    name: str
+    words: str
+
+
+@dataclass(frozen=True)
 class Decomposition:
     """How one task's factor is taken apart (module docstring)."""
 
@@ -77,15 +92,25 @@ class Decomposition:
     # that ran said (the last where none did); "": no such column.
     instruction_column: str = ""
     instructions: tuple[tuple[str, str], ...] = ()
+    # Every split (without the `<task>_` prefix) whose episodes it reads; empty: all of the task's. Two designs on one
+    # task (LIBERO-plus's camera and noise) each read their own, so one's variants are never the other's no-change
+    # view.
+    splits: tuple[str, ...] = ()
+    # The variants' twins (`Twin`), or None.
+    twin: Twin | None = None
+    # The dose–response figure's file name; "": `analysis_<task>_dose_response.png`.
+    figure_name: str = ""
 
     def __post_init__(self) -> None:
         columns = [f.column for f in self.sub_factors]
         if len(set(columns)) != len(columns):
             raise ValueError(f"decomposition {self.key!r}: a sub-factor column twice in {columns}")
         unknown = sorted({c for kind in self.kinds for c in kind} - set(columns))
+        if self.twin is not None and self.twin.column not in columns:
+            unknown.append(self.twin.column)
         if unknown:
             raise ValueError(
-                f"decomposition {self.key!r}: kinds name {unknown}, not its sub-factors {columns}"
+                f"decomposition {self.key!r}: kinds or twin name {unknown}, not its sub-factors {columns}"
             )
 
     def sub_factor(self, column: str) -> SubFactor:
@@ -103,4 +128,8 @@ class Decomposition:
     @property
     def figure(self) -> str:
         """The dose–response figure's file name."""
-        return f"analysis_{self.task}_dose_response.png"
+        return self.figure_name or f"analysis_{self.task}_dose_response.png"
+
+    def reads(self, split: str) -> bool:
+        """Whether a benchmark split (`<task>_<split>`) is one the design reads."""
+        return not self.splits or str(split).removeprefix(f"{self.task}_") in self.splits

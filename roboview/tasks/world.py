@@ -426,6 +426,11 @@ class WorldEnv(gym.Env):
         """The recorded cameras' ids in the compiled model, by RoboView's name."""
         raise NotImplementedError
 
+    def image_filters(self) -> dict[str, str]:
+        """The recorded cameras whose frames go through a corruption after rendering, and which (LIBERO-plus's
+        sensor noise), as the isolation certificate records them; empty: every frame as rendered."""
+        return {}
+
     def camera_pose(self, name: str) -> CameraPose:
         """Camera `name`'s calibration now (position, orientation, fovy), as records and certificates store it."""
         raise NotImplementedError

@@ -276,9 +276,14 @@ def test_the_certificate_labels_two_changes_and_a_suffixed_instruction(env):
 
     cert, _ = certificate(False, "view_azimuth")
     assert cert["isolated"] and cert["changes"] == ["view_azimuth"] and not cert["violations"]
-    assert isolation.label(cert) == "isolated (view_azimuth)"
+    assert isolation.label(cert) == "isolated (view_azimuth) on agentview" and cert["cameras"] == [
+        "agentview"
+    ]
     cert, _ = certificate(False, "view_azimuth_x_view_elevation")
-    assert not cert["isolated"] and isolation.label(cert) == "2 changes: view_azimuth + view_elevation"
+    assert (
+        not cert["isolated"]
+        and isolation.label(cert) == "2 changes: view_azimuth + view_elevation on agentview"
+    )
     # LIBERO-plus's instruction names the view: a second change of every value, named, not a violation.
     cert, rows = certificate(True, "view_azimuth")
     assert len(rows) == 2 and len({r["instruction"] for r in rows}) == 2  # the no-change view and azimuth 31

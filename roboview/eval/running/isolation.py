@@ -13,6 +13,8 @@ of each thing that must not change across the values of its block (`isolation` c
     seed              the episode seed
     context           every factor's value except those the split varies
     camera:<name>     each camera's calibration at t = 0 (position, orientation, field of view)
+    image:<name>      the corruption a camera's frames go through after rendering (LIBERO-plus's sensor noise),
+                      recorded only for a camera that has one
     card              the scene_text card's pose and size, where the scene holds one (its texture is the factor)
 
 `verify` groups a split's episodes into blocks (context_id, repeat) and checks every component is the
@@ -74,6 +76,8 @@ def components(env, seed: int) -> dict[str, str]:
     for name in sorted(env.camera_ids()):
         pose = env.camera_pose(name)
         out[f"camera:{name}"] = _digest([*pose.pos, *pose.quat, pose.fovy])
+    for name, corruption in sorted(env.image_filters().items()):
+        out[f"image:{name}"] = _digest(corruption)
     return out
 
 
@@ -134,6 +138,7 @@ def verify(episodes: pd.DataFrame) -> dict[str, dict[str, Any]]:
             "varied": list(varied),
             "allowed_to_differ": sorted(free),
             "changes": [*varied, *riding],
+            "cameras": cameras_changed(free),
             "isolated": len(varied) + len(riding) == 1,
         }
     return out
@@ -153,14 +158,22 @@ def _riding(rows: pd.DataFrame) -> list[str]:
     return out
 
 
+def cameras_changed(components: set[str]) -> list[str]:
+    """The cameras whose pose (`camera:<name>`) or frames (`image:<name>`) are among `components`, sorted."""
+    return sorted({c.partition(":")[2] for c in components if c.startswith(("camera:", "image:"))})
+
+
 def label(cert: dict[str, Any]) -> str:
-    """What a split's values change, in words: "isolated (view_azimuth)", "2 changes: view_azimuth + view_elevation"."""
+    """What a split's values change, in words, with the cameras they change: "isolated (view_azimuth) on agentview",
+    "2 changes: noise_fog + noise_wrist on agentview + wrist"."""
     changes = cert.get("changes") or []
     if not changes:
         return "not recorded"
+    cameras = cert.get("cameras") or []
+    on = f" on {' + '.join(cameras)}" if cameras else ""
     if cert.get("isolated"):
-        return f"isolated ({changes[0]})"
-    return f"{len(changes)} changes: {' + '.join(changes)}"
+        return f"isolated ({changes[0]}){on}"
+    return f"{len(changes)} changes: {' + '.join(changes)}{on}"
 
 
 def _varied(rows: pd.DataFrame) -> tuple[str, ...]:

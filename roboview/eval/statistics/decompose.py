@@ -19,6 +19,10 @@
   (statsmodels) of success on severity with standard errors clustered by context, the fitted success at 0, and the
   severity at which the fitted success falls to half of it, with a delta-method 95 % interval (None where success
   does not fall with severity).
+- **Twins** (`Decomposition.twin`: LIBERO-plus's noise on the wrist camera too): the factor's number both ways over
+  the twins of the external variants, and per kind the twins against their originals (the same variant with the
+  twin's sub-factor at its no-change value, in the same block): the mean per block of twin minus original success,
+  bounded and tested as above.
 - **Per variant**, where repeats ran: its rate, its paired difference to the no-change view over the same blocks,
   that difference's interval and McNemar's test (`roboview.eval.statistics.compare.control_deltas`, as every split's
   values against the control arm).
@@ -135,7 +139,8 @@ def interactions(rows: pd.DataFrame, design: Decomposition) -> dict[str, dict[st
     by = by[~by.index.duplicated()]
     base = no_change_blocks(rows)
     out = {}
-    for kind in (k for k in design.kinds if len(k) == 2):
+    singles = {k for k in design.kinds if len(k) == 1}
+    for kind in (k for k in design.kinds if len(k) == 2 and all((c,) in singles for c in k)):
         per_block: dict[tuple, list[float]] = {}
         matched: set[str] = set()
         for r in rows[rows["kind"] == "+".join(kind)].itertuples(index=False):
@@ -283,9 +288,54 @@ def factor_totals(rows: pd.DataFrame, design: Decomposition) -> dict[str, Any]:
     return out
 
 
+def twin_pairs(rows: pd.DataFrame, design: Decomposition) -> pd.DataFrame:
+    """Each twin row beside its original's success (`original`) and split (`original_split`), same block."""
+    column = design.twin.column
+    no_change = design.sub_factor(column).no_change
+    keys = [*BLOCK, *(f.column for f in design.sub_factors if f.column != column)]
+    originals = rows[(rows[column] == no_change) & (rows["kind"] != "")].drop_duplicates(keys)
+    originals = originals[[*keys, "success", "split"]].rename(
+        columns={"success": "original", "split": "original_split"}
+    )
+    return rows[rows[column] != no_change].merge(originals, on=keys)
+
+
+def twins(rows: pd.DataFrame, design: Decomposition) -> dict[str, Any] | None:
+    """The twins of the external variants: the factor's number both ways over them, against their originals overall
+    and per kind (module docstring); None where no twin ran beside its original."""
+    pairs = twin_pairs(rows, design)
+    external = pairs[pairs["original_split"].map(lambda s: is_variant(s, design))]
+    if pairs.empty:
+        return None
+
+    def against(sub: pd.DataFrame) -> dict[str, Any]:
+        d = (sub["success"] - sub["original"]).groupby([sub[c] for c in BLOCK]).mean().to_numpy(float)
+        return {
+            "n_variants": int(sub.drop_duplicates("instance_id").shape[0]),
+            "sr": float(sub["success"].mean()),
+            "sr_original": float(sub["original"].mean()),
+            **{"difference" if k == "effect" else k: v for k, v in block_test(d).items()},
+        }
+
+    column = design.twin.column
+    kinds = {}
+    for kind, sub in pairs.groupby("kind", sort=False):
+        original = tuple(c for c in kind.split("+") if c != column)
+        kinds[design.kind_name(original)] = {"factors": list(original), **against(sub)}
+    return {
+        "column": column,
+        **totals(external, design),
+        "against_original": against(external) if not external.empty else None,
+        "kinds": kinds,
+    }
+
+
 def compute(episodes: pd.DataFrame, design: Decomposition) -> dict[str, Any] | None:
-    """The decomposition of one policy's episodes of `design.task`; None without any, or without its columns."""
+    """The decomposition of one policy's episodes of `design.task` in the splits it reads; None without any, or
+    without its columns."""
     rows = episodes[episodes["task"].astype(str) == design.task] if "task" in episodes else episodes.iloc[:0]
+    if "split" in rows:
+        rows = rows[rows["split"].map(design.reads)]
     if rows.empty or any(f.column not in rows for f in design.sub_factors):
         return None
     rows = views(rows, design)
@@ -299,4 +349,5 @@ def compute(episodes: pd.DataFrame, design: Decomposition) -> dict[str, Any] | N
             f.name: d for f in design.dose_factors if (d := dose_response(rows, f)) is not None
         },
         "per_variant": per_variant(rows, design),
+        **({"twin": twins(rows, design)} if design.twin is not None else {}),
     }
