@@ -13,6 +13,10 @@ Their factors: every visual factor but distractors and object_size; the color ba
 - `libero_camera`: the `libero` preset's three camera splits alone (the 40 tasks, init state 0, every value of
   camera_pose, camera_euler and dist_scale): 1,560 instances, a camera profile the size of LIBERO-plus's camera
   dimension (1,599 variants). Repeats run init states 1, 2, … (docs/libero.md#cost-of-a-libero-profile).
+- `libero_object`: the look of one suite, libero_object's 10 tasks (init state 0), in the `libero` preset's color
+  (`original` and the seven colors of RoboView's factorial palette), lighting and table-texture splits: 250
+  instances, the visual profile of a policy trained on that suite (docs/results/libero_act.md). Repeats run init
+  states 1, 2, …, which demos collected from init states 10–49 never saw.
 
 LIBERO-plus's presets are registered with its task (roboview.libero.plus_task).
 """
@@ -22,7 +26,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from roboview.tasks.base import register_preset
-from roboview.variation.instances import SuiteConfig
+from roboview.variation.instances import DEFAULT_FACTORIAL_COLORS, SuiteConfig
 
 LIBERO_SPLITS = ("color", "camera_pose", "camera_euler", "dist_scale", "lighting", "table_texture")
 
@@ -73,4 +77,16 @@ LIBERO = register_preset(
 )
 LIBERO_CAMERA = register_preset(
     replace(LIBERO, preset="libero_camera", splits=("camera_pose", "camera_euler", "dist_scale"))
+)
+LIBERO_OBJECT = register_preset(
+    replace(
+        LIBERO,
+        preset="libero_object",
+        splits=("color", "lighting", "table_texture"),
+        value_subsets=(
+            ("color", ("original", *DEFAULT_FACTORIAL_COLORS)),
+            ("libero_task", tuple(f"libero_object/{i}" for i in range(10))),
+            ("init_state", ("0",)),
+        ),
+    )
 )
