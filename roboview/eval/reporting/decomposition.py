@@ -32,6 +32,7 @@ def markdown(result: dict[str, Any], policy: str, design: Decomposition) -> list
         "",
         totals_line(result, design),
         "",
+        *twin_lines(result, design),
         *kinds_lines(result),
         *interaction_lines(result),
         *dose_lines(result),
@@ -69,6 +70,49 @@ def totals_line(result: dict[str, Any], design: Decomposition) -> str:
         f"{macro_words} (the {design.groups_word}' mean: {groups}).{over_fair} The no-change view: "
         f"{pct(base['sr'])}{pct_ci(base['ci95'])} (n {base['n']}).{_told(result, design)}"
     )
+
+
+def twin_lines(result: dict[str, Any], design: Decomposition) -> list[str]:
+    """The factor's number over the twins beside the external one, and each kind's twins against their originals."""
+    twin = result.get("twin")
+    if not twin or design.twin is None:
+        return []
+    (micro, micro_words), (macro, macro_words) = design.micro, design.macro
+    lines = []
+    against = twin["against_original"]
+    if against is not None:
+        lines += [
+            f"{design.name.capitalize()} success rate {design.twin.name}, {design.twin.words}, over the twins of "
+            f"{design.source}'s {twin['n_variants']:,} variants: **{pct(twin[micro]['sr'])}**"
+            f"{pct_ci(twin[micro]['ci95'])} {micro_words}, {pct(twin[macro])} {macro_words}; against the same "
+            f"variants as {design.source} runs them ({pct(against['sr_original'])}): "
+            f"{points(against['difference'])} points{pct_ci(against['ci95'])}, p {p_fmt(against['p'])} over "
+            f"{against['n_blocks']} blocks.",
+            "",
+        ]
+    rows = [
+        [
+            name,
+            str(k["n_variants"]),
+            pct(k["sr_original"]),
+            pct(k["sr"]),
+            points(k["difference"]),
+            ci_cell(k["ci95"]),
+            p_fmt(k["p"]),
+            str(k["n_blocks"]),
+        ]
+        for name, k in twin["kinds"].items()
+    ]
+    return lines + [
+        f"Each kind {design.twin.name} against the same variant as {design.source} runs it, paired by block; "
+        "difference in points, 95 % bootstrap interval over blocks, sign-flip p over blocks:",
+        "",
+        *markdown_table(
+            ["Change", "Variants", design.source, design.twin.name, "Difference", "95 % CI", "p", "Blocks"],
+            rows,
+        ),
+        "",
+    ]
 
 
 def kinds_lines(result: dict[str, Any]) -> list[str]:
