@@ -26,6 +26,7 @@ ImageMagick's library (`make install-liberoplus-noise`).
 from __future__ import annotations
 
 from io import BytesIO
+from typing import Any
 
 import numpy as np
 
@@ -259,6 +260,46 @@ def _shuffle_kernel():
 
         _KERNEL.append(njit(cache=True, nogil=True)(_shuffle_loop))
     return _KERNEL[0]
+
+
+# ---- LIBERO-plus's own functions, the reference --------------------------------------------------------------
+WRAPPER = "liberoplus/envs/env_wrapper.py"  # under the installed `liberoplus` package
+# What its noise functions need from the wrapper's imports (the rest of it builds robosuite envs).
+_NEEDED = {"np", "cv2", "ctypes", "BytesIO", "wandlibrary", "WandImage", "gaussian", "scizoom"}
+
+
+def liberoplus_functions() -> dict[str, Any]:
+    """LIBERO-plus's own noise functions by type (`fn(PIL image, severity=s)`, drawing from numpy's global generator),
+    run from its installed env wrapper's source: the comparison RoboView's are held to.
+
+    The wrapper cannot be imported whole: its package's `__init__` builds LIBERO-plus's robosuite problems. Its
+    imports of the libraries the functions use, the motion-blur argtypes line, `MotionImage` and every function are
+    run from the file as they are, with numpy's `np.float_` (its fractal's dtype, gone in numpy 2) spelled back in.
+    Needs scikit-image (`make install-liberoplus-noise`)."""
+    import ast
+    import types
+
+    from roboview.libero.plus import package_root
+
+    path = package_root() / WRAPPER
+    keep = []
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            if {a.asname or a.name.split(".")[0] for a in node.names} & _NEEDED:
+                keep.append(node)
+        elif isinstance(node, ast.FunctionDef) or (
+            isinstance(node, ast.ClassDef) and node.name == "MotionImage"
+        ):
+            keep.append(node)
+        elif isinstance(node, ast.Assign) and "argtypes" in ast.unparse(node):
+            keep.append(node)
+    namespace: dict[str, Any] = {}
+    exec(compile(ast.Module(keep, []), str(path), "exec"), namespace)  # nosec B102: its own code
+    numpy_1 = types.ModuleType("numpy")
+    numpy_1.__dict__.update(np.__dict__)
+    numpy_1.float_ = np.float64
+    namespace["np"] = numpy_1
+    return {kind: namespace[kind] for kind in TYPES}
 
 
 FUNCTIONS = {

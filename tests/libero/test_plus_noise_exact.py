@@ -2,9 +2,6 @@
 frame equals LIBERO-plus's own function applied to the same frame, its draws from numpy's global generator in the
 state a generator of RoboView's starts in; the codes, and bad input refused in one line."""
 
-import ast
-import types
-
 import numpy as np
 import pytest
 
@@ -19,45 +16,11 @@ pytest.importorskip("wand.api", reason="Wand / ImageMagick missing (make install
 pytest.importorskip("skimage", reason="scikit-image missing (make install-liberoplus-noise)")
 
 from roboview.libero import corruptions  # noqa: E402
-from roboview.libero.plus import package_root  # noqa: E402
-
-WRAPPER = "liberoplus/envs/env_wrapper.py"
-# What its functions need from the wrapper's imports (the rest of it builds robosuite envs).
-NEEDED = {"np", "cv2", "ctypes", "BytesIO", "wandlibrary", "WandImage", "gaussian", "scizoom"}
-
-
-def numpy_1_spelling() -> types.ModuleType:
-    """numpy with `np.float_` (its plasma fractal's dtype, removed in numpy 2): the wrapper's own code runs as is."""
-    shim = types.ModuleType("numpy")
-    shim.__dict__.update(np.__dict__)
-    shim.float_ = np.float64
-    return shim
 
 
 @pytest.fixture(scope="module")
 def theirs() -> dict:
-    """LIBERO-plus's noise functions, from its installed env wrapper's source.
-
-    The module cannot be imported whole here: its package `__init__` builds LIBERO-plus's robosuite problems. Its
-    imports of the libraries the functions use, the motion-blur argtypes line, `MotionImage` and every function are
-    run from the file as they are."""
-    source = (package_root() / WRAPPER).read_text()
-    keep = []
-    for node in ast.parse(source).body:
-        if isinstance(node, ast.Import | ast.ImportFrom):
-            names = {a.asname or a.name.split(".")[0] for a in node.names}
-            if names & NEEDED:
-                keep.append(node)
-        elif isinstance(node, ast.FunctionDef) or (
-            isinstance(node, ast.ClassDef) and node.name == "MotionImage"
-        ):
-            keep.append(node)
-        elif isinstance(node, ast.Assign) and "argtypes" in ast.unparse(node):
-            keep.append(node)
-    namespace: dict = {}
-    exec(compile(ast.Module(keep, []), str(package_root() / WRAPPER), "exec"), namespace)  # nosec B102: its code
-    namespace["np"] = numpy_1_spelling()
-    return namespace
+    return corruptions.liberoplus_functions()
 
 
 @pytest.fixture(scope="module")

@@ -104,11 +104,20 @@ def twin_lines(result: dict[str, Any], design: Decomposition) -> list[str]:
         for name, k in twin["kinds"].items()
     ]
     return lines + [
-        f"Each kind {design.twin.name} against the same variant as {design.source} runs it, paired by block; "
+        f"Each kind {design.twin.name} against the same variants without it (each severity run), paired by block; "
         "difference in points, 95 % bootstrap interval over blocks, sign-flip p over blocks:",
         "",
         *markdown_table(
-            ["Change", "Variants", design.source, design.twin.name, "Difference", "95 % CI", "p", "Blocks"],
+            [
+                "Change",
+                "Variants",
+                "SR without",
+                f"SR {design.twin.name}",
+                "Difference",
+                "95 % CI",
+                "p",
+                "Blocks",
+            ],
             rows,
         ),
         "",
