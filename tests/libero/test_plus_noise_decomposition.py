@@ -2,6 +2,8 @@
 roboview.eval.statistics.decompose): the noise number and its twins on both cameras on a constructed table, each
 design reading only its own splits, and by simulation the twins' difference interval covering the truth."""
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -114,3 +116,17 @@ def test_the_twins_difference_interval_covers_the_truth():
         against = dec.twins(dec.views(pd.DataFrame(rows), NOISE), NOISE)["against_original"]
         covered += against["ci95"][0] <= -0.3 <= against["ci95"][1]
     assert 0.88 <= covered / sims <= 0.99
+
+
+def test_eval_info_json_carries_both_numbers(tmp_path):
+    from roboview.integrations.lerobot.convert import add_control_arm
+
+    path = tmp_path / "eval_info.json"
+    info = {"per_group": {"liberoplus_noise_fog": {"pc_success": 66.7}}}
+    add_control_arm(path, info, table().to_dict("records"))
+    written = json.loads(path.read_text())
+    noise = written["analyses"]["liberoplus_noise"]
+    assert noise["noise"]["liberoplus"]["sr"] == pytest.approx(2 / 3)
+    assert noise["twin"]["liberoplus"]["sr"] == pytest.approx(1 / 3)
+    assert "liberoplus_camera" not in written["analyses"]
+    assert written["per_group"]["liberoplus_noise_fog"]["pc_success"] == 66.7

@@ -105,9 +105,12 @@ def add_control_arm(path: Path, info: dict, rows: list[dict]) -> None:
     all-baseline instance of each (context, repeat) the split ran, on the same seed), `sr_control_ci95`
     (Clopper–Pearson) and `n_control_episodes`; a single-factor split also `per_value.<v>`, each value against the
     control arm on the pairs both ran: `delta_control`, `delta_control_ci95` (Newcombe's paired interval),
-    `n_control_pairs`, `p_control` (McNemar), the numbers metrics.json holds. Written back atomically."""
+    `n_control_pairs`, `p_control` (McNemar), the numbers metrics.json holds. A factor a task takes apart (`analyses`:
+    LIBERO-plus's camera and noise, their number over its own variants beside RoboView's isolated ones) is written
+    under `analyses.<key>`, as metrics.json has it. Written back atomically."""
     import pandas as pd
 
+    from roboview.eval.statistics.analyses import task_analyses
     from roboview.eval.statistics.compare import all_baseline, control_arm, control_deltas
 
     episodes = pd.DataFrame(rows)
@@ -118,6 +121,9 @@ def add_control_arm(path: Path, info: dict, rows: list[dict]) -> None:
             group.update(control_arm(base, split_rows))
             if "|" not in str(split_rows["factor"].iloc[0]):
                 group["per_value"] = control_deltas(base, split_rows)
+    analyses = task_analyses(episodes)
+    if analyses:
+        info["analyses"] = analyses
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(info, indent=2))
     tmp.replace(path)
