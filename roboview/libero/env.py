@@ -116,6 +116,8 @@ class LiberoWorld:
         self.image_filters: dict[str, Any] = {}
         # The last factors left an edit a soft reset cannot undo: the next reset compiles a new model.
         self._dirty = False
+        # The live model was compiled with a factor's MJCF additions (`edit_xml`).
+        self._edited = False
         self.hard_resets = 0
         self.timings: dict[str, float] = {}
         ensure_libero()
@@ -191,7 +193,12 @@ class LiberoWorld:
 
     def _reset(self, seed: int) -> LazyObservation:
         start = time.perf_counter()
-        hard = self.hard_reset or self._dirty
+        # A factor adding to LIBERO's MJCF (scene_text's card) compiles a model of its own; one without compiles
+        # LIBERO's own MJCF again: robosuite's XML processor, None as LIBERO leaves it unless such a factor is set.
+        edits = [factor.edit_xml for factor in self.factors if hasattr(factor, "edit_xml")]
+        hard = self.hard_reset or self._dirty or bool(edits) != self._edited
+        self.inner._xml_processor = _chain(edits) if edits else None
+        self._edited = bool(edits)
         self.inner.hard_reset = hard
         if hard:
             self._visual_snapshot = None  # a new model: snapshot its pristine visuals again
@@ -326,6 +333,17 @@ class LiberoWorld:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _chain(edits: Sequence[Any]):
+    """One XML processor applying `edits` (each MJCF text → MJCF text) in order."""
+
+    def process(xml: str) -> str:
+        for edit in edits:
+            xml = edit(xml)
+        return xml
+
+    return process
 
 
 def _address(gl) -> int | None:

@@ -29,6 +29,8 @@ unchanged:
   puts it (one applier for all five).
 - `noise_*`: LIBERO-plus's sensor noise (roboview.libero.noise): agentview's frames (and with `noise_wrist` the
   wrist camera's) corrupted after rendering, at reset and after every step, as LIBERO-plus corrupts them.
+- `scene_text`: a card with a word lying on the table below the objects in agentview (roboview.libero.scene_text),
+  compiled into LIBERO's MJCF only for an instance that sets it.
 - `distractors`, `object_size`: not applicable to LIBERO's scenes; an instance that sets them is refused.
 
 The world's applier table (`APPLIERS`, its `World.appliers`) says which applier makes each factor's value.
@@ -98,6 +100,7 @@ APPLIERS = {
     "dist_scale": "roboview.libero.factors:PullBack",
     "lighting": "roboview.variation.model_edits:Lighting",
     "table_texture": "roboview.libero.factors:TableTexture",
+    "scene_text": "roboview.libero.scene_text:TextCard",
     # LIBERO-plus's sensor noise: one applier for its five types and the wrist switch (a frame corruption, not a
     # model edit: the env applies it to every observation's frames).
     (*NOISE_FACTORS, WRIST_FACTOR): "roboview.libero.noise:SensorNoise.of",
@@ -324,6 +327,18 @@ class LiberoTaskEnv(WorldEnv):
         """What a policy must find besides the object: nothing the gate judges (LIBERO's scenes have no box)."""
         return ()
 
+    def text_card(self) -> Any:
+        """The scene_text card of the live model (roboview.libero.scene_text), or None where it holds none."""
+        import mujoco
+
+        from roboview.libero.scene_text import CARD, LiberoCard
+
+        if mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, CARD) < 0:
+            return None
+        if getattr(self, "_card", None) is None:
+            self._card = LiberoCard(self)
+        return self._card
+
     def render(self):
         return self.render_camera("agentview")
 
@@ -408,3 +423,4 @@ register_task(
 
 # The wing's presets (roboview.libero.presets), registered with its task.
 import roboview.libero.presets  # noqa: E402, F401
+import roboview.libero.scene_text  # noqa: E402, F401  (its presets; scene_text's applier, APPLIERS)

@@ -47,7 +47,8 @@ TASKS = ["pick_place", "push", "libero", "metaworld", "liberoplus"]
 WORLDS = ["roboview", "libero", "metaworld"]
 PRESETS = [
     *("paper", "paper_dedupe", "tiny", "extended", "tiny_extended", "scene_text", "scene_text_tiny"),
-    *("libero_tiny", "libero_small", "libero", "libero_camera"),
+    *("libero_tiny", "libero_small", "libero", "libero_camera", "libero_object"),
+    *("libero_scene_text", "libero_scene_text_tiny"),
     *("metaworld_tiny", "metaworld"),
     *(
         "liberoplus_camera",

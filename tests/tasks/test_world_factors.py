@@ -24,7 +24,7 @@ lighting        takes     takes    takes
 table_texture   takes     takes    takes
 distractors     takes     refuses  refuses
 object_size     takes     refuses  refuses
-scene_text      takes     lacks    lacks
+scene_text      takes     takes    lacks
 view_azimuth    lacks     takes    lacks
 view_elevation  lacks     takes    lacks
 view_scale      lacks     takes    lacks

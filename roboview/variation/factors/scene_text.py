@@ -11,8 +11,8 @@ matplotlib's DejaVu Sans Bold (the font file the installed package ships), dark 
   basket);
 - `color`: a color word contradicting the object's color;
 - `nonsense`: a non-word of the same length class;
-- `target_small`, `target_large`: the target word at a third and at three quarters of the card's height
-  (`target` is at half of it).
+- `target_small`, `target_large`: the target word at 0.6 and 1.0 of the largest size that fits the card (`target`
+  is at 0.8 of it).
 
 The baseline, `none`, has no card at all: an instance that does not set this factor compiles the scene every other
 instance has (the card is a scene addition made only when the factor is set, `Factor.extend_spec_when_set`), so no
@@ -41,11 +41,13 @@ from roboview.variation.factors.base import Factor, register_factor
 BASELINE = "none"
 REFERENCE = "blank"
 VALUES = (REFERENCE, "target", "conflict", "color", "nonsense", "target_small", "target_large")
-# The share of the card's height the text's capitals fill, per size (a word too long for the card is shrunk to fit).
-SIZES = {"small": 0.30, "normal": 0.48, "large": 0.75}
-# The card: texture (pixels, 2:1) and its size on the table (m, along the text line and across it).
-TEXTURE_HW = (128, 256)
-CARD_M = (0.18, 0.09)
+# The text's size as a share of the largest that fits the card (capitals 3/4 of its height, the word 92 % of its
+# width): a long word and a short one keep the same order of sizes.
+SIZES = {"small": 0.6, "normal": 0.8, "large": 1.0}
+FIT_HEIGHT, FIT_WIDTH = 0.75, 0.92
+# The card: texture (pixels, 2.5:1) and its size on the table (m, along the text line and across it).
+TEXTURE_HW = (128, 320)
+CARD_M = (0.25, 0.10)
 INK, PAPER = (20, 20, 20), (245, 245, 240)
 NONSENSE = "ZORP"
 
@@ -133,13 +135,12 @@ def card_image(word: str, size: str = "normal") -> np.ndarray:
     if word:
         if size not in SIZES:
             raise ValueError(f"unknown text size {size!r}; allowed: {', '.join(SIZES)}")
-        # DejaVu's capitals are 0.73 of the font size.
-        points = SIZES[size] * height / 0.73
-        font = ImageFont.truetype(font_path(), int(points))
+        # DejaVu's capitals are 0.73 of the font size; the word's width grows with it.
+        points = FIT_HEIGHT * height / 0.73
+        left, _, right, _ = ImageFont.truetype(font_path(), 100).getbbox(word)
+        points = min(points, FIT_WIDTH * width * 100 / (right - left))
+        font = ImageFont.truetype(font_path(), int(SIZES[size] * points))
         left, top, right, bottom = font.getbbox(word)
-        if right - left > 0.9 * width:
-            font = ImageFont.truetype(font_path(), int(points * 0.9 * width / (right - left)))
-            left, top, right, bottom = font.getbbox(word)
         xy = ((width - (right - left)) / 2 - left, (height - (bottom - top)) / 2 - top)
         ImageDraw.Draw(image).text(xy, word, font=font, fill=INK)
     return np.asarray(image, dtype=np.uint8).copy()

@@ -1,0 +1,220 @@
+"""`scene_text` in LIBERO's scenes: the card with its word, added to LIBERO's MJCF only for an instance that sets it.
+
+LIBERO compiles its scene from robosuite's MJCF. A `TextCard` names an MJCF edit (`edit_xml`: a flat 2D texture, its
+material, and a static, contact-free card body in visual group 1, parked) that `LiberoWorld` hands robosuite as its
+XML processor for the compile; an instance that does not set the factor compiles LIBERO's own MJCF, untouched, so
+LeRobot's `LiberoEnv` episode stays bit for bit what it was. After the reset, `apply` lays the card flat on the table
+where agentview's line of sight through `CARD_PIXEL` (a point of the lower middle of its frame, clear of the objects)
+first meets a static surface, turned so its text reads upright in the observed frame, and writes the value's word
+(roboview.variation.factors.scene_text: the words, the font, the pixels) into the texture. The words follow the
+task's instruction (`goal_words`: BASKET and PLATE in the basket tasks).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, replace
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from roboview.libero.factors import AGENTVIEW, VISUAL_GROUP, camera_pose, object_geoms, target_object
+from roboview.tasks.base import register_preset
+from roboview.variation.factors.scene_text import (
+    CARD_M,
+    CARD_THICK_M,
+    REFERENCE,
+    TEXTURE_HW,
+    card_image,
+    glyph_height,
+    goal_words,
+    text_of,
+)
+from roboview.variation.instances import SuiteConfig
+from roboview.variation.model_edits import rotation, tex_slice
+
+# The typographic factor over LIBERO's 40 tasks (init state 0; repeats run init states 1, 2, …): 280 instances; and
+# over libero_object's first task alone: 7, for tests and demos.
+LIBERO_SCENE_TEXT = register_preset(
+    SuiteConfig(
+        preset="libero_scene_text",
+        tasks=("libero",),
+        union_mode="dedupe",
+        splits=("scene_text",),
+        factorial_colors=(),
+        value_subsets=(("init_state", ("0",)),),
+    )
+)
+register_preset(
+    replace(
+        LIBERO_SCENE_TEXT,
+        preset="libero_scene_text_tiny",
+        value_subsets=(("libero_task", ("libero_object/0",)), ("init_state", ("0",))),
+    )
+)
+
+CARD = "scene_text_card"
+# Where the card lies: agentview's line of sight through this point of its upright frame (x right, y down, 0–1).
+CARD_PIXEL = (0.5, 0.86)
+
+
+def card_xml(xml: str) -> str:
+    """LIBERO's MJCF with the card added: its texture (drawn into after the compile), material and parked body."""
+    root = ET.fromstring(xml)
+    asset, world = root.find("asset"), root.find("worldbody")
+    if asset is None or world is None:
+        raise ValueError("LIBERO's MJCF has no <asset> or <worldbody> to add the scene_text card to")
+    height, width = TEXTURE_HW
+    ET.SubElement(
+        asset,
+        "texture",
+        name=CARD,
+        type="2d",
+        builtin="flat",
+        width=str(height),
+        height=str(width),
+        rgb1="1 1 1",
+    )
+    ET.SubElement(asset, "material", name=CARD, texture=CARD)
+    body = ET.SubElement(world, "body", name=CARD, pos="0 0 -5")
+    size = f"{CARD_M[1] / 2} {CARD_M[0] / 2} {CARD_THICK_M / 2}"
+    ET.SubElement(
+        body, "geom", name=CARD, type="box", size=size, material=CARD, contype="0", conaffinity="0",
+        group=str(VISUAL_GROUP),
+    )  # fmt: skip
+    return ET.tostring(root, encoding="unicode")
+
+
+def pixels(value: str, instruction: str) -> np.ndarray:
+    """The card texture's pixels for `value` in the task told `instruction`, as the box face maps them."""
+    # Turned 180° against RoboView's card: LIBERO's frames reach a policy turned (robosuite reads rows bottom first,
+    # LeRobot turns the frame 180°), and the word must read in the frame a policy is handed.
+    image = card_image(*text_of(value, goal_words(instruction)))[::-1, ::-1]
+    return np.ascontiguousarray(image.transpose(1, 0, 2)[::-1, ::-1])
+
+
+def _ids(model: mujoco.MjModel) -> tuple[int, int, int]:
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, CARD)
+    if body < 0:
+        raise RuntimeError("the LIBERO model was compiled without the scene_text card")
+    geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, CARD)
+    return body, geom, mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, CARD)
+
+
+def write_texture(world, value: str) -> None:
+    """The card's texture set to `value`'s word and uploaded to the live render context."""
+    model, (_, _, tex) = world.model, _ids(world.model)
+    model.tex_data[tex_slice(model, tex)] = pixels(value, world.task.language).reshape(-1)
+    ctx = world.render_context
+    ctx.gl_ctx.make_current()
+    mujoco.mjr_uploadTexture(model, ctx.con, tex)
+
+
+def lay_card(world) -> None:
+    """The card flat on the first static surface agentview sees through CARD_PIXEL, its text upright there."""
+    model, data = world.model, world.data
+    body, geom, _ = _ids(model)
+    pos, quat = camera_pose(world, AGENTVIEW)
+    rot = rotation(quat)  # columns: right, up, backward
+    cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, AGENTVIEW)
+    half = np.tan(np.radians(model.cam_fovy[cam]) / 2)
+    u, v = CARD_PIXEL
+    ray = rot @ np.array([(2 * u - 1) * half, (1 - 2 * v) * half, -1.0])
+    ray /= np.linalg.norm(ray)
+    groups = np.zeros(6, np.uint8)
+    groups[VISUAL_GROUP] = 1
+    hit, start = np.zeros(1, np.int32), pos.copy()
+    for _ in range(64):  # past the robot and the objects: the card lies on the table (or the floor)
+        dist = mujoco.mj_ray(model, data, start, ray, groups, 1, -1, hit)
+        if hit[0] < 0:
+            raise RuntimeError("agentview's line of sight to the scene_text card meets no static surface")
+        start = start + ray * (dist + 1e-4)
+        if model.body_weldid[model.geom_bodyid[hit[0]]] == 0 and hit[0] != geom:
+            break
+    up = rot[:, 1] - rot[:, 1] @ [0, 0, 1.0] * np.array([0, 0, 1.0])
+    right = np.cross(up / np.linalg.norm(up), [0, 0, 1.0])
+    frame = np.column_stack([-up / np.linalg.norm(up), right, [0, 0, 1.0]])
+    body_quat = np.zeros(4)
+    mujoco.mju_mat2Quat(body_quat, frame.reshape(9))
+    model.body_pos[body] = start + [0, 0, CARD_THICK_M / 2 + 1e-4]
+    model.body_quat[body] = body_quat
+
+
+@dataclass(frozen=True)
+class TextCard:
+    """The applier of `scene_text=value` in LIBERO's scenes (`World.appliers`)."""
+
+    value: str
+    # The texture's pixels change with the value: the world compiles a new model after such an episode, as after a
+    # table texture (the render context keeps texture state a restore in place does not undo).
+    in_place = False
+
+    def __post_init__(self) -> None:
+        text_of(self.value, goal_words("the basket"))  # validates the value
+
+    @staticmethod
+    def edit_xml(xml: str) -> str:
+        return card_xml(xml)
+
+    def apply(self, world) -> None:
+        lay_card(world)
+        write_texture(world, self.value)
+
+
+class LiberoCard:
+    """The card of a LIBERO scene compiled with it, as the gate and the isolation certificate read it
+    (`LiberoTaskEnv.text_card`)."""
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self._seg: mujoco.Renderer | None = None
+
+    @property
+    def world(self):
+        return self.env.libero_world
+
+    def geometry(self) -> list[float]:
+        model, (body, geom, _) = self.world.model, _ids(self.world.model)
+        return [*model.body_pos[body], *model.body_quat[body], *model.geom_size[geom]]
+
+    def glyph_heights(self, cameras: list[str], rgb: dict[str, np.ndarray]) -> dict[str, float]:
+        """Per camera, the text's glyph height: the live state rendered with the word and blank (an observation's
+        frames are sampled at a physics substep of the last step, not the live state)."""
+        value = self.env.instance.get("scene_text")
+        with self.world.own_gl():
+            shown = {cam: self.env.render_camera(cam) for cam in cameras}
+            write_texture(self.world, REFERENCE)
+            try:
+                blank = {cam: self.env.render_camera(cam) for cam in cameras}
+            finally:
+                write_texture(self.world, value)
+        return {cam: glyph_height(shown[cam], blank[cam]) for cam in cameras}
+
+    def hidden(self, cameras: list[str]) -> dict[str, int]:
+        model, (_, geom, _) = self.world.model, _ids(self.world.model)
+        figure = list(object_geoms(self.world, target_object(self.world)))
+        rgba = model.geom_rgba[geom].copy()
+        out = {}
+        for cam in cameras:
+            shown = self._figure(cam, figure)
+            model.geom_rgba[geom, 3] = 0.0
+            try:
+                alone = self._figure(cam, figure)
+            finally:
+                model.geom_rgba[geom] = rgba
+            out[cam] = int((alone & ~shown).sum())
+        return out
+
+    def _figure(self, camera: str, geoms: list[int]) -> np.ndarray:
+        model = self.world.model
+        if self._seg is None or self._seg.model is not model:
+            self._seg = mujoco.Renderer(model, self.env.image_size, self.env.image_size)
+            self._seg.enable_segmentation_rendering()
+            self._option = mujoco.MjvOption()
+            self._option.geomgroup[:] = 0
+            self._option.geomgroup[VISUAL_GROUP] = 1
+        cam = self.env.camera_ids()[camera]
+        self._seg.update_scene(self.world.data, camera=cam, scene_option=self._option)
+        seg = self._seg.render()
+        return (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM) & np.isin(seg[..., 0], geoms)
