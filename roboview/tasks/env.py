@@ -1,11 +1,10 @@
 """The env every task builds on (`TaskEnv`), and the scripted expert that plans a task from ground truth.
 
-`TaskEnv` is the shared world as a gymnasium env: the robot, the cameras, rendering, the visual
-factors applied at every reset, stepping. A task subclasses it (`roboview.tasks.pick_place`,
-`roboview.tasks.push`) with what is its own: what it adds to the scene (`add_target`), where
-its context puts things (`place_context`), its success test (`is_success`), its target for the
-fairness gate and for perception (`target`, `target_geoms`, `target_xy`) and its scripted solution
-(`plan`), which the privileged `ScriptedExpert` drives from the true object pose and the `vision`
+`TaskEnv` is the shared world as a gymnasium env: the robot, the cameras, rendering, the visual factors applied at
+every reset, stepping. A task subclasses it (`roboview.tasks.pick_place`, `roboview.tasks.push`) with what is its
+own: what it adds to the scene (`add_target`), where its context puts things (`place_context`), its success test
+(`is_success`), its target for the fairness gate and for perception (`target`, `target_geoms`, `target_xy`) and its
+scripted solution (`plan`), which the privileged `ScriptedExpert` drives from the true object pose and the `vision`
 policy from a perceived one.
 """
 
@@ -15,6 +14,7 @@ import atexit
 import functools
 import logging
 from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import mujoco
@@ -42,6 +42,7 @@ from roboview.sim.scene import (
     RenderQuality,
     Scene,
 )
+from roboview.tasks.scenes import LiveScenes, variant_key
 from roboview.tasks.world import (  # the observation keys too, which every policy imports from here
     DEPTH_KEY,
     EE_STATE_KEY,
@@ -54,14 +55,11 @@ from roboview.tasks.world import (  # the observation keys too, which every poli
 )
 from roboview.variation.factors import (
     DEFAULT_TASK,
-    FACTORS,
     SceneApplier,
-    baseline_of,
     baselines,
     load_factor,
     visual_factors,
 )
-from roboview.variation.factors.scene_text import SceneCard
 from roboview.variation.instances import TaskInstance
 
 log = logging.getLogger(__name__)
@@ -247,17 +245,12 @@ class TaskEnv(WorldEnv):
         # whose images no one reads cost physics only; the pixels are those eager rendering gives.
         self.lazy = lazy
         self._generation = 0  # bumped on every reset/step: a lazy observation is readable only at its own
-        self.quality = quality
         self._renderer: mujoco.Renderer | None = None
         self._depth_renderer: mujoco.Renderer | None = None
         self._open_renderers: list[mujoco.Renderer] = []
         self._appliers: dict[str, SceneApplier] = {}
-        # The scenes compiled with additions of factors set away from their baselines (`Factor.extend_spec_when_set`),
-        # by those factors' names, kept with their renderers and appliers; () is the plain scene, live first.
-        self._scene_key: tuple[str, ...] = ()
-        self._scenes: dict[tuple[str, ...], tuple] = {}
-        self._cards: dict[tuple[str, ...], SceneCard] = {}
-        self._bind_scene(Scene(quality, target=type(self).add_target, extras=self._extras(())))
+        self._scenes = LiveScenes(quality, type(self).add_target, self.task)  # the plain one live first
+        self.bind_scene(self._scenes.compile(()))
         self.n_substeps = round(1.0 / (fps * self.model.opt.timestep))
         self.instance = baseline_instance(self.task)
         self.instruction = self.instance.get(self.instruction_factor)
@@ -271,50 +264,16 @@ class TaskEnv(WorldEnv):
             action_space = gym.spaces.Box(*ee_action_space_bounds(control), dtype=np.float32)
         self.spaces(action_space, len(STATE_NAMES), len(EE_STATE_NAMES))
 
-    def _extras(self, key: tuple[str, ...]) -> list:
-        """The visual factors' scene additions: every factor's own, and those of the factors in `key` (set away from
-        their baselines) made for the task."""
-        extras = [f.extend_spec for f in FACTORS.values() if f.extend_spec is not None]
-        return extras + [
-            functools.partial(FACTORS[name].extend_spec_when_set, task=self.task) for name in key
-        ]
-
-    def _bind_scene(self, scene: Scene) -> None:
+    def bind_scene(self, scene: Scene) -> None:
         """Make `scene` the live one: the model, data and what is bound to them."""
         self.scene, self.model, self.data = scene, scene.model, scene.data
         self.bind_target()
         self.end_effector = EndEffector(self.model)
-        self.controller = (
-            EEController(self.model, self.control, self.end_effector) if self.control in EE_CONTROLS else None
-        )
+        ee = self.control in EE_CONTROLS
+        self.controller = EEController(self.model, self.control, self.end_effector) if ee else None
 
-    def _use_scene(self, values: dict[str, str]) -> None:
-        """The scene `values` need live: the plain one, or one compiled with the additions of the factors they set
-        away from their baselines (compiled on first use, then kept with its renderers and appliers)."""
-        key = tuple(
-            name
-            for name in visual_factors()
-            if FACTORS[name].extend_spec_when_set is not None and values[name] != baseline_of(name, self.task)
-        )
-        if key == self._scene_key:
-            return
-        self._scenes[self._scene_key] = (self.scene, self._renderer, self._depth_renderer, self._appliers)
-        if key in self._scenes:
-            scene, self._renderer, self._depth_renderer, self._appliers = self._scenes.pop(key)
-        else:
-            scene = Scene(self.quality, target=type(self).add_target, extras=self._extras(key))
-            self._renderer = self._depth_renderer = None
-            self._appliers = {}
-        self._scene_key = key
-        self._bind_scene(scene)
-
-    def text_card(self) -> SceneCard | None:
-        """The live scene's text card (`scene_text`), or None where it holds none."""
-        if "scene_text" not in self._scene_key:
-            return None
-        if self._scene_key not in self._cards:
-            self._cards[self._scene_key] = SceneCard(self)
-        return self._cards[self._scene_key]
+    def text_card(self) -> Any:
+        return self._scenes.card(self)
 
     @classmethod
     def _check_settings(
@@ -410,7 +369,7 @@ class TaskEnv(WorldEnv):
             )
 
         values = instance.factor_values
-        self._use_scene(values)
+        self._scenes.switch(self, variant_key(values, self.task))
         mujoco.mj_resetData(self.model, self.data)
         # Context (the task's own): where the object starts, with the episode's jitter, and the rest.
         self.place_context(values, rng)
@@ -508,8 +467,7 @@ class TaskEnv(WorldEnv):
 
     def scene_xml(self) -> str:
         """The plain scene's MJCF (a scene compiled with a factor's additions holds pixel buffers MJCF cannot)."""
-        plain = self.scene if not self._scene_key else self._scenes[()][0]
-        return plain.spec.to_xml()
+        return self._scenes.plain(self).spec.to_xml()
 
     def _observation(self) -> dict[str, np.ndarray]:
         renders = {IMAGE_KEY.format(c): functools.partial(self.render_camera, c) for c in self.cameras}
