@@ -18,6 +18,7 @@ from roboview.tasks import make_env  # noqa: E402
 from roboview.tasks.fairness import factor_gates  # noqa: E402
 from roboview.variation.factors.scene_text import MIN_GLYPH_PX  # noqa: E402
 from roboview.variation.instances import TaskInstance  # noqa: E402
+from tests.helpers.text import reading  # noqa: E402
 
 CONTEXT, INIT, SEED = "libero_object/0", "0", 7
 KEY = "observation.images.agentview"
@@ -69,6 +70,10 @@ def test_values_differ_in_the_texture_alone_and_pass_the_gate(env):
     assert len({tuple(sorted(c.items())) for c in certs.values()}) == 1 and "card" in certs["blank"]
     assert heights["blank"] == 0.0
     assert MIN_GLYPH_PX <= heights["target_small"] < heights["target"] < heights["target_large"]
+    assert (
+        reading(frames["conflict"], frames["blank"], "PLATE") == "upright"
+    )  # in the frame a policy is handed
+    assert reading(frames["target"], frames["blank"], "BASKET") == "upright"
     changed = np.abs(frames["target"].astype(int) - frames["conflict"].astype(int)).max(-1) > 0
     rows, cols = np.nonzero(changed)
     # BASKET against PLATE: only the card's pixels, low in the frame (where the card lies), centered.

@@ -23,6 +23,7 @@ from roboview.variation.factors.scene_text import (
     text_of,
 )
 from roboview.variation.instances import TaskInstance
+from tests.helpers.text import reading
 
 pytestmark = pytest.mark.slow
 
@@ -121,6 +122,8 @@ def test_only_the_texture_differs_and_the_gate_passes(env):
     rows, cols = np.nonzero(changed)
     # Only the card's pixels change: a patch in the lower part of the front view, far from the object and the box.
     assert rows.min() > 150 and cols.max() - cols.min() < 80
+    assert reading(shots["conflict"]["front"], shots["blank"]["front"], "LEFT") == "upright"
+    assert reading(shots["color"]["front"], shots["blank"]["front"], "GREEN") == "upright"
     assert heights["blank"] == {"front": 0.0, "left_top": 0.0}
     for cam in CAMERAS:
         assert heights["target_small"][cam] < heights["target"][cam] < heights["target_large"][cam]

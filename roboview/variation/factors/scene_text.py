@@ -161,7 +161,7 @@ def add_card(spec: mujoco.MjSpec, task: str) -> None:
     height, width = TEXTURE_HW
     for value in VALUES:
         # The front camera looks along -x: a text line along +y, its top towards -x, reads upright there.
-        pixels = np.ascontiguousarray(card_image(*text_of(value, words)).transpose(1, 0, 2)[::-1, ::-1])
+        pixels = np.ascontiguousarray(card_image(*text_of(value, words))[::-1].transpose(1, 0, 2)[::-1, ::-1])
         texture = spec.add_texture(
             name=f"scene_text_{value}",
             type=mujoco.mjtTexture.mjTEXTURE_2D,
