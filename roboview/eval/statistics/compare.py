@@ -184,7 +184,7 @@ def control_rows(base: pd.DataFrame | None, split_rows: pd.DataFrame) -> pd.Data
     all-baseline ones."""
     from roboview.variation.factors import FACTORS
 
-    factor = str(split_rows["factor"].iloc[0]) if len(split_rows) else ""
+    factor = str(split_rows["factor"].iloc[0]) if len(split_rows) and "factor" in split_rows else ""
     reference = FACTORS[factor].reference if factor in FACTORS else ""
     return split_rows[split_rows["value"].astype(str) == reference] if reference else base
 
