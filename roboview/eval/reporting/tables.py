@@ -168,7 +168,8 @@ SPLIT_COLUMNS: tuple[Column, ...] = (
         "control SR [95 % CI]",
         "sr_control",
         lambda row: pct(row[1].get("sr_control")) + pct_ci(row[1].get("sr_control_ci95")),
-        "the control arm: success of the all-baseline instance on the same contexts and seeds, ×100, with its "
+        "the control arm: success of the all-baseline instance (or the value its factor compares against: "
+        "scene_text's blank card) on the same contexts and seeds, ×100, with its "
         "Clopper–Pearson 95 % interval; N/A: none of it was run",
     ),
     Column(
