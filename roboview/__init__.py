@@ -23,7 +23,7 @@ Beside the package, not installed: benchmarks/, the throughput and statistics st
 throughput, render_rate, collect_rate, serving, cluster, gpu, policy_latency, torch_threads.sh, verify_rate,
 conformance_drift, adaptive, paired_compare, stats_calibration, cv_excess_interval, glm_refits, interval_coverage,
 libero_throughput, libero_render, libero_render_rate, libero_expert, libero_vs_lerobot_eval, libero_plus_poses,
-liberoplus_noise_cost, metaworld_expert, metaworld_vs_lerobot_eval.
+libero_plus_noise_cost, metaworld_expert, metaworld_vs_lerobot_eval.
 
 Importing `roboview` itself loads nothing. The tasks, worlds and presets register when a registry is first read
 (`roboview.tasks.discover()` does it at once): every module named under the `roboview.tasks` entry-point group, so

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+import roboview.libero.view  # noqa: F401  (LIBERO-plus's view_* factors register first, whichever module is imported first)
 from roboview.libero.corruptions import SEVERITIES, TYPES, check_imagemagick, code_of, corrupt, frame_rng
 from roboview.variation.factors import Factor, register_factor
 

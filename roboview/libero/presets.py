@@ -17,6 +17,9 @@ Their factors: every visual factor but distractors and object_size; the color ba
   (`original` and the seven colors of RoboView's factorial palette), lighting and table-texture splits: 250
   instances, the visual profile of a policy trained on that suite (docs/results/libero_act.md). Repeats run init
   states 1, 2, …, which demos collected from init states 10–49 never saw.
+- `libero_scene_text`: the typographic factor (`scene_text`, a card with a word on the table) over the 40 tasks (init
+  state 0; repeats run init states 1, 2, …): 280 instances; `libero_scene_text_tiny`: over libero_object's first task
+  alone, 7, for tests and demos.
 
 LIBERO-plus's presets are registered with its task (roboview.libero.plus_task).
 """
@@ -88,5 +91,15 @@ LIBERO_OBJECT = register_preset(
             ("libero_task", tuple(f"libero_object/{i}" for i in range(10))),
             ("init_state", ("0",)),
         ),
+    )
+)
+LIBERO_SCENE_TEXT = register_preset(
+    replace(LIBERO, preset="libero_scene_text", splits=("scene_text",), value_subsets=(("init_state", ("0",)),))
+)
+register_preset(
+    replace(
+        LIBERO_SCENE_TEXT,
+        preset="libero_scene_text_tiny",
+        value_subsets=(("libero_task", ("libero_object/0",)), ("init_state", ("0",))),
     )
 )

@@ -13,14 +13,13 @@ task's instruction (`goal_words`: BASKET and PLATE in the basket tasks).
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
 import numpy as np
 
 from roboview.libero.factors import AGENTVIEW, VISUAL_GROUP, camera_pose, object_geoms, target_object
-from roboview.tasks.base import register_preset
 from roboview.variation.factors.scene_text import (
     CARD_M,
     CARD_THICK_M,
@@ -31,28 +30,7 @@ from roboview.variation.factors.scene_text import (
     goal_words,
     text_of,
 )
-from roboview.variation.instances import SuiteConfig
 from roboview.variation.model_edits import rotation, tex_slice
-
-# The typographic factor over LIBERO's 40 tasks (init state 0; repeats run init states 1, 2, …): 280 instances; and
-# over libero_object's first task alone: 7, for tests and demos.
-LIBERO_SCENE_TEXT = register_preset(
-    SuiteConfig(
-        preset="libero_scene_text",
-        tasks=("libero",),
-        union_mode="dedupe",
-        splits=("scene_text",),
-        factorial_colors=(),
-        value_subsets=(("init_state", ("0",)),),
-    )
-)
-register_preset(
-    replace(
-        LIBERO_SCENE_TEXT,
-        preset="libero_scene_text_tiny",
-        value_subsets=(("libero_task", ("libero_object/0",)), ("init_state", ("0",))),
-    )
-)
 
 CARD = "scene_text_card"
 # Where the card lies: agentview's line of sight through this point of its upright frame (x right, y down, 0–1).

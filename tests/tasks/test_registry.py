@@ -57,8 +57,11 @@ PRESETS = [
         "liberoplus_camera_object",
     ),
     *("liberoplus_camera_goal", "liberoplus_camera_10", "liberoplus_camera_tiny"),
+    *("liberoplus_noise", "liberoplus_noise_suffixed", "liberoplus_noise_spatial", "liberoplus_noise_object"),
+    *("liberoplus_noise_goal", "liberoplus_noise_10", "liberoplus_noise_tiny"),
 ]
 VIEW = ["view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"]
+NOISE = [f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")]
 
 
 def test_any_module_imported_first_gives_the_same_registries_in_the_same_order():
@@ -76,7 +79,7 @@ def test_any_module_imported_first_gives_the_same_registries_in_the_same_order()
     want = got["roboview.tasks"]
     assert want["tasks"] == TASKS and want["worlds"] == WORLDS and want["presets"] == PRESETS
     # RoboView's own visual factors first (the factor registry's modules), then the LIBERO wing's.
-    assert want["visual"][:2] == ["color", "camera_pose"] and want["visual"][-5:] == VIEW
+    assert want["visual"][:2] == ["color", "camera_pose"] and want["visual"][-11:] == VIEW + NOISE
     assert want["labels"] == ["libero", "liberoplus", "metaworld"] and len(want["gym"]) == 5
     different = {first: read for first, read in got.items() if read != want}
     assert not different, different

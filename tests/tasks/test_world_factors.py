@@ -1,8 +1,8 @@
 """Every registered world against every registered visual factor: whether the world takes it (a value away from its
 baseline is applied), refuses it (its applier table, `World.appliers`, declares the factor does not apply to its
 scenes) or lacks it (its table does not name the factor: neither an applier nor a refusal is written for it, refused all
-the same; in RoboView's scene, which has no table, a factor that brings no applier for it: LIBERO-plus's `view_*`,
-declared in the LIBERO wing). A new factor shows its row here, in every world at once."""
+the same; in RoboView's scene, which has no table, a factor that brings no applier for it: LIBERO-plus's `view_*` and
+`noise_*`, declared in the LIBERO wing). A new factor shows its row here, in every world at once."""
 
 import numpy as np
 import pytest
@@ -10,7 +10,8 @@ import pytest
 from roboview.tasks import TASKS
 from roboview.tasks.pick_place import PickPlaceEnv
 from roboview.tasks.world import WORLDS, World
-from roboview.variation.factors import FACTORS, baseline_of, visual_factors
+from roboview.variation.factors import FACTORS, baseline_of, baselines, visual_factors
+from roboview.variation.instances import TaskInstance
 
 pytestmark = pytest.mark.fast
 
@@ -30,6 +31,12 @@ view_elevation  lacks     takes    lacks
 view_scale      lacks     takes    lacks
 view_rotz       lacks     takes    lacks
 view_roty       lacks     takes    lacks
+noise_motion_blur   lacks     takes    lacks
+noise_gaussian_blur lacks     takes    lacks
+noise_zoom_blur     lacks     takes    lacks
+noise_fog           lacks     takes    lacks
+noise_glass_blur    lacks     takes    lacks
+noise_wrist         lacks     takes    lacks
 """
 
 
@@ -48,15 +55,30 @@ def changed(factor: str, task: str) -> str:
     return next(v for v in FACTORS[factor].values if v != baseline_of(factor, task))
 
 
+# A factor that qualifies another is applied with it: `noise_wrist` puts a noise type's corruption on the wrist camera
+# too, and alone is refused (a test of the LIBERO wing says so).
+COMPANIONS = {"noise_wrist": {"noise_fog": "3"}}
+
+
+def in_scene_of(scene: PickPlaceEnv, values: dict[str, str]) -> None:
+    """Reset `scene` to the instance with `values` over the baselines: a factor whose additions only the scene of an
+    instance that sets it holds (`Factor.extend_spec_when_set`: scene_text's card) is applied in that scene."""
+    scene.reset(options={"instance": TaskInstance("color", ("color",), baselines() | values, "base")})
+
+
 def observed(world: World, factor: str, scene: PickPlaceEnv) -> str:
     """What `world` does with a value of `factor` away from its baseline."""
     task = task_of(world)
     value = changed(factor, task)
     try:
         if world.appliers is None:  # RoboView's scene: every factor's own applier, bound to the scene
+            if FACTORS[factor].extend_spec_when_set is not None:
+                in_scene_of(scene, {factor: value})
             scene.applier(factor).apply(value, np.random.default_rng(0))
+            in_scene_of(scene, {})
         else:
-            assert len(world.make_appliers({factor: value}, task)) == 1, (world.name, factor)
+            values = {factor: value} | COMPANIONS.get(factor, {})
+            assert len(world.make_appliers(values, task)) == 1, (world.name, factor)
     except ValueError as refused:
         assert factor in str(refused), (world.name, factor, str(refused))
         return "lacks" if world.status(factor) == "lacks" else "refuses"
@@ -85,9 +107,10 @@ def test_what_a_world_does_not_take_is_derived_from_its_table():
     table = expected()
     for name, world in WORLDS.items():
         assert world.not_applicable == tuple(f for f in visual_factors() if table[f, name] != "takes"), name
-    # RoboView's scene takes every factor that brings its applier for it, and lacks the LIBERO wing's view factors.
+    # RoboView's scene takes every factor that brings its applier for it, and lacks the LIBERO wing's view and noise
+    # factors.
     assert WORLDS["roboview"].appliers is None and WORLDS["roboview"].not_applicable == tuple(
-        f for f in visual_factors() if f.startswith("view_")
+        f for f in visual_factors() if f.startswith(("view_", "noise_"))
     )
     assert WORLDS["metaworld"].status("view_azimuth") == "lacks"
     assert (

@@ -37,18 +37,29 @@ def test_factor_names_and_kinds():
         "view_scale",
         "view_rotz",
         "view_roty",
+        # LIBERO-plus's sensor noise (the LIBERO wing's): one factor per type, severity 1–10, and the wrist camera.
+        "noise_motion_blur",
+        "noise_gaussian_blur",
+        "noise_zoom_blur",
+        "noise_fog",
+        "noise_glass_blur",
+        "noise_wrist",
     )
     assert context_factors() == ("initial_position", "shape", "instruction")
     assert factor_names() == visual_factors() + context_factors()
     worlds = {f for t in ("libero", "liberoplus", "metaworld") for f in context_factors(t)}
     assert set(FACTORS) == set(factor_names()) | set(context_factors("push")) | worlds
-    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 14 + ["context"] * 3
-    assert {n: len(load_factor(n).values) for n in visual_factors()[9:]} == {
+    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 20 + ["context"] * 3
+    assert {n: len(load_factor(n).values) for n in visual_factors()[9:14]} == {
         "view_azimuth": 150,
         "view_elevation": 1,
         "view_scale": 100,
         "view_rotz": 10,
         "view_roty": 10,
+    }
+    assert {n: len(load_factor(n).values) for n in visual_factors()[14:]} == {
+        **{f"noise_{t}": 10 for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur")},
+        "noise_wrist": 1,
     }
     assert {n: len(load_factor(n).values) for n in visual_factors()[4:9]} == {
         "lighting": 9,
@@ -75,13 +86,16 @@ def test_baselines():
         "view_scale": "100",
         "view_rotz": "0",
         "view_roty": "0",
+        **{f"noise_{t}": "0" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")},
         "initial_position": "center",
         "shape": "cube",
         "instruction": "put the small object into the yellow box",
     }
     # Every baseline is one of its factor's values, except where no change is not a swept value: camera_pose's
-    # "original" (the unperturbed cameras) and LIBERO-plus's no-change view.
+    # "original" (the unperturbed cameras), LIBERO-plus's no-change view and its noise-free frame, and scene_text's
+    # "none" (no card: the scene of every instance that does not set it; its split's control arm is the blank card).
     unswept = {"camera_pose", "view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"}
+    unswept |= {"scene_text"} | {f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")}
     assert all(load_factor(n).baseline in load_factor(n).values for n in factor_names() if n not in unswept)
     assert not any(load_factor(n).baseline in load_factor(n).values for n in unswept)
 

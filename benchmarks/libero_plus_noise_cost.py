@@ -2,7 +2,7 @@
 read every step (as a policy reads them), clean and under each noise type, and each corruption alone on a 256² frame,
 RoboView's (roboview.libero.corruptions) and, where its package's functions load, LIBERO-plus's own.
 
-    python -m benchmarks.liberoplus_noise_cost [--severity=5] [--steps=20] [--frames=5]
+    python -m benchmarks.libero_plus_noise_cost [--severity=5] [--steps=20] [--frames=5]
         [--output=outputs/liberoplus/noise_bench/cost.json]
 
 Writes a JSON (per type: ms per env step, ms per corruption, RoboView's and LIBERO-plus's) and prints a table.
