@@ -114,11 +114,13 @@ def _single_factor_values(table: Path) -> list[str]:
 
 
 def _analyses(splits: list[str]) -> list[Decomposition]:
-    """The analyses the splits' tasks declare (`Task.analyses`), in the splits' order."""
+    """The analyses the splits' tasks declare (`Task.analyses`), in the splits' order, that read one of the splits (a
+    design reads only its own: LIBERO-plus's noise number is not declared for a benchmark of its camera variants)."""
     from roboview.tasks import load_task
 
     tasks = dict.fromkeys(split_task(s)[0] for s in splits)
-    return [design for task in tasks for design in load_task(task).analyses]
+    designs = [design for task in tasks for design in load_task(task).analyses]
+    return [d for d in designs if any(split_task(s)[0] == d.task and d.reads(s) for s in splits)]
 
 
 def _front_matter(manifest: dict, total: int) -> str:

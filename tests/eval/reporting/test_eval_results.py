@@ -22,7 +22,7 @@ pytestmark = pytest.mark.fast
 @pytest.fixture(scope="module")
 def camera():
     """LIBERO-plus's camera design and its decomposition of a synthetic table (6 blocks)."""
-    [design] = load_task("liberoplus").analyses
+    design = next(d for d in load_task("liberoplus").analyses if d.key == "liberoplus_camera")
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(decompose, "N_BOOT", 200)
         return design, decompose.compute(synthetic(design), design)
