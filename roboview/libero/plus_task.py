@@ -258,4 +258,26 @@ register_preset(
     )
 )
 
+# LIBERO-plus's light and background dimensions (roboview.libero.plus_scenes; docs/liberoplus.md): their variants load
+# LIBERO-plus's own scene files from its asset folder (--liberoplus.assets). The presets check that folder for the
+# files of their variants before any work. `_tiny`: one task's variants (libero_object/2).
+for _dimension in ("light", "background"):
+    _scenes = SuiteConfig(
+        preset=f"liberoplus_{_dimension}",
+        tasks=("liberoplus",),
+        union_mode="dedupe",
+        splits=(_dimension,),
+        factorial_colors=(),
+        value_subsets=(("liberoplus_init_state", ("0",)),),
+        generator="roboview.libero.plus_scenes:scene_suite",
+    )
+    register_preset(_scenes)
+    register_preset(
+        replace(
+            _scenes,
+            preset=f"liberoplus_{_dimension}_tiny",
+            value_subsets=(*_scenes.value_subsets, ("liberoplus_task", ("libero_object/2",))),
+        )
+    )
+
 __all__ = ["SUB_FACTORS", "LiberoPlusTaskEnv", "LiberoTaskExpert", "baseline_liberoplus_instance"]

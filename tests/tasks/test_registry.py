@@ -59,6 +59,7 @@ PRESETS = [
     *("liberoplus_camera_goal", "liberoplus_camera_10", "liberoplus_camera_tiny"),
     *("liberoplus_noise", "liberoplus_noise_suffixed", "liberoplus_noise_spatial", "liberoplus_noise_object"),
     *("liberoplus_noise_goal", "liberoplus_noise_10", "liberoplus_noise_tiny"),
+    *("liberoplus_light", "liberoplus_light_tiny", "liberoplus_background", "liberoplus_background_tiny"),
 ]
 VIEW = ["view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"]
 NOISE = [f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")]

