@@ -41,7 +41,7 @@ def _count(suite: SuiteConfig) -> str:
         return f"{len(generate_suite(suite)):,}"
     except ImportError as e:  # LiberoMissing / LiberoPlusMissing: the message names the install command
         return "needs " + str(e).rpartition("install it with: ")[2]
-    except ValueError:  # a preset this version cannot build (LIBERO-plus's light and background): asking says why
+    except ValueError:  # a preset not built by this version (LIBERO-plus's light): asking says why
         return "not built by this version"
 
 
