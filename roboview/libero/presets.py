@@ -94,7 +94,9 @@ LIBERO_OBJECT = register_preset(
     )
 )
 LIBERO_SCENE_TEXT = register_preset(
-    replace(LIBERO, preset="libero_scene_text", splits=("scene_text",), value_subsets=(("init_state", ("0",)),))
+    replace(
+        LIBERO, preset="libero_scene_text", splits=("scene_text",), value_subsets=(("init_state", ("0",)),)
+    )
 )
 register_preset(
     replace(

@@ -86,7 +86,10 @@ def test_baselines():
         "view_scale": "100",
         "view_rotz": "0",
         "view_roty": "0",
-        **{f"noise_{t}": "0" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")},
+        **{
+            f"noise_{t}": "0"
+            for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")
+        },
         "initial_position": "center",
         "shape": "cube",
         "instruction": "put the small object into the yellow box",
@@ -95,7 +98,9 @@ def test_baselines():
     # "original" (the unperturbed cameras), LIBERO-plus's no-change view and its noise-free frame, and scene_text's
     # "none" (no card: the scene of every instance that does not set it; its split's control arm is the blank card).
     unswept = {"camera_pose", "view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"}
-    unswept |= {"scene_text"} | {f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")}
+    unswept |= {"scene_text"} | {
+        f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")
+    }
     assert all(load_factor(n).baseline in load_factor(n).values for n in factor_names() if n not in unswept)
     assert not any(load_factor(n).baseline in load_factor(n).values for n in unswept)
 
