@@ -30,6 +30,7 @@ class NoiseCostConfig:
     frames: int = 5
     # The task the env runs.
     task: str = "libero_object/2"
+    # The JSON file the timings are written to.
     output: str = "outputs/liberoplus/noise_bench/cost.json"
 
     def __post_init__(self) -> None:

@@ -12,6 +12,11 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 
+class WorldMissing(ImportError):
+    """A world's package or assets are absent (LIBERO's, LIBERO-plus's); the message names what is missing and how to
+    install it, in one line a verb prints as it is."""
+
+
 @contextmanager
 def flag_errors(flag: str) -> Iterator[None]:
     """Prefix a ValueError raised inside the block with the command-line `flag` it concerns."""

@@ -26,6 +26,7 @@ from types import ModuleType
 
 import yaml
 
+from roboview.core.cli_errors import WorldMissing
 from roboview.core.files import cache_dir
 
 # The exact install (`--no-deps`: both LIBERO packages require `opencv-python`, which would overwrite the pinned
@@ -47,7 +48,7 @@ REQUIRED = {
 }
 
 
-class LiberoMissing(ImportError):
+class LiberoMissing(WorldMissing):
     """A LIBERO package is not installed; the message names it and the pip command."""
 
 

@@ -27,10 +27,11 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
+from roboview.core.external_assets import LIBEROPLUS_ASSETS_ENV as ASSETS_ENV
+from roboview.core.external_assets import LIBEROPLUS_ASSETS_FLAG as ASSETS_FLAG
+from roboview.core.external_assets import liberoplus_assets_dir as assets_dir
 from roboview.libero.plus import SUITES, LiberoPlusMissing, package_root, task_map
 
-ASSETS_ENV = "ROBOVIEW_LIBEROPLUS_ASSETS"
-ASSETS_FLAG = "--liberoplus.assets"
 PUBLISHED = "https://huggingface.co/datasets/Sylvest/LIBERO-plus (assets.zip)"
 PROBLEMS = "liberoplus/envs/problems"  # under the installed `liberoplus` package
 STYLES = "liberoplus/envs/arenas/style.py"  # its floor and wall styles → texture file names (STYLE_MAPPING)
@@ -132,23 +133,6 @@ def counts(dimension: str) -> dict:
 
 
 # ---- the asset folder ------------------------------------------------------------------------------------------
-def assets_dir() -> Path | None:
-    """LIBERO-plus's unpacked asset folder (`ROBOVIEW_LIBEROPLUS_ASSETS`, set by `--liberoplus.assets`); None: unset."""
-    value = os.environ.get(ASSETS_ENV, "")
-    return Path(value) if value else None
-
-
-def set_assets_dir(path: str) -> None:
-    """Point this process and the workers it starts at LIBERO-plus's asset folder `path` (a ValueError if it is no
-    folder)."""
-    folder = Path(path).expanduser().resolve()
-    if not folder.is_dir():
-        raise ValueError(
-            f"{ASSETS_FLAG}={path}: no such folder (LIBERO-plus's unpacked assets, holding scenes/)"
-        )
-    os.environ[ASSETS_ENV] = str(folder)
-
-
 @cache
 def style_files() -> dict[str, dict[str, str]]:
     """LIBERO-plus's floor and wall styles → their texture file names (its `STYLE_MAPPING`, read from its source)."""
@@ -215,17 +199,6 @@ def check_assets(variants: tuple[SceneVariant, ...] | list[SceneVariant]) -> Pat
 def _listed(files: list[str], shown: int = 3) -> str:
     more = len(files) - shown
     return ", ".join(files[:shown]) + (f" and {more:,} more" if more > 0 else "")
-
-
-@dataclass
-class LiberoPlusAssets:
-    # LIBERO-plus's unpacked asset folder (its assets.zip: scenes/, textures/ …), which its light and background
-    # presets load; empty: the environment variable ROBOVIEW_LIBEROPLUS_ASSETS, if set.
-    assets: str = ""
-
-    def __post_init__(self) -> None:
-        if self.assets:
-            set_assets_dir(self.assets)
 
 
 # ---- the presets -----------------------------------------------------------------------------------------------

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from roboview.benchmark.build import BuildResult, BuildSpec, GateFailure, build
-from roboview.libero.bootstrap import LiberoMissing
-from roboview.libero.plus_scenes import LiberoPlusAssets
+from roboview.core.cli_errors import WorldMissing
+from roboview.core.external_assets import LiberoPlusAssets
 from roboview.pipelines._cli import cli_main
 from roboview.policies.vlm.client import Endpoint, VLMClient
 from roboview.sim.cameras import IMAGE_SIZE_MIN, check_image_size
@@ -170,8 +170,8 @@ def _summary(cfg: BuildConfig, result: BuildResult) -> None:
 
 
 def main(args: list[str] | None = None) -> BuildResult:
-    # LiberoMissing: a world's package or assets are absent; its one line names what and how to install it.
-    errors = (ValueError, GateFailure, LiberoMissing)
+    # WorldMissing: a world's package or assets are absent; its one line names what and how to install it.
+    errors = (ValueError, GateFailure, WorldMissing)
     return cli_main(BuildConfig, run, _summary, errors, args, on_interrupt=_interrupted)
 
 

@@ -39,6 +39,7 @@ HARNESSES = (
     "libero_throughput",
     "libero_vs_lerobot_eval",
     "libero_plus_poses",
+    "libero_plus_noise_cost",
     "metaworld_expert",
     "metaworld_vs_lerobot_eval",
     "paired_compare",

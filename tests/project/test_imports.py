@@ -333,6 +333,7 @@ FLOORS = (
         "roboview.core.workers",
         "roboview.core.ray_cluster",
         "roboview.core.registry",
+        "roboview.core.external_assets",
     ),
     ("roboview.sim",),
     ("roboview.variation",),
