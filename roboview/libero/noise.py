@@ -182,8 +182,8 @@ def is_liberoplus_split(split: str) -> bool:
     return split.removeprefix("liberoplus_") in LIBERO_PLUS_SPLITS
 
 
-def _views(task: str, own: set[tuple[str, int]], subsets: dict) -> dict[str, list[dict[str, str]]]:
-    """Each split's noise values for one task: the no-change view, LIBERO-plus's variants, the ladders of the types it
+def _views(own: set[tuple[str, int]], subsets: dict) -> dict[str, list[dict[str, str]]]:
+    """Each split's noise values for one task running LIBERO-plus's (type, severity) pairs `own`: the no-change view, LIBERO-plus's variants, the ladders of the types it
     runs there, and every one of those again on both cameras."""
     rows: dict[str, list[dict[str, str]]] = {split: [] for split in SPLITS}
     rows[BASELINE_SPLIT].append({})
@@ -204,36 +204,21 @@ def noise_suite(cfg) -> list:
     the splits of the module docstring that `cfg.splits` names. `value_subsets` restricts the tasks
     (`liberoplus_task`), the init states, the instruction mode and the severities of each type. Refused before any
     work where motion blur would run and Wand or ImageMagick is missing."""
-    from roboview.libero.plus import TASK
-    from roboview.variation.factors import baselines, load_factor
-    from roboview.variation.instances import TaskInstance, split_name
+    from roboview.libero.plus import split_instances, suite_contexts
 
     subsets = cfg.subsets
-    tasks = subsets.get("liberoplus_task") or load_factor("liberoplus_task").values
-    inits = subsets.get("liberoplus_init_state", ("0",))
-    modes = subsets.get("liberoplus_instruction", ("libero",))
+    tasks, _, _ = suite_contexts(subsets)
     own: dict[str, set[tuple[str, int]]] = {}
     for v in noise_variants():
         own.setdefault(v.libero_task, set()).add((v.factor, v.severity))
     by_split: dict[str, list[tuple[str, dict[str, str]]]] = {split: [] for split in SPLITS}
     for task in tasks:
-        for split, values in _views(task, own.get(task, set()), subsets).items():
+        for split, values in _views(own.get(task, set()), subsets).items():
             by_split[split] += [(task, v) for v in values]
     if any(NOISE_FACTORS[0] in v for s in cfg.splits for _, v in by_split.get(s, ())):
         check_imagemagick()
     out = []
-    base = baselines(TASK)
     for split in (s for s in SPLITS if s in cfg.splits):
         varied = tuple(split.removesuffix("_ladder").split("_x_"))
-        for task, noise in by_split[split]:
-            for init in inits:
-                for mode in modes:
-                    context = {
-                        "liberoplus_task": task,
-                        "liberoplus_init_state": init,
-                        "liberoplus_instruction": mode,
-                    }
-                    out.append(
-                        TaskInstance(split_name(split, TASK), varied, base | context | noise, "base", TASK)
-                    )
+        out += split_instances(split, varied, by_split[split], subsets)
     return out

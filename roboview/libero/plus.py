@@ -343,40 +343,60 @@ def _kept(view: View, subsets: dict[str, tuple[str, ...]]) -> bool:
     return all(f not in subsets or values[f] in subsets[f] for f in view.changes)
 
 
+def suite_contexts(subsets: dict[str, tuple[str, ...]]) -> tuple[tuple[str, ...], ...]:
+    """The tasks, init states and instruction modes a `liberoplus_*` preset's `value_subsets` keeps (every task, init
+    state 0 and LIBERO's own instruction where it names none)."""
+    from roboview.variation.factors import load_factor
+
+    tasks = subsets.get("liberoplus_task") or load_factor("liberoplus_task").values
+    return (
+        tuple(tasks),
+        subsets.get("liberoplus_init_state", ("0",)),
+        subsets.get("liberoplus_instruction", ("libero",)),
+    )
+
+
+def split_instances(split: str, varied: tuple[str, ...], rows: list, subsets: dict) -> list:
+    """One split's instances: each (task, values) of `rows` from every init state and instruction mode the preset's
+    `value_subsets` keeps, every other factor at its baseline."""
+    from roboview.variation.factors import baselines
+    from roboview.variation.instances import TaskInstance, split_name
+
+    _, inits, modes = suite_contexts(subsets)
+    base, out = baselines(TASK), []
+    for task, values in rows:
+        for init in inits:
+            for mode in modes:
+                context = {
+                    "liberoplus_task": task,
+                    "liberoplus_init_state": init,
+                    "liberoplus_instruction": mode,
+                }
+                out.append(
+                    TaskInstance(split_name(split, TASK), varied, base | context | values, "base", TASK)
+                )
+    return out
+
+
 def camera_suite(cfg) -> list:
     """The `liberoplus_camera*` presets' instances (SuiteConfig.generator): for every task and init state of the
     preset, LIBERO-plus's camera variants, their single-change parts and the no-change view, split by what they
     change. `value_subsets` restricts the tasks (`liberoplus_task`), the init states, the instruction mode and the
     sub-factor values (a variant is kept when each value it changes is held)."""
-    from roboview.variation.factors import baselines, load_factor
-    from roboview.variation.instances import TaskInstance, split_name
-
     subsets = cfg.subsets
-    tasks = subsets.get("liberoplus_task") or load_factor("liberoplus_task").values
-    inits = subsets.get("liberoplus_init_state", ("0",))
-    modes = subsets.get("liberoplus_instruction", ("libero",))
+    tasks, _, _ = suite_contexts(subsets)
     by_task: dict[str, list[View]] = {}
     for v in variants():
         if v.libero_task in tasks and _kept(v.view, subsets):
             by_task.setdefault(v.libero_task, []).append(v.view)
-    rows: dict[str, list[tuple[str, View]]] = {split: [] for split in SPLITS}
+    rows: dict[str, list[tuple[str, dict[str, str]]]] = {split: [] for split in SPLITS}
     for task in tasks:
         own = by_task.get(task, [])
         # The no-change view, the task's variants, then their parts it does not run; each view once, in that order.
         for view in dict.fromkeys([View(), *own, *(p for v in own for p in v.parts())]):
-            rows[split_of(view, view in own)].append((task, view))
+            rows[split_of(view, view in own)].append((task, view.values()))
     out = []
-    base = baselines(TASK)
     for split in SPLITS:
         varied = tuple(split.removesuffix("_parts").split("_x_"))
-        for task, view in rows[split]:
-            for init in inits:
-                for mode in modes:
-                    context = {
-                        "liberoplus_task": task,
-                        "liberoplus_init_state": init,
-                        "liberoplus_instruction": mode,
-                    }
-                    values = base | context | view.values()
-                    out.append(TaskInstance(split_name(split, TASK), varied, values, "base", TASK))
+        out += split_instances(split, varied, rows[split], subsets)
     return out

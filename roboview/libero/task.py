@@ -423,4 +423,4 @@ register_task(
 
 # The wing's presets (roboview.libero.presets), registered with its task.
 import roboview.libero.presets  # noqa: E402, F401
-import roboview.libero.scene_text  # noqa: E402, F401  (its presets; scene_text's applier, APPLIERS)
+import roboview.libero.scene_text  # noqa: E402, F401  (scene_text's applier, which APPLIERS names)
