@@ -106,14 +106,28 @@ class FairnessProbe:
         self.cameras = cameras or env.world.observed_cameras
         self._seg = env.new_renderer()
         self._seg.enable_segmentation_rendering()
+        # The renderer of the scene the env last switched away from (`_renderer`).
+        self._spare: mujoco.Renderer | None = None
+
+    def _renderer(self) -> mujoco.Renderer:
+        """The segmentation renderer of the env's live model. An env switching between its plain scene and one compiled
+        with a factor's additions (scene_text's card) keeps both live, so the renderer of the one it left is kept
+        too, and a switch back builds none; an older one (a LIBERO model replaced by a hard reset) is closed."""
+        model = self.env.model
+        if self._seg.model is not model:
+            if self._spare is not None and self._spare.model is model:
+                self._seg, self._spare = self._spare, self._seg
+            else:
+                if self._spare is not None:
+                    self._spare.close()
+                self._spare, self._seg = self._seg, self.env.new_renderer()
+                self._seg.enable_segmentation_rendering()
+        return self._seg
 
     def _segment(self, camera: str) -> np.ndarray:
-        # The env switched to a scene compiled with a factor's additions: a renderer of its model.
-        if self._seg.model is not self.env.model:
-            self._seg = self.env.new_renderer()
-            self._seg.enable_segmentation_rendering()
-        self._seg.update_scene(self.env.data, camera=self.env.camera_ids()[camera])
-        seg = self._seg.render()
+        renderer = self._renderer()
+        renderer.update_scene(self.env.data, camera=self.env.camera_ids()[camera])
+        seg = renderer.render()
         return np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
 
     def _segment_alone(self, camera: str, geoms: list[int]) -> np.ndarray:
