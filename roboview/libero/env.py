@@ -15,7 +15,9 @@ sensors that copy `MjData` at that very substep (≈ 0.1 ms); an image is render
 
 Visual factors (`roboview.libero.factors`) edit the compiled model in place. A hard reset compiles a *new* `MjModel`
 and render context, so the world re-applies them after every reset, before the init state is loaded; with
-`hard_reset=False` it first restores the visual arrays it snapshotted from the pristine model.
+`hard_reset=False` it first restores the visual arrays it snapshotted from the pristine model. A factor that swaps
+LIBERO's scene file for another (`arena()`: LIBERO-plus's light and background scenes) makes the reset that changes
+the scene a hard one, whose arena LIBERO's problem class builds from that file.
 
 LeRobot's processed view of an observation (`lerobot_view`): both images flipped 180° (`[::-1, ::-1]`) and the 8-D
 state eef pos (3) + axis-angle of the xyzw eef quat (3) + gripper qpos (2), computed with the same torch float32
@@ -132,6 +134,10 @@ class LiberoWorld:
             hard_reset=hard_reset,
         )
         self.timings["create_s"] = time.perf_counter() - start
+        # The scene file LIBERO's problem class builds its arena from, and the arena's properties (styles): LIBERO's
+        # own, or a factor's (`arena()`); `arena` is the live model's.
+        self._own_arena = (self.inner._arena_xml, tuple(sorted(self.inner._arena_properties.items())))
+        self.arena = self._own_arena
         self._install_lazy_cameras()
 
     # ---- the robosuite objects -------------------------------------------------------------------------------
@@ -196,9 +202,12 @@ class LiberoWorld:
         # A factor adding to LIBERO's MJCF (scene_text's card) compiles a model of its own; one without compiles
         # LIBERO's own MJCF again: robosuite's XML processor, None as LIBERO leaves it unless such a factor is set.
         edits = [factor.edit_xml for factor in self.factors if hasattr(factor, "edit_xml")]
-        hard = self.hard_reset or self._dirty or bool(edits) != self._edited
+        arena = self._arena_of(self.factors)
+        hard = self.hard_reset or self._dirty or bool(edits) != self._edited or arena != self.arena
         self.inner._xml_processor = _chain(edits) if edits else None
         self._edited = bool(edits)
+        self.inner._arena_xml, self.inner._arena_properties = arena[0], dict(arena[1])
+        self.arena = arena
         self.inner.hard_reset = hard
         if hard:
             self._visual_snapshot = None  # a new model: snapshot its pristine visuals again
@@ -220,6 +229,15 @@ class LiberoWorld:
             robot.controller.use_delta = True  # LeRobot's control_mode="relative"
         self.timings["reset_s"] = time.perf_counter() - start
         return self._observation(raw)
+
+    def _arena_of(self, factors: Sequence[Any]) -> tuple[str, tuple[tuple[str, Any], ...]]:
+        """The arena `factors` load: LIBERO's own, or the one factor's that swaps it (two are refused)."""
+        arenas = [factor.arena() for factor in factors if hasattr(factor, "arena")]
+        if len(arenas) > 1:
+            raise ValueError(
+                f"{len(arenas)} factors swap LIBERO's scene file ({arenas}); one scene at a time"
+            )
+        return arenas[0] if arenas else self._own_arena
 
     def step(self, action: np.ndarray) -> tuple[LazyObservation, float, bool, bool, dict[str, Any]]:
         """One control step (OSC_POSE delta, 7-D in [-1, 1]); `terminated` when LIBERO says done or success."""

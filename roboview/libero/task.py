@@ -31,6 +31,8 @@ unchanged:
   wrist camera's) corrupted after rendering, at reset and after every step, as LIBERO-plus corrupts them.
 - `scene_text`: a card with a word lying on the table below the objects in agentview (roboview.libero.scene_text),
   compiled into LIBERO's MJCF only for an instance that sets it.
+- `scene_light`, `scene_background`: LIBERO-plus's light and background scenes (roboview.libero.plus_scene_world):
+  LIBERO's arena built from the scene file and styles of one of LIBERO-plus's problem classes, from its asset folder.
 - `distractors`, `object_size`: not applicable to LIBERO's scenes; an instance that sets them is refused.
 
 The world's applier table (`APPLIERS`, its `World.appliers`) says which applier makes each factor's value.
@@ -57,6 +59,7 @@ import roboview.libero.view  # noqa: F401  (registers LIBERO-plus's view_* facto
 from roboview.libero.env import IMAGE_SIZE
 from roboview.libero.noise import NOISE_FACTORS, WRIST_FACTOR
 from roboview.libero.plus import SUB_FACTORS
+from roboview.libero.plus_scene_world import SCENE_BACKGROUND, SCENE_LIGHT
 from roboview.libero.suites import SUITES, max_steps
 from roboview.sim.cameras import CameraPose, camera_pose_of
 from roboview.tasks.base import Task, register_task
@@ -104,6 +107,9 @@ APPLIERS = {
     # LIBERO-plus's sensor noise: one applier for its five types and the wrist switch (a frame corruption, not a
     # model edit: the env applies it to every observation's frames).
     (*NOISE_FACTORS, WRIST_FACTOR): "roboview.libero.noise:SensorNoise.of",
+    # LIBERO-plus's light and background scenes: LIBERO's arena built from its scene file at the next reset (one
+    # applier for both: one scene at a time).
+    (SCENE_LIGHT.name, SCENE_BACKGROUND.name): "roboview.libero.plus_scene_world:LiberoPlusScene.of",
     "distractors": None,
     "object_size": None,
 }

@@ -39,10 +39,8 @@ def _count(suite: SuiteConfig) -> str:
     """A preset's instance count; a preset its world's packages must generate says how to install them instead."""
     try:
         return f"{len(generate_suite(suite)):,}"
-    except ImportError as e:  # LiberoMissing / LiberoPlusMissing: the message names the install command
+    except ImportError as e:  # LiberoMissing / LiberoPlusMissing, its asset folder: the message says how to
         return "needs " + str(e).rpartition("install it with: ")[2]
-    except ValueError:  # a preset not built by this version (LIBERO-plus's light): asking says why
-        return "not built by this version"
 
 
 @dataclass

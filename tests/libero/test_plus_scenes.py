@@ -76,17 +76,33 @@ def test_a_folder_lacking_a_file_is_refused_naming_it(monkeypatch, tmp_path):
     _scene(tmp_path)
     tiny = [v for v in ps.scene_variants("background") if v.libero_task == "libero_object/2"]
     textures = {f"textures/{ps.style_files()[k][s]}" for v in tiny for k, s in v.styles}
-    assert ps.missing_files(tmp_path, tiny) == sorted(textures | {"meshes/table.obj"})
+    assert ps.missing_files(tmp_path, {(v.scene_xml, v.styles) for v in tiny}) == sorted(
+        textures | {"meshes/table.obj"}
+    )
     # The floor's and wall's own textures are replaced by the styles' files, as LIBERO-plus's arenas do.
-    assert "textures/original_floor.png" not in ps.missing_files(tmp_path, tiny)
+    assert "textures/original_floor.png" not in ps.missing_files(
+        tmp_path, {(v.scene_xml, v.styles) for v in tiny}
+    )
     with pytest.raises(ps.LiberoPlusAssetsMissing, match=r"lacks \d+ files its background variants load"):
         generate_suite(load_preset("liberoplus_background_tiny"))
     for name in textures | {"meshes/table.obj"}:
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_bytes(b"")
     assert ps.check_assets(tiny) == tmp_path
-    with pytest.raises(ValueError, match="which it does not do; no benchmark is built"):
-        generate_suite(load_preset("liberoplus_background_tiny"))
+    # Complete, the folder builds the preset: the task's no-change view, then each variant's problem class.
+    built = generate_suite(load_preset("liberoplus_background_tiny"))
+    assert [i.value for i in built] == ["original", *(v.problem for v in tiny)]
+    assert {i.split for i in built} == {"liberoplus_scene_background"}
+
+
+def test_the_factors_values_are_the_problem_classes_liberoplus_variants_name(tmp_path):
+    from roboview.variation.factors import load_factor
+
+    for dimension, factor in ps.FACTOR.items():
+        assert load_factor(factor).values == ps.problems(dimension)
+    assert (len(ps.problems("light")), len(ps.problems("background"))) == (998, 921)
+    ps.write_values(tmp_path / "values.txt")  # the file the package writes is the one shipped
+    assert (tmp_path / "values.txt").read_text() == ps.VALUES_FILE.read_text()
 
 
 def test_the_flag_sets_the_folder_and_the_verb_refuses_in_one_line(monkeypatch, tmp_path, capsys):

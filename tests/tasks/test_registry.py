@@ -38,6 +38,7 @@ FIRST = (
     "roboview.libero.plus_task",
     "roboview.libero.presets",
     "roboview.libero.view",
+    "roboview.libero.plus_scene_world",
     "roboview.metaworld",
     "roboview.metaworld.task",
     "roboview.metaworld.presets",
@@ -63,6 +64,7 @@ PRESETS = [
 ]
 VIEW = ["view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"]
 NOISE = [f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")]
+SCENE = ["scene_light", "scene_background"]
 
 
 def test_any_module_imported_first_gives_the_same_registries_in_the_same_order():
@@ -80,7 +82,7 @@ def test_any_module_imported_first_gives_the_same_registries_in_the_same_order()
     want = got["roboview.tasks"]
     assert want["tasks"] == TASKS and want["worlds"] == WORLDS and want["presets"] == PRESETS
     # RoboView's own visual factors first (the factor registry's modules), then the LIBERO wing's.
-    assert want["visual"][:2] == ["color", "camera_pose"] and want["visual"][-11:] == VIEW + NOISE
+    assert want["visual"][:2] == ["color", "camera_pose"] and want["visual"][-13:] == VIEW + NOISE + SCENE
     assert want["labels"] == ["libero", "liberoplus", "metaworld"] and len(want["gym"]) == 5
     different = {first: read for first, read in got.items() if read != want}
     assert not different, different

@@ -1,8 +1,9 @@
 """Every registered world against every registered visual factor: whether the world takes it (a value away from its
 baseline is applied), refuses it (its applier table, `World.appliers`, declares the factor does not apply to its
 scenes) or lacks it (its table does not name the factor: neither an applier nor a refusal is written for it, refused all
-the same; in RoboView's scene, which has no table, a factor that brings no applier for it: LIBERO-plus's `view_*` and
-`noise_*`, declared in the LIBERO wing). A new factor shows its row here, in every world at once."""
+the same; in RoboView's scene, which has no table, a factor that brings no applier for it: LIBERO-plus's `view_*`,
+`noise_*`, `scene_light` and `scene_background`, declared in the LIBERO wing). A new factor shows its row here, in every
+world at once."""
 
 import numpy as np
 import pytest
@@ -37,6 +38,8 @@ noise_zoom_blur     lacks     takes    lacks
 noise_fog           lacks     takes    lacks
 noise_glass_blur    lacks     takes    lacks
 noise_wrist         lacks     takes    lacks
+scene_light         lacks     takes    lacks
+scene_background    lacks     takes    lacks
 """
 
 
@@ -107,10 +110,12 @@ def test_what_a_world_does_not_take_is_derived_from_its_table():
     table = expected()
     for name, world in WORLDS.items():
         assert world.not_applicable == tuple(f for f in visual_factors() if table[f, name] != "takes"), name
-    # RoboView's scene takes every factor that brings its applier for it, and lacks the LIBERO wing's view and noise
-    # factors.
+    # RoboView's scene takes every factor that brings its applier for it, and lacks the LIBERO wing's view, noise and
+    # scene factors.
     assert WORLDS["roboview"].appliers is None and WORLDS["roboview"].not_applicable == tuple(
-        f for f in visual_factors() if f.startswith(("view_", "noise_"))
+        f
+        for f in visual_factors()
+        if f.startswith(("view_", "noise_")) or f in ("scene_light", "scene_background")
     )
     assert WORLDS["metaworld"].status("view_azimuth") == "lacks"
     assert (

@@ -44,12 +44,15 @@ def test_factor_names_and_kinds():
         "noise_fog",
         "noise_glass_blur",
         "noise_wrist",
+        # LIBERO-plus's light and background scenes (the LIBERO wing's): its problem classes.
+        "scene_light",
+        "scene_background",
     )
     assert context_factors() == ("initial_position", "shape", "instruction")
     assert factor_names() == visual_factors() + context_factors()
     worlds = {f for t in ("libero", "liberoplus", "metaworld") for f in context_factors(t)}
     assert set(FACTORS) == set(factor_names()) | set(context_factors("push")) | worlds
-    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 20 + ["context"] * 3
+    assert [load_factor(n).kind for n in factor_names()] == ["visual"] * 22 + ["context"] * 3
     assert {n: len(load_factor(n).values) for n in visual_factors()[9:14]} == {
         "view_azimuth": 150,
         "view_elevation": 1,
@@ -60,6 +63,8 @@ def test_factor_names_and_kinds():
     assert {n: len(load_factor(n).values) for n in visual_factors()[14:]} == {
         **{f"noise_{t}": 10 for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur")},
         "noise_wrist": 1,
+        "scene_light": 998,
+        "scene_background": 921,
     }
     assert {n: len(load_factor(n).values) for n in visual_factors()[4:9]} == {
         "lighting": 9,
@@ -90,14 +95,18 @@ def test_baselines():
             f"noise_{t}": "0"
             for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")
         },
+        "scene_light": "original",
+        "scene_background": "original",
         "initial_position": "center",
         "shape": "cube",
         "instruction": "put the small object into the yellow box",
     }
     # Every baseline is one of its factor's values, except where no change is not a swept value: camera_pose's
-    # "original" (the unperturbed cameras), LIBERO-plus's no-change view and its noise-free frame, and scene_text's
-    # "none" (no card: the scene of every instance that does not set it; its split's control arm is the blank card).
+    # "original" (the unperturbed cameras), LIBERO-plus's no-change view, its noise-free frame and LIBERO's own scene,
+    # and scene_text's "none" (no card: the scene of every instance that does not set it; its split's control arm is
+    # the blank card).
     unswept = {"camera_pose", "view_azimuth", "view_elevation", "view_scale", "view_rotz", "view_roty"}
+    unswept |= {"scene_light", "scene_background"}
     unswept |= {"scene_text"} | {
         f"noise_{t}" for t in ("motion_blur", "gaussian_blur", "zoom_blur", "fog", "glass_blur", "wrist")
     }

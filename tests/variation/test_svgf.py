@@ -198,6 +198,8 @@ def test_to_record_columns_and_values():
         "noise_fog",
         "noise_glass_blur",
         "noise_wrist",
+        "scene_light",
+        "scene_background",
         "initial_position",
         "shape",
         "instruction",
