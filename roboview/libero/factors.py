@@ -84,14 +84,35 @@ def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
     return idx
 
 
-def target_object(world) -> str:
-    """The task's target object: LIBERO's `obj_of_interest[0]` (the object the instruction acts on). Where that is a
-    region of an object (libero_goal's "open the middle drawer of the cabinet": `wooden_cabinet_1_middle_region`,
-    named `<object>_<region>` as LIBERO names regions), the object the region belongs to."""
-    name = world.inner.obj_of_interest[0]
+def owner_object(world, name: str) -> str | None:
+    """The LIBERO object or fixture `name` names: itself, or, for a region of one (`wooden_cabinet_1_middle_region`,
+    `basket_1_contain_region`: named `<object>_<region>` as LIBERO names regions), the object it belongs to; None for
+    a region of no object (a table's: `main_table_stove_front_region`)."""
     objects = {**world.inner.fixtures_dict, **world.inner.objects_dict}
     owners = [o for o in objects if name.startswith(o + "_")]
-    return name if name in objects or not owners else max(owners, key=len)
+    return name if name in objects else max(owners, key=len) if owners else None
+
+
+def target_object(world) -> str:
+    """The task's target object: LIBERO's `obj_of_interest[0]` (the object the instruction acts on). Where that is a
+    region of an object (libero_goal's "open the middle drawer of the cabinet": `wooden_cabinet_1_middle_region`),
+    the object the region belongs to (`owner_object`)."""
+    name = world.inner.obj_of_interest[0]
+    return owner_object(world, name) or name
+
+
+def goal_places(world) -> list[str]:
+    """Where the task's goal puts things, or what it changes, besides the target object: the last term of each
+    predicate of LIBERO's parsed goal (`parsed_problem["goal_state"]`) — `(In soup basket_1_contain_region)`'s
+    region, `(On bowl plate_1)`'s plate, `(Turnon flat_stove_1)`'s stove — as the object it belongs to (`basket_1`,
+    `plate_1`, `flat_stove_1`), or, for a region of no object (`(On plate_1 main_table_stove_front_region)`), the
+    region: a site of LIBERO's model. In the goal's order, each once; the target object left out."""
+    target, out = target_object(world), []
+    for predicate in world.inner.parsed_problem["goal_state"]:
+        place = owner_object(world, predicate[-1]) or predicate[-1]
+        if place != target and place not in out:
+            out.append(place)
+    return out
 
 
 def object_geoms(world, name: str) -> list[int]:

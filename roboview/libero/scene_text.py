@@ -8,6 +8,10 @@ where agentview's line of sight through `CARD_PIXEL` (a point of the lower middl
 first meets a static surface, turned so its text reads upright in the observed frame, and writes the value's word
 (roboview.variation.factors.scene_text: the words, the font, the pixels) into the texture. The words follow the
 task's instruction (`goal_words`: BASKET and PLATE in the basket tasks).
+
+The fairness gate reads the card through `LiberoCard`: the glyph heights, the pixels of the task's object it hides
+(`hidden`) and those of each place of the task's goal (`hidden_goals`: `goal_places`' objects by segmentation with and
+without the card; a region of the table, which is no object's, as its site's top face projected by `region_mask`).
 """
 
 from __future__ import annotations
@@ -19,7 +23,14 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from roboview.libero.factors import AGENTVIEW, VISUAL_GROUP, camera_pose, object_geoms, target_object
+from roboview.libero.factors import (
+    AGENTVIEW,
+    VISUAL_GROUP,
+    camera_pose,
+    goal_places,
+    object_geoms,
+    target_object,
+)
 from roboview.variation.factors.scene_text import (
     CARD_M,
     CARD_THICK_M,
@@ -170,21 +181,51 @@ class LiberoCard:
         return {cam: glyph_height(shown[cam], blank[cam]) for cam in cameras}
 
     def hidden(self, cameras: list[str]) -> dict[str, int]:
-        model, (_, geom, _) = self.world.model, _ids(self.world.model)
-        figure = list(object_geoms(self.world, target_object(self.world)))
-        rgba = model.geom_rgba[geom].copy()
+        """Per camera, the pixels of the task's object (`target_object`) the card covers: those it shows without the
+        card and not with it."""
+        figure = object_geoms(self.world, target_object(self.world))
         out = {}
         for cam in cameras:
-            shown = self._figure(cam, figure)
-            model.geom_rgba[geom, 3] = 0.0
-            try:
-                alone = self._figure(cam, figure)
-            finally:
-                model.geom_rgba[geom] = rgba
-            out[cam] = int((alone & ~shown).sum())
+            shown, alone = self.segments(cam)
+            out[cam] = int((np.isin(alone, figure) & ~np.isin(shown, figure)).sum())
         return out
 
-    def _figure(self, camera: str, geoms: list[int]) -> np.ndarray:
+    def hidden_goals(self, cameras: list[str]) -> dict[str, dict[str, tuple[int, int]]]:
+        """Per camera, per place of the task's goal (`goal_places`: the basket, the plate, the stove…), the pixels
+        the card covers and those the place shows without the card. An object's are its visual geoms' pixels, as
+        `hidden` counts the object's; a region of no object (a table's) is its site's top face seen by the camera
+        (`region_mask`), and the card covers the pixels of it where the card shows (the card lies on the table, the
+        region is the table's: what stands in front of the card stands in front of the region)."""
+        world, card = self.world, _ids(self.world.model)[1]
+        places = goal_places(world)
+        objects = {**world.inner.fixtures_dict, **world.inner.objects_dict}
+        out = {}
+        for cam in cameras:
+            shown, alone = self.segments(cam)
+            out[cam] = {}
+            for place in places:
+                if place in objects:
+                    figure = object_geoms(world, place)
+                    seen = np.isin(alone, figure)
+                    out[cam][place] = (int((seen & ~np.isin(shown, figure)).sum()), int(seen.sum()))
+                else:
+                    seen = region_mask(world, place, self.env.camera_ids()[cam], shown.shape)
+                    out[cam][place] = (int((seen & (shown == card)).sum()), int(seen.sum()))
+        return out
+
+    def segments(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
+        """`camera`'s geom ids per pixel (-1: none), with the card and without it (made transparent)."""
+        model, (_, geom, _) = self.world.model, _ids(self.world.model)
+        rgba = model.geom_rgba[geom].copy()
+        shown = self._geom_ids(camera)
+        model.geom_rgba[geom, 3] = 0.0
+        try:
+            alone = self._geom_ids(camera)
+        finally:
+            model.geom_rgba[geom] = rgba
+        return shown, alone
+
+    def _geom_ids(self, camera: str) -> np.ndarray:
         model = self.world.model
         if self._seg is None or self._seg.model is not model:
             self._seg = mujoco.Renderer(model, self.env.image_size, self.env.image_size)
@@ -195,4 +236,35 @@ class LiberoCard:
         cam = self.env.camera_ids()[camera]
         self._seg.update_scene(self.world.data, camera=cam, scene_option=self._option)
         seg = self._seg.render()
-        return (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM) & np.isin(seg[..., 0], geoms)
+        return np.where(seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, seg[..., 0], -1)
+
+
+def region_mask(world, site: str, camera: int, shape: tuple[int, ...]) -> np.ndarray:
+    """The pixels of `camera`'s frame (top row first, as mujoco.Renderer's) inside the top face of LIBERO's region
+    `site` (a box site: its x-y rectangle), projected through the camera's pinhole; none where a corner lies behind
+    the camera."""
+    model, data = world.model, world.data
+    sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site)
+    if sid < 0:
+        raise ValueError(f"the goal's place {site!r} is neither an object nor a site of the LIBERO model")
+    rot, (sx, sy, sz) = data.site_xmat[sid].reshape(3, 3), model.site_size[sid]
+    corners = (
+        data.site_xpos[sid]
+        + np.array([[x, y, sz] for x, y in ((-sx, -sy), (sx, -sy), (sx, sy), (-sx, sy))]) @ rot.T
+    )
+    local = (corners - data.cam_xpos[camera]) @ data.cam_xmat[camera].reshape(
+        3, 3
+    )  # camera axes: right, up, back
+    height, width = shape[:2]
+    if (local[:, 2] >= 0).any():
+        return np.zeros((height, width), bool)
+    focal = height / 2 / np.tan(np.radians(model.cam_fovy[camera]) / 2)
+    px = np.column_stack(
+        [width / 2 + focal * local[:, 0] / -local[:, 2], height / 2 - focal * local[:, 1] / -local[:, 2]]
+    )
+    cols, rows = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    sides = []
+    for a, b in zip(px, np.roll(px, -1, axis=0), strict=True):  # the convex outline's edges, in turn
+        sides.append((b[0] - a[0]) * (rows - a[1]) - (b[1] - a[1]) * (cols - a[0]))
+    sides = np.stack(sides)
+    return (sides >= 0).all(axis=0) | (sides <= 0).all(axis=0)

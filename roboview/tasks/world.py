@@ -419,7 +419,8 @@ class WorldEnv(gym.Env):
 
     def text_card(self) -> Any:
         """The live scene's text card (the `scene_text` factor's): `glyph_heights(cameras, rgb)` and `hidden(cameras)`
-        for the fairness gate, `geometry()` for the isolation certificate; None where the scene holds none."""
+        (and, where the goal is not the target, `hidden_goals(cameras)`) for the fairness gate, `geometry()` for the
+        isolation certificate; None where the scene holds none."""
         return None
 
     def camera_ids(self) -> dict[str, int]:

@@ -21,7 +21,8 @@ card in its own scenes (roboview.libero.scene_text) with the pixels `card_image`
 
 The fairness gate (`gate`) requires the text legible in every judged scene camera — its glyph height, measured from
 the render as the extent of the pixels the text changes across the text line, at least `MIN_GLYPH_PX` in the frame
-at the benchmark's image size — and the card hiding no pixel of the object or the target.
+at the benchmark's image size — and the card hiding no pixel of the object or the target (in LIBERO's scenes, where
+the target is not the goal: no pixel of the object, nor of any place of the goal, `goal_reasons`).
 """
 
 from __future__ import annotations
@@ -277,9 +278,21 @@ def legibility_reasons(heights: Mapping[str, float], image_size: int) -> list[st
     ]
 
 
+def goal_reasons(hidden: Mapping[str, Mapping[str, tuple[int, int]]]) -> list[str]:
+    """Why the card hides the goal: one reason per camera and place of the goal (`hidden`: per camera, per place, the
+    pixels the card covers and those the place shows without it) of which the card covers any pixel."""
+    return [
+        f"{cam}: the card hides {n} of the {seen} px of the goal {place}"
+        for cam, places in hidden.items()
+        for place, (n, seen) in places.items()
+        if n
+    ]
+
+
 def gate(env: Any, rgb: Mapping[str, np.ndarray]) -> list[str]:
     """The gate's reasons against an instance setting `scene_text` (empty: it passes): the world's card handle
-    (`env.text_card()`) measures the glyph heights and the object and target pixels the card hides."""
+    (`env.text_card()`) measures the glyph heights and the object and target pixels the card hides, and, where the
+    goal is not among those (LIBERO's: `hidden_goals`), the goal's."""
     card = env.text_card()
     if card is None:
         return ["scene_text set, but the scene holds no card"]
@@ -293,6 +306,8 @@ def gate(env: Any, rgb: Mapping[str, np.ndarray]) -> list[str]:
         for cam, n in card.hidden(cameras).items()
         if n
     ]
+    if hasattr(card, "hidden_goals"):
+        out += goal_reasons(card.hidden_goals(cameras))
     return out
 
 
