@@ -30,6 +30,7 @@ def evaluate(
     videos: str = "",
     eager: bool = False,
     policy_server: bool = False,
+    torch_threads: int = 0,
 ):
     """roboview.eval.campaign.runner.run of `policy` (a type name) over `splits` of `bench` into `out`."""
     cfg = EvaluateConfig(
@@ -47,6 +48,7 @@ def evaluate(
             videos=videos,
             eager_render=eager,
             policy_server=policy_server,
+            torch_threads=torch_threads,
         ),
         str(out),
     )

@@ -5,11 +5,13 @@ tasks and image size (`plan`), the protocol it follows, the one-step pre-flight 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 from roboview.benchmark.format import Benchmark, load_benchmark, select_items
 from roboview.core.cli_errors import flag_errors
+from roboview.core.workers import threads_per_worker
 from roboview.eval.campaign.config import DEFAULT_IMAGE_SIZE, EvaluateConfig
-from roboview.eval.running.results import shard_of
+from roboview.eval.running.results import recorded_threads, shard_of
 from roboview.eval.running.rollout import WorkItem
 from roboview.eval.running.row import STATUS, STATUS_OK
 from roboview.policies.base import PolicyConfig
@@ -196,7 +198,20 @@ def run_info(cfg: EvaluateConfig, p: Plan) -> dict:
             else {}
         ),
         **({"shard": cfg.eval.shard} if cfg.eval.shard else {}),
+        "torch_threads": inference_threads(cfg),
     }
+
+
+def inference_threads(cfg: EvaluateConfig) -> int:
+    """The intra-op threads of each worker's torch policy, which run.json records so a replay computes with the
+    same (they change a CPU policy's actions in the last bits): --eval.torch_threads when given; else the count the
+    folder's episodes already ran with (a resume keeps it, whatever the load now); else the cores the load
+    average leaves free, split between the workers."""
+    return (
+        cfg.eval.torch_threads
+        or recorded_threads(Path(cfg.output_dir))
+        or threads_per_worker(cfg.eval.num_workers, 0)
+    )
 
 
 def max_steps(cfg: EvaluateConfig, tasks: list[str]) -> int | None:

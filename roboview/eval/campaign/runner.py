@@ -14,7 +14,6 @@ from pathlib import Path
 from tqdm import tqdm
 
 from roboview.core.cli_errors import flag_errors
-from roboview.core.workers import threads_per_worker
 from roboview.eval.campaign.config import VIDEO_FPS, EvaluateConfig
 from roboview.eval.campaign.plan import Plan, check_conformance, plan, probe_policy, run_info
 from roboview.eval.campaign.rounds import run_rounds
@@ -55,8 +54,8 @@ class Runner:
             from roboview.eval.running.rerun_log import RerunLogger
 
             self.rerun = RerunLogger(Path(cfg.eval.rerun))
-        # CPU inference: the free cores split between workers, so num_workers × threads never oversubscribes.
-        self.threads = threads_per_worker(cfg.eval.num_workers, cfg.eval.torch_threads)
+        # CPU inference: the threads run.json records (plan.inference_threads), so a replay computes as these did.
+        self.threads = store.run_info["torch_threads"]
         log.info("inference threads per worker: %d (--eval.torch_threads)", self.threads)
         self.cluster: dict[str, dict] = {}
         self.per_split: dict[str, list[int]] = defaultdict(lambda: [0, 0])

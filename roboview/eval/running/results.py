@@ -45,12 +45,25 @@ RUN_FILE = "run.json"
 RUN_DEFAULTS = {"control": "joint", "protocol": ""}
 # run.json keys added later that follow from the others (`privileged` from the policy type): a run.json without
 # them matches whatever this run records.
-RUN_DERIVED = ("privileged",)
+RUN_DERIVED = ("privileged", "torch_threads")
 VERSION_KEY = "roboview_benchmark_version"  # parquet metadata key: the benchmark version a results file ran
 FORMAT_KEY = b"roboview_results_format"
 # 2: episode seeds from (context_id, repeat), shared by every value of a context (common random
 # numbers); 1 (or no key): seeds hashed from instance_id. The two must never be mixed.
 RESULTS_FORMAT = 2
+
+
+def recorded_threads(folder: Path) -> int | None:
+    """The intra-op threads each worker's torch policy ran the folder's episodes with: run.json's `torch_threads`,
+    else (a folder written before run.json recorded them) the count every provenance entry records, when they all
+    agree; None when neither says. A CPU policy's actions differ in their last bits with the count (torch splits
+    its reductions by thread), enough to change an episode's steps: an episode is re-run with the same count."""
+    run_file = Path(folder) / RUN_FILE
+    run = json.loads(run_file.read_text()) if run_file.is_file() else {}
+    if run.get("torch_threads"):
+        return int(run["torch_threads"])
+    counts = {(e.get("torch_threads") or {}).get("per_worker") for e in provenance.read(Path(folder))}
+    return int(counts.pop()) if len(counts) == 1 and None not in counts else None
 
 
 def more_repeats(existing, requested) -> bool:
@@ -299,17 +312,21 @@ def _run_info(folder: Path) -> dict:
 
 
 def _common_run(folders: list[Path], infos: list[dict]) -> dict:
-    """The run.json the shards share, less its `shard`; ResultsError naming what differs when they do not."""
-    base = {k: v for k, v in infos[0].items() if k != "shard"}
+    """The run.json the shards share, less its `shard`; ResultsError naming what differs when they do not. Shards
+    on machines of other sizes may have run with other inference threads: the merge keeps the count only where
+    every shard ran with it (each shard's own stays in its provenance entries)."""
+    own = {"shard", "torch_threads"}
+    base = {k: v for k, v in infos[0].items() if k not in own}
     for folder, info in zip(folders[1:], infos[1:]):
         diffs = [
             f"{k}: {base.get(k)!r} in {folders[0]} vs {info.get(k)!r}"
-            for k in sorted(set(base) | set(info) - {"shard"})
-            if k != "shard" and base.get(k) != info.get(k)
+            for k in sorted(set(base) | set(info) - own)
+            if base.get(k) != info.get(k)
         ]
         if diffs:
             raise ResultsError(f"{folder} is not a shard of the same run as {folders[0]}: {'; '.join(diffs)}")
-    return base
+    threads = {info.get("torch_threads") for info in infos}
+    return base | ({"torch_threads": threads.pop()} if len(threads) == 1 and None not in threads else {})
 
 
 def _shard_count(folders: list[Path], shards: list[str | None], partial: bool) -> int:

@@ -117,7 +117,15 @@ class Replayer:
 
     @classmethod
     def _worker_key(cls, run: dict, task: str, record_media: bool) -> tuple:
-        return cls._key(run), run.get("image_size", 224), run.get("max_steps", 120), task, record_media
+        threads = int(run.get("torch_threads") or 0)  # the run's own: a CPU policy's actions depend on them
+        return (
+            cls._key(run),
+            run.get("image_size", 224),
+            run.get("max_steps", 120),
+            threads,
+            task,
+            record_media,
+        )
 
     def policy(self, run: dict):
         """The policy config run.json records (built once per distinct record)."""
@@ -135,8 +143,10 @@ class Replayer:
 
         key = self._worker_key(run, task, record_media)
         if key not in self._workers:
-            _, image_size, max_steps, _, _ = key
-            spec = WorkerSpec(policy, image_size, max_steps, record_media=record_media, task=task)
+            _, image_size, max_steps, threads, _, _ = key
+            spec = WorkerSpec(
+                policy, image_size, max_steps, record_media=record_media, torch_threads=threads, task=task
+            )
             self._workers[key] = EvalWorker(spec)
         return self._workers[key]
 

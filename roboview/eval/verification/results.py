@@ -17,7 +17,7 @@ from roboview.benchmark.format import read_manifest
 from roboview.core.folders import folder_problem
 from roboview.eval.reporting.bundle import BUNDLE_FILE, manifest_problems
 from roboview.eval.running import provenance
-from roboview.eval.running.results import PARQUET
+from roboview.eval.running.results import PARQUET, recorded_threads
 from roboview.eval.running.row import INFRA_ERROR, STATUS
 from roboview.eval.statistics.adaptive import read_record
 from roboview.eval.verification.integrity import (
@@ -78,6 +78,8 @@ def read_table(results: Path):
         ) from None
     if not isinstance(run, dict):
         raise ResultsError(f"{results / RUN_FILE} holds a JSON {type(run).__name__}, not an object")
+    if "torch_threads" not in run and recorded_threads(results):  # written before run.json recorded them
+        run["torch_threads"] = recorded_threads(results)
     return table, run
 
 
