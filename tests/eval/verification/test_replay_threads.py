@@ -51,7 +51,10 @@ def test_a_folder_written_before_run_json_recorded_threads(tmp_path):
     folder = tmp_path / "old"
     folder.mkdir()
     (folder / RUN_FILE).write_text(json.dumps({"policy": "lerobot"}))
-    entry = {"started": "2026-01-01T00:00:00+00:00", "torch_threads": {"per_worker": 1, "load_average_1m": 0.4}}
+    entry = {
+        "started": "2026-01-01T00:00:00+00:00",
+        "torch_threads": {"per_worker": 1, "load_average_1m": 0.4},
+    }
     provenance.write(folder, [entry, entry])
     assert recorded_threads(folder) == 1
     provenance.write(folder, [entry, {**entry, "torch_threads": {"per_worker": 2}}])
