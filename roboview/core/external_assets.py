@@ -2,7 +2,7 @@
 environment, so the worker processes a verb starts see them too.
 
 LIBERO-plus's light and background variants load scene files from its asset archive (`assets.zip`), which no package
-ships: `--liberoplus.assets=DIR` on `roboview-build-benchmark`, or `ROBOVIEW_LIBEROPLUS_ASSETS=DIR`
+ships: `--liberoplus.assets=DIR` on `roboview-build-benchmark` and `roboview-evaluate`, or `ROBOVIEW_LIBEROPLUS_ASSETS=DIR`
 (roboview.libero.plus_scenes reads it and says which files a preset lacks).
 """
 

@@ -8,6 +8,7 @@ import logging
 from dataclasses import dataclass, field
 
 from roboview.core.cli_errors import flag_errors
+from roboview.core.external_assets import LiberoPlusAssets
 from roboview.eval.running import videos
 from roboview.eval.running.backends import BACKENDS
 from roboview.policies.base import PolicyConfig, missing_policy_type
@@ -243,6 +244,8 @@ class EvaluateConfig:
     output_dir: str = "outputs/eval"
     # The Semantic Grounding Layer around the policy: --sgl.enable=true (docs/vlm.md).
     sgl: SGLConfig = field(default_factory=SGLConfig)
+    # LIBERO-plus's asset folder, which its light and background instances load (--liberoplus.assets=DIR).
+    liberoplus: LiberoPlusAssets = field(default_factory=LiberoPlusAssets)
 
     def __post_init__(self) -> None:
         if self.policy is None:
