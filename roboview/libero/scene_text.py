@@ -158,6 +158,9 @@ class LiberoCard:
     def __init__(self, env: Any) -> None:
         self.env = env
         self._seg: mujoco.Renderer | None = None
+        # The last segmentations per camera, with the state they were rendered in: the gate asks `hidden` and
+        # `hidden_goals` of one state, and both read the same two renders.
+        self._segments: dict[str, tuple[tuple, tuple[np.ndarray, np.ndarray]]] = {}
 
     @property
     def world(self):
@@ -214,7 +217,17 @@ class LiberoCard:
         return out
 
     def segments(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
-        """`camera`'s geom ids per pixel (-1: none), with the card and without it (made transparent)."""
+        """`camera`'s geom ids per pixel (-1: none), with the card and without it (made transparent); rendered once
+        per state of the scene (its model, its bodies' and geoms' placement, and the joints' positions)."""
+        model = self.world.model
+        placement = (model.body_pos, model.body_quat, model.geom_pos, model.geom_quat, model.geom_size)
+        state = (id(model), self.world.data.qpos.tobytes(), *(a.tobytes() for a in placement))
+        cached = self._segments.get(camera)
+        if cached is None or cached[0] != state:
+            self._segments[camera] = cached = (state, self._render_segments(camera))
+        return cached[1]
+
+    def _render_segments(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
         model, (_, geom, _) = self.world.model, _ids(self.world.model)
         rgba = model.geom_rgba[geom].copy()
         shown = self._geom_ids(camera)
