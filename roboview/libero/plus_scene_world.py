@@ -24,6 +24,7 @@ task) is the task's own, as in LIBERO-plus, whose light and background variants 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import roboview.libero.noise  # noqa: F401  (LIBERO-plus's view_* and noise_* factors register first, whichever module is imported first)
 from roboview.libero.plus_scenes import (
@@ -34,6 +35,7 @@ from roboview.libero.plus_scenes import (
     assets_dir,
     check_scenes,
     scene_of,
+    scene_set,
     style_files,
 )
 from roboview.variation.factors import Factor, register_factor
@@ -63,6 +65,7 @@ SCENE_LIGHT, SCENE_BACKGROUND = (
 )
 
 
+@cache
 def install_styles() -> None:
     """Complete LIBERO's floor and wall style table with LIBERO-plus's (its arenas then resolve LIBERO-plus's style
     names, as LIBERO-plus's own arenas do); a LookupError where the two tables name one style's file differently."""
@@ -87,14 +90,12 @@ class LiberoPlusScene:
     @classmethod
     def of(cls, values: dict[str, str]) -> LiberoPlusScene:
         """The applier of an instance's `scene_*` values (LIBERO's `World.appliers`): one scene at a time."""
-        set_ = {d: values[f] for d, f in FACTOR.items() if values.get(f, ORIGINAL) != ORIGINAL}
-        if len(set_) != 1:
+        chosen = scene_set(values)
+        if chosen is None:
             raise ValueError(
-                f"scene {set_}: LIBERO-plus's scene is one problem class at a time; set one of "
-                f"{', '.join(FACTOR.values())}"
+                f"scene {{}}: LIBERO-plus's scene is one problem class at a time; set one of {', '.join(FACTOR.values())}"
             )
-        ((dimension, problem),) = set_.items()
-        return cls(dimension, problem)
+        return cls(*chosen)
 
     def arena(self) -> tuple[str, tuple[tuple[str, str], ...]]:
         """The scene file LIBERO's problem class builds its arena from (absolute, in the asset folder) and the arena's
@@ -106,6 +107,6 @@ class LiberoPlusScene:
         return str(assets_dir() / scene), tuple((f"{kind}_style", style) for kind, style in styles)
 
     def apply(self, world) -> None:
-        """Nothing to edit in place: the world built its model from `arena()`; checked here."""
-        if world.arena[0] != self.arena()[0]:
+        """Nothing to edit in place: the world built its model from `arena()` (which checked the folder); checked here."""
+        if world.arena[0] != str(assets_dir() / scene_of(self.problem)[0]):
             raise RuntimeError(f"the world did not load the scene of {self.problem} ({world.arena[0]})")

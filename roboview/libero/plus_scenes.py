@@ -157,6 +157,17 @@ def write_values(path: Path = VALUES_FILE) -> None:
     path.write_text(head + "".join(f"{d} {p}\n" for d in DIMENSIONS for p in problems(d)))
 
 
+def scene_set(values: dict[str, str]) -> tuple[str, str] | None:
+    """The (dimension, problem class) an instance's `scene_*` values set; None where none is set, a ValueError where
+    more than one is (LIBERO-plus loads one scene at a time)."""
+    chosen = {d: values[f] for d, f in FACTOR.items() if values.get(f, ORIGINAL) != ORIGINAL}
+    if len(chosen) > 1:
+        raise ValueError(
+            f"scene {chosen}: LIBERO-plus's scene is one problem class at a time; set one of {', '.join(FACTOR.values())}"
+        )
+    return next(iter(chosen.items()), None)
+
+
 def variant_of(libero_task: str, dimension: str, problem: str) -> SceneVariant:
     """LIBERO-plus's variant of `libero_task` (`<suite>/<task id>`) whose problem class is `problem`; a one-line
     LookupError where it runs none."""

@@ -106,14 +106,10 @@ class LiberoPlusTaskEnv(LiberoTaskEnv):
         if instance.get("liberoplus_instruction") == "libero":
             return world.task.language
         values = instance.factor_values
-        scene = [
-            (d, values[f])
-            for d, f in plus_scenes.FACTOR.items()
-            if values.get(f, plus_scenes.ORIGINAL) != plus_scenes.ORIGINAL
-        ]
+        scene = plus_scenes.scene_set(values)
         if scene:  # a light or background variant's file name (`<task>_light_<n>`)
             task = instance.get(self.task_factor)
-            return instruction_of(plus_scenes.variant_of(task, *scene[0]).name)
+            return instruction_of(plus_scenes.variant_of(task, *scene).name)
         name = variant_name(world.task.name, View.of(values))
         code = noise.noise_code(values)
         return instruction_of(f"{name}_noise_{code}" if code else name)
