@@ -78,8 +78,9 @@ def read_table(results: Path):
         ) from None
     if not isinstance(run, dict):
         raise ResultsError(f"{results / RUN_FILE} holds a JSON {type(run).__name__}, not an object")
-    if "torch_threads" not in run and recorded_threads(results):  # written before run.json recorded them
-        run["torch_threads"] = recorded_threads(results)
+    threads = recorded_threads(results) if "torch_threads" not in run else None
+    if threads:  # a folder written before run.json recorded them: its provenance's count
+        run["torch_threads"] = threads
     return table, run
 
 
